@@ -1,0 +1,19 @@
+"""Learned effect models (Symbolic and Dynamics Model) for the pick-place TAMP system.
+
+No Drake, no imports from tamp/, symbolic/ or evaluation/: actions cross the border as
+4-tuples or (B, 4) int arrays, states as (n, 5) float arrays (see ``learned.effects``).
+"""
+from .ablation import ablate_activations, write_ablation_report
+from .checkpoint import load_model, save_checkpoint
+from .dataset import (DatasetWriter, ShardError, TransitionDataset, Transitions, load_transitions,
+                      read_meta)
+from .effects import arm_displacement, effect_targets, encode_actions
+from .model import ACTIVATIONS, EffectModel, ModelConfig
+from .train import TrainResult, evaluate, train_model
+
+__all__ = [
+    "ACTIVATIONS", "DatasetWriter", "EffectModel", "ModelConfig", "ShardError", "TrainResult",
+    "TransitionDataset", "Transitions", "ablate_activations", "arm_displacement", "effect_targets",
+    "encode_actions", "evaluate", "load_model", "load_transitions", "read_meta", "save_checkpoint",
+    "train_model", "write_ablation_report",
+]

@@ -1,0 +1,211 @@
+"""The attentive effect predictor of the paper (Symbolic and Dynamics Model share it).
+
+    u_i      = act(MLP_u(x_i))                        unary symbol, d_z bits
+    s_k(i,j) = act(q_k(x_i) . k_k(x_j) / sqrt(d_key))  relation k of K (self-attention heads)
+    z_i      = MLP_z([u_i, a_i])                       a_i: per-object action encoding
+    h_i^k    = sum_j s_k(i,j) z_j                      (padded j excluded)
+    e_i      = MLP_e([h_i^1, ..., h_i^K])              effect, metres (see ``effects``)
+
+``act`` is the bottleneck activation: ``gumbel_sigmoid`` (Symbolic Model; logistic noise at
+temperature T while training, hard 0/1 in eval mode), ``sigmoid`` (Dynamics Model), ``tanh`` or
+``none``. Discrete symbols are ``logit > 0`` for every activation (= rounding the sigmoid).
+The 1/sqrt(d_key) scale only conditions the initialisation; it is a constant inside act.
+Positions are normalised with training-set statistics kept as buffers (so in checkpoints), and
+effects are predicted in units of ``effect_scale``.
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, fields
+
+import numpy as np
+import torch
+from torch import nn
+
+from .effects import ACTION_ENC_DIM, STATE_DIM, arm_shift, as_action_array, check_actions, encode_actions
+
+ACTIVATIONS = ("gumbel_sigmoid", "sigmoid", "tanh", "none")
+
+
+@dataclass
+class ModelConfig:
+    """Architecture; everything needed to rebuild an EffectModel (JSON-able)."""
+    n_max: int = 4               # largest object count the model is trained / used for
+    d_z: int = 8                 # unary symbol bits per object
+    heads: int = 4               # K relation types (attention heads)
+    d_key: int = 16              # query/key width per head
+    d_msg: int = 64              # width of z_i
+    hidden: int = 128            # MLP hidden width
+    layers: int = 2              # hidden layers per MLP
+    activation: str = "sigmoid"  # one of ACTIVATIONS
+    temperature: float = 1.0     # Gumbel-Sigmoid temperature
+
+    def __post_init__(self):
+        if self.activation not in ACTIVATIONS:
+            raise ValueError(f"activation {self.activation!r} not in {ACTIVATIONS}")
+        for f in ("n_max", "d_z", "heads", "d_key", "d_msg", "hidden", "layers"):
+            if int(getattr(self, f)) < 1:
+                raise ValueError(f"{f} must be >= 1")
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "ModelConfig":
+        names = {f.name for f in fields(cls)}
+        unknown = set(d) - names
+        if unknown:
+            raise ValueError(f"unknown model config keys {sorted(unknown)}")
+        return cls(**d)
+
+
+def mlp(sizes: Sequence[int]) -> nn.Sequential:
+    """Linear layers with ReLU between them (none after the last)."""
+    mods: list[nn.Module] = []
+    for i in range(len(sizes) - 1):
+        mods.append(nn.Linear(sizes[i], sizes[i + 1]))
+        if i < len(sizes) - 2:
+            mods.append(nn.ReLU())
+    return nn.Sequential(*mods)
+
+
+class Bottleneck(nn.Module):
+    """The bottleneck activation applied to unary and relational logits."""
+
+    def __init__(self, activation: str, temperature: float = 1.0):
+        super().__init__()
+        self.activation, self.temperature = activation, temperature
+
+    def forward(self, logits: torch.Tensor) -> torch.Tensor:
+        if self.activation == "gumbel_sigmoid":
+            if not self.training:
+                return (logits > 0).to(logits.dtype)
+            u = torch.rand_like(logits).clamp_(1e-6, 1 - 1e-6)
+            return torch.sigmoid((logits + torch.log(u) - torch.log1p(-u)) / self.temperature)
+        if self.activation == "sigmoid":
+            return torch.sigmoid(logits)
+        if self.activation == "tanh":
+            return torch.tanh(logits)
+        return logits
+
+
+class EffectModel(nn.Module):
+    """Predicts per-object effects of a pick-place from (X, action); see module docstring."""
+
+    def __init__(self, config: ModelConfig):
+        super().__init__()
+        c = self.config = config
+        hid = [c.hidden] * c.layers
+        self.unary = mlp([STATE_DIM, *hid, c.d_z])
+        self.pre_attention = nn.Sequential(mlp([STATE_DIM, *hid]), nn.ReLU())
+        self.query = nn.Linear(c.hidden, c.heads * c.d_key)
+        self.key = nn.Linear(c.hidden, c.heads * c.d_key)
+        self.object_mlp = mlp([c.d_z + ACTION_ENC_DIM, *hid, c.d_msg])
+        self.decoder = mlp([c.heads * c.d_msg, *hid, 3])
+        self.bottleneck = Bottleneck(c.activation, c.temperature)
+        # Normalisation statistics (metres), set from training data by ``set_normalisation``.
+        self.register_buffer("pos_mean", torch.zeros(3))
+        self.register_buffer("pos_std", torch.ones(3))
+        self.register_buffer("effect_scale", torch.ones(()))
+        self.register_buffer("arm_scale", torch.ones(()))
+
+    def set_normalisation(self, pos_mean, pos_std, effect_scale: float, arm_scale: float) -> None:
+        self.pos_mean.copy_(torch.as_tensor(pos_mean, dtype=torch.float32))
+        self.pos_std.copy_(torch.as_tensor(pos_std, dtype=torch.float32))
+        self.effect_scale.fill_(float(effect_scale))
+        self.arm_scale.fill_(float(arm_scale))
+
+    # -- encoders -----------------------------------------------------------------------
+    def _normalise(self, X: torch.Tensor) -> torch.Tensor:
+        return torch.cat([(X[..., :3] - self.pos_mean) / self.pos_std, X[..., 3:]], dim=-1)
+
+    def unary_logits(self, X: torch.Tensor) -> torch.Tensor:
+        """(B, N, d_z) pre-activation unary symbols."""
+        return self.unary(self._normalise(X))
+
+    def relation_logits(self, X: torch.Tensor) -> torch.Tensor:
+        """(B, K, N, N) pre-activation relations q_k(x_i) . k_k(x_j)."""
+        B, N, _ = X.shape
+        c = self.config
+        f = self.pre_attention(self._normalise(X))
+        q = self.query(f).view(B, N, c.heads, c.d_key).transpose(1, 2)
+        k = self.key(f).view(B, N, c.heads, c.d_key).transpose(1, 2)
+        return q @ k.transpose(-1, -2) / math.sqrt(c.d_key)
+
+    # -- forward ------------------------------------------------------------------------
+    def forward(self, X: torch.Tensor, action: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+        """Effect target (B, N, 3) in metres, arm motion of the pick object removed; 0 if padded.
+
+        X: (B, N, 5) metres / one-hot, zero-padded; action: (B, 4) long; mask: (B, N) bool.
+        """
+        B, N, _ = X.shape
+        m = mask.to(X.dtype)
+        u = self.bottleneck(self.unary_logits(X))
+        r = self.bottleneck(self.relation_logits(X)) * m[:, None, None, :]
+        a = encode_actions(X, action, self.arm_scale)
+        z = self.object_mlp(torch.cat([u, a], dim=-1))
+        h = (r @ z[:, None]).transpose(1, 2).reshape(B, N, -1)
+        return self.decoder(h) * self.effect_scale * m[..., None]
+
+    # -- planner API --------------------------------------------------------------------
+    def _scene(self, X: np.ndarray) -> torch.Tensor:
+        X = np.asarray(X, dtype=np.float64)
+        if X.ndim != 2 or X.shape[1] != STATE_DIM:
+            raise ValueError(f"X must have shape (n, {STATE_DIM}), got {X.shape}")
+        if X.shape[0] > self.config.n_max:
+            raise ValueError(f"scene has {X.shape[0]} objects, model built for n_max="
+                             f"{self.config.n_max}")
+        return torch.as_tensor(X, dtype=torch.float32)[None]
+
+    @torch.no_grad()
+    def predict_effect(self, X: np.ndarray, actions) -> np.ndarray:
+        """Absolute position displacements (B, n, 3) in metres for B actions on one scene.
+
+        ``X[:, :3] + e[b]`` is the predicted next position under ``actions[b]``; actions are a
+        (B, 4) int array or a list of 4-tuples. One batched forward pass, eval mode.
+        """
+        Xt = self._scene(X)
+        a = as_action_array(actions)
+        n = Xt.shape[1]
+        if a.shape[0] == 0:
+            return np.zeros((0, n, 3))
+        check_actions(a, n)
+        was_training = self.training
+        self.eval()
+        try:
+            B = a.shape[0]
+            Xb = Xt.expand(B, n, STATE_DIM)
+            at = torch.from_numpy(a)
+            e = self(Xb, at, torch.ones(B, n, dtype=torch.bool)).double()
+            shift = arm_shift(torch.as_tensor(np.asarray(X, np.float64))[None].expand(B, n, 5), at)
+        finally:
+            self.train(was_training)
+        return (e + shift).numpy()
+
+    @torch.no_grad()
+    def symbols(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Discrete symbols of one scene: unary bits (n, d_z) and relation bits (K, n, n), uint8.
+
+        Deterministic: bit = 1 iff the bottleneck logit > 0 (rounded activation).
+        """
+        Xt = self._scene(X)
+        u, r = self.symbols_batch(Xt.numpy(), np.ones(Xt.shape[:2], dtype=bool))
+        return u[0], r[0]
+
+    @torch.no_grad()
+    def symbols_batch(self, X: np.ndarray, mask: np.ndarray, batch_size: int = 4096
+                      ) -> tuple[np.ndarray, np.ndarray]:
+        """Symbols of many padded scenes: unary (S, N, d_z) and relations (S, K, N, N), uint8.
+
+        For converting whole datasets; padded objects get all-zero bits (in both roles).
+        """
+        X = torch.as_tensor(np.asarray(X), dtype=torch.float32)
+        m = torch.as_tensor(np.asarray(mask), dtype=torch.bool)
+        us, rs = [], []
+        for s in range(0, X.shape[0], batch_size):
+            Xb, mb = X[s:s + batch_size], m[s:s + batch_size]
+            us.append((self.unary_logits(Xb) > 0) & mb[..., None])
+            pair = mb[:, None, :, None] & mb[:, None, None, :]
+            rs.append((self.relation_logits(Xb) > 0) & pair)
+        return (torch.cat(us).to(torch.uint8).numpy(), torch.cat(rs).to(torch.uint8).numpy())
