@@ -1,0 +1,106 @@
+"""UR10e inverse kinematics: closed form (ur-analytic-ik) on a fixed branch, Drake IK as fallback.
+
+Top-down grasps are solved on one branch, elbow up and wrist down, and each joint is wrapped by
+multiples of 2 pi to the value nearest the current configuration: choosing among all eight
+solutions by joint distance alone can flip the elbow or wrist between waypoints.
+"""
+from __future__ import annotations
+
+import numpy as np
+import ur_analytic_ik
+from pydrake.math import RigidTransform, RotationMatrix
+from pydrake.multibody.inverse_kinematics import InverseKinematics
+from pydrake.multibody.plant import MultibodyPlant
+from pydrake.solvers import Solve
+
+from tamp.plants import X_FlangeTcp, X_WBase
+
+# Joint limits (radians) and velocity limits (rad/s) of drake_models/ur10e.urdf.
+Q_LOWER = np.array([-2 * np.pi, -2 * np.pi, -np.pi, -2 * np.pi, -2 * np.pi, -2 * np.pi])
+Q_UPPER = -Q_LOWER
+V_MAX = np.array([2.0944, 2.0944, 3.1416, 3.1416, 3.1416, 3.1416])
+# Home: upper arm up, forearm forward, tool pointing down over the table.
+Q_HOME = np.array([0.0, -np.pi / 2, np.pi / 2, -np.pi / 2, -np.pi / 2, 0.0])
+
+_X_BaseW = X_WBase.inverse()
+_X_TcpFlange = X_FlangeTcp.inverse()
+
+
+def flange_pose_in_base(X_WTcp: RigidTransform) -> np.ndarray:
+    """4x4 pose of the flange (DH frame 6) in the arm's base frame for a tcp pose in the world."""
+    return (_X_BaseW @ X_WTcp @ _X_TcpFlange).GetAsMatrix4()
+
+
+def tcp_pose(q: np.ndarray) -> RigidTransform:
+    """Forward kinematics of the tcp in the world frame (closed form)."""
+    T = ur_analytic_ik.ur10e.forward_kinematics(*np.asarray(q, dtype=float))
+    return X_WBase @ RigidTransform(T) @ X_FlangeTcp
+
+
+def on_branch(q: np.ndarray) -> bool:
+    """Elbow up and wrist down, the branch of Q_HOME, with the shoulder facing the table."""
+    return bool(np.sin(q[2]) > 0.0 and np.sin(q[4]) < 0.0)
+
+
+def _wrap_near(q: np.ndarray, q_ref: np.ndarray) -> np.ndarray | None:
+    """q shifted per joint by multiples of 2 pi to be nearest q_ref, or None outside the limits."""
+    q = q_ref + (q - q_ref + np.pi) % (2 * np.pi) - np.pi
+    for i in range(6):
+        if q[i] > Q_UPPER[i]:
+            q[i] -= 2 * np.pi
+        if q[i] < Q_LOWER[i]:
+            q[i] += 2 * np.pi
+    if np.any(q < Q_LOWER - 1e-9) or np.any(q > Q_UPPER + 1e-9):
+        return None
+    return q
+
+
+def analytic_ik(X_WTcp: RigidTransform, q_ref: np.ndarray) -> np.ndarray | None:
+    """The on-branch closed-form solution nearest q_ref, or None when there is none."""
+    solutions = ur_analytic_ik.ur10e.inverse_kinematics(flange_pose_in_base(X_WTcp))
+    best, best_dist = None, np.inf
+    for q in solutions:
+        if not np.all(np.isfinite(q)) or not on_branch(q):
+            continue
+        q = _wrap_near(np.asarray(q, dtype=float), q_ref)
+        if q is None:
+            continue
+        dist = float(np.linalg.norm(q - q_ref))
+        if dist < best_dist:
+            best, best_dist = q, dist
+    return best
+
+
+def drake_ik(
+    plant: MultibodyPlant,
+    arm_position_indices: np.ndarray,
+    X_WTcp: RigidTransform,
+    q_seed_full: np.ndarray,
+    tcp_frame,
+    position_tolerance: float = 1e-3,
+    angle_tolerance: float = 1e-2,
+) -> np.ndarray | None:
+    """Numerical IK on the motion plant, seeded at q_seed_full, for poses the branch cannot reach
+    exactly (e.g. near a singularity). Returns the 6 arm joints or None."""
+    ik = InverseKinematics(plant)
+    p = X_WTcp.translation()
+    tol = np.full(3, position_tolerance)
+    ik.AddPositionConstraint(tcp_frame, np.zeros(3), plant.world_frame(), p - tol, p + tol)
+    ik.AddOrientationConstraint(
+        plant.world_frame(), X_WTcp.rotation(), tcp_frame, RotationMatrix(), angle_tolerance
+    )
+    q_vars = ik.q()
+    prog = ik.prog()
+    # Other bodies (free blocks) stay where they are.
+    others = np.setdiff1d(np.arange(plant.num_positions()), arm_position_indices)
+    prog.AddBoundingBoxConstraint(q_seed_full[others], q_seed_full[others], q_vars[others])
+    prog.AddQuadraticErrorCost(np.eye(len(arm_position_indices)), q_seed_full[arm_position_indices], q_vars[arm_position_indices])
+    prog.SetInitialGuess(q_vars, q_seed_full)
+    result = Solve(prog)
+    if not result.is_success():
+        return None
+    q = result.GetSolution(q_vars)[arm_position_indices]
+    if np.any(q < Q_LOWER) or np.any(q > Q_UPPER) or not on_branch(q):
+        return None
+    return q
+

@@ -1,0 +1,135 @@
+"""Joint-space motion planning for the UR10e: OMPL RRTConnect over Drake's collision checker.
+
+Every motion is first tried as the straight joint-space segment (OMPL's motion validator at the
+configured resolution); RRTConnect runs only when that segment is blocked. A grasped block is
+attached to the gripper as an added collision shape and its free body is moved out of the scene,
+so carried motions are checked with the block in the jaws.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from ompl import base as ob
+from ompl import geometric as og
+from ompl import util as ou
+from pydrake.geometry import Box
+from pydrake.math import RigidTransform
+
+from tamp.kinematics import Q_LOWER, Q_UPPER
+from tamp.plants import MotionScene
+
+ou.setLogLevel(ou.LogLevel.LOG_WARN)
+
+_PARKED = np.array([1.0, 0.0, 0.0, 0.0, 0.0, 0.0, -10.0])  # free-body pose far below the table
+_CARRIED_GROUP = "carried"
+
+
+@dataclass
+class MotionResult:
+    path: np.ndarray | None  # (m, 6) joint waypoints, start and goal included; None if no path
+    reason: str = ""  # why there is no path
+    planner: str = ""  # "direct" or "rrtconnect"
+
+
+class MotionPlanner:
+    """Plans collision-free arm motions in a scene whose block poses are set by the caller."""
+
+    def __init__(self, scene: MotionScene, joint_step: float, padding: float, seed: int = 0) -> None:
+        self.scene = scene
+        plant = scene.plant
+        self._n_q = plant.num_positions()
+        self._arm_idx = np.array(
+            [plant.get_joint(j).position_start() for j in plant.GetJointIndices(scene.arm)
+             if plant.get_joint(j).num_positions() == 1]
+        )
+        self._block_idx = [
+            plant.get_body(plant.GetBodyIndices(b)[0]).floating_positions_start() for b in scene.blocks
+        ]
+        self._q_full = np.zeros(self._n_q)
+        for i in range(len(scene.blocks)):
+            self._set_block(i, _PARKED)
+        self._joint_step = joint_step
+        self._seed = seed
+        self.num_checks = 0
+
+        self._space = ob.RealVectorStateSpace(6)
+        bounds = ob.RealVectorBounds(6)
+        for i in range(6):
+            bounds.setLow(i, float(Q_LOWER[i]))
+            bounds.setHigh(i, float(Q_UPPER[i]))
+        self._space.setBounds(bounds)
+
+    # --- scene -------------------------------------------------------------------------------
+    def _set_block(self, i: int, q7: np.ndarray) -> None:
+        s = self._block_idx[i]
+        self._q_full[s : s + 7] = q7
+
+    def set_block_poses(self, X_WB: list[RigidTransform], parked: tuple[int, ...] = ()) -> None:
+        """Block poses for collision checking; blocks in `parked` are removed from the scene."""
+        for i, X in enumerate(X_WB):
+            if i in parked:
+                self._set_block(i, _PARKED)
+            else:
+                self._set_block(i, np.r_[X.rotation().ToQuaternion().wxyz(), X.translation()])
+
+    def attach(self, shapes: list[tuple[tuple[float, float, float], RigidTransform]]) -> None:
+        """Attach boxes (size, pose in the gripper body frame) to the gripper."""
+        self.detach()
+        for size, X_GB in shapes:
+            self.scene.checker.AddCollisionShapeToBody(
+                _CARRIED_GROUP, self.scene.gripper_body, Box(*size), X_GB
+            )
+
+    def detach(self) -> None:
+        self.scene.checker.RemoveAllAddedCollisionShapes(_CARRIED_GROUP)
+
+    def full_configuration(self, q_arm: np.ndarray) -> np.ndarray:
+        q = self._q_full.copy()
+        q[self._arm_idx] = q_arm
+        return q
+
+    # --- checks ------------------------------------------------------------------------------
+    def is_valid(self, q_arm) -> bool:
+        self.num_checks += 1
+        q = self._q_full
+        q[self._arm_idx] = [q_arm[i] for i in range(6)]
+        return bool(self.scene.checker.CheckConfigCollisionFree(q))
+
+    def path_is_valid(self, path: np.ndarray, joint_step: float) -> bool:
+        """Check a piecewise-linear path densely (independent of OMPL)."""
+        for a, b in zip(path[:-1], path[1:]):
+            m = max(2, int(np.ceil(np.linalg.norm(b - a) / joint_step)) + 1)
+            for s in np.linspace(0.0, 1.0, m):
+                if not self.is_valid(a + s * (b - a)):
+                    return False
+        return True
+
+    # --- planning ----------------------------------------------------------------------------
+    def plan(self, q_start: np.ndarray, q_goal: np.ndarray, time_limit: float, simplify: bool = False) -> MotionResult:
+        """A collision-free joint path from q_start to q_goal within the joint limits."""
+        if not self.is_valid(q_start):
+            return MotionResult(None, "start configuration in collision")
+        if not self.is_valid(q_goal):
+            return MotionResult(None, "goal configuration in collision")
+        ss = og.SimpleSetup(self._space)
+        ss.setStateValidityChecker(self.is_valid)
+        si = ss.getSpaceInformation()
+        si.setStateValidityCheckingResolution(self._joint_step / self._space.getMaximumExtent())
+        start, goal = self._space.allocState(), self._space.allocState()
+        for i in range(6):
+            start[i] = float(q_start[i])
+            goal[i] = float(q_goal[i])
+        ss.setStartAndGoalStates(start, goal)
+        ss.setPlanner(og.RRTConnect(si))
+        ss.setup()
+        if si.checkMotion(start, goal):
+            return MotionResult(np.array([q_start, q_goal], dtype=float), planner="direct")
+        status = ss.solve(time_limit)
+        if not ss.haveExactSolutionPath():
+            return MotionResult(None, f"no collision-free path within {time_limit:g} s ({status})")
+        if simplify:
+            ss.simplifySolution(time_limit)
+        path = ss.getSolutionPath()
+        states = [[path.getState(k)[i] for i in range(6)] for k in range(path.getStateCount())]
+        return MotionResult(np.array(states, dtype=float), planner="rrtconnect")

@@ -1,0 +1,74 @@
+"""Physics of released blocks: simulate table + blocks until every block is at rest."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from pydrake.math import RigidTransform
+from pydrake.systems.analysis import Simulator
+
+from tamp.plants import PhysicsScene
+
+
+@dataclass
+class SettleResult:
+    X_WB: list[RigidTransform]  # block poses at rest
+    time: float  # simulated seconds
+    settled: bool  # False when the time cap was hit
+
+
+class BlockPhysics:
+    """Hydroelastic table-and-blocks simulation that runs until the scene is at rest."""
+
+    def __init__(self, scene: PhysicsScene, settle_speed: float, settle_angular_speed: float,
+                 settle_window: float, max_time: float) -> None:
+        self.scene = scene
+        self._simulator = Simulator(scene.diagram)
+        self._plant_context = scene.plant.GetMyMutableContextFromRoot(self._simulator.get_mutable_context())
+        self._bodies = [scene.plant.get_body(scene.plant.GetBodyIndices(b)[0]) for b in scene.blocks]
+        self._speed = settle_speed
+        self._angular_speed = settle_angular_speed
+        self._window = settle_window
+        self._max_time = max_time
+        self._check_every = max(scene.plant.time_step(), 0.01)
+
+    def settle(self, X_WB: list[RigidTransform], record: list | None = None) -> SettleResult:
+        """Start the blocks at rest at X_WB and simulate until all are still for the settle window.
+
+        If `record` is a list, (time, poses) samples are appended to it every check interval.
+        """
+        plant, ctx = self.scene.plant, self._plant_context
+        root = self._simulator.get_mutable_context()
+        root.SetTime(0.0)
+        for body, X in zip(self._bodies, X_WB):
+            plant.SetFreeBodyPose(ctx, body, X)
+            plant.SetFreeBodySpatialVelocity(ctx, body, _zero_velocity())
+        self._simulator.Initialize()
+        still_since = 0.0
+        t = 0.0
+        while t < self._max_time:
+            t = min(t + self._check_every, self._max_time)
+            self._simulator.AdvanceTo(t)
+            poses = [plant.EvalBodyPoseInWorld(ctx, b) for b in self._bodies]
+            if record is not None:
+                record.append((t, poses))
+            if self._at_rest():
+                if t - still_since >= self._window - 1e-9:
+                    return SettleResult(poses, t, True)
+            else:
+                still_since = t
+        return SettleResult([plant.EvalBodyPoseInWorld(ctx, b) for b in self._bodies], t, False)
+
+    def _at_rest(self) -> bool:
+        plant, ctx = self.scene.plant, self._plant_context
+        for body in self._bodies:
+            V = plant.EvalBodySpatialVelocityInWorld(ctx, body)
+            if np.linalg.norm(V.translational()) > self._speed or np.linalg.norm(V.rotational()) > self._angular_speed:
+                return False
+        return True
+
+
+def _zero_velocity():
+    from pydrake.multibody.math import SpatialVelocity
+
+    return SpatialVelocity(np.zeros(3), np.zeros(3))

@@ -1,0 +1,128 @@
+"""Drake plants of the block world, built from our own model files in `drake_models/`.
+
+Two plants, each built once per scene layout (block types):
+- the motion plant (arm + gripper + table + free blocks) behind the `SceneGraphCollisionChecker`
+  that validates OMPL motions, and behind forward kinematics and Meshcat replays;
+- the physics plant (table + free blocks, hydroelastic contact) that decides what a released
+  block does. The arm is not in it: in the `fast` fidelity the gripper leaves with its jaws open.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from pydrake.math import RigidTransform, RotationMatrix
+from pydrake.multibody.parsing import Parser
+from pydrake.multibody.plant import (
+    AddMultibodyPlantSceneGraph,
+    DiscreteContactApproximation,
+    MultibodyPlant,
+)
+from pydrake.multibody.tree import ModelInstanceIndex
+from pydrake.planning import RobotDiagramBuilder, SceneGraphCollisionChecker
+from pydrake.systems.framework import DiagramBuilder
+
+from tamp.structs import LARGE, SMALL
+
+MODEL_DIR = Path(__file__).resolve().parent.parent / "drake_models"
+ARM_FILE = MODEL_DIR / "ur10e.urdf"
+GRIPPER_FILE = MODEL_DIR / "gripper.sdf"
+TABLE_FILE = MODEL_DIR / "table.sdf"
+BLOCK_FILES = {SMALL: MODEL_DIR / "small_block.sdf", LARGE: MODEL_DIR / "large_block.sdf"}
+
+# The arm's base on the table, yawed so that the UR10e's DH frame 0 (arm along -x at q = 0) faces +x.
+X_WBase = RigidTransform(RotationMatrix.MakeZRotation(np.pi), [0.0, 0.0, 0.0])
+# Grasp point (tcp) in the flange frame: see drake_models/gripper.sdf.
+X_FlangeTcp = RigidTransform([0.0, 0.0, 0.125])
+ARM_JOINTS = (
+    "shoulder_pan_joint",
+    "shoulder_lift_joint",
+    "elbow_joint",
+    "wrist_1_joint",
+    "wrist_2_joint",
+    "wrist_3_joint",
+)
+
+
+def _add_arm_gripper_table(plant: MultibodyPlant, parser: Parser) -> tuple[ModelInstanceIndex, ModelInstanceIndex]:
+    (arm,) = parser.AddModels(str(ARM_FILE))
+    (gripper,) = parser.AddModels(str(GRIPPER_FILE))
+    (table,) = parser.AddModels(str(TABLE_FILE))
+    plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("base_link", arm), X_WBase)
+    plant.WeldFrames(plant.GetFrameByName("tool0", arm), plant.GetFrameByName("gripper_base", gripper))
+    plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("table_top", table))
+    return arm, gripper
+
+
+def _add_blocks(parser: Parser, types: np.ndarray) -> list[ModelInstanceIndex]:
+    parser.SetAutoRenaming(True)
+    blocks = []
+    for t in types:
+        (block,) = parser.AddModels(str(BLOCK_FILES[int(t)]))
+        blocks.append(block)
+    return blocks
+
+
+@dataclass
+class MotionScene:
+    """Arm, gripper, table and free blocks, with a collision checker over the full plant state."""
+
+    diagram: object
+    plant: MultibodyPlant
+    checker: SceneGraphCollisionChecker
+    arm: ModelInstanceIndex
+    gripper: ModelInstanceIndex
+    blocks: list[ModelInstanceIndex]
+
+    @property
+    def gripper_body(self):
+        return self.plant.GetBodyByName("gripper_base", self.gripper)
+
+    def block_body(self, i: int):
+        return self.plant.get_body(self.plant.GetBodyIndices(self.blocks[i])[0])
+
+
+def build_motion_scene(types: np.ndarray, padding: float, edge_step: float = 0.02) -> MotionScene:
+    """The motion plant for blocks of `types`; the checker's robot is the arm and its gripper."""
+    builder = RobotDiagramBuilder(time_step=0.0)
+    plant = builder.plant()
+    parser = builder.parser()
+    arm, gripper = _add_arm_gripper_table(plant, parser)
+    blocks = _add_blocks(parser, types)
+    plant.Finalize()
+    diagram = builder.Build()
+    checker = SceneGraphCollisionChecker(
+        model=diagram,
+        robot_model_instances=[arm, gripper],
+        edge_step_size=edge_step,
+        env_collision_padding=padding,
+        self_collision_padding=0.0,
+    )
+    return MotionScene(diagram, plant, checker, arm, gripper, blocks)
+
+
+@dataclass
+class PhysicsScene:
+    """Table and free blocks under hydroelastic contact."""
+
+    diagram: object
+    plant: MultibodyPlant
+    blocks: list[ModelInstanceIndex]
+
+
+def build_physics_scene(types: np.ndarray, time_step: float) -> PhysicsScene:
+    """Box-on-box contact needs hydroelastic contact and the lagged solver (see BUILD_NOTES.md)."""
+    builder = DiagramBuilder()
+    plant, scene_graph = AddMultibodyPlantSceneGraph(builder, time_step=time_step)
+    plant.set_discrete_contact_approximation(DiscreteContactApproximation.kLagged)
+    from pydrake.multibody.plant import ContactModel
+
+    plant.set_contact_model(ContactModel.kHydroelasticWithFallback)
+    parser = Parser(plant)
+    (table,) = parser.AddModels(str(TABLE_FILE))
+    plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("table_top", table))
+    blocks = _add_blocks(parser, types)
+    plant.Finalize()
+    diagram = builder.Build()
+    return PhysicsScene(diagram, plant, blocks)

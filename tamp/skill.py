@@ -1,0 +1,173 @@
+"""Geometry of the pick-place skill: gripper poses, what the jaws hold, where a block is released.
+
+All poses are of the tcp frame G (drake_models/gripper.sdf) in the world W: top-down, +z_G pointing
+down, the jaws closing along x_G and y_G along the block's own y axis, so a 5 x 25 cm bar is held
+across its 5 cm width. The grasp point is p_pick + grasp_offset * 7.5 cm along the picked block's
+y axis, the target point p_place + release_offset * 7.5 cm along the place block's y axis, and the
+gripper keeps the block where it held it: the block ends at target - (grasp point - block centre),
+rotated with the gripper.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from pydrake.math import RigidTransform, RotationMatrix
+
+from tamp.structs import BLOCK_SIZES, OFFSET_STEP, PickPlace, WorldConfig
+
+JAW_OPENING = 0.08  # metres between the open jaws' inner faces
+_GRASP_TOLERANCE = 0.005  # metres: the grasp point may lie this far outside a block and still hold it
+
+
+@dataclass
+class Scene:
+    """Simulator state of the blocks: types (n,) and full poses (orientation is not in X)."""
+
+    types: np.ndarray
+    X_WB: list[RigidTransform]
+
+    @property
+    def n(self) -> int:
+        return len(self.types)
+
+    def X(self) -> np.ndarray:
+        """The planner's state: (n, 5) = position (m) and one-hot type."""
+        X = np.zeros((self.n, 5))
+        for i, (t, pose) in enumerate(zip(self.types, self.X_WB)):
+            X[i, :3] = pose.translation()
+            X[i, 3 + int(t)] = 1.0
+        return X
+
+    def size(self, i: int) -> np.ndarray:
+        return np.array(BLOCK_SIZES[int(self.types[i])])
+
+    def corners(self, i: int) -> np.ndarray:
+        """(8, 3) world coordinates of block i's corners."""
+        h = self.size(i) / 2
+        signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
+        return (self.X_WB[i] @ (signs * h).T).T
+
+    def top(self, i: int) -> float:
+        return float(self.corners(i)[:, 2].max())
+
+    def bottom(self, i: int) -> float:
+        return float(self.corners(i)[:, 2].min())
+
+    def yaw(self, i: int) -> float:
+        """Heading of block i's y axis projected on the table, minus 90 degrees (0 for an
+        axis-aligned block)."""
+        y = self.X_WB[i].rotation().matrix()[:, 1]
+        return float(np.arctan2(y[1], y[0]) - np.pi / 2)
+
+    def y_axis_xy(self, i: int) -> np.ndarray:
+        yaw = self.yaw(i)
+        return np.array([-np.sin(yaw), np.cos(yaw)])
+
+    def contains(self, i: int, p_W: np.ndarray, tolerance: float = 0.0) -> bool:
+        p_B = self.X_WB[i].inverse() @ p_W
+        return bool(np.all(np.abs(p_B) <= self.size(i) / 2 + tolerance))
+
+    def resting_on(self, i: int, tolerance: float = 0.01) -> list[int]:
+        """Blocks whose bottom touches block i's top inside its footprint, recursively."""
+        found: list[int] = []
+        frontier = [i]
+        while frontier:
+            k = frontier.pop()
+            for j in range(self.n):
+                if j == i or j in found:
+                    continue
+                if abs(self.bottom(j) - self.top(k)) > tolerance:
+                    continue
+                c = self.X_WB[j].translation()
+                probe = np.array([c[0], c[1], self.top(k) - 0.005])
+                if self.contains(k, probe, tolerance=0.0):
+                    found.append(j)
+                    frontier.append(j)
+        return found
+
+
+def topdown(p_W: np.ndarray, yaw: float) -> RigidTransform:
+    """Tcp pose at p_W pointing down, with y_G along yaw + 90 degrees (the block's y axis)."""
+    return RigidTransform(RotationMatrix.MakeZRotation(yaw) @ RotationMatrix.MakeXRotation(np.pi), p_W)
+
+
+@dataclass
+class Waypoints:
+    """Tcp poses of one pick-place, in execution order, and the carried blocks' grasp."""
+
+    pregrasp: RigidTransform
+    grasp: RigidTransform
+    liftoff: RigidTransform
+    lift: RigidTransform
+    preplace: RigidTransform
+    place: RigidTransform
+    retreat: RigidTransform
+    carried: list[int]  # grasped block first, then blocks resting on it
+    X_GC: list[RigidTransform]  # each carried block's pose in the tcp frame
+
+    def named(self) -> list[tuple[str, RigidTransform]]:
+        return [("pregrasp", self.pregrasp), ("grasp", self.grasp), ("liftoff", self.liftoff), ("lift", self.lift),
+                ("preplace", self.preplace), ("place", self.place), ("retreat", self.retreat)]
+
+
+def grasp_pose(scene: Scene, action: PickPlace, config: WorldConfig) -> RigidTransform:
+    """Tcp pose that closes the jaws around the picked block at its grasp offset."""
+    i = action.pick
+    c = scene.X_WB[i].translation()
+    p = np.r_[c[:2] + action.grasp_offset * OFFSET_STEP * scene.y_axis_xy(i), scene.top(i) - config.grasp_depth]
+    return topdown(p, scene.yaw(i))
+
+
+def held_block(scene: Scene, X_WG: RigidTransform) -> int:
+    """The block the closing jaws hold at X_WG (-1 if none): the grasp point lies inside it and
+    its width across the jaws fits the opening."""
+    p = X_WG.translation()
+    for j in range(scene.n):
+        if scene.contains(j, p, tolerance=_GRASP_TOLERANCE):
+            across = np.abs((X_WG.inverse() @ scene.corners(j).T)[0]).max() * 2
+            if across < JAW_OPENING:
+                return j
+    return -1
+
+
+def pick_place_waypoints(scene: Scene, action: PickPlace, grasped: int, config: WorldConfig) -> Waypoints:
+    """All tcp poses of the action once `grasped` is known to be held at the grasp pose."""
+    X_WGrasp = grasp_pose(scene, action, config)
+    carried = [grasped] + scene.resting_on(grasped)
+    X_GC = [X_WGrasp.inverse() @ scene.X_WB[c] for c in carried]
+    # Depth of the carried blocks' lowest corner below the tcp (a yaw about z keeps it).
+    below = X_WGrasp.translation()[2] - min(scene.bottom(c) for c in carried)
+    j = action.place
+    cj = scene.X_WB[j].translation()
+    target_xy = cj[:2] + action.release_offset * OFFSET_STEP * scene.y_axis_xy(j)
+    support = scene.bottom(j) if j == action.pick else scene.top(j)
+    place_z = support + config.release_clearance + below
+    # Of the two equivalent jaw headings at the target, keep the one nearer the grasp heading.
+    grasp_yaw = scene.yaw(action.pick)
+    yaw = scene.yaw(j)
+    if abs(_wrap(yaw + np.pi - grasp_yaw)) < abs(_wrap(yaw - grasp_yaw)):
+        yaw += np.pi
+    X_WPlace = topdown(np.r_[target_xy, place_z], yaw)
+
+    others = [k for k in range(scene.n) if k not in carried]
+    tallest = max([scene.top(k) for k in others], default=0.0)
+    carry_z = max(X_WGrasp.translation()[2] + config.approach_height,
+                  place_z + config.approach_height,
+                  tallest + config.carry_clearance + below)
+    up = lambda X, z: RigidTransform(X.rotation(), np.r_[X.translation()[:2], z])  # noqa: E731
+    return Waypoints(
+        pregrasp=up(X_WGrasp, X_WGrasp.translation()[2] + config.approach_height),
+        grasp=X_WGrasp,
+        liftoff=up(X_WGrasp, X_WGrasp.translation()[2] + config.lift_off),
+        lift=up(X_WGrasp, carry_z),
+        preplace=up(X_WPlace, carry_z),
+        place=X_WPlace,
+        retreat=up(X_WPlace, place_z + config.approach_height),
+        carried=carried,
+        X_GC=X_GC,
+    )
+
+
+def _wrap(a: float) -> float:
+    return (a + np.pi) % (2 * np.pi) - np.pi

@@ -1,0 +1,115 @@
+"""Plain data shared across the world, the skill and the planners.
+
+`PickPlace` crosses package borders as a 4-tuple (learned/ and symbolic/ never import tamp), so it
+is a NamedTuple. Lengths are metres, angles radians, times seconds.
+"""
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import NamedTuple
+
+import numpy as np
+
+# Block types: index into the one-hot part of X.
+SMALL, LARGE = 0, 1
+TYPE_NAMES = ("small", "large")
+# Box sizes along the block's own x, y, z (metres).
+BLOCK_SIZES = {SMALL: (0.05, 0.05, 0.05), LARGE: (0.05, 0.25, 0.05)}
+OFFSET_STEP = 0.075  # metres along the block's y axis per unit of grasp or release offset
+OFFSETS = (-1, 0, 1)
+
+
+class PickPlace(NamedTuple):
+    """Pick object `pick` at `grasp_offset` and release it on object `place` at `release_offset`.
+
+    Offsets are in {-1, 0, +1} and scale OFFSET_STEP along the object's y axis.
+    `place == pick` places the object where it was, shifted by the offsets.
+    """
+
+    pick: int
+    grasp_offset: int
+    place: int
+    release_offset: int
+
+
+@dataclass(frozen=True)
+class WorldConfig:
+    """Configuration of the block world. All lengths in metres, times in seconds."""
+
+    fidelity: str = "fast"  # "fast": planned and checked arm motion, kinematic carry, physics after release
+    workspace_x: tuple[float, float] = (0.45, 0.85)  # random scenes: block centres in this box
+    workspace_y: tuple[float, float] = (-0.30, 0.30)
+    min_separation: float = 0.04  # gap between random blocks' footprints (the jaws need 2.7 cm)
+    p_large: float = 0.5  # probability that a random block is a large bar
+    approach_height: float = 0.12  # pre-grasp and retreat: above the grasp / release pose
+    carry_clearance: float = 0.10  # lift: carried block's bottom this far above the tallest block
+    release_clearance: float = 0.005  # released block's bottom above the support surface
+    grasp_depth: float = 0.025  # tcp below the grasped block's top
+    lift_off: float = 0.01  # first, straight-up part of the lift that frees the block from its support
+    time_step: float = 0.002  # physics step
+    settle_speed: float = 0.005  # m/s: a block moving slower than this (and turning slower than
+    settle_angular_speed: float = 0.05  # rad/s this) is at rest
+    settle_window: float = 0.03  # all blocks at rest this long means the scene settled
+    settle_max_time: float = 2.0  # cap on simulated settling time
+    planning_time: float = 1.0  # OMPL time limit per motion
+    collision_resolution: float = 0.01  # OMPL validity-checking resolution (fraction of extent)
+    padding: float = 0.002  # collision padding of the motion checker
+
+    def __post_init__(self) -> None:
+        if self.fidelity not in ("fast", "full"):
+            raise ValueError(f"WorldConfig.fidelity must be 'fast' or 'full', got {self.fidelity!r}")
+        for name in ("workspace_x", "workspace_y"):
+            lo, hi = getattr(self, name)
+            if not lo < hi:
+                raise ValueError(f"WorldConfig.{name} must be (low, high) with low < high, got {(lo, hi)}")
+        if not 0.0 <= self.p_large <= 1.0:
+            raise ValueError(f"WorldConfig.p_large must be in [0, 1], got {self.p_large}")
+        if self.time_step <= 0 or self.settle_max_time <= 0:
+            raise ValueError("WorldConfig.time_step and settle_max_time must be positive")
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+
+@dataclass
+class StepInfo:
+    """What happened during one `World.step`.
+
+    `status` is one of STATUSES; `reason` says in words why an action changed nothing.
+    """
+
+    action: PickPlace
+    status: str = "ok"
+    reason: str = ""
+    ik_success: dict[str, bool] = field(default_factory=dict)  # waypoint name -> IK found
+    motion_success: dict[str, bool] = field(default_factory=dict)  # motion name -> path found
+    grasped: int = -1  # object actually carried (-1: none)
+    carried: list[int] = field(default_factory=list)  # grasped object and blocks resting on it
+    settle_time: float = 0.0  # simulated seconds until the scene was at rest
+    settled: bool = True  # False if the settle cap was hit
+    timings: dict[str, float] = field(default_factory=dict)  # wall-clock seconds per stage
+    paths: dict[str, np.ndarray] = field(default_factory=dict)  # motion name -> (m, 6) joint path
+    X_release: np.ndarray | None = None  # scene at the moment of release (before physics)
+
+    @property
+    def changed(self) -> bool:
+        return self.status == "ok"
+
+    def to_dict(self) -> dict:
+        return {
+            "action": list(self.action),
+            "status": self.status,
+            "reason": self.reason,
+            "ik_success": dict(self.ik_success),
+            "motion_success": dict(self.motion_success),
+            "grasped": self.grasped,
+            "carried": list(self.carried),
+            "settle_time": round(self.settle_time, 4),
+            "settled": self.settled,
+            "timings": {k: round(v, 5) for k, v in self.timings.items()},
+        }
+
+
+# Outcome codes, stable across versions (datasets store the integer).
+STATUSES = ("ok", "ik_failure", "motion_failure", "nothing_grasped")

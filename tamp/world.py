@@ -1,0 +1,284 @@
+"""The block world: a UR10e on a table with 2-4 blocks and a pick-place skill that really happens.
+
+`World.step` plans the whole action before anything moves: IK for every waypoint, then OMPL
+motions checked against the scene (the grasped block attached while carried); only a fully planned
+action is executed. In the `fast` fidelity the grasped block follows the gripper kinematically and
+physics runs from release until every block is at rest. An action that is kinematically
+impossible or closes the jaws on nothing changes nothing, and `StepInfo` says why.
+"""
+from __future__ import annotations
+
+import time
+from typing import Iterable
+
+import numpy as np
+from pydrake.math import RigidTransform
+
+from tamp.kinematics import Q_HOME, analytic_ik, drake_ik, tcp_pose
+from tamp.motion import MotionPlanner
+from tamp.physics import BlockPhysics
+from tamp.plants import X_FlangeTcp, build_motion_scene, build_physics_scene
+from tamp.replay import Timeline
+from tamp.skill import Scene, Waypoints, grasp_pose, held_block, pick_place_waypoints, topdown
+from tamp.structs import BLOCK_SIZES, LARGE, OFFSETS, SMALL, PickPlace, StepInfo, WorldConfig
+
+MAX_OBJECTS = 6
+_JOINT_STEP = 0.005  # radians between collision checks along a motion
+
+
+class World:
+    """Random or given block scenes and the pick-place skill on them."""
+
+    def __init__(self, config: WorldConfig | None = None, seed: int = 0) -> None:
+        self.config = config or WorldConfig()
+        if self.config.fidelity != "fast":
+            raise ValueError(
+                f"fidelity {self.config.fidelity!r} is not available in this World; use 'fast'"
+            )
+        self.seed = seed
+        self.rng = np.random.default_rng(seed)
+        self.q = Q_HOME.copy()
+        self.scene: Scene | None = None
+        self.timeline: Timeline | None = None  # set to a Timeline to record frames for a replay
+        self._layouts: dict[tuple[int, ...], tuple[MotionPlanner, BlockPhysics]] = {}
+
+    # --- scenes ------------------------------------------------------------------------------
+    def reset(self, n_objects: int | None = None, X: np.ndarray | None = None) -> np.ndarray:
+        """A random scene of n_objects blocks, or the scene X (blocks upright, axis-aligned).
+
+        Blocks settle under physics before the state is returned; the arm goes home.
+        """
+        if (n_objects is None) == (X is None):
+            raise ValueError("reset takes exactly one of n_objects or X")
+        if X is not None:
+            types, positions = _parse_X(X)
+        else:
+            if isinstance(n_objects, bool) or not isinstance(n_objects, (int, np.integer)) \
+                    or not 1 <= n_objects <= MAX_OBJECTS:
+                raise ValueError(f"n_objects must be an integer in 1..{MAX_OBJECTS}, got {n_objects!r}")
+            types, positions = self._random_layout(int(n_objects))
+        self.q = Q_HOME.copy()
+        scene = Scene(types, [RigidTransform(p) for p in positions])
+        _, physics = self._layout(types)
+        settled = physics.settle(scene.X_WB)
+        self.scene = Scene(types, settled.X_WB)
+        if self.timeline is not None:
+            self.timeline.start(self.scene, self.q)
+        return self.scene.X()
+
+    def _random_layout(self, n: int) -> tuple[np.ndarray, np.ndarray]:
+        cfg = self.config
+        types = (self.rng.random(n) < cfg.p_large).astype(int)
+        half = np.array([BLOCK_SIZES[int(t)][:2] for t in types]) / 2 + cfg.min_separation / 2
+        positions = np.zeros((n, 3))
+        for i in range(n):
+            for _ in range(10_000):
+                xy = np.array([self.rng.uniform(*cfg.workspace_x), self.rng.uniform(*cfg.workspace_y)])
+                if all(np.any(np.abs(xy - positions[j, :2]) >= half[i] + half[j]) for j in range(i)):
+                    break
+            else:
+                raise RuntimeError(f"could not place {n} blocks in the workspace without overlap")
+            positions[i] = [xy[0], xy[1], BLOCK_SIZES[int(types[i])][2] / 2]
+        return types, positions
+
+    def _layout(self, types: np.ndarray) -> tuple[MotionPlanner, BlockPhysics]:
+        key = tuple(int(t) for t in types)
+        if key not in self._layouts:
+            cfg = self.config
+            planner = MotionPlanner(build_motion_scene(types, cfg.padding), _JOINT_STEP, cfg.padding)
+            physics = BlockPhysics(build_physics_scene(types, cfg.time_step), cfg.settle_speed,
+                                   cfg.settle_angular_speed, cfg.settle_window, cfg.settle_max_time)
+            self._layouts[key] = (planner, physics)
+        return self._layouts[key]
+
+    def actions(self) -> list[PickPlace]:
+        """All 9 n^2 pick-place actions of the current scene."""
+        n = self._require_scene().n
+        return [PickPlace(i, gi, j, rj) for i in range(n) for gi in OFFSETS for j in range(n) for rj in OFFSETS]
+
+    @property
+    def X(self) -> np.ndarray:
+        return self._require_scene().X()
+
+    def _require_scene(self) -> Scene:
+        if self.scene is None:
+            raise RuntimeError("call World.reset() before using the scene")
+        return self.scene
+
+    # --- the skill ---------------------------------------------------------------------------
+    def step(self, action: PickPlace | Iterable[int]) -> tuple[np.ndarray, StepInfo]:
+        """Plan and execute one pick-place; returns the next state X and what happened."""
+        scene = self._require_scene()
+        action = validate_action(action, scene.n)
+        info = StepInfo(action)
+        t_start = time.perf_counter()
+        planner, physics = self._layout(scene.types)
+        planner.detach()
+        planner.set_block_poses(scene.X_WB)
+
+        # Approach: jaws open over the grasp point, then down to it.
+        X_grasp = grasp_pose(scene, action, self.config)
+        approach = [("pregrasp", _raised(X_grasp, self.config.approach_height)), ("grasp", X_grasp)]
+        qs = self._solve_ik(approach, info)
+        if qs is None:
+            return self._unchanged(info, t_start)
+        t_motion = time.perf_counter()
+        paths = {}
+        if not self._plan(planner, [("approach", self.q, qs["pregrasp"]), ("descend", qs["pregrasp"], qs["grasp"])], info, paths):
+            return self._unchanged(info, t_start, t_motion)
+        info.timings["motion"] = time.perf_counter() - t_motion
+
+        held = held_block(scene, X_grasp)
+        info.grasped = held
+        if held < 0:
+            info.status, info.reason = "nothing_grasped", "the jaws closed on nothing at the grasp point"
+            return self._unchanged(info, t_start)
+
+        wp = pick_place_waypoints(scene, action, held, self.config)
+        info.carried = list(wp.carried)
+        qs = self._solve_ik(wp.named(), info, q_start=qs["grasp"], skip=("pregrasp", "grasp"), known=qs)
+        if qs is None:
+            return self._unchanged(info, t_start)
+        t_motion = time.perf_counter()
+        # Lift-off: straight up by a centimetre, the carried blocks leaving their support (the
+        # gripper alone is checked); from there on they are attached to the gripper.
+        planner.set_block_poses(scene.X_WB, parked=tuple(wp.carried))
+        ok = self._plan(planner, [("liftoff", qs["grasp"], qs["liftoff"])], info, paths)
+        sizes = [BLOCK_SIZES[int(scene.types[c])] for c in wp.carried]
+        planner.attach(list(zip(sizes, [X_FlangeTcp @ X for X in wp.X_GC])))
+        carry = [("lift", qs["liftoff"], qs["lift"]), ("transfer", qs["lift"], qs["preplace"]),
+                 ("lower", qs["preplace"], qs["place"])]
+        ok = ok and self._plan(planner, carry, info, paths)
+        planner.detach()
+        info.timings["motion"] += time.perf_counter() - t_motion
+        if not ok:
+            return self._unchanged(info, t_start)
+
+        # Execute: carry kinematically, release, let physics decide.
+        X_release = list(scene.X_WB)
+        for c, X_GC in zip(wp.carried, wp.X_GC):
+            X_release[c] = wp.place @ X_GC
+        info.X_release = Scene(scene.types, X_release).X()
+        if self.timeline is not None:
+            self.timeline.add_motions([paths[m] for m in ("approach", "descend")], scene.X_WB, None)
+            self.timeline.add_motions([paths[m] for m in ("liftoff", "lift", "transfer", "lower")], scene.X_WB, (wp.carried, wp.X_GC))
+        t_physics = time.perf_counter()
+        record = [] if self.timeline is not None else None
+        settled = physics.settle(X_release, record)
+        info.timings["physics"] = time.perf_counter() - t_physics
+        info.settle_time, info.settled = settled.time, settled.settled
+        if self.timeline is not None:
+            self.timeline.add_physics(record, qs["place"])
+        self.scene = Scene(scene.types, settled.X_WB)
+
+        # Retreat straight up with open jaws; the released blocks are below the jaws.
+        t_motion = time.perf_counter()
+        planner.set_block_poses(self.scene.X_WB, parked=tuple(wp.carried))
+        if self._plan(planner, [("retreat", qs["place"], qs["retreat"])], info, paths):
+            self.q = qs["retreat"]
+            if self.timeline is not None:
+                self.timeline.add_motions([paths["retreat"]], self.scene.X_WB, None)
+        else:
+            self.q = qs["place"]
+            info.reason = "released, but the retreat was blocked; the arm stays at the place pose"
+        info.timings["motion"] += time.perf_counter() - t_motion
+        info.paths = paths
+        info.timings["total"] = time.perf_counter() - t_start
+        return self.scene.X(), info
+
+    def _solve_ik(self, waypoints, info: StepInfo, q_start=None, skip=(), known=None) -> dict | None:
+        t0 = time.perf_counter()
+        qs = dict(known or {})
+        q_prev = self.q if q_start is None else q_start
+        planner, _ = self._layout(self.scene.types)
+        ok = True
+        for name, X in waypoints:
+            if name in skip:
+                continue
+            q = analytic_ik(X, q_prev)
+            if q is None:
+                q = self._numerical_ik(planner, X, q_prev)
+            info.ik_success[name] = q is not None
+            if q is None:
+                p = X.translation()
+                info.status = "ik_failure"
+                info.reason = f"no IK solution for the {name} pose at ({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) m"
+                ok = False
+                break
+            qs[name] = q_prev = q
+        info.timings["ik"] = info.timings.get("ik", 0.0) + time.perf_counter() - t0
+        return qs if ok else None
+
+    @staticmethod
+    def _numerical_ik(planner: MotionPlanner, X_WTcp: RigidTransform, q_seed: np.ndarray):
+        plant = planner.scene.plant
+        q_full = planner.full_configuration(q_seed)
+        return drake_ik(plant, planner._arm_idx, X_WTcp, q_full, plant.GetFrameByName("tcp"))
+
+    def _plan(self, planner: MotionPlanner, motions, info: StepInfo, paths: dict) -> bool:
+        for name, q_a, q_b in motions:
+            result = planner.plan(q_a, q_b, self.config.planning_time)
+            info.motion_success[name] = result.path is not None
+            if result.path is None:
+                info.status = "motion_failure"
+                info.reason = f"{name} motion: {result.reason}"
+                return False
+            paths[name] = result.path
+        return True
+
+    def _unchanged(self, info: StepInfo, t_start: float, t_motion: float | None = None) -> tuple[np.ndarray, StepInfo]:
+        if t_motion is not None:
+            info.timings["motion"] = info.timings.get("motion", 0.0) + time.perf_counter() - t_motion
+        info.timings["total"] = time.perf_counter() - t_start
+        return self.scene.X(), info
+
+
+def _raised(X: RigidTransform, dz: float) -> RigidTransform:
+    return RigidTransform(X.rotation(), X.translation() + [0.0, 0.0, dz])
+
+
+def validate_action(action, n: int) -> PickPlace:
+    """A PickPlace from a 4-sequence of integers, or a ValueError naming what is wrong."""
+    try:
+        values = [int(v) for v in action]
+        if any(float(v) != int(v) for v in action):
+            raise TypeError
+    except (TypeError, ValueError):
+        raise ValueError(f"an action is 4 integers (pick, grasp_offset, place, release_offset), got {action!r}") from None
+    if len(values) != 4:
+        raise ValueError(f"an action is 4 integers (pick, grasp_offset, place, release_offset), got {action!r}")
+    pick, grasp_offset, place, release_offset = values
+    for name, index in (("pick", pick), ("place", place)):
+        if not 0 <= index < n:
+            raise ValueError(f"{name} object index {index} is out of range for a scene of {n} objects")
+    for name, offset in (("grasp_offset", grasp_offset), ("release_offset", release_offset)):
+        if offset not in OFFSETS:
+            raise ValueError(f"{name} must be -1, 0 or +1, got {offset}")
+    return PickPlace(pick, grasp_offset, place, release_offset)
+
+
+def _parse_X(X) -> tuple[np.ndarray, np.ndarray]:
+    X = np.asarray(X, dtype=float) if not isinstance(X, np.ndarray) else X.astype(float)
+    if X.ndim != 2 or X.shape[1] != 5:
+        raise ValueError(f"X must have shape (n, 5) (x, y, z, one-hot type), got shape {X.shape}")
+    if not 1 <= X.shape[0] <= MAX_OBJECTS:
+        raise ValueError(f"X must describe 1..{MAX_OBJECTS} objects, got {X.shape[0]}")
+    if not np.all(np.isfinite(X)):
+        raise ValueError("X contains NaN or infinite values")
+    onehot = X[:, 3:]
+    if not np.all((onehot == 0) | (onehot == 1)) or not np.all(onehot.sum(axis=1) == 1):
+        raise ValueError(f"X[:, 3:5] must be a one-hot type (small, large) per object, got {onehot.tolist()}")
+    types = onehot.argmax(axis=1).astype(int)
+    positions = X[:, :3].copy()
+    for i in range(len(X)):
+        if positions[i, 2] < BLOCK_SIZES[int(types[i])][2] / 2 - 0.01:
+            raise ValueError(f"object {i} at z = {positions[i, 2]:.3f} m would be inside the table")
+        for j in range(i):
+            overlap = np.array(BLOCK_SIZES[int(types[i])]) / 2 + np.array(BLOCK_SIZES[int(types[j])]) / 2 \
+                - np.abs(positions[i] - positions[j])
+            if np.all(overlap > 0.01):
+                raise ValueError(f"objects {j} and {i} overlap by more than 1 cm")
+    return types, positions
+
+
+__all__ = ["World", "validate_action", "SMALL", "LARGE", "topdown", "Waypoints"]
