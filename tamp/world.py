@@ -23,6 +23,8 @@ from tamp.skill import Scene, Waypoints, grasp_pose, held_block, pick_place_wayp
 from tamp.structs import BLOCK_SIZES, LARGE, OFFSETS, SMALL, PickPlace, StepInfo, WorldConfig
 
 MAX_OBJECTS = 6
+TABLE_X, TABLE_Y = (-0.5, 1.9), (-1.2, 1.2)  # table top extent (drake_models/table.sdf), metres
+BASE_CLEARANCE = 0.15  # metres: no block centre this close to the arm's base axis
 _JOINT_STEP = 0.005  # radians between collision checks along a motion
 
 
@@ -271,6 +273,12 @@ def _parse_X(X) -> tuple[np.ndarray, np.ndarray]:
     types = onehot.argmax(axis=1).astype(int)
     positions = X[:, :3].copy()
     for i in range(len(X)):
+        x, y = positions[i, :2]
+        if not (TABLE_X[0] <= x <= TABLE_X[1] and TABLE_Y[0] <= y <= TABLE_Y[1]):
+            raise ValueError(f"object {i} at ({x:.3f}, {y:.3f}) m is off the table "
+                             f"(x in {TABLE_X}, y in {TABLE_Y})")
+        if np.hypot(x, y) < BASE_CLEARANCE:
+            raise ValueError(f"object {i} at ({x:.3f}, {y:.3f}) m is inside the robot's base")
         if positions[i, 2] < BLOCK_SIZES[int(types[i])][2] / 2 - 0.01:
             raise ValueError(f"object {i} at z = {positions[i, 2]:.3f} m would be inside the table")
         for j in range(i):

@@ -1,0 +1,52 @@
+"""The UR10e model's kinematics agree with the closed-form solver it is paired with."""
+import numpy as np
+import pytest
+from pydrake.math import RigidTransform, RotationMatrix
+
+from tamp.kinematics import Q_HOME, Q_LOWER, Q_UPPER, analytic_ik, on_branch, tcp_pose
+from tamp.plants import build_motion_scene
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return build_motion_scene(np.array([0]), padding=0.0)
+
+
+def test_drake_forward_kinematics_matches_analytic(scene):
+    plant = scene.plant
+    ctx = plant.CreateDefaultContext()
+    tcp = plant.GetFrameByName("tcp")
+    rng = np.random.default_rng(0)
+    for _ in range(50):
+        q_arm = rng.uniform(-np.pi, np.pi, 6)
+        q = np.zeros(plant.num_positions())
+        q[:6] = q_arm
+        q[6] = 1.0  # block quaternion
+        plant.SetPositions(ctx, q)
+        X_drake = plant.CalcRelativeTransform(ctx, plant.world_frame(), tcp)
+        np.testing.assert_allclose(X_drake.GetAsMatrix4(), tcp_pose(q_arm).GetAsMatrix4(), atol=1e-9)
+
+
+def test_denavit_hartenberg_lengths():
+    # At q = 0 the arm is stretched out along world +x (the base is yawed by pi): the flange is
+    # at x = -(a2 + a3), y = d4 + d6, z = d1 - d5. The tcp is 0.125 m beyond it along flange z.
+    X = tcp_pose(np.zeros(6))
+    flange = X.translation() - X.rotation().matrix()[:, 2] * 0.125
+    np.testing.assert_allclose(flange, [0.6127 + 0.57155, 0.17415 + 0.11655, 0.1807 - 0.11985], atol=1e-9)
+
+
+def test_topdown_ik_round_trip_on_branch():
+    rng = np.random.default_rng(1)
+    for _ in range(100):
+        p = [rng.uniform(0.4, 0.95), rng.uniform(-0.45, 0.45), rng.uniform(0.0, 0.4)]
+        X = RigidTransform(RotationMatrix.MakeZRotation(rng.uniform(-np.pi, np.pi)) @ RotationMatrix.MakeXRotation(np.pi), p)
+        q = analytic_ik(X, Q_HOME)
+        assert q is not None, p
+        assert on_branch(q)
+        assert np.all(q >= Q_LOWER) and np.all(q <= Q_UPPER)
+        np.testing.assert_allclose(tcp_pose(q).GetAsMatrix4(), X.GetAsMatrix4(), atol=1e-8)
+
+
+def test_ik_out_of_reach_is_none():
+    X = RigidTransform(RotationMatrix.MakeXRotation(np.pi), [1.6, 0.0, 0.05])
+    assert analytic_ik(X, Q_HOME) is None

@@ -1,0 +1,201 @@
+"""The block world: the pick-place skill's outcomes, its motions, its determinism and its errors."""
+import numpy as np
+import pytest
+from pydrake.math import RigidTransform
+
+from tamp import PickPlace, World, WorldConfig
+from tamp.kinematics import Q_LOWER, Q_UPPER, tcp_pose
+from tamp.motion import MotionPlanner
+from tamp.plants import X_FlangeTcp, build_motion_scene
+from tamp.structs import BLOCK_SIZES
+
+SMALL, LARGE = [1.0, 0.0], [0.0, 1.0]
+BAR_HEIGHT = BLOCK_SIZES[1][2]
+
+
+@pytest.fixture(scope="module")
+def world():
+    return World(WorldConfig(), seed=0)
+
+
+def scene(*blocks):
+    return np.array([list(p) + t for p, t in blocks], dtype=float)
+
+
+def test_cube_released_centred_on_bar_ends_on_top(world):
+    X0 = world.reset(X=scene(((0.6, 0.15, 0.025), SMALL), ((0.7, -0.1, 0.025), LARGE)))
+    X1, info = world.step(PickPlace(0, 0, 1, 0))
+    assert info.status == "ok" and info.grasped == 0
+    assert X1[0, 2] == pytest.approx(X0[0, 2] + BAR_HEIGHT, abs=0.01)
+    np.testing.assert_allclose(X1[0, :2], X0[1, :2], atol=0.01)
+    np.testing.assert_allclose(X1[1, :3], X0[1, :3], atol=0.005)  # the bar did not move
+
+
+def test_cube_released_off_centre_on_cube_falls_to_table(world):
+    X0 = world.reset(X=scene(((0.6, 0.15, 0.025), SMALL), ((0.7, -0.1, 0.025), SMALL)))
+    X1, info = world.step(PickPlace(0, 0, 1, 1))
+    assert info.status == "ok"
+    assert X1[0, 2] == pytest.approx(X0[0, 2], abs=0.01)  # on the table, not on the cube
+    assert abs(X1[0, 1] - X0[1, 1]) > 0.05  # beside the other cube
+
+
+def test_pick_and_place_on_itself_shifts_along_y(world):
+    X0 = world.reset(X=scene(((0.6, 0.1, 0.025), SMALL), ((0.7, -0.15, 0.025), LARGE)))
+    X1, info = world.step(PickPlace(0, 0, 0, 1))
+    assert info.status == "ok"
+    np.testing.assert_allclose(X1[0, :3] - X0[0, :3], [0.0, 0.075, 0.0], atol=0.01)
+    # The bar picked at +1 and released on itself at 0 moves the other way.
+    X2, info = world.step(PickPlace(1, 1, 1, 0))
+    assert info.status == "ok"
+    np.testing.assert_allclose(X2[1, :3] - X1[1, :3], [0.0, -0.075, 0.0], atol=0.01)
+
+
+def test_grasp_beside_a_cube_grasps_nothing(world):
+    X0 = world.reset(X=scene(((0.6, 0.1, 0.025), SMALL), ((0.7, -0.15, 0.025), LARGE)))
+    X1, info = world.step(PickPlace(0, 1, 1, 0))
+    assert info.status == "nothing_grasped" and info.grasped == -1
+    assert "nothing" in info.reason
+    np.testing.assert_array_equal(X1, X0)
+
+
+def test_target_out_of_reach_is_an_ik_failure_and_changes_nothing(world):
+    X0 = world.reset(X=scene(((0.6, 0.1, 0.025), SMALL), ((1.6, -0.1, 0.025), SMALL)))
+    X1, info = world.step(PickPlace(0, 0, 1, 0))
+    assert info.status == "ik_failure"
+    assert False in info.ik_success.values()
+    assert "IK" in info.reason
+    np.testing.assert_array_equal(X1, X0)
+    # Picking the unreachable block fails the same way.
+    X2, info = world.step(PickPlace(1, 0, 0, 0))
+    assert info.status == "ik_failure" and info.ik_success["pregrasp"] is False
+    np.testing.assert_array_equal(X2, X0)
+
+
+def test_grasp_blocked_by_a_block_on_top_changes_nothing(world):
+    world.reset(X=scene(((0.6, 0.1, 0.025), SMALL), ((0.7, -0.15, 0.025), LARGE)))
+    X1, info = world.step(PickPlace(0, 0, 1, 0))  # cube onto the bar's centre
+    assert info.status == "ok"
+    X2, info = world.step(PickPlace(1, 0, 0, 0))  # the bar under the cube
+    assert info.status == "motion_failure"
+    assert "collision" in info.reason
+    np.testing.assert_array_equal(X2, X1)
+
+
+def test_block_resting_on_the_picked_bar_is_carried_along(world):
+    X0 = world.reset(X=scene(((0.6, 0.1, 0.025), SMALL), ((0.7, -0.15, 0.025), LARGE), ((0.5, -0.2, 0.025), LARGE)))
+    X1, _ = world.step(PickPlace(0, 0, 1, -1))  # cube on the bar's -y end
+    X2, info = world.step(PickPlace(1, 1, 2, 0))  # bar held at its +y end onto the other bar
+    assert info.status == "ok" and info.carried == [1, 0]
+    np.testing.assert_allclose(X2[0, :2] - X2[1, :2], X1[0, :2] - X1[1, :2], atol=0.01)
+    assert X2[0, 2] == pytest.approx(X1[0, 2] + BAR_HEIGHT, abs=0.01)
+
+
+def _check_path(checker_planner, path, joint_step=1e-3):
+    assert np.all(path >= Q_LOWER) and np.all(path <= Q_UPPER)
+    return checker_planner.path_is_valid(path, joint_step)
+
+
+def test_every_planned_motion_is_collision_free_at_fine_resolution():
+    """Replays each motion of random actions against a separate, unpadded checker."""
+    world = World(WorldConfig(), seed=3)
+    rng = np.random.default_rng(3)
+    world.reset(n_objects=3)
+    checker = MotionPlanner(build_motion_scene(world.scene.types, padding=0.0), joint_step=1e-3, padding=0.0)
+    checked = 0
+    for _ in range(8):
+        actions = world.actions()
+        before = list(world.scene.X_WB)
+        X, info = world.step(actions[rng.integers(len(actions))])
+        if info.status != "ok":
+            continue
+        after = list(world.scene.X_WB)
+        X_WGrasp = tcp_pose(info.paths["descend"][-1])
+        carried = tuple(info.carried)
+        attached = [(BLOCK_SIZES[int(world.scene.types[c])], X_FlangeTcp @ X_WGrasp.inverse() @ before[c]) for c in carried]
+        checker.detach()
+        checker.set_block_poses(before)
+        for m in ("approach", "descend"):
+            assert _check_path(checker, info.paths[m]), m
+        checker.set_block_poses(before, parked=carried)
+        assert _check_path(checker, info.paths["liftoff"])
+        checker.attach(attached)
+        for m in ("lift", "transfer", "lower"):
+            assert _check_path(checker, info.paths[m]), m
+        checker.detach()
+        checker.set_block_poses(after, parked=carried)
+        assert _check_path(checker, info.paths["retreat"])
+        checked += 1
+    assert checked >= 2
+
+
+def test_same_seed_same_outcomes():
+    def rollout(seed):
+        world = World(WorldConfig(), seed=seed)
+        rng = np.random.default_rng(seed)
+        states = [world.reset(n_objects=3)]
+        statuses = []
+        for _ in range(4):
+            actions = world.actions()
+            X, info = world.step(actions[rng.integers(len(actions))])
+            states.append(X)
+            statuses.append(info.status)
+        return np.array(states), statuses
+
+    a, sa = rollout(11)
+    b, sb = rollout(11)
+    np.testing.assert_array_equal(a, b)
+    assert sa == sb
+    c, _ = rollout(12)
+    assert not np.array_equal(a[0], c[0])
+
+
+def test_random_scene_and_actions(world):
+    X = world.reset(n_objects=4)
+    assert X.shape == (4, 5)
+    assert np.all(X[:, 3:].sum(axis=1) == 1)
+    assert np.all((X[:, 0] >= 0.44) & (X[:, 0] <= 0.86))
+    actions = world.actions()
+    assert len(actions) == 9 * 4**2 == len(set(actions))
+
+
+@pytest.mark.parametrize(
+    "action, message",
+    [
+        ((5, 0, 1, 0), "pick object index 5"),
+        ((0, 0, -1, 0), "place object index -1"),
+        ((0, 2, 1, 0), "grasp_offset"),
+        ((0, 0, 1, -2), "release_offset"),
+        ((0, 0, 1), "4 integers"),
+        (("a", 0, 1, 0), "4 integers"),
+        ((0.5, 0, 1, 0), "4 integers"),
+    ],
+)
+def test_bad_actions_raise_clear_errors(world, action, message):
+    world.reset(n_objects=2)
+    with pytest.raises(ValueError, match=message):
+        world.step(action)
+
+
+@pytest.mark.parametrize(
+    "X, message",
+    [
+        (np.zeros((3, 4)), "shape"),
+        (np.array([[0.6, 0.1, 0.025, 1.0, 1.0]]), "one-hot"),
+        (np.array([[0.6, 0.1, np.nan, 1.0, 0.0]]), "NaN"),
+        (np.array([[5.0, 0.1, 0.025, 1.0, 0.0]]), "off the table"),
+        (np.array([[0.6, 0.1, 0.025, 1.0, 0.0], [0.61, 0.1, 0.025, 1.0, 0.0]]), "overlap"),
+        (np.array([[0.6, 0.1, -0.2, 1.0, 0.0]]), "inside the table"),
+    ],
+)
+def test_malformed_scenes_raise_clear_errors(world, X, message):
+    with pytest.raises(ValueError, match=message):
+        world.reset(X=X)
+
+
+def test_reset_argument_errors(world):
+    with pytest.raises(ValueError, match="exactly one"):
+        world.reset()
+    with pytest.raises(ValueError, match="n_objects"):
+        world.reset(n_objects=0)
+    with pytest.raises(ValueError, match="fidelity"):
+        WorldConfig(fidelity="slow")
