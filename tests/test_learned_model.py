@@ -1,0 +1,161 @@
+"""EffectModel: equivariance, padding, the planner API, symbols, checkpoints."""
+import numpy as np
+import pytest
+import torch
+
+from learned import EffectModel, ModelConfig, load_model, save_checkpoint
+from learned.effects import arm_shift
+from learned.synthetic import random_scene
+
+torch.set_num_threads(1)
+
+
+def make_model(activation="sigmoid", seed=0, **kw) -> EffectModel:
+    torch.manual_seed(seed)
+    m = EffectModel(ModelConfig(hidden=32, d_msg=16, d_z=6, heads=3, activation=activation, **kw))
+    m.set_normalisation([0.65, 0.0, 0.05], [0.12, 0.2, 0.03], effect_scale=0.05, arm_scale=0.2)
+    with torch.no_grad():  # sharper relations than at init, so every head matters
+        m.query.weight.mul_(4)
+        m.key.weight.mul_(4)
+    return m.eval()
+
+
+def scene(n, seed=0):
+    return random_scene(np.random.default_rng(seed), n, stack_prob=1.0)
+
+
+def all_actions(n):
+    return [(i, d, j, r) for i in range(n) for d in (-1, 0, 1) for j in range(n) for r in (-1, 0, 1)]
+
+
+@pytest.mark.parametrize("activation", ["sigmoid", "gumbel_sigmoid", "tanh", "none"])
+def test_permuting_objects_permutes_effects_and_symbols(activation):
+    m = make_model(activation, seed=1)
+    X = scene(4, seed=2)
+    acts = np.array(all_actions(4))
+    perm = np.array([2, 0, 3, 1])          # new object k is old object perm[k]
+    inv = np.argsort(perm)
+    Xp = X[perm]
+    acts_p = acts.copy()
+    acts_p[:, 0], acts_p[:, 2] = inv[acts[:, 0]], inv[acts[:, 2]]
+    e, e_p = m.predict_effect(X, acts), m.predict_effect(Xp, acts_p)
+    np.testing.assert_allclose(e_p, e[:, perm], atol=1e-7)
+    learned_part = e - arm_shift(torch.tensor(X)[None].expand(len(acts), 4, 5),
+                                 torch.tensor(acts)).numpy()
+    assert np.ptp(learned_part, axis=(0, 1)).min() > 1e-4  # varies 1000x above the tolerance
+    u, r = m.symbols(X)
+    u_p, r_p = m.symbols(Xp)
+    assert 0 < u.mean() < 1 and 0 < r.mean() < 1, "symbols too uniform for a meaningful test"
+    np.testing.assert_array_equal(u_p, u[perm])
+    np.testing.assert_array_equal(r_p, r[:, perm][:, :, perm])
+
+
+@pytest.mark.parametrize("activation", ["sigmoid", "gumbel_sigmoid"])
+def test_padding_does_not_change_predictions(activation):
+    m = make_model(activation, seed=3)
+    X = torch.tensor(scene(2, seed=4), dtype=torch.float32)[None]
+    acts = torch.tensor(all_actions(2))
+    B = acts.shape[0]
+    X2 = X.expand(B, 2, 5)
+    X4 = torch.cat([X2, torch.randn(B, 2, 5)], dim=1)  # garbage in the padded rows
+    mask4 = torch.tensor([True, True, False, False]).expand(B, 4)
+    with torch.no_grad():
+        e2 = m(X2, acts, torch.ones(B, 2, dtype=torch.bool))
+        e4 = m(X4, acts, mask4)
+    torch.testing.assert_close(e4[:, :2], e2, rtol=0, atol=1e-6)
+    assert torch.all(e4[:, 2:] == 0)
+    assert e2.abs().max() > 1e-3  # a non-trivial prediction was compared
+    u, r = m.symbols_batch(X4[:1].numpy(), mask4[:1].numpy())
+    u2, r2 = m.symbols(X[0].numpy())
+    np.testing.assert_array_equal(u[0, :2], u2)
+    np.testing.assert_array_equal(r[0][:, :2, :2], r2)
+    assert not u[0, 2:].any() and not r[0][:, 2:].any() and not r[0][:, :, 2:].any()
+
+
+def test_predict_effect_is_absolute_and_batched():
+    m = make_model(seed=5)
+    X = scene(3, seed=6)
+    acts = all_actions(3)
+    e = m.predict_effect(X, acts)
+    assert e.shape == (81, 3, 3) and e.dtype == np.float64
+    np.testing.assert_array_equal(m.predict_effect(X, np.array(acts)), e)
+    one = np.stack([m.predict_effect(X, [a])[0] for a in acts])
+    np.testing.assert_allclose(one, e, atol=1e-6)
+    Xt = torch.tensor(X, dtype=torch.float32)[None].expand(81, 3, 5)
+    at = torch.tensor(acts)
+    with torch.no_grad():
+        target = m(Xt, at, torch.ones(81, 3, dtype=torch.bool)).double()
+    shift = arm_shift(torch.tensor(X)[None].expand(81, 3, 5), at)
+    np.testing.assert_allclose(e, (target + shift).numpy(), atol=1e-9)
+    # The pick object's prediction includes the gripper's lateral motion.
+    assert np.abs(shift.numpy()).max() > 0.05
+    assert m.predict_effect(X, np.zeros((0, 4), int)).shape == (0, 3, 3)
+    with pytest.raises(ValueError, match="out of range"):
+        m.predict_effect(X, [(3, 0, 0, 0)])
+    with pytest.raises(ValueError, match="offsets"):
+        m.predict_effect(X, [(0, 2, 1, 0)])
+    with pytest.raises(ValueError, match="n_max"):
+        m.predict_effect(scene(5, seed=1), [(0, 0, 1, 0)])
+
+
+def test_gumbel_is_stochastic_in_training_and_binary_at_inference():
+    m = make_model("gumbel_sigmoid", seed=7)
+    X = torch.tensor(scene(3, seed=8), dtype=torch.float32)[None]
+    logits = m.unary_logits(X)
+    m.train()
+    a, b = m.bottleneck(logits), m.bottleneck(logits)
+    assert not torch.equal(a, b) and ((a > 0) & (a < 1)).any()
+    m.eval()
+    hard = m.bottleneck(logits)
+    assert torch.equal(hard, (logits > 0).float())
+    np.testing.assert_array_equal(m.symbols(X[0].numpy())[0], hard[0].to(torch.uint8).numpy())
+    acts = all_actions(3)
+    np.testing.assert_array_equal(m.predict_effect(X[0].numpy(), acts),
+                                  m.predict_effect(X[0].numpy(), acts))
+
+
+def test_checkpoint_round_trips_exactly(tmp_path):
+    m = make_model("tanh", seed=9)
+    path = tmp_path / "m.pt"
+    save_checkpoint(path, m)
+    m2 = load_model(path)
+    assert m2.config == m.config and not m2.training
+    sd, sd2 = m.state_dict(), m2.state_dict()
+    assert sd.keys() == sd2.keys() and all(torch.equal(sd[k], sd2[k]) for k in sd)
+    X = scene(4, seed=10)
+    np.testing.assert_array_equal(m2.predict_effect(X, all_actions(4)),
+                                  m.predict_effect(X, all_actions(4)))
+    for a, b in zip(m.symbols(X), m2.symbols(X)):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_foreign_or_corrupt_checkpoints_give_clear_errors(tmp_path):
+    m = make_model(seed=11)
+    good = tmp_path / "good.pt"
+    save_checkpoint(good, m)
+    payload = torch.load(good, weights_only=True)
+
+    other_arch = tmp_path / "other_arch.pt"   # config says d_z=12, weights are for d_z=6
+    torch.save({**payload, "config": {**payload["config"], "d_z": 12}}, other_arch)
+    with pytest.raises(ValueError, match="other_arch.pt.*does not match"):
+        load_model(other_arch)
+
+    foreign = tmp_path / "foreign.pt"          # some other network's plain state dict
+    torch.save(torch.nn.Linear(5, 3).state_dict(), foreign)
+    with pytest.raises(ValueError, match="foreign.pt.*not an effect-model checkpoint"):
+        load_model(foreign)
+
+    unknown_key = tmp_path / "unknown_key.pt"
+    torch.save({**payload, "config": {**payload["config"], "layers_x": 3}}, unknown_key)
+    with pytest.raises(ValueError, match="unknown_key.pt"):
+        load_model(unknown_key)
+
+    truncated = tmp_path / "truncated.pt"
+    truncated.write_bytes(good.read_bytes()[:2000])
+    with pytest.raises(ValueError, match="truncated.pt.*not a readable checkpoint"):
+        load_model(truncated)
+
+    pickled = tmp_path / "pickled.pt"         # arbitrary pickled objects are refused
+    torch.save({"format": "learned-effect-model/1", "obj": np.random.default_rng(0)}, pickled)
+    with pytest.raises(ValueError, match="pickled.pt"):
+        load_model(pickled)
