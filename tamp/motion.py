@@ -96,6 +96,17 @@ class MotionPlanner:
         q[self._arm_idx] = [q_arm[i] for i in range(6)]
         return bool(self.scene.checker.CheckConfigCollisionFree(q))
 
+    def collisions(self, q_arm: np.ndarray) -> list[str]:
+        """Names of the colliding body pairs at q_arm, e.g. 'gripper_base / object 2'."""
+        checker, plant = self.scene.checker, self.scene.plant
+        clearance = checker.CalcRobotClearance(self.full_configuration(q_arm), 0.01)
+        names = {plant.GetBodyIndices(b)[0]: f"object {i}" for i, b in enumerate(self.scene.blocks)}
+        pairs = []
+        for r, o, d in zip(clearance.robot_indices(), clearance.other_indices(), clearance.distances()):
+            if d < checker.GetPaddingBetween(r, o):
+                pairs.append(f"{names.get(r, plant.get_body(r).name())} / {names.get(o, plant.get_body(o).name())}")
+        return sorted(set(pairs))
+
     def path_is_valid(self, path: np.ndarray, joint_step: float) -> bool:
         """Check a piecewise-linear path densely (independent of OMPL)."""
         for a, b in zip(path[:-1], path[1:]):
@@ -108,10 +119,10 @@ class MotionPlanner:
     # --- planning ----------------------------------------------------------------------------
     def plan(self, q_start: np.ndarray, q_goal: np.ndarray, time_limit: float, simplify: bool = False) -> MotionResult:
         """A collision-free joint path from q_start to q_goal within the joint limits."""
-        if not self.is_valid(q_start):
-            return MotionResult(None, "start configuration in collision")
-        if not self.is_valid(q_goal):
-            return MotionResult(None, "goal configuration in collision")
+        for name, q in (("start", q_start), ("goal", q_goal)):
+            if not self.is_valid(q):
+                pairs = ", ".join(self.collisions(q)) or "carried block"
+                return MotionResult(None, f"{name} configuration in collision ({pairs})")
         ss = og.SimpleSetup(self._space)
         ss.setStateValidityChecker(self.is_valid)
         si = ss.getSpaceInformation()

@@ -20,6 +20,7 @@ from pydrake.multibody.plant import (
     MultibodyPlant,
 )
 from pydrake.multibody.tree import ModelInstanceIndex
+from pydrake.common import Parallelism
 from pydrake.planning import RobotDiagramBuilder, SceneGraphCollisionChecker
 from pydrake.systems.framework import DiagramBuilder
 
@@ -98,6 +99,7 @@ def build_motion_scene(types: np.ndarray, padding: float, edge_step: float = 0.0
         edge_step_size=edge_step,
         env_collision_padding=padding,
         self_collision_padding=0.0,
+        implicit_context_parallelism=Parallelism(1),  # one thread per world; parallelism comes from processes
     )
     return MotionScene(diagram, plant, checker, arm, gripper, blocks)
 
