@@ -1,0 +1,58 @@
+"""Top-level entry points used by the CLI: build a domain from bits, and load it again."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from symbolic.atoms import check_bits
+from symbolic.dataset import make_dataset, split_dataset
+from symbolic.operators import coverage, learn_operators, load_operators, save_operators, stats
+from symbolic.pddl import write_domains
+from symbolic.structs import OperatorSet, SymbolicDataset, SymbolicProblem
+
+
+def build_domain(unary_pre, rel_pre, actions, unary_post, rel_post, n_per_transition, out_dir,
+                 holdout: float | SymbolicDataset = 0.1, seed: int = 0, min_prob: float = 0.0) -> dict:
+    """Learn operators from symbolic transitions and write the domain files.
+
+    Inputs: padded bit arrays unary (T, n_max, d_z), relations (T, K, n_max, n_max), actions (T, 4),
+    n_per_transition (T,). holdout: fraction of transitions held out for coverage (seeded split), or
+    an explicit held-out `SymbolicDataset`. Writes into out_dir: domain.pddl (most frequent effects),
+    domain.ppddl, operators.json, stats.json. Returns the statistics dict (also in stats.json).
+    """
+    data = make_dataset(unary_pre, rel_pre, actions, unary_post, rel_post, n_per_transition)
+    if isinstance(holdout, SymbolicDataset):
+        train, held = data, holdout
+    else:
+        train, held = split_dataset(data, float(holdout), seed)
+    ops = learn_operators(train)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = write_domains(ops, out, min_prob)
+    save_operators(ops, out / "operators.json")
+    report = stats(ops)
+    report["train_transitions"] = len(train)
+    report["coverage_train"] = coverage(ops, train)
+    report["coverage_holdout"] = coverage(ops, held) if held is not None and len(held) else None
+    report["files"] = {k: p.name for k, p in paths.items()} | {"operators": "operators.json"}
+    report["ppddl_bytes"] = paths["ppddl"].stat().st_size
+    (out / "stats.json").write_text(json.dumps(report, indent=1))
+    return report
+
+
+def load_domain(domain_dir: str | Path) -> OperatorSet:
+    """Operators written by `build_domain` (operators.json)."""
+    return load_operators(Path(domain_dir) / "operators.json")
+
+
+def make_problem(init_unary, init_rel, goal_unary, goal_rel) -> SymbolicProblem:
+    """Sigma_init / Sigma_goal bits -> problem (shapes checked against each other)."""
+    iu, ir, gu, gr = (np.asarray(x) for x in (init_unary, init_rel, goal_unary, goal_rel))
+    iu, ir = check_bits(iu, ir, "init")
+    gu, gr = check_bits(gu, gr, "goal", iu.shape[1], ir.shape[0])
+    if gu.shape != iu.shape:
+        raise ValueError(f"goal has {gu.shape[0]} objects, init has {iu.shape[0]}")
+    return SymbolicProblem(iu, ir, gu, gr)

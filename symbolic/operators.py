@@ -1,0 +1,229 @@
+"""Lifted operators from symbolic transitions (paper, Background), their statistics and persistence.
+
+Lifting. A transition in an n-object scene becomes an operator with n parameters: the picked
+object, the target object (if different) and the n-1 or n-2 other objects. Transitions are grouped
+by (n, pick == place, grasp offset, release offset, pre-state up to renaming of the other objects):
+the other objects are put in the order that makes the pre-state code lexicographically smallest,
+ties (symmetric objects) broken by the smallest effect code, so isomorphic transitions share one
+operator and symmetric effects are counted as one. The precondition is the *full* pre-state over
+the parameters: every unary bit of every parameter and every relation bit between parameters
+(including r(x, x)), written as positive atoms ``u``/``not-u``, ``r``/``not-r``, plus pairwise
+distinct parameters. The effect is the set difference to the post-state (bits that flip).
+
+Applicability in scenes of another size. Objects that are not parameters are neither tested nor
+changed. An operator learned in an m-object scene therefore applies in an n >= m scene to every
+m-subset of objects whose sub-state matches exactly (the published domain of the paper behaves the
+same way), and never in a scene with fewer objects. `symbolic.grounding` also offers
+``scope="exact"`` (only operators with arity == n), which keeps the frame assumption honest at the
+price of coverage.
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+from collections import Counter, defaultdict
+from pathlib import Path
+
+import numpy as np
+
+from symbolic.structs import Effect, Operator, OperatorSet, SymbolicDataset
+
+FORMAT = "symbolic-operators"
+VERSION = 1
+_OFFSET_NAME = {-1: "m1", 0: "0", 1: "p1"}
+
+GroupKey = tuple[int, bool, int, int, bytes]  # (arity, same, grasp, release, canonical pre-state code)
+
+
+def operator_name(index: int, grasp: int, release: int) -> str:
+    return f"pp{index}_g{_OFFSET_NAME[grasp]}_r{_OFFSET_NAME[release]}"
+
+
+def _canonicalize_group(U, R, Uq, Rq, pick, place, same):
+    """Canonical parameter order for transitions with the same n and pick==place flag.
+
+    Returns per transition: pre code (bytes), effect code (bytes) and the parameter order (T, n)
+    mapping parameter index -> scene object.
+    """
+    T, n, _ = U.shape
+    rows = np.arange(T)
+    base = np.empty((T, n), np.int64)
+    base[:, 0] = pick
+    fixed = 1 if same else 2
+    if not same:
+        base[:, 1] = place
+    objects = np.arange(n)
+    for t in range(T):
+        base[t, fixed:] = objects[(objects != pick[t]) & (objects != place[t])]
+    best_pre: list[bytes | None] = [None] * T
+    best_eff: list[bytes | None] = [None] * T
+    best_order = base.copy()
+    for perm in itertools.permutations(range(fixed, n)):
+        order = np.concatenate([base[:, :fixed], base[:, list(perm)]], axis=1)
+        u = U[rows[:, None], order]
+        r = np.moveaxis(R[rows[:, None, None], :, order[:, :, None], order[:, None, :]], -1, 1)
+        uq = Uq[rows[:, None], order]
+        rq = np.moveaxis(Rq[rows[:, None, None], :, order[:, :, None], order[:, None, :]], -1, 1)
+        pre = np.packbits(np.concatenate([u.reshape(T, -1), r.reshape(T, -1)], axis=1), axis=1)
+        eff = np.packbits(np.concatenate([(u != uq).reshape(T, -1), (r != rq).reshape(T, -1)], axis=1), axis=1)
+        for t in range(T):
+            p, e = pre[t].tobytes(), eff[t].tobytes()
+            if best_pre[t] is None or (p, e) < (best_pre[t], best_eff[t]):
+                best_pre[t], best_eff[t], best_order[t] = p, e, order[t]
+    return best_pre, best_eff, best_order
+
+
+def canonical_transitions(data: SymbolicDataset) -> tuple[list[GroupKey], list[bytes], np.ndarray]:
+    """Group key, effect code and parameter order (padded with -1) of every transition."""
+    T = len(data)
+    keys: list[GroupKey | None] = [None] * T
+    effs: list[bytes | None] = [None] * T
+    orders = np.full((T, data.unary_pre.shape[1]), -1, np.int64)
+    a = data.actions
+    same_all = a[:, 0] == a[:, 2]
+    for n in np.unique(data.n):
+        for same in (True, False):
+            idx = np.flatnonzero((data.n == n) & (same_all == same))
+            if idx.size == 0:
+                continue
+            if not same and n < 2:
+                raise ValueError("pick != place needs at least two objects")
+            sl = slice(0, int(n))
+            pre, eff, order = _canonicalize_group(
+                data.unary_pre[idx, sl], data.rel_pre[idx][:, :, sl, sl],
+                data.unary_post[idx, sl], data.rel_post[idx][:, :, sl, sl],
+                a[idx, 0], a[idx, 2], same)
+            for j, t in enumerate(idx):
+                keys[t] = (int(n), bool(same), int(a[t, 1]), int(a[t, 3]), pre[j])
+                effs[t] = eff[j]
+                orders[t, : int(n)] = order[j]
+    return keys, effs, orders  # type: ignore[return-value]
+
+
+def _lifted(data: SymbolicDataset, t: int, order: np.ndarray):
+    n = int(data.n[t])
+    o = order[:n]
+    u, r = data.unary_pre[t][o], data.rel_pre[t][:, o][:, :, o]
+    uq, rq = data.unary_post[t][o], data.rel_post[t][:, o][:, :, o]
+    effect = Effect(tuple((int(i), int(k)) for i, k in zip(*np.nonzero(u != uq))),
+                    tuple((int(k), int(i), int(j)) for k, i, j in zip(*np.nonzero(r != rq))))
+    return u, r, effect
+
+
+def learn_operators(data: SymbolicDataset) -> OperatorSet:
+    """Group transitions into lifted operators with their empirical effect distributions."""
+    if len(data) == 0:
+        raise ValueError("empty dataset: no transitions to learn operators from")
+    keys, effs, orders = canonical_transitions(data)
+    members: dict[GroupKey, list[int]] = defaultdict(list)
+    for t, key in enumerate(keys):
+        members[key].append(t)
+    groups = sorted(members.items(), key=lambda kv: (-len(kv[1]), kv[0]))
+    operators = []
+    for index, (key, ts) in enumerate(groups):
+        arity, same, grasp, release, _ = key
+        counts: Counter = Counter()
+        decoded: dict[bytes, Effect] = {}
+        for t in ts:
+            code = effs[t]
+            if code not in decoded:
+                decoded[code] = _lifted(data, t, orders[t])[2]
+            counts[decoded[code]] += 1
+        pre_u, pre_r, _ = _lifted(data, ts[0], orders[ts[0]])
+        ranked = sorted(counts.items(), key=lambda ec: (-ec[1], ec[0]))
+        operators.append(Operator(
+            name=operator_name(index, grasp, release), arity=arity, same=same, grasp=grasp,
+            release=release, pre_unary=pre_u, pre_rel=pre_r,
+            effects=tuple(e for e, _ in ranked), counts=tuple(c for _, c in ranked)))
+    return OperatorSet(operators, data.n_unary, data.n_relations)
+
+
+def operator_key(op: Operator) -> GroupKey:
+    code = np.packbits(np.concatenate([op.pre_unary.ravel(), op.pre_rel.ravel()]).astype(np.uint8))
+    return (op.arity, op.same, op.grasp, op.release, code.tobytes())
+
+
+def coverage(ops: OperatorSet, data: SymbolicDataset) -> dict[str, float | int]:
+    """How well operators explain (held-out) transitions.
+
+    matched: fraction whose lifted pre-state + action is the precondition of an operator;
+    effect_predicted: fraction whose observed effect is among that operator's effects (PPDDL);
+    effect_is_mode: fraction whose observed effect is the operator's most frequent one (PDDL).
+    """
+    if len(data) == 0:
+        raise ValueError("empty dataset: nothing to measure coverage on")
+    if (data.n_unary, data.n_relations) != (ops.n_unary, ops.n_relations):
+        raise ValueError(f"dataset has d_z={data.n_unary}, K={data.n_relations}; operators were "
+                         f"learned with d_z={ops.n_unary}, K={ops.n_relations}")
+    table = {operator_key(op): op for op in ops.operators}
+    keys, _, orders = canonical_transitions(data)
+    matched = predicted = mode = 0
+    for t, key in enumerate(keys):
+        op = table.get(key)
+        if op is None:
+            continue
+        matched += 1
+        effect = _lifted(data, t, orders[t])[2]
+        predicted += effect in op.effects
+        mode += effect == op.effects[0]
+    T = len(data)
+    return {"transitions": T, "matched": matched / T, "effect_predicted": predicted / T,
+            "effect_is_mode": mode / T}
+
+
+def stats(ops: OperatorSet) -> dict:
+    """Number of operators, effects per operator, arities, supporting transitions."""
+    n_eff = np.array([len(op.effects) for op in ops.operators], dtype=int)
+    return {
+        "n_operators": len(ops),
+        "n_probabilistic": int((n_eff > 1).sum()),
+        "n_unary": ops.n_unary,
+        "n_relations": ops.n_relations,
+        "operators_by_arity": {str(k): v for k, v in sorted(Counter(op.arity for op in ops.operators).items())},
+        "effects_per_operator": {
+            "mean": float(n_eff.mean()) if n_eff.size else 0.0,
+            "max": int(n_eff.max()) if n_eff.size else 0,
+            "histogram": {str(k): v for k, v in sorted(Counter(n_eff.tolist()).items())},
+        },
+        "transitions": int(sum(op.count for op in ops.operators)),
+    }
+
+
+def to_json(ops: OperatorSet) -> dict:
+    return {
+        "format": FORMAT, "version": VERSION, "n_unary": ops.n_unary, "n_relations": ops.n_relations,
+        "operators": [{
+            "name": op.name, "arity": op.arity, "same": op.same, "grasp": op.grasp, "release": op.release,
+            "pre_unary": op.pre_unary.tolist(), "pre_rel": op.pre_rel.tolist(),
+            "effects": [{"unary_flips": [list(f) for f in e.unary_flips],
+                         "rel_flips": [list(f) for f in e.rel_flips], "count": c}
+                        for e, c in zip(op.effects, op.counts)],
+        } for op in ops.operators],
+    }
+
+
+def from_json(doc: dict) -> OperatorSet:
+    if doc.get("format") != FORMAT:
+        raise ValueError(f"not an operators file (format={doc.get('format')!r})")
+    if doc.get("version") != VERSION:
+        raise ValueError(f"operators.json version {doc.get('version')} unsupported (expected {VERSION})")
+    d, K = int(doc["n_unary"]), int(doc["n_relations"])
+    operators = []
+    for o in doc["operators"]:
+        a = int(o["arity"])
+        pre_u = np.asarray(o["pre_unary"], np.uint8).reshape(a, d)
+        pre_r = np.asarray(o["pre_rel"], np.uint8).reshape(K, a, a)
+        effects = tuple(Effect(tuple(tuple(f) for f in e["unary_flips"]), tuple(tuple(f) for f in e["rel_flips"]))
+                        for e in o["effects"])
+        operators.append(Operator(o["name"], a, bool(o["same"]), int(o["grasp"]), int(o["release"]),
+                                  pre_u, pre_r, effects, tuple(int(e["count"]) for e in o["effects"])))
+    return OperatorSet(operators, d, K)
+
+
+def save_operators(ops: OperatorSet, path: str | Path) -> None:
+    Path(path).write_text(json.dumps(to_json(ops), separators=(",", ":")))
+
+
+def load_operators(path: str | Path) -> OperatorSet:
+    return from_json(json.loads(Path(path).read_text()))

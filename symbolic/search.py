@@ -1,0 +1,66 @@
+"""In-process breadth-first search over a grounded task (the fast Level-1 backend).
+
+Unit action costs, so BFS with the goal test at generation returns a shortest plan, the same length
+as Fast Downward's optimal configurations (e.g. astar(lmcut())). Successors are generated in ground
+action order, which makes the returned plan a deterministic function of the task and the effect
+choice. The search records which operators it looked at (`touched`): any other domain that chooses
+the same effects for those operators yields exactly the same search, so its result is reused.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+
+from symbolic.grounding import GroundTask
+from symbolic.structs import PlannerStatus
+
+
+@dataclass
+class SearchOutcome:
+    status: PlannerStatus
+    plan: list[int] | None  # ground action ids
+    touched: np.ndarray  # operator ids whose effect choice the search depended on
+    expanded: int
+    message: str = ""
+
+
+def bfs(task: GroundTask, choice: np.ndarray, init: int, goal: int,
+        max_expansions: int = 200_000, time_limit: float | None = None) -> SearchOutcome:
+    """Shortest plan from `init` to the full goal state `goal` with effect choice[op] per operator."""
+    deadline = None if time_limit is None else time.perf_counter() + time_limit
+    touched: set[int] = set()
+    if init == goal:
+        return SearchOutcome(PlannerStatus.SOLVED, [], np.empty(0, np.int64), 0)
+    parent: dict[int, tuple[int, int] | None] = {init: None}
+    frontier = deque([init])
+    flips = task.flips
+    ch = np.asarray(choice).tolist()
+    expanded = 0
+    while frontier:
+        s = frontier.popleft()
+        expanded += 1
+        if expanded > max_expansions or (deadline is not None and expanded % 256 == 0
+                                         and time.perf_counter() > deadline):
+            return SearchOutcome(PlannerStatus.TIMEOUT, None, np.fromiter(touched, np.int64), expanded,
+                                 f"search limit reached after {expanded} expansions")
+        gs, opis = task.applicable(s)
+        touched.update(opis)
+        for g, oi in zip(gs, opis):
+            t = s ^ flips[g][ch[oi]]
+            if t in parent:
+                continue
+            parent[t] = (s, g)
+            if t == goal:
+                plan = []
+                while parent[t] is not None:
+                    t, g2 = parent[t]
+                    plan.append(g2)
+                return SearchOutcome(PlannerStatus.SOLVED, plan[::-1],
+                                     np.array(sorted(touched), np.int64), expanded)
+            frontier.append(t)
+    return SearchOutcome(PlannerStatus.UNSOLVABLE, None, np.array(sorted(touched), np.int64), expanded,
+                         f"goal unreachable: {len(parent)} states explored")
