@@ -1,0 +1,204 @@
+"""Operator learning on hand-made bit datasets with known operators; persistence; bad input."""
+
+from __future__ import annotations
+
+import json
+from fractions import Fraction
+
+import numpy as np
+import pytest
+
+from symbolic import blocksworld as bw
+from symbolic.atoms import pack_state, state_atoms, unpack_state
+from symbolic.build import build_domain, load_domain
+from symbolic.dataset import make_dataset
+from symbolic.operators import coverage, from_json, learn_operators, stats, to_json
+from symbolic.structs import Effect
+
+# Two blocks, d_z = 1 (u0 = clear), K = 1 (r0(a, b) = a on b). The three scenes:
+TABLE = ([[1], [1]], [[[0, 0], [0, 0]]])
+ZERO_ON_ONE = ([[1], [0]], [[[0, 1], [0, 0]]])
+ONE_ON_ZERO = ([[0], [1]], [[[0, 0], [1, 0]]])
+OFFSETS = [(g, r) for g in (-1, 0, 1) for r in (-1, 0, 1)]
+
+
+def _world(state, action, success: bool):
+    """Ground truth: stacking p on t succeeds iff `success`; pick == place unstacks p."""
+    u, r = (np.array(x, np.uint8) for x in state)
+    p, _, q, _ = action
+    u, r = u.copy(), r.copy()
+    if p != q and u[p, 0] and u[q, 0] and success:
+        r[0, p, q], u[q, 0] = 1, 0
+    if p == q and u[p, 0] and r[0, p].any():
+        q2 = int(np.flatnonzero(r[0, p])[0])
+        r[0, p, q2], u[q2, 0] = 0, 1
+    return u, r
+
+
+def _known_dataset():
+    """Every (scene, action) four times; stacking succeeds 3 of 4 times with offset g == 0 and
+    1 of 4 times otherwise."""
+    rows = []
+    for state in (TABLE, ZERO_ON_ONE, ONE_ON_ZERO):
+        for p in (0, 1):
+            for q in (0, 1):
+                for g, r in OFFSETS:
+                    wins = 3 if g == 0 else 1
+                    for rep in range(4):
+                        a = (p, g, q, r)
+                        rows.append((state, a, _world(state, a, rep < wins)))
+    up = np.array([s[0] for s, _, _ in rows], np.uint8)
+    rp = np.array([s[1] for s, _, _ in rows], np.uint8)
+    uq = np.array([o[0] for _, _, o in rows])
+    rq = np.array([o[1] for _, _, o in rows])
+    acts = np.array([a for _, a, _ in rows])
+    return make_dataset(up, rp, acts, uq, rq, np.full(len(rows), 2))
+
+
+STACK = Effect(unary_flips=((1, 0),), rel_flips=((0, 0, 1),))  # r0(p, t) := 1, clear(t) := 0
+UNSTACK = Effect(unary_flips=((1, 0),), rel_flips=((0, 0, 1),))  # r0(p, x) := 0, clear(x) := 1
+NOOP = Effect()
+
+
+def _known_operators():
+    """(same, g, r, pre_unary, pre_rel) -> {effect: probability}, written out by hand."""
+    known = {}
+    for g, r in OFFSETS:
+        win = Fraction(3, 4) if g == 0 else Fraction(1, 4)
+        # pick != place, parameters (?p, ?t)
+        known[(False, g, r, ((1,), (1,)), (((0, 0), (0, 0)),))] = {STACK: win, NOOP: 1 - win}
+        known[(False, g, r, ((1,), (0,)), (((0, 1), (0, 0)),))] = {NOOP: Fraction(1)}  # p already on t
+        known[(False, g, r, ((0,), (1,)), (((0, 0), (1, 0)),))] = {NOOP: Fraction(1)}  # t on p
+        # pick == place, parameters (?p, ?x1)
+        known[(True, g, r, ((1,), (0,)), (((0, 1), (0, 0)),))] = {UNSTACK: Fraction(1)}  # p on x
+        known[(True, g, r, ((1,), (1,)), (((0, 0), (0, 0)),))] = {NOOP: Fraction(1)}
+        known[(True, g, r, ((0,), (1,)), (((0, 0), (1, 0)),))] = {NOOP: Fraction(1)}  # x on p
+    return known
+
+
+def _as_table(ops):
+    table = {}
+    for op in ops.operators:
+        key = (op.same, op.grasp, op.release, tuple(map(tuple, op.pre_unary.tolist())),
+               tuple(tuple(map(tuple, m)) for m in op.pre_rel.tolist()))
+        assert key not in table, f"two operators share the precondition {key}"
+        table[key] = {e: Fraction(c, op.count) for e, c in zip(op.effects, op.counts)}
+    return table
+
+
+def test_learned_operators_equal_known_ones():
+    ops = learn_operators(_known_dataset())
+    assert (ops.n_unary, ops.n_relations) == (1, 1)
+    assert len(ops) == 54
+    assert all(op.arity == 2 and op.count == 8 for op in ops.operators)
+    assert _as_table(ops) == _known_operators()
+    for op in ops.operators:  # most frequent effect first; names carry the offsets
+        assert op.counts == tuple(sorted(op.counts, reverse=True))
+        assert f"_g{ {-1: 'm1', 0: '0', 1: 'p1'}[op.grasp] }_r" in op.name
+
+
+def test_deterministic_effect_is_the_mode():
+    ops = learn_operators(_known_dataset())
+    stack_ops = [op for op in ops.operators if not op.same and op.pre_unary.tolist() == [[1], [1]]]
+    assert len(stack_ops) == 9
+    for op in stack_ops:
+        assert op.effects[0] == (STACK if op.grasp == 0 else NOOP)
+        np.testing.assert_allclose(op.probabilities, [0.75, 0.25])
+
+
+def _relabel(data, seed):
+    """The same transitions with object identities permuted per transition."""
+    rng = np.random.default_rng(seed)
+    d = data.subset(np.arange(len(data)))
+    for t in range(len(d)):
+        n = int(d.n[t])
+        perm = rng.permutation(n)  # new object i is old object perm[i]
+        inv = np.argsort(perm)
+        for arr in (d.unary_pre, d.unary_post):
+            arr[t, :n] = arr[t, perm]
+        for arr in (d.rel_pre, d.rel_post):
+            arr[t, :, :n, :n] = arr[t][:, perm][:, :, perm]
+        d.actions[t, 0], d.actions[t, 2] = inv[d.actions[t, 0]], inv[d.actions[t, 2]]
+    return d
+
+
+def test_lifting_is_invariant_to_object_identities():
+    data = bw.random_dataset(1500, (2, 3, 4), seed=3, p_large=0.0)
+    a, b = learn_operators(data), learn_operators(_relabel(data, 7))
+    ta = {(op.arity,) + k: v for op, (k, v) in zip(a.operators, _as_table(a).items())}
+    tb = {(op.arity,) + k: v for op, (k, v) in zip(b.operators, _as_table(b).items())}
+    assert ta == tb
+    assert len(a) < len(data) / 2  # isomorphic scenes really were merged
+
+
+def test_json_round_trip_and_versioning(tmp_path):
+    ops = learn_operators(bw.random_dataset(600, (2, 3), seed=1))
+    doc = json.loads(json.dumps(to_json(ops)))
+    back = from_json(doc)
+    assert _as_table(back) == _as_table(ops) and [o.name for o in back.operators] == [o.name for o in ops.operators]
+    doc["version"] = 99
+    with pytest.raises(ValueError, match="version"):
+        from_json(doc)
+
+
+def test_stats_and_coverage():
+    ops = learn_operators(_known_dataset())
+    s = stats(ops)
+    assert s["n_operators"] == 54 and s["n_probabilistic"] == 9
+    assert s["effects_per_operator"]["histogram"] == {"1": 45, "2": 9}
+    full = coverage(ops, _known_dataset())
+    assert full["matched"] == 1.0 and full["effect_predicted"] == 1.0
+    # 432 transitions; stacking outcomes that are not the mode: 3 offsets with g == 0 x 2 failures
+    # + 6 offsets with g != 0 x 2 successes
+    assert full["transitions"] == 432
+    assert full["effect_is_mode"] == pytest.approx(1 - 18 / 432)
+    held = _known_dataset().subset(np.arange(0, 432, 4))  # every scene/action once, mostly successes
+    assert coverage(ops, held)["matched"] == 1.0
+    with pytest.raises(ValueError, match="d_z"):
+        coverage(ops, bw.random_dataset(50, (3,), seed=0))  # symbols of another model
+
+
+def test_build_domain_writes_files_and_holdout_coverage(tmp_path):
+    data = bw.random_dataset(3000, (2, 3), seed=4)
+    report = build_domain(data.unary_pre, data.rel_pre, data.actions, data.unary_post, data.rel_post,
+                          data.n, tmp_path, holdout=0.2, seed=0)
+    for name in ("domain.pddl", "domain.ppddl", "operators.json", "stats.json"):
+        assert (tmp_path / name).stat().st_size > 0
+    assert report["train_transitions"] == 2400 and report["coverage_holdout"]["transitions"] == 600
+    assert 0.5 < report["coverage_holdout"]["matched"] <= 1.0
+    assert report["coverage_holdout"]["effect_predicted"] <= report["coverage_holdout"]["matched"]
+    assert report["coverage_train"]["matched"] == 1.0
+    assert json.loads((tmp_path / "stats.json").read_text())["n_operators"] == len(load_domain(tmp_path))
+
+
+def test_pack_unpack_and_atoms():
+    rng = np.random.default_rng(0)
+    u, r = rng.integers(0, 2, (3, 4)), rng.integers(0, 2, (2, 3, 3))
+    s = pack_state(u, r)
+    assert s < 2 ** (12 + 18)
+    uu, rr = unpack_state(s, 3, 4, 2)
+    assert np.array_equal(uu, u) and np.array_equal(rr, r)
+    atoms = state_atoms([[1, 0]], [[[0]]])
+    assert atoms == ["(u0 o0)", "(not-u1 o0)", "(not-r0 o0 o0)"]
+
+
+@pytest.mark.parametrize("mutate, message", [
+    (lambda a: {**a, "unary_pre": a["unary_pre"][:0], "rel_pre": a["rel_pre"][:0], "actions": a["actions"][:0],
+                "unary_post": a["unary_post"][:0], "rel_post": a["rel_post"][:0], "n_per_transition": a["n_per_transition"][:0]},
+     "empty"),
+    (lambda a: {**a, "unary_pre": a["unary_pre"][:, :, 0]}, "unary_pre must have shape"),
+    (lambda a: {**a, "rel_pre": a["rel_pre"][:, :, :2]}, "rel_pre must have shape"),
+    (lambda a: {**a, "unary_post": a["unary_post"][:, :, :1]}, "unary_post shape"),
+    (lambda a: {**a, "actions": a["actions"][:, :3]}, "actions must have shape"),
+    (lambda a: {**a, "unary_pre": a["unary_pre"] * 2}, "binary"),
+    (lambda a: {**a, "n_per_transition": a["n_per_transition"] + 5}, "n_per_transition"),
+    (lambda a: {**a, "actions": a["actions"] + np.array([0, 2, 0, 0])}, "grasp_offset"),
+    (lambda a: {**a, "actions": np.where(np.arange(4) == 2, 3, a["actions"]), "n_per_transition": np.full(len(a["actions"]), 3)},
+     "object 3 outside 0..2"),
+])
+def test_bad_input_gives_clear_value_error(mutate, message):
+    data = bw.random_dataset(20, (3, 4), seed=0)
+    args = {"unary_pre": data.unary_pre, "rel_pre": data.rel_pre, "actions": data.actions,
+            "unary_post": data.unary_post, "rel_post": data.rel_post, "n_per_transition": data.n}
+    with pytest.raises(ValueError, match=message):
+        make_dataset(**mutate(args))
