@@ -44,7 +44,7 @@ ALIASES = {
 }
 UNSOLVABLE_CODES = {10: "translator proved the task unsolvable", 11: "search proved the task unsolvable",
                     12: "search space exhausted (incomplete search)", 13: "unsolvable within bound"}
-TIMEOUT_CODES = {21, 23, 24}
+TIMEOUT_CODES = {21, 23, 24, -signal.SIGXCPU, 256 - signal.SIGXCPU}  # SIGXCPU: a CPU-time rlimit hit
 PLAN_FOUND_CODES = {0, 1, 2, 3}
 
 
