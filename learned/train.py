@@ -109,7 +109,8 @@ def train_model(data: "str | Path | Transitions", config: ModelConfig | None = N
                 epochs: int = 100, out_path: str | Path | None = None, *,
                 val_data: Transitions | None = None, batch_size: int = 128, lr: float = 1e-4,
                 val_fraction: float = 0.1, seed: int = 0, max_steps: int | None = None,
-                resume: bool = False, threads: int | None = None, progress: bool = True
+                resume: bool = False, threads: int | None = None, progress: bool = True,
+                target_val_cm: float | None = None, time_limit_s: float | None = None
                 ) -> TrainResult:
     """Train an EffectModel on a dataset directory or in-memory Transitions.
 
@@ -117,6 +118,8 @@ def train_model(data: "str | Path | Transitions", config: ModelConfig | None = N
     Validates after every epoch (and when ``max_steps`` stops training early), keeps the best
     model by validation effect error (written to ``out_path`` if given) and the latest state
     (``last_path(out_path)``). ``resume=True`` continues from the latest state up to ``epochs``.
+    Training also stops after the epoch in which the validation error reaches ``target_val_cm``
+    or the wall time of this call exceeds ``time_limit_s``; history records carry ``elapsed_s``.
     """
     if threads:
         torch.set_num_threads(threads)
@@ -171,9 +174,14 @@ def train_model(data: "str | Path | Transitions", config: ModelConfig | None = N
                dynamic_ncols=True)
     scale = float(model.effect_scale)
     train_time, trained = 0.0, 0
-    epoch = epoch0
+    start = time.perf_counter()
+    elapsed0 = history[-1]["elapsed_s"] if history else 0.0
     for epoch in range(epoch0, epochs):
         if max_steps is not None and step >= max_steps:
+            break
+        if target_val_cm is not None and best["val_cm"] <= target_val_cm:
+            break
+        if time_limit_s is not None and time.perf_counter() - start > time_limit_s:
             break
         perm = torch.randperm(N, generator=torch.Generator().manual_seed(seed * 100003 + epoch))
         run_loss = run_err = run_n = run_b = 0.0
@@ -203,7 +211,8 @@ def train_model(data: "str | Path | Transitions", config: ModelConfig | None = N
         train_time += time.perf_counter() - t0
         val = evaluate(model, va)
         rec = {"epoch": epoch, "step": step, "train_err_cm": run_err / max(run_n, 1),
-               "val_err_cm": val["err_cm"], "val_zero_cm": val["zero_cm"], "val_loss": val["loss"]}
+               "val_err_cm": val["err_cm"], "val_zero_cm": val["zero_cm"], "val_loss": val["loss"],
+               "elapsed_s": elapsed0 + time.perf_counter() - start}
         history.append(rec)
         if val["err_cm"] < best["val_cm"]:
             best = {"val_cm": val["err_cm"], "epoch": epoch,
