@@ -93,7 +93,8 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def main(argv: list[str] | None = None) -> None:
+def main(argv: list[str] | None = None) -> int:
+    """Run one command; returns the exit code (2 for a user error, with a one-line message)."""
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
@@ -104,6 +105,12 @@ def main(argv: list[str] | None = None) -> None:
     except KeyboardInterrupt:
         print(f"tamp {args.command}: interrupted", file=sys.stderr)
         code = 130
+    return code
+
+
+def entry() -> None:
+    """Console-script entry point."""
+    code = main()
     sys.stdout.flush()
     sys.stderr.flush()
     # OMPL's nanobind bindings print "leaked instances" warnings at interpreter exit; nothing is
@@ -112,4 +119,4 @@ def main(argv: list[str] | None = None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    entry()

@@ -117,8 +117,10 @@ class MotionPlanner:
         return True
 
     # --- planning ----------------------------------------------------------------------------
-    def plan(self, q_start: np.ndarray, q_goal: np.ndarray, time_limit: float, simplify: bool = False) -> MotionResult:
-        """A collision-free joint path from q_start to q_goal within the joint limits."""
+    def plan(self, q_start: np.ndarray, q_goal: np.ndarray, time_limit: float, direct: bool = True,
+             simplify: bool = False) -> MotionResult:
+        """A collision-free joint path from q_start to q_goal within the joint limits; with `direct`
+        the straight segment is returned when it is free."""
         for name, q in (("start", q_start), ("goal", q_goal)):
             if not self.is_valid(q):
                 pairs = ", ".join(self.collisions(q)) or "carried block"
@@ -134,13 +136,13 @@ class MotionPlanner:
         ss.setStartAndGoalStates(start, goal)
         ss.setPlanner(og.RRTConnect(si))
         ss.setup()
-        if si.checkMotion(start, goal):
+        if direct and si.checkMotion(start, goal):
             return MotionResult(np.array([q_start, q_goal], dtype=float), planner="direct")
         status = ss.solve(time_limit)
         if not ss.haveExactSolutionPath():
             return MotionResult(None, f"no collision-free path within {time_limit:g} s ({status})")
         if simplify:
-            ss.simplifySolution(time_limit)
+            ss.simplifySolution()  # one full shortcut-and-smooth pass
         path = ss.getSolutionPath()
         states = [[path.getState(k)[i] for i in range(6)] for k in range(path.getStateCount())]
         return MotionResult(np.array(states, dtype=float), planner="rrtconnect")

@@ -72,13 +72,14 @@ class Timeline:
         """Render the frames to a self-contained Meshcat HTML file."""
         if not self.times or self.types is None:
             raise ValueError("the timeline is empty: reset and step the world with a timeline attached")
-        from pydrake.geometry import Meshcat, MeshcatParams, MeshcatVisualizer, MeshcatVisualizerParams, Role
+        from pydrake.geometry import Meshcat, MeshcatVisualizer, MeshcatVisualizerParams, Role
 
         from tamp.plants import build_motion_scene
 
         scene = build_motion_scene(self.types, padding=0.0)
         plant = scene.plant
-        meshcat = Meshcat(MeshcatParams(port=0)) if hasattr(MeshcatParams, "port") else Meshcat()
+        meshcat = Meshcat()
+        meshcat.SetCameraPose(camera_in_world=[1.7, -1.1, 0.9], target_in_world=[0.6, 0.0, 0.1])
         from pydrake.systems.framework import DiagramBuilder
 
         # A visualizer on the motion scene's scene graph, driven by hand.

@@ -53,7 +53,9 @@ class WorldConfig:
     settle_window: float = 0.03  # all blocks at rest this long means the scene settled
     settle_max_time: float = 2.0  # cap on simulated settling time
     planning_time: float = 1.0  # OMPL time limit per motion
-    collision_resolution: float = 0.01  # OMPL validity-checking resolution (fraction of extent)
+    direct_motions: bool = True  # try the straight joint-space segment before RRTConnect
+    simplify_paths: bool = False  # OMPL path simplification (costly; for executed motions)
+    joint_step: float = 0.005  # radians between collision checks along a motion
     padding: float = 0.002  # collision padding of the motion checker
 
     def __post_init__(self) -> None:

@@ -25,7 +25,6 @@ from tamp.structs import BLOCK_SIZES, LARGE, OFFSETS, SMALL, PickPlace, StepInfo
 MAX_OBJECTS = 6
 TABLE_X, TABLE_Y = (-0.5, 1.9), (-1.2, 1.2)  # table top extent (drake_models/table.sdf), metres
 BASE_CLEARANCE = 0.15  # metres: no block centre this close to the arm's base axis
-_JOINT_STEP = 0.005  # radians between collision checks along a motion
 
 
 class World:
@@ -87,7 +86,7 @@ class World:
         key = tuple(int(t) for t in types)
         if key not in self._layouts:
             cfg = self.config
-            planner = MotionPlanner(build_motion_scene(types, cfg.padding), _JOINT_STEP, cfg.padding)
+            planner = MotionPlanner(build_motion_scene(types, cfg.padding), cfg.joint_step, cfg.padding)
             physics = BlockPhysics(build_physics_scene(types, cfg.time_step), cfg.settle_speed,
                                    cfg.settle_angular_speed, cfg.settle_window, cfg.settle_max_time)
             self._layouts[key] = (planner, physics)
@@ -219,7 +218,8 @@ class World:
 
     def _plan(self, planner: MotionPlanner, motions, info: StepInfo, paths: dict) -> bool:
         for name, q_a, q_b in motions:
-            result = planner.plan(q_a, q_b, self.config.planning_time)
+            result = planner.plan(q_a, q_b, self.config.planning_time, direct=self.config.direct_motions,
+                                  simplify=self.config.simplify_paths)
             info.motion_success[name] = result.path is not None
             if result.path is None:
                 info.status = "motion_failure"
