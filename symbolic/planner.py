@@ -116,11 +116,14 @@ class SymbolicPlanner:
 
     def _rank(self, per_domain: list[PlannerResult], n: int) -> list[RankedPlan]:
         found: dict[tuple, list] = {}
+        parsed: dict[int, tuple] = {}  # reused searches share one result object: parse it once
         for r in per_domain:  # domain order: the first domain to produce a plan names its steps
             if r.status is not PlannerStatus.SOLVED:
                 continue
-            steps = tuple(_strip_variant(r.plan))
-            key = tuple(steps_to_actions(self.ops, list(steps), n))
+            if id(r) not in parsed:
+                steps = tuple(_strip_variant(r.plan))
+                parsed[id(r)] = (steps, tuple(steps_to_actions(self.ops, list(steps), n)))
+            steps, key = parsed[id(r)]
             if key in found:
                 found[key][1] += 1
             else:
