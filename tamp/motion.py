@@ -25,6 +25,15 @@ _PARKED = np.array([1.0, 0.0, 0.0, 0.0, 0.0, 0.0, -10.0])  # free-body pose far 
 _CARRIED_GROUP = "carried"
 
 
+def _seed_ompl(seed: int) -> None:
+    """Reseed OMPL's generator so a motion's path depends on its seed only. OMPL logs an error
+    when reseeding after its first use, yet the reseeding takes effect, so the log is muted."""
+    level = ou.getLogLevel()
+    ou.setLogLevel(ou.LogLevel.LOG_NONE)
+    ou.RNG.setSeed(int(seed) % (2**31 - 1) + 1)
+    ou.setLogLevel(level)
+
+
 @dataclass
 class MotionResult:
     path: np.ndarray | None  # (m, 6) joint waypoints, start and goal included; None if no path
@@ -35,7 +44,7 @@ class MotionResult:
 class MotionPlanner:
     """Plans collision-free arm motions in a scene whose block poses are set by the caller."""
 
-    def __init__(self, scene: MotionScene, joint_step: float, padding: float, seed: int = 0) -> None:
+    def __init__(self, scene: MotionScene, joint_step: float, padding: float) -> None:
         self.scene = scene
         plant = scene.plant
         self._n_q = plant.num_positions()
@@ -50,7 +59,6 @@ class MotionPlanner:
         for i in range(len(scene.blocks)):
             self._set_block(i, _PARKED)
         self._joint_step = joint_step
-        self._seed = seed
         self.num_checks = 0
 
         self._space = ob.RealVectorStateSpace(6)
@@ -118,7 +126,7 @@ class MotionPlanner:
 
     # --- planning ----------------------------------------------------------------------------
     def plan(self, q_start: np.ndarray, q_goal: np.ndarray, time_limit: float, direct: bool = True,
-             simplify: bool = False) -> MotionResult:
+             simplify: bool = False, seed: int = 0) -> MotionResult:
         """A collision-free joint path from q_start to q_goal within the joint limits; with `direct`
         the straight segment is returned when it is free."""
         for name, q in (("start", q_start), ("goal", q_goal)):
@@ -138,6 +146,7 @@ class MotionPlanner:
         ss.setup()
         if direct and si.checkMotion(start, goal):
             return MotionResult(np.array([q_start, q_goal], dtype=float), planner="direct")
+        _seed_ompl(seed)
         status = ss.solve(time_limit)
         if not ss.haveExactSolutionPath():
             return MotionResult(None, f"no collision-free path within {time_limit:g} s ({status})")

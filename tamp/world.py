@@ -23,6 +23,7 @@ from tamp.skill import Scene, Waypoints, grasp_pose, held_block, pick_place_wayp
 from tamp.structs import BLOCK_SIZES, LARGE, OFFSETS, SMALL, PickPlace, StepInfo, WorldConfig
 
 MAX_OBJECTS = 6
+MOTIONS = ("approach", "descend", "liftoff", "lift", "transfer", "lower", "retreat")
 TABLE_X, TABLE_Y = (-0.5, 1.9), (-1.2, 1.2)  # table top extent (drake_models/table.sdf), metres
 BASE_CLEARANCE = 0.15  # metres: no block centre this close to the arm's base axis
 
@@ -42,15 +43,23 @@ class World:
         self.scene: Scene | None = None
         self.timeline: Timeline | None = None  # set to a Timeline to record frames for a replay
         self._layouts: dict[tuple[int, ...], tuple[MotionPlanner, BlockPhysics]] = {}
+        self._motion_seed = 0  # seeds RRTConnect per scene, step and motion
+        self._steps = 0
 
     # --- scenes ------------------------------------------------------------------------------
-    def reset(self, n_objects: int | None = None, X: np.ndarray | None = None) -> np.ndarray:
+    def reset(self, n_objects: int | None = None, X: np.ndarray | None = None, seed: int | None = None) -> np.ndarray:
         """A random scene of n_objects blocks, or the scene X (blocks upright, axis-aligned).
 
-        Blocks settle under physics before the state is returned; the arm goes home.
+        Blocks settle under physics before the state is returned; the arm goes home. With `seed`
+        the scene and its motion plans depend on that seed alone, not on earlier scenes (used to
+        collect data in parallel with a seed per scene).
         """
         if (n_objects is None) == (X is None):
             raise ValueError("reset takes exactly one of n_objects or X")
+        if seed is not None:
+            self.rng = np.random.default_rng(seed)
+        self._motion_seed = int(self.rng.integers(2**31 - 1))
+        self._steps = 0
         if X is not None:
             types, positions = _parse_X(X)
         else:
@@ -111,6 +120,7 @@ class World:
         """Plan and execute one pick-place; returns the next state X and what happened."""
         scene = self._require_scene()
         action = validate_action(action, scene.n)
+        self._steps += 1
         info = StepInfo(action)
         t_start = time.perf_counter()
         planner, physics = self._layout(scene.types)
@@ -218,8 +228,9 @@ class World:
 
     def _plan(self, planner: MotionPlanner, motions, info: StepInfo, paths: dict) -> bool:
         for name, q_a, q_b in motions:
+            seed = (self._motion_seed * 1_000_003 + self._steps * 16 + MOTIONS.index(name)) % (2**31 - 1)
             result = planner.plan(q_a, q_b, self.config.planning_time, direct=self.config.direct_motions,
-                                  simplify=self.config.simplify_paths)
+                                  simplify=self.config.simplify_paths, seed=seed)
             info.motion_success[name] = result.path is not None
             if result.path is None:
                 info.status = "motion_failure"
