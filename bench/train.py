@@ -104,7 +104,7 @@ def main(argv: list[str] | None = None) -> dict:
 
     if not a.skip_time_to_error:
         with tempfile.TemporaryDirectory() as tmp:
-            res = train_model(data, config, epochs=10**6, out_path=Path(tmp) / "bench.pt",
+            res = train_model(data, config, epochs=10_000, out_path=Path(tmp) / "bench.pt",
                               batch_size=a.batch_size, lr=a.lr, seed=0,
                               target_val_cm=a.target_cm, time_limit_s=a.time_limit_min * 60)
         hit = next((h for h in res.history if h["val_err_cm"] <= a.target_cm), None)

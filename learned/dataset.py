@@ -279,11 +279,14 @@ class DatasetWriter:
 
     def add(self, X: np.ndarray, action: Sequence[int], X_next: np.ndarray, grasped: int,
             status: int) -> None:
-        """Buffer one transition (X, X_next: (n, 5) metres / one-hot); flush when a shard is full."""
-        if int(status) not in self.status_values:
-            raise ValueError(f"status {status} not in status_codes {self.meta['status_codes']}")
-        self._buffer.append({"X": X, "action": action, "X_next": X_next, "grasped": grasped,
-                             "status": status})
+        """Validate and buffer one transition (X, X_next: (n, 5), metres and one-hot type);
+        writes a shard when ``shard_size`` samples are buffered. Raises ValueError if invalid."""
+        sample = pack_samples([{"X": X, "action": action, "X_next": X_next, "grasped": grasped,
+                                "status": status}], self.n_max)
+        reason = validate_arrays(sample, self.n_max, self.status_values)
+        if reason:
+            raise ValueError(f"invalid transition (sample {self.num_samples}): {reason}")
+        self._buffer.append(sample)
         if len(self._buffer) >= self.shard_size:
             self.flush()
 
@@ -291,7 +294,7 @@ class DatasetWriter:
         """Write buffered samples as the next shard; returns its path (None if nothing buffered)."""
         if not self._buffer:
             return None
-        arrays = pack_samples(self._buffer, self.n_max)
+        arrays = {k: np.concatenate([b[k] for b in self._buffer]) for k in KEYS}
         path = self.directory / f"shard-{self._next:06d}.npz"
         write_shard(path, arrays, self.n_max, self.status_values)
         self._next += 1
@@ -305,8 +308,8 @@ class DatasetWriter:
     def __enter__(self) -> "DatasetWriter":
         return self
 
-    def __exit__(self, *exc) -> None:
-        self.close()
+    def __exit__(self, exc_type, exc, tb) -> None:
+        self.close()  # also on error: the buffered samples are complete and valid
 
 
 # ----------------------------------------------------------------------------- reading

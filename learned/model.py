@@ -134,19 +134,28 @@ class EffectModel(nn.Module):
         return q @ k.transpose(-1, -2) / math.sqrt(c.d_key)
 
     # -- forward ------------------------------------------------------------------------
+    def encode(self, X: torch.Tensor, mask: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Bottleneck outputs: unary (B, N, d_z) and relations (B, K, N, N), padded j zeroed."""
+        u = self.bottleneck(self.unary_logits(X))
+        r = self.bottleneck(self.relation_logits(X)) * mask.to(X.dtype)[:, None, None, :]
+        return u, r
+
+    def decode(self, X: torch.Tensor, action: torch.Tensor, mask: torch.Tensor, u: torch.Tensor,
+               r: torch.Tensor) -> torch.Tensor:
+        """Effects (B, N, 3) in metres from the symbols and the action (see ``forward``)."""
+        B, N, _ = X.shape
+        a = encode_actions(X, action, self.arm_scale)
+        z = self.object_mlp(torch.cat([u.expand(B, -1, -1), a], dim=-1))
+        h = (r.expand(B, -1, -1, -1) @ z[:, None]).transpose(1, 2).reshape(B, N, -1)
+        return self.decoder(h) * self.effect_scale * mask.to(X.dtype)[..., None]
+
     def forward(self, X: torch.Tensor, action: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
         """Effect target (B, N, 3) in metres, arm motion of the pick object removed; 0 if padded.
 
         X: (B, N, 5) metres / one-hot, zero-padded; action: (B, 4) long; mask: (B, N) bool.
         """
-        B, N, _ = X.shape
-        m = mask.to(X.dtype)
-        u = self.bottleneck(self.unary_logits(X))
-        r = self.bottleneck(self.relation_logits(X)) * m[:, None, None, :]
-        a = encode_actions(X, action, self.arm_scale)
-        z = self.object_mlp(torch.cat([u, a], dim=-1))
-        h = (r @ z[:, None]).transpose(1, 2).reshape(B, N, -1)
-        return self.decoder(h) * self.effect_scale * m[..., None]
+        u, r = self.encode(X, mask)
+        return self.decode(X, action, mask, u, r)
 
     # -- planner API --------------------------------------------------------------------
     def _scene(self, X: np.ndarray) -> torch.Tensor:
@@ -177,7 +186,9 @@ class EffectModel(nn.Module):
             B = a.shape[0]
             Xb = Xt.expand(B, n, STATE_DIM)
             at = torch.from_numpy(a)
-            e = self(Xb, at, torch.ones(B, n, dtype=torch.bool)).double()
+            mask = torch.ones(B, n, dtype=torch.bool)
+            u, r = self.encode(Xt, mask[:1])  # the scene's symbols once, shared by all actions
+            e = self.decode(Xb, at, mask, u, r).double()
             shift = arm_shift(torch.as_tensor(np.asarray(X, np.float64))[None].expand(B, n, 5), at)
         finally:
             self.train(was_training)

@@ -52,12 +52,17 @@ def test_writer_resumes_and_refuses_other_world(data_dir):
 def test_writer_rejects_invalid_samples(tmp_path):
     w = DatasetWriter(tmp_path / "d", n_max=3, seed=0, status_codes=STATUS_CODES, world_config={})
     X = np.array([[0.5, 0.0, 0.025, 1, 0], [0.6, 0.1, 0.025, 0, 1]])
-    with pytest.raises(ValueError, match="status"):
+    with pytest.raises(ValueError, match="status codes"):
         w.add(X, (0, 0, 1, 0), X, -1, 7)
-    w.add(X, (0, 0, 2, 0), X, -1, 0)  # place index 2 does not exist for n=2
     with pytest.raises(ValueError, match="out of range"):
-        w.flush()
-    assert shard_paths(tmp_path / "d") == []
+        w.add(X, (0, 0, 2, 0), X, -1, 0)  # place index 2 does not exist for n=2
+    with pytest.raises(ValueError, match="one-hot"):
+        w.add(X[:, [0, 1, 2, 3, 3]], (0, 0, 1, 0), X[:, [0, 1, 2, 3, 3]], -1, 0)
+    with pytest.raises(ValueError, match="n_max"):
+        w.add(np.tile(X, (2, 1)), (0, 0, 1, 0), np.tile(X, (2, 1)), -1, 0)
+    w.add(X, (0, 0, 1, 0), X, -1, 1)
+    assert w.num_samples == 1 and w.flush().name == "shard-000000.npz"
+    assert len(load_transitions(tmp_path / "d")) == 1
 
 
 def test_truncated_shard_is_reported_by_name(data_dir):
