@@ -11,17 +11,20 @@ from symbolic.atoms import check_bits
 from symbolic.dataset import make_dataset, split_dataset
 from symbolic.operators import coverage, learn_operators, load_operators, save_operators, stats
 from symbolic.pddl import write_domains
+from symbolic.sampling import write_sampled_domains
 from symbolic.structs import OperatorSet, SymbolicDataset, SymbolicProblem
 
 
 def build_domain(unary_pre, rel_pre, actions, unary_post, rel_post, n_per_transition, out_dir,
-                 holdout: float | SymbolicDataset = 0.1, seed: int = 0, min_prob: float = 0.0) -> dict:
+                 holdout: float | SymbolicDataset = 0.1, seed: int = 0, min_prob: float = 0.0,
+                 sampled_domains: int = 0) -> dict:
     """Learn operators from symbolic transitions and write the domain files.
 
     Inputs: padded bit arrays unary (T, n_max, d_z), relations (T, K, n_max, n_max), actions (T, 4),
     n_per_transition (T,). holdout: fraction of transitions held out for coverage (seeded split), or
     an explicit held-out `SymbolicDataset`. Writes into out_dir: domain.pddl (most frequent effects),
-    domain.ppddl, operators.json, stats.json. Returns the statistics dict (also in stats.json).
+    domain.ppddl, operators.json, stats.json, and with sampled_domains = N > 0 the distinct sampled
+    PDDL domains in sampled/ (sampled.json has their multiplicities). Returns the statistics dict.
     """
     data = make_dataset(unary_pre, rel_pre, actions, unary_post, rel_post, n_per_transition)
     if isinstance(holdout, SymbolicDataset):
@@ -39,6 +42,9 @@ def build_domain(unary_pre, rel_pre, actions, unary_post, rel_post, n_per_transi
     report["coverage_holdout"] = coverage(ops, held) if held is not None and len(held) else None
     report["files"] = {k: p.name for k, p in paths.items()} | {"operators": "operators.json"}
     report["ppddl_bytes"] = paths["ppddl"].stat().st_size
+    if sampled_domains > 0:
+        written = write_sampled_domains(ops, out / "sampled", sampled_domains, seed, min_prob)
+        report["sampled_domains"] = {"n": sampled_domains, "distinct": len(written)}
     (out / "stats.json").write_text(json.dumps(report, indent=1))
     return report
 

@@ -161,13 +161,14 @@ def test_stats_and_coverage():
 def test_build_domain_writes_files_and_holdout_coverage(tmp_path):
     data = bw.random_dataset(3000, (2, 3), seed=4)
     report = build_domain(data.unary_pre, data.rel_pre, data.actions, data.unary_post, data.rel_post,
-                          data.n, tmp_path, holdout=0.2, seed=0)
+                          data.n, tmp_path, holdout=0.2, seed=0, sampled_domains=5)
     for name in ("domain.pddl", "domain.ppddl", "operators.json", "stats.json"):
         assert (tmp_path / name).stat().st_size > 0
     assert report["train_transitions"] == 2400 and report["coverage_holdout"]["transitions"] == 600
     assert 0.5 < report["coverage_holdout"]["matched"] <= 1.0
     assert report["coverage_holdout"]["effect_predicted"] <= report["coverage_holdout"]["matched"]
     assert report["coverage_train"]["matched"] == 1.0
+    assert 1 <= report["sampled_domains"]["distinct"] == len(list((tmp_path / "sampled").glob("*.pddl"))) <= 5
     assert json.loads((tmp_path / "stats.json").read_text())["n_operators"] == len(load_domain(tmp_path))
 
 
