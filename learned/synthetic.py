@@ -2,10 +2,10 @@
 
 Rules (metres, blocks axis-aligned, 5 cm tall; small = 5 x 5 cm, large = 5 x 25 cm along y):
 the gripper descends top-down at ``g = p_pick + d_grasp * 0.075 y_hat`` and grasps the topmost
-block whose footprint contains ``g`` (none: nothing moves, status ``grasped_nothing``). It
-carries that block, keeping its offset to the gripper, to ``p_place + d_release * 0.075 y_hat``
-and releases it; then every block settles, lowest first, onto the highest block under its
-centre (or the table). A little Gaussian noise on the landing xy stands in for physics.
+block whose footprint contains ``g`` (none: nothing moves, status ``nothing_grasped``). It
+carries that block (and the blocks resting on it), keeping their offset to the gripper, to
+``p_place + d_release * 0.075 y_hat`` and releases it; then every block settles, lowest first,
+onto the highest block under its centre (or the table). A little Gaussian noise on the landing xy stands in for physics.
 """
 from __future__ import annotations
 
@@ -16,7 +16,8 @@ import numpy as np
 from .dataset import DatasetWriter, Transitions, pack_samples
 from .effects import OFFSET_M
 
-STATUS_CODES = {"ok": 0, "grasped_nothing": 1}
+STATUS_CODES = {"ok": 0, "ik_failure": 1, "motion_failure": 2, "nothing_grasped": 3}
+"""The world's outcome codes (tamp.structs.STATUSES order); the toy rules emit 0 and 3 only."""
 HALF_XY = np.array([[0.025, 0.025], [0.025, 0.125]])
 """Footprint half extents (x, y) in metres by type index (small, large)."""
 HALF_Z = 0.025
@@ -39,6 +40,15 @@ def _settle(X: np.ndarray, order: np.ndarray) -> None:
         done.append(i)
 
 
+def _carried(X: np.ndarray, grasped: int) -> list[int]:
+    """The grasped block and, recursively, the blocks resting on it (lowest first)."""
+    half, out = _half(X), [grasped]
+    for i in out:
+        out += [k for k in range(len(X)) if k not in out and abs(X[k, 2] - X[i, 2] - 2 * HALF_Z) < 1e-3
+                and np.all(np.abs(X[k, :2] - X[i, :2]) <= half[i])]
+    return out
+
+
 def apply_action(X: np.ndarray, action, rng: np.random.Generator | None = None,
                  noise_m: float = 0.0) -> tuple[np.ndarray, int, int]:
     """Toy outcome of one pick-place: (X_next, grasped index or -1, status code)."""
@@ -47,14 +57,16 @@ def apply_action(X: np.ndarray, action, rng: np.random.Generator | None = None,
     g = X[pick, :2] + (0.0, d_grasp * OFFSET_M)
     under = np.all(np.abs(g - X[:, :2]) <= _half(X), axis=1)
     if not under.any():
-        return X, -1, STATUS_CODES["grasped_nothing"]
+        return X, -1, STATUS_CODES["nothing_grasped"]
     grasped = int(np.flatnonzero(under)[np.argmax(X[under, 2])])
+    carried = _carried(X, grasped)
     target = X[place, :2] + (0.0, d_release * OFFSET_M)
-    X[grasped, :2] = target + (X[grasped, :2] - g)
+    shift = target - g
     if rng is not None and noise_m > 0:
-        X[grasped, :2] += rng.normal(0.0, noise_m, 2)
+        shift = shift + rng.normal(0.0, noise_m, 2)
+    X[carried, :2] += shift
     z = X[:, 2].copy()
-    z[grasped] = np.inf  # released from above everything else
+    z[carried] = 1e3 + np.arange(len(carried))  # released above everything else, in order
     _settle(X, np.argsort(z, kind="stable"))
     return X, grasped, STATUS_CODES["ok"]
 

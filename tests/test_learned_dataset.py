@@ -29,7 +29,7 @@ def test_round_trip_matches_generator(data_dir):
     assert meta["format"] == "tamp-transitions/1" and meta["n_max"] == 4 and meta["seed"] == 3
     assert meta["status_codes"] == STATUS_CODES and "numpy" in meta["versions"]
     # Some of each outcome, including blocks carried that were not the pick object.
-    assert 0 < (got.status == STATUS_CODES["grasped_nothing"]).mean() < 0.6
+    assert 0 < (got.status == STATUS_CODES["nothing_grasped"]).mean() < 0.6
     assert set(np.unique(got.n)) == {2, 3, 4}
 
 
@@ -138,6 +138,16 @@ def test_arm_displacement_by_hand():
     Xn, grasped, status = apply_action(X, (0, 0, 1, 1))  # cube onto the bar's +y end
     assert grasped == 0 and status == 0
     np.testing.assert_allclose(Xn[0, :3], [0.7, 0.275, 0.075])
+    # a cube resting on the +y end of a bar
+    Xs = np.array([[0.7, 0.275, 0.075, 1, 0], [0.7, 0.2, 0.025, 0, 1], [0.5, 0.1, 0.025, 1, 0]])
+    Xn, grasped, status = apply_action(Xs, (1, -1, 1, -1))  # release where grasped
+    np.testing.assert_allclose(Xn, Xs)
+    Xn, grasped, status = apply_action(Xs, (1, 1, 2, 0))  # grasp at y .275: the cube on top
+    assert grasped == 0
+    np.testing.assert_allclose(Xn[0, :3], [0.5, 0.1, 0.075])  # now on the other cube
+    Xn, grasped, status = apply_action(Xs, (1, -1, 2, 0))  # the bar at y .125, with the cube
+    assert grasped == 1
+    np.testing.assert_allclose(Xn[:2, :3], [[0.5, 0.25, 0.075], [0.5, 0.175, 0.025]])
     Xn, grasped, status = apply_action(X, (0, 1, 1, 0))  # beside the small cube: nothing
-    assert grasped == -1 and status == STATUS_CODES["grasped_nothing"]
+    assert grasped == -1 and status == STATUS_CODES["nothing_grasped"]
     np.testing.assert_array_equal(Xn, X)
