@@ -73,6 +73,10 @@ class GroundTask:
     def __len__(self) -> int:
         return len(self.op_index)
 
+    def clear_cache(self) -> None:
+        """Forget the applicable actions cached per state (kept ground actions)."""
+        self._succ.clear()
+
     def applicable(self, state: int) -> tuple[tuple[int, ...], tuple[int, ...]]:
         """(ground action ids in ascending order, their operator ids) applicable in `state`; cached."""
         hit = self._succ.get(state)

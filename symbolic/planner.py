@@ -135,7 +135,7 @@ class SymbolicPlanner:
     def _run_python(self, problem, choices, timings):
         t0 = time.perf_counter()
         task = self.ground(problem.n)
-        task._succ.clear()  # no state cache carried over between problems (honest per-problem cost)
+        task.clear_cache()  # no state cache carried over between problems (honest per-problem cost)
         init, goal = problem_states(problem)
         timings["grounding"] = time.perf_counter() - t0
         t0 = time.perf_counter()
