@@ -92,6 +92,8 @@ class StepInfo:
     settled: bool = True  # False if the settle cap was hit
     timings: dict[str, float] = field(default_factory=dict)  # wall-clock seconds per stage
     paths: dict[str, np.ndarray] = field(default_factory=dict)  # motion name -> (m, 6) joint path
+    q_waypoints: dict[str, np.ndarray] = field(default_factory=dict)  # waypoint name -> arm joints
+    X_GC: list = field(default_factory=list)  # carried blocks' poses in the tcp frame (RigidTransform)
     X_release: np.ndarray | None = None  # scene at the moment of release (before physics)
 
     @property

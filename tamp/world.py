@@ -76,6 +76,13 @@ class World:
             self.timeline.start(self.scene, self.q)
         return self.scene.X()
 
+    def set_scene(self, scene: Scene, q: np.ndarray) -> None:
+        """Continue from an exact simulator state (block poses with orientation, arm joints)."""
+        if self.timeline is not None:
+            self.timeline.start(scene, q)
+        self.scene = Scene(np.array(scene.types), list(scene.X_WB))
+        self.q = np.array(q, dtype=float)
+
     def _random_layout(self, n: int) -> tuple[np.ndarray, np.ndarray]:
         cfg = self.config
         types = (self.rng.random(n) < cfg.p_large).astype(int)
@@ -194,6 +201,8 @@ class World:
             info.reason = "released, but the retreat was blocked; the arm stays at the place pose"
         info.timings["motion"] += time.perf_counter() - t_motion
         info.paths = paths
+        info.q_waypoints = qs
+        info.X_GC = list(wp.X_GC)
         info.timings["total"] = time.perf_counter() - t_start
         return self.scene.X(), info
 

@@ -1,0 +1,74 @@
+"""Refinement: a plan of pick-place actions -> IK configurations, collision-free paths and one
+time-parameterized joint trajectory, following the scene as it evolves.
+
+Each action is planned by the `fast` world from the scene the previous actions left (their outcome
+simulated there), with OMPL paths simplified because they will be executed. Refinement stops at the
+first action that cannot be refined and says which action, which waypoint or motion, and why; a
+failed plan never carries a whole-plan trajectory.
+"""
+from __future__ import annotations
+
+import dataclasses
+import time
+from typing import Iterable
+
+import numpy as np
+
+from tamp.skill import Scene
+from tamp.structs import PickPlace, WorldConfig
+from tamp.trajectory import RefinedPlan, RefinementFailure, concatenate, refined_action
+from tamp.world import World, validate_action
+
+_STAGES = {"ik_failure": "ik", "motion_failure": "motion", "nothing_grasped": "grasp"}
+
+
+def refine(
+    plan: Iterable[PickPlace | Iterable[int]],
+    X_init: np.ndarray | None = None,
+    *,
+    scene: Scene | None = None,
+    q_start: np.ndarray | None = None,
+    config: WorldConfig | None = None,
+    world: World | None = None,
+) -> RefinedPlan:
+    """Refine `plan` from X_init (blocks upright) or from an exact `scene` and arm configuration.
+
+    `world` (a `fast` World, ideally with `simplify_paths=True`) may be given to reuse its cached
+    Drake plants; it is left at the predicted final scene.
+    """
+    if (X_init is None) == (scene is None):
+        raise ValueError("refine takes exactly one of X_init or scene")
+    if world is None:
+        world = World(dataclasses.replace(config or WorldConfig(), fidelity="fast", simplify_paths=True))
+    if scene is None:
+        world.reset(X=X_init)
+    else:
+        world.set_scene(scene, world.q if q_start is None else q_start)
+    if q_start is not None:
+        world.q = np.array(q_start, dtype=float)
+    actions = [validate_action(a, world.scene.n) for a in plan]
+    result = RefinedPlan(X_init=world.X, actions=actions, scene_init=world.scene, q_init=world.q.copy())
+    t_plan = time.perf_counter()
+    for k, action in enumerate(actions):
+        t0 = time.perf_counter()
+        X_before, q_before = world.X, world.q.copy()
+        X_after, info = world.step(action)
+        if info.status != "ok" or not info.motion_success.get("retreat", False):
+            where = _failed_at(info)
+            reason = info.reason or "the retreat after release was blocked"
+            result.failure = RefinementFailure(k, action, _STAGES.get(info.status, "motion"), where, reason)
+            break
+        step = refined_action(action, info, X_before, X_after, q_before)
+        step.refine_time = time.perf_counter() - t0
+        result.steps.append(step)
+    result.refine_time = time.perf_counter() - t_plan
+    if result.success and result.steps:
+        result.trajectory, result.start_times = concatenate(result.steps)
+    return result
+
+
+def _failed_at(info) -> str:
+    for name, ok in list(info.ik_success.items()) + list(info.motion_success.items()):
+        if not ok:
+            return name
+    return "grasp" if info.status == "nothing_grasped" else "retreat"
