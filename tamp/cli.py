@@ -68,6 +68,38 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_view(args: argparse.Namespace) -> int:
+    """Refine a plan file, execute it with the arm under physics and write the replay."""
+    from tamp.execute import execute
+    from tamp.plan_file import load_plan_file
+    from tamp.refine import refine
+    from tamp.replay import Timeline
+
+    X, plan = load_plan_file(args.plan)
+    refined = refine(plan, X)
+    for k, step in enumerate(refined.steps):
+        print(f"action {k} {tuple(step.action)}: refined in {step.refine_time * 1e3:.0f} ms, "
+              f"{step.duration:.2f} s of arm motion")
+    if refined.failure is not None:
+        print(f"refinement failed: {refined.failure}")
+        if not refined.steps:
+            print("nothing to execute; no replay written")
+            return 1
+        print(f"executing the {len(refined.steps)} refined action(s) before it, nothing past it")
+    timeline = Timeline()
+    result = execute(refined, timeline=timeline, partial=True)
+    for entry in result.log:
+        print(f"executed action {entry.index}: {'grasped' if entry.grasped else entry.note}; "
+              f"{entry.prediction_error * 100:.1f} cm from the prediction; tracking error "
+              f"{entry.max_tracking_error:.4f} rad; {entry.sim_time:.1f} s simulated in {entry.wall_time:.1f} s")
+    print("final scene:")
+    for i, x in enumerate(result.X_final):
+        print(f"  {i}: ({x[0]:.3f}, {x[1]:.3f}, {x[2]:.3f}) m")
+    path = timeline.write_html(args.out)
+    print(f"replay written to {path} ({path.stat().st_size / 1e6:.1f} MB)")
+    return 0 if refined.failure is None else 1
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="tamp",
@@ -90,6 +122,57 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--replay", type=_html_path, metavar="OUT.html",
                    help="write a self-contained Meshcat HTML replay of the arm and blocks")
     p.set_defaults(func=cmd_simulate)
+
+    p = sub.add_parser(
+        "collect",
+        help="random pick-place interaction data (X, a, X') as dataset shards, in parallel, resumable",
+        description="Random scenes and random pick-place actions (all 9 n^2, failing ones included), "
+        "a new scene every --actions-per-scene actions, written as .npz shards plus meta.json. The "
+        "dataset depends on the parameters only (not on --workers or --backend); running the same "
+        "command again after an interruption finishes it, re-collecting missing or corrupt shards.",
+    )
+    p.add_argument("--samples", type=int, required=True, help="number of transitions")
+    p.add_argument("--objects", type=_object_counts, default=(2, 3, 4),
+                   help="object counts drawn uniformly per scene, e.g. 2,3,4 (default)")
+    p.add_argument("--out", type=Path, required=True, help="dataset directory (new, or the one to resume)")
+    p.add_argument("--workers", type=_positive_int, default=None,
+                   help="worker processes or Ray actors (default: all CPUs, of the cluster with --address)")
+    p.add_argument("--backend", choices=("local", "ray"), default="local",
+                   help="local process pool (default) or Ray (optional extra: pip install ray)")
+    p.add_argument("--address", default=None,
+                   help="with --backend ray: join this Ray cluster (e.g. auto or HOST:6379) instead of starting one")
+    p.add_argument("--seed", type=int, default=0, help="dataset seed (default 0)")
+    p.add_argument("--actions-per-scene", type=int, default=10, metavar="M",
+                   help="chained random actions per scene (default 10)")
+    p.add_argument("--scenes-per-shard", type=int, default=20, metavar="K",
+                   help="scenes per shard file, the unit of resumption (default 20)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=cmd_collect)
+
+    p = sub.add_parser(
+        "dataset-stats",
+        help="counts, no-change reasons, effect sizes and outcome classes of a dataset, with a PNG",
+        description="Read every shard of a dataset directory (corrupt shards are reported by name "
+        "and skipped) and print counts per object count, why actions changed nothing, how far the "
+        "moved object went and the outcome classes (moved, stacked, toppled), plus a PNG histogram.",
+    )
+    p.add_argument("directory", type=Path, help="dataset directory (meta.json + shard-*.npz)")
+    p.add_argument("--png", type=Path, default=None, help="histogram path (default DIR/stats.png)")
+    p.set_defaults(func=cmd_dataset_stats)
+
+    p = sub.add_parser(
+        "view",
+        help="refine a plan file, execute it with the full arm under physics, write a replay",
+        description="Refine a plan (JSON: {\"X\": [[x, y, z, small, large], ...], \"actions\": "
+        "[[pick, grasp_offset, place, release_offset], ...]}) into collision-free joint "
+        "trajectories, execute them with the arm under Drake physics, and write a self-contained "
+        "Meshcat HTML replay. If an action cannot be refined, the actions before it are executed and "
+        "the command exits with status 1.",
+    )
+    p.add_argument("plan", help="plan file (JSON)")
+    p.add_argument("--out", type=_html_path, default=Path("replay.html"), metavar="OUT.html",
+                   help="replay file (default replay.html)")
+    p.set_defaults(func=cmd_view)
     return parser
 
 

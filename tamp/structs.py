@@ -37,7 +37,9 @@ class PickPlace(NamedTuple):
 class WorldConfig:
     """Configuration of the block world. All lengths in metres, times in seconds."""
 
-    fidelity: str = "fast"  # "fast": planned and checked arm motion, kinematic carry, physics after release
+    # "fast": planned and checked arm motion, kinematic carry, physics after release;
+    # "full": the arm follows the time-parameterized plan under physics (tamp/execute.py)
+    fidelity: str = "fast"
     workspace_x: tuple[float, float] = (0.45, 0.85)  # random scenes: block centres in this box
     workspace_y: tuple[float, float] = (-0.30, 0.30)
     min_separation: float = 0.04  # gap between random blocks' footprints (the jaws need 2.7 cm)
@@ -95,13 +97,15 @@ class StepInfo:
     q_waypoints: dict[str, np.ndarray] = field(default_factory=dict)  # waypoint name -> arm joints
     X_GC: list = field(default_factory=list)  # carried blocks' poses in the tcp frame (RigidTransform)
     X_release: np.ndarray | None = None  # scene at the moment of release (before physics)
+    X_predicted: np.ndarray | None = None  # full fidelity: the fast world's outcome of the same plan
+    execution: object = None  # full fidelity: tamp.execute.ExecutedAction
 
     @property
     def changed(self) -> bool:
         return self.status == "ok"
 
     def to_dict(self) -> dict:
-        return {
+        record = {
             "action": list(self.action),
             "status": self.status,
             "reason": self.reason,
@@ -113,6 +117,9 @@ class StepInfo:
             "settled": self.settled,
             "timings": {k: round(v, 5) for k, v in self.timings.items()},
         }
+        if self.execution is not None:
+            record["execution"] = self.execution.to_dict()
+        return record
 
 
 # Outcome codes, stable across versions (datasets store the integer).

@@ -3,11 +3,14 @@
 `World.step` plans the whole action before anything moves: IK for every waypoint, then OMPL
 motions checked against the scene (the grasped block attached while carried); only a fully planned
 action is executed. In the `fast` fidelity the grasped block follows the gripper kinematically and
-physics runs from release until every block is at rest. An action that is kinematically
-impossible or closes the jaws on nothing changes nothing, and `StepInfo` says why.
+physics runs from release until every block is at rest. In the `full` fidelity the same plan is
+time-parameterized and the arm follows it under Drake physics (tamp/execute.py); the `fast` outcome
+is kept in `info.X_predicted`. An action that is kinematically impossible or closes the jaws on
+nothing changes nothing, and `StepInfo` says why.
 """
 from __future__ import annotations
 
+import dataclasses
 import time
 from typing import Iterable
 
@@ -33,10 +36,6 @@ class World:
 
     def __init__(self, config: WorldConfig | None = None, seed: int = 0) -> None:
         self.config = config or WorldConfig()
-        if self.config.fidelity != "fast":
-            raise ValueError(
-                f"fidelity {self.config.fidelity!r} is not available in this World; use 'fast'"
-            )
         self.seed = seed
         self.rng = np.random.default_rng(seed)
         self.q = Q_HOME.copy()
@@ -45,6 +44,10 @@ class World:
         self._layouts: dict[tuple[int, ...], tuple[MotionPlanner, BlockPhysics]] = {}
         self._motion_seed = 0  # seeds RRTConnect per scene, step and motion
         self._steps = 0
+        # The full fidelity plans (and predicts) with a fast world whose executed paths are simplified.
+        self._planner: World | None = None
+        if self.config.fidelity == "full":
+            self._planner = World(dataclasses.replace(self.config, fidelity="fast", simplify_paths=True), seed)
 
     # --- scenes ------------------------------------------------------------------------------
     def reset(self, n_objects: int | None = None, X: np.ndarray | None = None, seed: int | None = None) -> np.ndarray:
@@ -127,6 +130,8 @@ class World:
         """Plan and execute one pick-place; returns the next state X and what happened."""
         scene = self._require_scene()
         action = validate_action(action, scene.n)
+        if self._planner is not None:
+            return self._step_full(action)
         self._steps += 1
         info = StepInfo(action)
         t_start = time.perf_counter()
@@ -204,6 +209,29 @@ class World:
         info.q_waypoints = qs
         info.X_GC = list(wp.X_GC)
         info.timings["total"] = time.perf_counter() - t_start
+        return self.scene.X(), info
+
+    def _step_full(self, action: PickPlace) -> tuple[np.ndarray, StepInfo]:
+        """Plan and predict with the fast world, then execute the timed trajectory under physics."""
+        from tamp.execute import Executor
+        from tamp.trajectory import RefinedPlan, refined_action
+
+        scene, q = self.scene, self.q.copy()
+        self._planner._motion_seed, self._planner._steps = self._motion_seed, self._steps
+        self._steps += 1
+        self._planner.set_scene(scene, q)
+        X_predicted, info = self._planner.step(action)
+        info.X_predicted = X_predicted
+        if info.status != "ok" or not info.motion_success.get("retreat", False):
+            return scene.X(), info
+        t0 = time.perf_counter()
+        step = refined_action(action, info, scene.X(), X_predicted, q)
+        plan = RefinedPlan(scene.X(), [action], scene_init=scene, q_init=q, steps=[step])
+        result = Executor(plan, self.config).run(self.timeline)
+        self.scene, self.q = result.scene, step.q["retreat"].copy()
+        info.execution = result.log[0]
+        info.timings["execute"] = time.perf_counter() - t0
+        info.timings["total"] += info.timings["execute"]
         return self.scene.X(), info
 
     def _solve_ik(self, waypoints, info: StepInfo, q_start=None, skip=(), known=None) -> dict | None:

@@ -1,0 +1,464 @@
+"""Interaction data at scale: random pick-place exploration written as dataset shards.
+
+The work unit is one *scene* k. Its seed is ``SeedSequence(seed, spawn_key=(k,))``; from it
+come the object count n (uniform over ``objects``), the scene (``World.reset(seed=...)``) and
+M = ``actions_per_scene`` uniformly random actions among the 9 n^2 (failing ones included),
+chained: each action starts from the previous outcome. A sample is (X, a, X', n, grasped,
+status), so a scene depends on (seed, k) alone, never on which worker ran it or what it ran before.
+
+Shard j holds scenes [j K, (j + 1) K) with K = ``scenes_per_shard`` (the last scene and shard
+are trimmed so the dataset has exactly ``samples`` samples). The layout is fixed by the
+parameters, so the dataset is identical whatever the number of workers or the backend, and a
+run that was stopped (even by ``kill -9``) is resumed by computing only the missing shards:
+shards are written atomically by the parent (``learned.dataset.write_shard``), and on resume every
+existing shard is validated; one that fails is reported by name, deleted and recomputed.
+
+Workers only simulate (Drake, no torch): a local ``spawn`` process pool or Ray actors, each
+keeping one ``World`` (and its cache of Drake plants per block-type layout) for its lifetime.
+The parent packs, validates and writes the shards.
+"""
+from __future__ import annotations
+
+import fcntl
+import json
+import math
+import multiprocessing as mp
+import os
+import sys
+import threading
+import time
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass, field
+from importlib import metadata
+from pathlib import Path
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from tamp.structs import STATUSES, WorldConfig
+
+MAX_OBJECTS = 6  # as tamp.world.MAX_OBJECTS (not imported: the parent need not load Drake)
+STATUS_CODES = {name: code for code, name in enumerate(STATUSES)}
+LOCK_NAME = ".collect.lock"
+# meta.json fields that define the data: a directory is resumed only if all of them match.
+DEFINING_KEYS = ("format", "n_max", "world_config", "seed", "status_codes", "shard_size", "collection")
+
+
+@dataclass(frozen=True)
+class CollectConfig:
+    """What to collect. ``samples`` transitions from scenes of n in ``objects`` blocks."""
+
+    samples: int
+    objects: tuple[int, ...] = (2, 3, 4)
+    seed: int = 0
+    actions_per_scene: int = 10
+    scenes_per_shard: int = 20
+    world: WorldConfig = field(default_factory=WorldConfig)
+
+    def __post_init__(self) -> None:
+        if isinstance(self.samples, bool) or not isinstance(self.samples, int) or self.samples < 1:
+            raise ValueError(f"--samples must be a positive integer, got {self.samples!r}")
+        objects = tuple(int(n) for n in self.objects)
+        if not objects:
+            raise ValueError("--objects needs at least one object count, e.g. 2,3,4")
+        bad = [n for n in objects if not 1 <= n <= MAX_OBJECTS]
+        if bad:
+            raise ValueError(f"--objects: object counts must be in 1..{MAX_OBJECTS}, got {bad[0]}")
+        if len(set(objects)) != len(objects):
+            raise ValueError(f"--objects lists a count twice: {','.join(map(str, objects))}")
+        object.__setattr__(self, "objects", tuple(sorted(objects)))
+        if self.actions_per_scene < 1:
+            raise ValueError(f"--actions-per-scene must be at least 1, got {self.actions_per_scene}")
+        if self.scenes_per_shard < 1:
+            raise ValueError(f"--scenes-per-shard must be at least 1, got {self.scenes_per_shard}")
+        if not 0 <= self.seed < 2**63:
+            raise ValueError(f"--seed must be in [0, 2^63), got {self.seed}")
+
+    @property
+    def n_max(self) -> int:
+        return max(self.objects)
+
+    @property
+    def n_scenes(self) -> int:
+        return math.ceil(self.samples / self.actions_per_scene)
+
+    @property
+    def n_shards(self) -> int:
+        return math.ceil(self.n_scenes / self.scenes_per_shard)
+
+    @property
+    def shard_size(self) -> int:
+        """Samples per shard (all but possibly the last)."""
+        return self.scenes_per_shard * self.actions_per_scene
+
+    def shard_scenes(self, j: int) -> range:
+        return range(j * self.scenes_per_shard, min((j + 1) * self.scenes_per_shard, self.n_scenes))
+
+    def shard_samples(self, j: int) -> int:
+        return min(self.shard_size, self.samples - j * self.shard_size)
+
+    def scene_samples(self, k: int) -> int:
+        return min(self.actions_per_scene, self.samples - k * self.actions_per_scene)
+
+    def meta(self) -> dict[str, Any]:
+        """meta.json content (format of learned.dataset), normalised through JSON."""
+        from learned.dataset import FORMAT  # noqa: PLC0415  (parent only; learned imports torch)
+
+        meta = {
+            "format": FORMAT, "n_max": self.n_max, "world_config": self.world.to_dict(),
+            "seed": self.seed, "status_codes": STATUS_CODES, "shard_size": self.shard_size,
+            "versions": package_versions(),
+            "collection": {
+                "samples": self.samples, "objects": list(self.objects),
+                "actions_per_scene": self.actions_per_scene, "scenes_per_shard": self.scenes_per_shard,
+                "shards": self.n_shards, "scenes": self.n_scenes,
+                "scene_seed": "numpy SeedSequence(seed, spawn_key=(k,)) for scene k; n, the scene "
+                              "seed and the actions drawn from default_rng of it",
+                "actions": "uniform over the 9 n^2 actions, chained from the previous outcome",
+            },
+        }
+        return json.loads(json.dumps(meta))
+
+
+def package_versions() -> dict[str, str]:
+    out = {"python": sys.version.split()[0]}
+    for name in ("bilevel-tamp", "drake", "ompl", "ur-analytic-ik", "numpy"):
+        try:
+            out[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            out[name] = "not installed"
+    return out
+
+
+# --------------------------------------------------------------------------- one scene (workers)
+
+class SceneTask(NamedTuple):
+    seed: int
+    k: int  # scene index
+    objects: tuple[int, ...]
+    samples: int  # actions to run in this scene (M, or fewer for the last scene)
+
+
+@dataclass
+class SceneResult:
+    """The transitions of one scene; states are (m, n, 5), metres and one-hot type."""
+
+    k: int
+    X: np.ndarray
+    action: np.ndarray  # (m, 4) int64
+    X_next: np.ndarray
+    grasped: np.ndarray  # (m,) int64, -1 if nothing was carried
+    status: np.ndarray  # (m,) int64, codes of STATUS_CODES
+
+    def __len__(self) -> int:
+        return len(self.status)
+
+
+def run_scene(world, task: SceneTask) -> SceneResult:
+    """Random scene k and its chain of random actions; depends on (task.seed, task.k) alone."""
+    rng = np.random.default_rng(np.random.SeedSequence(task.seed, spawn_key=(task.k,)))
+    n = int(task.objects[rng.integers(len(task.objects))])
+    X = world.reset(n_objects=n, seed=int(rng.integers(2**63)))
+    actions = world.actions()
+    Xs, As, Xn, G, S = [], [], [], [], []
+    for _ in range(task.samples):
+        action = actions[rng.integers(len(actions))]
+        X_next, info = world.step(action)
+        Xs.append(X)
+        As.append(tuple(action))
+        Xn.append(X_next)
+        G.append(info.grasped if info.status == "ok" else -1)
+        S.append(STATUS_CODES[info.status])
+        X = X_next
+    return SceneResult(task.k, np.array(Xs), np.array(As, np.int64), np.array(Xn),
+                       np.array(G, np.int64), np.array(S, np.int64))
+
+
+_WORLD = None  # the one World of a worker process
+
+
+def _worker_world(world_config: dict):
+    global _WORLD
+    if _WORLD is None:
+        from tamp import World  # noqa: PLC0415
+
+        _WORLD = World(WorldConfig(**world_config))
+    return _WORLD
+
+
+def _init_pool_worker(world_config: dict, parent_pid: int) -> None:
+    """Pool initializer: build the World, and exit if the parent dies (e.g. kill -9)."""
+    def watch() -> None:
+        while os.getppid() == parent_pid:
+            time.sleep(0.5)
+        os._exit(1)
+
+    threading.Thread(target=watch, daemon=True).start()
+    _worker_world(world_config)
+
+
+def _pool_run(task: SceneTask) -> SceneResult:
+    return run_scene(_WORLD, task)
+
+
+class RaySceneWorker:
+    """A Ray actor (wrapped with ray.remote at run time) holding one World."""
+
+    def __init__(self, world_config: dict) -> None:
+        self.world = _worker_world(world_config)
+
+    def run(self, task: SceneTask) -> SceneResult:
+        return run_scene(self.world, task)
+
+
+# --------------------------------------------------------------------------- backends
+
+def run_local(tasks: list[SceneTask], world: WorldConfig, workers: int) -> Iterator[SceneResult]:
+    """Results of `tasks` in completion order: in this process (1 worker) or a spawn pool."""
+    if workers == 1:
+        from tamp import World  # noqa: PLC0415
+
+        w = World(world)
+        for task in tasks:
+            yield run_scene(w, task)
+        return
+    ctx = mp.get_context("spawn")
+    with ctx.Pool(workers, initializer=_init_pool_worker, initargs=(world.to_dict(), os.getpid())) as pool:
+        yield from pool.imap_unordered(_pool_run, tasks, chunksize=1)
+
+
+def import_ray():
+    try:
+        import ray  # noqa: PLC0415
+    except ImportError:
+        raise RuntimeError("--backend ray needs Ray: pip install 'bilevel-tamp[ray]' "
+                           "(or pip install ray) into this environment") from None
+    return ray
+
+
+def run_ray(tasks: list[SceneTask], world: WorldConfig, workers: int | None,
+            address: str | None) -> Iterator[SceneResult]:
+    """Results of `tasks` from Ray actors: a local cluster of `workers` CPUs, or `address`'s.
+
+    Every node of an existing cluster must have this package installed (same versions).
+    """
+    ray = import_ray()
+    import logging  # noqa: PLC0415
+
+    started_here = not ray.is_initialized()
+    if started_here:
+        kwargs = dict(include_dashboard=False, logging_level=logging.WARNING, log_to_driver=True)
+        if address:
+            ray.init(address=address, **kwargs)
+        else:
+            ray.init(num_cpus=workers or available_cpus(), **kwargs)
+    try:
+        n_actors = workers or max(1, int(ray.cluster_resources().get("CPU", 1)))
+        Worker = ray.remote(num_cpus=1)(RaySceneWorker)
+        actors = [Worker.remote(world.to_dict()) for _ in range(min(n_actors, len(tasks)) or 1)]
+        todo = iter(tasks)
+        pending: dict[Any, Any] = {}
+
+        def submit(actor) -> None:
+            task = next(todo, None)
+            if task is not None:
+                pending[actor.run.remote(task)] = actor
+
+        for actor in actors * 2:  # two tasks in flight per actor hide the round trip
+            submit(actor)
+        while pending:
+            done, _ = ray.wait(list(pending), num_returns=1)
+            actor = pending.pop(done[0])
+            submit(actor)
+            yield ray.get(done[0])
+    finally:
+        if started_here:
+            ray.shutdown()
+
+
+def available_cpus() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:
+        return os.cpu_count() or 1
+
+
+# --------------------------------------------------------------------------- the dataset directory
+
+def shard_name(j: int) -> str:
+    return f"shard-{j:06d}.npz"
+
+
+def _warn(message: str) -> None:
+    from tqdm import tqdm  # noqa: PLC0415
+
+    tqdm.write(f"warning: {message}", file=sys.stderr)
+
+
+def _describe_difference(old: dict, new: dict) -> str:
+    diffs = []
+    for key in DEFINING_KEYS:
+        a, b = old.get(key), new.get(key)
+        if isinstance(a, dict) and isinstance(b, dict):
+            diffs += [f"{key}.{k} {a.get(k)!r} -> {b.get(k)!r}" for k in sorted(set(a) | set(b))
+                      if a.get(k) != b.get(k) and k not in ("scenes", "shards")]
+        elif a != b:
+            diffs.append(f"{key} {a!r} -> {b!r}")
+    return "; ".join(diffs[:4]) + ("; ..." if len(diffs) > 4 else "")
+
+
+def prepare_directory(out: Path, cfg: CollectConfig, meta: dict) -> tuple[set[int], list[str]]:
+    """Create or check `out`; returns the indices of valid shards and the names of bad ones.
+
+    Raises ValueError if `out` holds anything but a dataset of exactly these parameters.
+    Bad shards (unreadable, invalid, wrong size) are deleted so they are recomputed.
+    """
+    from learned.dataset import META_NAME, SHARD_RE, ShardError, read_meta, read_shard, write_meta  # noqa: PLC0415
+
+    meta_path = out / META_NAME
+    if meta_path.exists():
+        old = read_meta(out)
+        if any(old.get(k) != meta[k] for k in DEFINING_KEYS):
+            raise ValueError(f"{out} holds a dataset collected with other parameters "
+                             f"({_describe_difference(old, meta)}); use a new --out directory, "
+                             "or the same parameters to resume it")
+        if old.get("versions") != meta["versions"]:
+            _warn(f"{out} was started with other package versions ({old.get('versions')}); "
+                  "resuming anyway, the new shards may differ from what those versions would give")
+    elif out.exists() and any(not p.name.startswith(".") for p in out.iterdir()):
+        raise ValueError(f"{out} is not empty and has no {META_NAME}; give a new or empty --out directory")
+    else:
+        out.mkdir(parents=True, exist_ok=True)
+        write_meta(out, meta)
+
+    for stale in out.glob(".shard-*.tmp-*"):  # temp files of a killed run
+        stale.unlink()
+    status_values = sorted(STATUS_CODES.values())
+    good, bad = set(), []
+    for path in sorted(out.iterdir()):
+        match = SHARD_RE.match(path.name)
+        if not match:
+            continue
+        j = int(match.group(1))
+        if j >= cfg.n_shards:
+            raise ValueError(f"{path} is beyond the {cfg.n_shards} shards of this dataset; "
+                             "the directory was modified by hand")
+        try:
+            shard = read_shard(path, cfg.n_max, status_values)
+            if len(shard) != cfg.shard_samples(j):
+                raise ShardError(path, f"{len(shard)} samples, expected {cfg.shard_samples(j)}")
+        except ShardError as error:
+            _warn(f"corrupt shard {path.name} ({error}); deleting it, it will be re-collected")
+            path.unlink()
+            bad.append(path.name)
+            continue
+        good.add(j)
+    return good, bad
+
+
+def pack_shard(results: list[SceneResult], n_max: int) -> dict[str, np.ndarray]:
+    """Shard arrays (learned.dataset layout, zero padding beyond n) from consecutive scenes."""
+    S = sum(len(r) for r in results)
+    arrays = {"X": np.zeros((S, n_max, 5), np.float32), "X_next": np.zeros((S, n_max, 5), np.float32),
+              "mask": np.zeros((S, n_max), bool), "action": np.zeros((S, 4), np.int64),
+              "n": np.zeros(S, np.int64), "grasped": np.zeros(S, np.int64), "status": np.zeros(S, np.int64)}
+    s = 0
+    for r in results:
+        m, n = r.X.shape[:2]
+        rows = slice(s, s + m)
+        arrays["X"][rows, :n] = r.X
+        arrays["X_next"][rows, :n] = r.X_next
+        arrays["mask"][rows, :n] = True
+        arrays["action"][rows] = r.action
+        arrays["n"][rows] = n
+        arrays["grasped"][rows] = r.grasped
+        arrays["status"][rows] = r.status
+        s += m
+    return arrays
+
+
+@dataclass
+class CollectReport:
+    directory: Path
+    samples: int  # in the finished dataset
+    new_samples: int  # computed by this run
+    shards: int
+    shards_written: int
+    shards_recollected: list[str]  # names of corrupt shards found and recomputed
+    seconds: float  # wall clock of this run
+    progress: list[tuple[float, int]] = field(default_factory=list)  # (seconds, new samples so far)
+
+    def rate(self, start_fraction: float = 0.0) -> float:
+        """New samples per second, measured from `start_fraction` of this run's samples on."""
+        if not self.progress or self.new_samples == 0:
+            return 0.0
+        t0, s0 = (0.0, 0)
+        for t, s in self.progress:
+            if s >= start_fraction * self.new_samples:
+                break
+            t0, s0 = t, s
+        t1, s1 = self.progress[-1]
+        return (s1 - s0) / max(t1 - t0, 1e-9)
+
+
+def collect(out: str | Path, cfg: CollectConfig, workers: int | None = None, backend: str = "local",
+            address: str | None = None, progress: bool = True) -> CollectReport:
+    """Collect (or finish collecting) the dataset `cfg` into directory `out`.
+
+    workers: local processes, or Ray actors (default: the CPUs of this machine, or of the Ray
+    cluster at `address`). Returns what was done; the data do not depend on workers or backend.
+    """
+    from tqdm import tqdm  # noqa: PLC0415
+    from learned.dataset import write_shard  # noqa: PLC0415
+
+    if backend not in ("local", "ray"):
+        raise ValueError(f"--backend must be 'local' or 'ray', got {backend!r}")
+    if address and backend != "ray":
+        raise ValueError("--address joins a Ray cluster; use it with --backend ray")
+    if workers is not None and workers < 1:
+        raise ValueError(f"--workers must be at least 1, got {workers}")
+    if backend == "ray":
+        import_ray()  # fail before touching the directory
+    out = Path(out)
+    t_start = time.perf_counter()
+    meta = cfg.meta()
+    out.mkdir(parents=True, exist_ok=True)
+    with open(out / LOCK_NAME, "w") as lock:
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise ValueError(f"another tamp collect is writing to {out}") from None
+        good, bad = prepare_directory(out, cfg, meta)
+        missing = [j for j in range(cfg.n_shards) if j not in good]
+        done = sum(cfg.shard_samples(j) for j in good)
+        tasks = [SceneTask(cfg.seed, k, cfg.objects, cfg.scene_samples(k)) for j in missing
+                 for k in cfg.shard_scenes(j)]
+        report = CollectReport(out, cfg.samples, cfg.samples - done, cfg.n_shards, 0, bad, 0.0)
+        if tasks:
+            if backend == "ray":
+                results = run_ray(tasks, cfg.world, workers, address)
+            else:
+                results = run_local(tasks, cfg.world, min(workers or available_cpus(), len(tasks)))
+            pending: dict[int, dict[int, SceneResult]] = {j: {} for j in missing}
+            new = 0
+            bar = tqdm(total=cfg.samples, initial=done, unit="sample", dynamic_ncols=True,
+                       smoothing=0.05, disable=not progress, file=sys.stderr)
+            t_run = time.perf_counter()
+            try:
+                for result in results:
+                    j = result.k // cfg.scenes_per_shard
+                    pending[j][result.k] = result
+                    if len(pending[j]) == len(cfg.shard_scenes(j)):
+                        scenes = [pending.pop(j)[k] for k in cfg.shard_scenes(j)]
+                        write_shard(out / shard_name(j), pack_shard(scenes, cfg.n_max), cfg.n_max,
+                                    sorted(STATUS_CODES.values()))
+                        report.shards_written += 1
+                    new += len(result)
+                    report.progress.append((time.perf_counter() - t_run, new))
+                    bar.update(len(result))
+            finally:
+                bar.close()
+                if hasattr(results, "close"):
+                    results.close()  # stops the pool or the Ray actors
+    report.seconds = time.perf_counter() - t_start
+    return report

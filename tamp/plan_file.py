@@ -1,0 +1,54 @@
+"""Plan files: JSON with the initial scene and the actions, e.g.
+
+    {"X": [[0.6, 0.15, 0.025, 1, 0], [0.7, -0.1, 0.025, 0, 1]],
+     "actions": [[0, 0, 1, 0]]}
+
+`X` is (n, 5): x, y, z in metres and a one-hot type (small cube, large bar); each action is
+(pick, grasp_offset, place, release_offset). `X_init` is accepted for `X`.
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from tamp.structs import PickPlace
+
+
+def load_plan_file(path: str | Path) -> tuple[np.ndarray, list[PickPlace]]:
+    """Read and check a plan file; errors name the file and the field."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"no plan file at {path}")
+    try:
+        data = json.loads(path.read_text())
+    except json.JSONDecodeError as error:
+        raise ValueError(f"{path}: not valid JSON ({error})") from None
+    if not isinstance(data, dict):
+        raise ValueError(f"{path}: expected a JSON object with fields 'X' and 'actions'")
+    key = "X" if "X" in data else "X_init" if "X_init" in data else None
+    if key is None:
+        raise ValueError(f"{path}: missing field 'X' (the initial scene, n rows of x, y, z, small, large)")
+    try:
+        X = np.array(data[key], dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{path}: field '{key}' must be a list of [x, y, z, small, large] rows") from None
+    if X.ndim != 2 or X.shape[1] != 5:
+        raise ValueError(f"{path}: field '{key}' must have rows of 5 numbers, got shape {X.shape}")
+    if "actions" not in data:
+        raise ValueError(f"{path}: missing field 'actions' (a list of [pick, grasp_offset, place, release_offset])")
+    actions = data["actions"]
+    if not isinstance(actions, list) or not actions:
+        raise ValueError(f"{path}: field 'actions' must be a non-empty list")
+    plan = []
+    for k, a in enumerate(actions):
+        if not (isinstance(a, list) and len(a) == 4 and all(isinstance(v, int) and not isinstance(v, bool) for v in a)):
+            raise ValueError(f"{path}: actions[{k}] must be 4 integers [pick, grasp_offset, place, release_offset], got {a!r}")
+        plan.append(PickPlace(*a))
+    return X, plan
+
+
+def write_plan_file(path: str | Path, X: np.ndarray, plan: list) -> None:
+    Path(path).write_text(json.dumps({"X": np.round(np.asarray(X), 5).tolist(),
+                                      "actions": [list(map(int, a)) for a in plan]}, indent=1))
