@@ -100,6 +100,41 @@ def cmd_view(args: argparse.Namespace) -> int:
     return 0 if refined.failure is None else 1
 
 
+def _object_counts(text: str) -> tuple[int, ...]:
+    try:
+        return tuple(int(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected object counts like 2,3,4, got {text!r}") from None
+
+
+def cmd_collect(args: argparse.Namespace) -> int:
+    """Random-exploration transitions (X, a, X') into a sharded dataset directory; resumable."""
+    from tamp.collect import CollectConfig, collect
+
+    cfg = CollectConfig(samples=args.samples, objects=args.objects, seed=args.seed,
+                        actions_per_scene=args.actions_per_scene, scenes_per_shard=args.scenes_per_shard)
+    report = collect(args.out, cfg, workers=args.workers, backend=args.backend, address=args.address,
+                     progress=not args.quiet)
+    reused = report.shards - report.shards_written
+    rate = report.new_samples / report.seconds if report.seconds > 0 else 0.0
+    print(f"{report.directory}: {report.samples} samples in {report.shards} shards "
+          f"({report.shards_written} written now, {reused} already there"
+          + (f", {len(report.shards_recollected)} corrupt re-collected" if report.shards_recollected else "")
+          + f"); {report.new_samples} new samples in {report.seconds:.1f} s ({rate:.1f} samples/s)")
+    return 0
+
+
+def cmd_dataset_stats(args: argparse.Namespace) -> int:
+    """Counts, failure reasons, effect magnitudes and outcome classes of a dataset."""
+    from tamp.dataset_stats import dataset_stats
+
+    stats = dataset_stats(args.directory, png=args.png)
+    print(stats.table())
+    if stats.png is not None:
+        print(f"histogram written to {stats.png}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="tamp",
