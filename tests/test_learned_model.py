@@ -159,3 +159,12 @@ def test_foreign_or_corrupt_checkpoints_give_clear_errors(tmp_path):
     torch.save({"format": "learned-effect-model/1", "obj": np.random.default_rng(0)}, pickled)
     with pytest.raises(ValueError, match="pickled.pt"):
         load_model(pickled)
+
+
+def test_learned_imports_no_drake_and_no_other_package():
+    import subprocess
+    import sys
+    code = ("import sys, learned, learned.synthetic; "
+            "bad = [m for m in sys.modules if m.split('.')[0] in "
+            "('pydrake', 'tamp', 'symbolic', 'evaluation')]; print(bad); assert not bad")
+    subprocess.run([sys.executable, "-c", code], check=True, capture_output=True, text=True)
