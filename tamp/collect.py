@@ -449,7 +449,8 @@ def collect(out: str | Path, cfg: CollectConfig, workers: int | None = None, bac
                     j = result.k // cfg.scenes_per_shard
                     pending[j][result.k] = result
                     if len(pending[j]) == len(cfg.shard_scenes(j)):
-                        scenes = [pending.pop(j)[k] for k in cfg.shard_scenes(j)]
+                        by_scene = pending.pop(j)
+                        scenes = [by_scene[k] for k in cfg.shard_scenes(j)]
                         write_shard(out / shard_name(j), pack_shard(scenes, cfg.n_max), cfg.n_max,
                                     sorted(STATUS_CODES.values()))
                         report.shards_written += 1

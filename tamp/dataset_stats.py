@@ -1,0 +1,197 @@
+"""What is in an interaction dataset: counts, why actions changed nothing, effect sizes, outcomes.
+
+Outcome classes of a sample, decided from X, X' and the stored status alone (orientation is not
+in X, so they are read off positions; all blocks are 5 cm tall):
+
+- failures (``ik_failure``, ``motion_failure``, ``nothing_grasped``): nothing was executed.
+- ``unchanged``: executed, but no object moved more than MOVE_TOL (1 cm), e.g. a block put
+  back where it was.
+- ``toppled``: an object that moved more than 1 cm is not *resting flat* in X': its height is
+  not that of a flat stack level (z = 2.5 cm + k 5 cm, within 1 cm), or it is above the table
+  with no object one level below within reach (a bar standing on end, a leaning block).
+- ``stacked``: the grasped object rests flat on another object (level k >= 1) in X'.
+- ``moved``: everything else that moved (placed on the table, shifted, fell off its target).
+
+A block that rolls onto another face of the same height (a cube, or a bar about its long axis)
+looks unchanged in X and is not counted as toppled.
+"""
+from __future__ import annotations
+
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from tamp.structs import BLOCK_SIZES, LARGE, SMALL, STATUSES
+
+MOVE_TOL = 0.01  # metres: an object moved if its centre moved more than this
+LEVEL_TOL = 0.01  # metres: height tolerance of a flat stack level
+HEIGHT = 0.05  # metres: every block is 5 cm tall
+# Rotation-invariant reach of a footprint: half its diagonal (metres).
+REACH = {t: float(np.hypot(*BLOCK_SIZES[t][:2]) / 2) for t in (SMALL, LARGE)}
+CLASSES = ("moved", "stacked", "toppled", "unchanged")
+OUTCOMES = CLASSES + tuple(s for s in STATUSES if s != "ok")
+
+
+def resting_flat(X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per object of X (n, 5): whether it rests flat on the table or a stack, and its level."""
+    z = X[:, 2]
+    level = np.rint((z - HEIGHT / 2) / HEIGHT).astype(int)
+    on_level = (np.abs(z - HEIGHT / 2 - level * HEIGHT) < LEVEL_TOL) & (level >= 0)
+    types = X[:, 3:].argmax(axis=1)
+    reach = np.array([REACH[int(t)] for t in types])
+    flat = on_level.copy()
+    for i in np.flatnonzero(on_level & (level > 0)):
+        below = on_level & (level == level[i] - 1)
+        below[i] = False
+        dist = np.linalg.norm(X[:, :2] - X[i, :2], axis=1)
+        flat[i] = bool(np.any(below & (dist < reach + reach[i])))
+    return flat, level
+
+
+def classify(X: np.ndarray, X_next: np.ndarray, grasped: int, status: str) -> str:
+    """Outcome class of one transition (X, X' of shape (n, 5)); see the module docstring."""
+    if status != "ok":
+        return status
+    moved = np.linalg.norm(X_next[:, :3] - X[:, :3], axis=1) > MOVE_TOL
+    if not moved.any():
+        return "unchanged"
+    flat, level = resting_flat(X_next)
+    if np.any(moved & ~flat):
+        return "toppled"
+    if grasped >= 0 and moved[grasped] and level[grasped] >= 1:
+        return "stacked"
+    return "moved"
+
+
+@dataclass
+class DatasetStats:
+    directory: Path
+    meta: dict
+    n: np.ndarray  # (S,) object counts
+    outcome: np.ndarray  # (S,) outcome names (OUTCOMES)
+    displacement: np.ndarray  # (S,) metres: how far the grasped object moved (NaN if none)
+    others_moved: np.ndarray  # (S,) bool: an object other than the grasped one moved > 1 cm
+    skipped: list[str] = field(default_factory=list)  # "name: reason" of corrupt shards
+    missing: list[str] = field(default_factory=list)  # shards the meta promises but are absent
+    png: Path | None = None
+
+    def table(self) -> str:
+        """Markdown tables: per n, why nothing changed, effect magnitudes, outcome classes."""
+        S = len(self.n)
+        lines = [f"# {self.directory}: {S} samples"]
+        if self.missing:
+            lines.append(f"incomplete: {len(self.missing)} shards missing ({', '.join(self.missing[:5])}"
+                         + (", ..." if len(self.missing) > 5 else "") + ")")
+        for s in self.skipped:
+            lines.append(f"skipped corrupt shard {s}")
+        nothing = np.isin(self.outcome, ("unchanged",) + tuple(s for s in STATUSES if s != "ok"))
+
+        lines += ["", "| n | samples | changed nothing | moved | stacked | toppled |", "|---|---|---|---|---|---|"]
+        for n in np.unique(self.n):
+            sel = self.n == n
+            frac = lambda mask: f"{mask[sel].mean():.1%}"  # noqa: E731
+            lines.append(f"| {n} | {sel.sum()} | {frac(nothing)} | {frac(self.outcome == 'moved')} | "
+                         f"{frac(self.outcome == 'stacked')} | {frac(self.outcome == 'toppled')} |")
+
+        lines += ["", f"changed nothing: {nothing.sum()} of {S} ({nothing.mean():.1%}), why:", "",
+                  "| why | samples | fraction of all |", "|---|---|---|"]
+        why = {"ik_failure": "no IK solution (ik_failure)", "motion_failure": "motion blocked (motion_failure)",
+               "nothing_grasped": "jaws closed on nothing (nothing_grasped)",
+               "unchanged": "executed, nothing moved > 1 cm (ok)"}
+        for key, text in why.items():
+            count = int((self.outcome == key).sum())
+            lines.append(f"| {text} | {count} | {count / S:.1%} |")
+
+        lines += ["", "effect of executed actions (displacement of the grasped object, cm):", "",
+                  "| outcome | samples | median | p90 | max | others moved |", "|---|---|---|---|---|---|"]
+        for cls in CLASSES:
+            sel = self.outcome == cls
+            d = self.displacement[sel & np.isfinite(self.displacement)] * 100
+            if not sel.any():
+                lines.append(f"| {cls} | 0 | - | - | - | - |")
+                continue
+            stats = (f"{np.median(d):.1f} | {np.percentile(d, 90):.1f} | {d.max():.1f}" if d.size else "- | - | -")
+            lines.append(f"| {cls} | {sel.sum()} | {stats} | {self.others_moved[sel].mean():.0%} |")
+        executed = np.isin(self.outcome, CLASSES) & np.isfinite(self.displacement)
+        if executed.any():
+            d = self.displacement[executed] * 100
+            lines.append(f"| all executed | {executed.sum()} | {np.median(d):.1f} | "
+                         f"{np.percentile(d, 90):.1f} | {d.max():.1f} | {self.others_moved[executed].mean():.0%} |")
+        return "\n".join(lines)
+
+    def write_png(self, path: Path) -> Path:
+        import matplotlib  # noqa: PLC0415
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt  # noqa: PLC0415
+
+        fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4))
+        executed = np.isin(self.outcome, CLASSES) & np.isfinite(self.displacement)
+        d = self.displacement[executed] * 100
+        bins = np.linspace(0, max(float(d.max()) if d.size else 1.0, 1.0), 30)
+        ax1.hist([d[self.outcome[executed] == c] for c in CLASSES], bins=bins, stacked=True, label=CLASSES)
+        ax1.set_xlabel("displacement of the grasped object (cm)")
+        ax1.set_ylabel("samples")
+        ax1.set_title("executed actions")
+        ax1.legend()
+        ns = np.unique(self.n)
+        bottom = np.zeros(len(ns))
+        for outcome in OUTCOMES:
+            frac = np.array([(self.outcome[self.n == n] == outcome).mean() for n in ns])
+            ax2.bar([str(n) for n in ns], frac, bottom=bottom, label=outcome)
+            bottom += frac
+        ax2.set_xlabel("objects n")
+        ax2.set_ylabel("fraction of samples")
+        ax2.set_title("outcomes per object count")
+        ax2.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.0, 1.0))
+        fig.suptitle(f"{self.directory.name}: {len(self.n)} samples")
+        fig.tight_layout()
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(path, dpi=100)
+        plt.close(fig)
+        return path
+
+
+def dataset_stats(directory: str | Path, png: str | Path | None = None) -> DatasetStats:
+    """Read every valid shard of `directory` (corrupt ones are reported and skipped) and summarise.
+
+    Writes the PNG histogram to `png` (default DIR/stats.png).
+    """
+    from learned.dataset import ShardError, read_meta, read_shard, shard_paths  # noqa: PLC0415
+
+    directory = Path(directory)
+    if not directory.is_dir():
+        raise FileNotFoundError(f"no dataset directory {directory}")
+    meta = read_meta(directory)
+    codes = {int(v): k for k, v in meta["status_codes"].items()}
+    parts, skipped = [], []
+    for path in shard_paths(directory):
+        try:
+            parts.append(read_shard(path, int(meta["n_max"]), sorted(codes)))
+        except ShardError as error:
+            reason = str(error).split(": ", 1)[-1]
+            print(f"warning: skipping corrupt shard {path.name}: {reason}", file=sys.stderr)
+            skipped.append(f"{path.name}: {reason}")
+    if not parts:
+        raise ValueError(f"{directory}: no readable shards")
+    present = {p.name for p in shard_paths(directory)}
+    expected = meta.get("collection", {}).get("shards")
+    missing = [f"shard-{j:06d}.npz" for j in range(expected or 0) if f"shard-{j:06d}.npz" not in present]
+
+    n = np.concatenate([p.n for p in parts])
+    outcome, displacement, others = [], [], []
+    for part in parts:
+        for s in range(len(part)):
+            k = int(part.n[s])
+            X, Xn, g = part.X[s, :k].astype(float), part.X_next[s, :k].astype(float), int(part.grasped[s])
+            status = codes[int(part.status[s])]
+            outcome.append(classify(X, Xn, g, status))
+            dist = np.linalg.norm(Xn[:, :3] - X[:, :3], axis=1)
+            displacement.append(dist[g] if status == "ok" and g >= 0 else np.nan)
+            others.append(bool(np.any(np.delete(dist, g) > MOVE_TOL)) if g >= 0 else bool(np.any(dist > MOVE_TOL)))
+    stats = DatasetStats(directory, meta, n, np.array(outcome), np.array(displacement), np.array(others),
+                         skipped, missing)
+    stats.png = stats.write_png(Path(png) if png is not None else directory / "stats.png")
+    return stats
