@@ -296,14 +296,18 @@ def _warn(message: str) -> None:
 
 
 def _describe_difference(old: dict, new: dict) -> str:
+    def short(value) -> str:
+        text = repr(value)
+        return text if len(text) <= 40 else text[:37] + "..."
+
     diffs = []
     for key in DEFINING_KEYS:
         a, b = old.get(key), new.get(key)
         if isinstance(a, dict) and isinstance(b, dict):
-            diffs += [f"{key}.{k} {a.get(k)!r} -> {b.get(k)!r}" for k in sorted(set(a) | set(b))
+            diffs += [f"{key}.{k} {short(a.get(k))} -> {short(b.get(k))}" for k in sorted(set(a) | set(b))
                       if a.get(k) != b.get(k) and k not in ("scenes", "shards")]
         elif a != b:
-            diffs.append(f"{key} {a!r} -> {b!r}")
+            diffs.append(f"{key} {short(a)} -> {short(b)}")
     return "; ".join(diffs[:4]) + ("; ..." if len(diffs) > 4 else "")
 
 
@@ -331,7 +335,7 @@ def prepare_directory(out: Path, cfg: CollectConfig, meta: dict) -> tuple[set[in
         out.mkdir(parents=True, exist_ok=True)
         write_meta(out, meta)
 
-    for stale in out.glob(".shard-*.tmp-*"):  # temp files of a killed run
+    for stale in out.glob(".*.tmp-*"):  # temp files of a killed run (shards or meta.json)
         stale.unlink()
     status_values = sorted(STATUS_CODES.values())
     good, bad = set(), []
@@ -422,7 +426,10 @@ def collect(out: str | Path, cfg: CollectConfig, workers: int | None = None, bac
     out = Path(out)
     t_start = time.perf_counter()
     meta = cfg.meta()
-    out.mkdir(parents=True, exist_ok=True)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        raise ValueError(f"cannot create the dataset directory {out}: {error.strerror}") from None
     with open(out / LOCK_NAME, "w") as lock:
         try:
             fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)

@@ -210,3 +210,11 @@ def test_outcome_classes(large, after, grasped, status, expected):
     X = np.array([_block(0.5, 0.0, 0.025), _block(0.7, 0.2, 0.025, large=large)])
     assert classify(X, np.array(after), grasped, status) == expected
     assert classify(X, X.copy(), grasped, "ok") == "unchanged"
+
+
+def test_ray_backend_without_ray_says_how_to_install(monkeypatch, tmp_path, capsys):
+    monkeypatch.setitem(sys.modules, "ray", None)  # import ray -> ImportError
+    assert main(collect_cli(tmp_path / "d", "--backend", "ray")) == 2
+    err = capsys.readouterr().err
+    assert "pip install" in err and "ray" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "d").exists()
