@@ -34,35 +34,38 @@ CLASSES = ("moved", "stacked", "toppled", "unchanged")
 OUTCOMES = CLASSES + tuple(s for s in STATUSES if s != "ok")
 
 
-def resting_flat(X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Per object of X (n, 5): whether it rests flat on the table or a stack, and its level."""
-    z = X[:, 2]
+def resting_flat(X: np.ndarray, mask: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Per object of X (..., n, 5): whether it rests flat on the table or a stack, and its level."""
+    mask = np.ones(X.shape[:-1], bool) if mask is None else mask
+    z = X[..., 2]
     level = np.rint((z - HEIGHT / 2) / HEIGHT).astype(int)
-    on_level = (np.abs(z - HEIGHT / 2 - level * HEIGHT) < LEVEL_TOL) & (level >= 0)
-    types = X[:, 3:].argmax(axis=1)
-    reach = np.array([REACH[int(t)] for t in types])
-    flat = on_level.copy()
-    for i in np.flatnonzero(on_level & (level > 0)):
-        below = on_level & (level == level[i] - 1)
-        below[i] = False
-        dist = np.linalg.norm(X[:, :2] - X[i, :2], axis=1)
-        flat[i] = bool(np.any(below & (dist < reach + reach[i])))
-    return flat, level
+    on_level = (np.abs(z - HEIGHT / 2 - level * HEIGHT) < LEVEL_TOL) & (level >= 0) & mask
+    reach = np.where(X[..., 4] == 1, REACH[LARGE], REACH[SMALL])
+    near = np.linalg.norm(X[..., :, None, :2] - X[..., None, :, :2], axis=-1) < reach[..., :, None] + reach[..., None, :]
+    below = on_level[..., None, :] & (level[..., None, :] == level[..., :, None] - 1)  # [i, j]: j one level under i
+    supported = (level == 0) | np.any(below & near, axis=-1)
+    return on_level & supported, level
+
+
+def classify_batch(X: np.ndarray, X_next: np.ndarray, mask: np.ndarray, grasped: np.ndarray,
+                   status: np.ndarray) -> np.ndarray:
+    """Outcome class names (S,) of padded transitions X, X' (S, n_max, 5); status as names."""
+    moved = (np.linalg.norm(X_next[..., :3] - X[..., :3], axis=-1) > MOVE_TOL) & mask
+    flat, level = resting_flat(X_next, mask)
+    g = np.maximum(grasped, 0)[:, None]
+    grasped_stacked = (grasped >= 0) & np.take_along_axis(moved & (level >= 1), g, axis=1)[:, 0]
+    out = np.where(grasped_stacked, "stacked", "moved").astype(object)
+    out[np.any(moved & ~flat, axis=1)] = "toppled"
+    out[~moved.any(axis=1)] = "unchanged"
+    failed = status != "ok"
+    out[failed] = status[failed]
+    return out
 
 
 def classify(X: np.ndarray, X_next: np.ndarray, grasped: int, status: str) -> str:
     """Outcome class of one transition (X, X' of shape (n, 5)); see the module docstring."""
-    if status != "ok":
-        return status
-    moved = np.linalg.norm(X_next[:, :3] - X[:, :3], axis=1) > MOVE_TOL
-    if not moved.any():
-        return "unchanged"
-    flat, level = resting_flat(X_next)
-    if np.any(moved & ~flat):
-        return "toppled"
-    if grasped >= 0 and moved[grasped] and level[grasped] >= 1:
-        return "stacked"
-    return "moved"
+    return str(classify_batch(X[None], X_next[None], np.ones((1, len(X)), bool), np.array([grasped]),
+                              np.array([status], object))[0])
 
 
 @dataclass
@@ -183,15 +186,16 @@ def dataset_stats(directory: str | Path, png: str | Path | None = None) -> Datas
     n = np.concatenate([p.n for p in parts])
     outcome, displacement, others = [], [], []
     for part in parts:
-        for s in range(len(part)):
-            k = int(part.n[s])
-            X, Xn, g = part.X[s, :k].astype(float), part.X_next[s, :k].astype(float), int(part.grasped[s])
-            status = codes[int(part.status[s])]
-            outcome.append(classify(X, Xn, g, status))
-            dist = np.linalg.norm(Xn[:, :3] - X[:, :3], axis=1)
-            displacement.append(dist[g] if status == "ok" and g >= 0 else np.nan)
-            others.append(bool(np.any(np.delete(dist, g) > MOVE_TOL)) if g >= 0 else bool(np.any(dist > MOVE_TOL)))
-    stats = DatasetStats(directory, meta, n, np.array(outcome), np.array(displacement), np.array(others),
-                         skipped, missing)
+        X, Xn = part.X.astype(float), part.X_next.astype(float)
+        status = np.array([codes[int(c)] for c in part.status], object)
+        outcome.append(classify_batch(X, Xn, part.mask, part.grasped, status))
+        dist = np.where(part.mask, np.linalg.norm(Xn[..., :3] - X[..., :3], axis=-1), 0.0)
+        executed = (status == "ok") & (part.grasped >= 0)
+        g = np.maximum(part.grasped, 0)[:, None]
+        displacement.append(np.where(executed, np.take_along_axis(dist, g, axis=1)[:, 0], np.nan))
+        is_grasped = (np.arange(X.shape[1])[None] == part.grasped[:, None])
+        others.append(np.any((dist > MOVE_TOL) & ~is_grasped, axis=1))
+    outcome, displacement, others = map(np.concatenate, (outcome, displacement, others))
+    stats = DatasetStats(directory, meta, n, outcome.astype(str), displacement, others, skipped, missing)
     stats.png = stats.write_png(Path(png) if png is not None else directory / "stats.png")
     return stats

@@ -1,6 +1,5 @@
 """`tamp collect` / `tamp dataset-stats`: resumable after kill -9, identical whatever the workers or
 backend, corrupt shards named and re-collected, clear user errors, outcome classes."""
-import os
 import shutil
 import signal
 import subprocess
