@@ -213,8 +213,10 @@ class EffectModel(nn.Module):
         """
         X = torch.as_tensor(np.asarray(X), dtype=torch.float32)
         m = torch.as_tensor(np.asarray(mask), dtype=torch.bool)
-        us, rs = [], []
-        for s in range(0, X.shape[0], batch_size):
+        S, N = m.shape
+        us = [torch.zeros(0, N, self.config.d_z, dtype=torch.bool)]
+        rs = [torch.zeros(0, self.config.heads, N, N, dtype=torch.bool)]
+        for s in range(0, S, batch_size):
             Xb, mb = X[s:s + batch_size], m[s:s + batch_size]
             us.append((self.unary_logits(Xb) > 0) & mb[..., None])
             pair = mb[:, None, :, None] & mb[:, None, None, :]
