@@ -25,7 +25,8 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, TrajectorySource
 
-from tamp.plants import X_FlangeTcp, _add_arm_gripper_table, _add_blocks
+from tamp.physics import blocks_at_rest
+from tamp.plants import X_FlangeTcp, add_arm_gripper_table, add_blocks
 from tamp.replay import REPLAY_FPS, Timeline
 from tamp.skill import Scene
 from tamp.structs import WorldConfig
@@ -93,8 +94,8 @@ class Executor:
         plant.set_discrete_contact_approximation(DiscreteContactApproximation.kLagged)
         plant.set_contact_model(ContactModel.kHydroelasticWithFallback)
         parser = Parser(plant)
-        arm, gripper = _add_arm_gripper_table(plant, parser)
-        self.blocks = _add_blocks(parser, types)
+        arm, gripper = add_arm_gripper_table(plant, parser)
+        self.blocks = add_blocks(parser, types)
         plant.set_gravity_enabled(arm, False)
         plant.set_gravity_enabled(gripper, False)
         # (GetJointActuatorIndices(arm) is empty before Finalize; the arm's actuators come first.)
@@ -206,12 +207,8 @@ class Executor:
         return True, ""
 
     def _at_rest(self) -> bool:
-        cfg = self.config
-        for body in self._block_bodies:
-            V = self.plant.EvalBodySpatialVelocityInWorld(self.plant_context, body)
-            if np.linalg.norm(V.translational()) > cfg.settle_speed or np.linalg.norm(V.rotational()) > cfg.settle_angular_speed:
-                return False
-        return True
+        return blocks_at_rest(self.plant, self.plant_context, self._block_bodies, self.config.settle_speed,
+                              self.config.settle_angular_speed)
 
     def _record(self, timeline: Timeline, t: float) -> None:
         scene = self._scene()

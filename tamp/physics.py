@@ -60,12 +60,16 @@ class BlockPhysics:
         return SettleResult([plant.EvalBodyPoseInWorld(ctx, b) for b in self._bodies], t, False)
 
     def _at_rest(self) -> bool:
-        plant, ctx = self.scene.plant, self._plant_context
-        for body in self._bodies:
-            V = plant.EvalBodySpatialVelocityInWorld(ctx, body)
-            if np.linalg.norm(V.translational()) > self._speed or np.linalg.norm(V.rotational()) > self._angular_speed:
-                return False
-        return True
+        return blocks_at_rest(self.scene.plant, self._plant_context, self._bodies, self._speed, self._angular_speed)
+
+
+def blocks_at_rest(plant, context, bodies, speed: float, angular_speed: float) -> bool:
+    """True when every body moves slower than `speed` (m/s) and turns slower than `angular_speed` (rad/s)."""
+    for body in bodies:
+        V = plant.EvalBodySpatialVelocityInWorld(context, body)
+        if np.linalg.norm(V.translational()) > speed or np.linalg.norm(V.rotational()) > angular_speed:
+            return False
+    return True
 
 
 def _zero_velocity():

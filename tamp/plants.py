@@ -46,7 +46,7 @@ ARM_JOINTS = (
 )
 
 
-def _add_arm_gripper_table(plant: MultibodyPlant, parser: Parser) -> tuple[ModelInstanceIndex, ModelInstanceIndex]:
+def add_arm_gripper_table(plant: MultibodyPlant, parser: Parser) -> tuple[ModelInstanceIndex, ModelInstanceIndex]:
     (arm,) = parser.AddModels(str(ARM_FILE))
     (gripper,) = parser.AddModels(str(GRIPPER_FILE))
     (table,) = parser.AddModels(str(TABLE_FILE))
@@ -56,7 +56,7 @@ def _add_arm_gripper_table(plant: MultibodyPlant, parser: Parser) -> tuple[Model
     return arm, gripper
 
 
-def _add_blocks(parser: Parser, types: np.ndarray) -> list[ModelInstanceIndex]:
+def add_blocks(parser: Parser, types: np.ndarray) -> list[ModelInstanceIndex]:
     parser.SetAutoRenaming(True)
     blocks = []
     for t in types:
@@ -89,8 +89,8 @@ def build_motion_scene(types: np.ndarray, padding: float, edge_step: float = 0.0
     builder = RobotDiagramBuilder(time_step=0.0)
     plant = builder.plant()
     parser = builder.parser()
-    arm, gripper = _add_arm_gripper_table(plant, parser)
-    blocks = _add_blocks(parser, types)
+    arm, gripper = add_arm_gripper_table(plant, parser)
+    blocks = add_blocks(parser, types)
     plant.Finalize()
     diagram = builder.Build()
     checker = SceneGraphCollisionChecker(
@@ -124,7 +124,7 @@ def build_physics_scene(types: np.ndarray, time_step: float) -> PhysicsScene:
     parser = Parser(plant)
     (table,) = parser.AddModels(str(TABLE_FILE))
     plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("table_top", table))
-    blocks = _add_blocks(parser, types)
+    blocks = add_blocks(parser, types)
     plant.Finalize()
     diagram = builder.Build()
     return PhysicsScene(diagram, plant, blocks)
