@@ -7,16 +7,25 @@ Each run collects the same dataset (same seed) into a fresh temporary directory 
 `tamp.collect.collect`; the two datasets are checked to be identical. Reported per run: wall-clock
 samples/s including start-up (worker processes, Drake imports, one Drake plant per block-type
 layout, built on first use: up to 28 for n in 2..4), and the steady rate over the second half of
-the samples. Target: >= 20 samples/s on 2 cores. Timings depend on what else the machine runs.
+the samples. Target: >= 20 samples/s on 2 cores. Wall-clock figures depend on what else the
+machine runs, so the CPU seconds per sample (this process and its workers) are printed as well:
+2 / (CPU s per sample) is what two free cores would give.
 """
 from __future__ import annotations
 
 import argparse
 import os
+import resource
 import tempfile
 from pathlib import Path
 
 import numpy as np
+
+
+def _cpu_seconds() -> float:
+    """User + system CPU time of this process and its reaped children (the pool workers)."""
+    own, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
 
 
 def main() -> None:
@@ -35,15 +44,17 @@ def main() -> None:
     workers = [int(w) for w in args.workers.split(",")]
     print(f"collect {cfg.samples} samples, objects {cfg.objects}, {cfg.actions_per_scene} actions per "
           f"scene, on {len(os.sched_getaffinity(0))} CPUs (load average {os.getloadavg()[0]:.2f} at start)")
-    print("| workers | wall s | samples/s (wall) | samples/s (second half) |")
-    print("|---|---|---|---|")
+    print("| workers | wall s | samples/s (wall) | samples/s (second half) | CPU ms per sample |")
+    print("|---|---|---|---|---|")
     rates, datasets = {}, []
     with tempfile.TemporaryDirectory(prefix="bench-collect-") as tmp:
         for w in workers:
+            cpu0 = _cpu_seconds()
             report = collect(Path(tmp) / f"w{w}", cfg, workers=w, progress=False)
+            cpu = (_cpu_seconds() - cpu0) / report.new_samples
             wall = report.new_samples / report.seconds
             rates[w] = (wall, report.rate(0.5))
-            print(f"| {w} | {report.seconds:.1f} | {wall:.1f} | {rates[w][1]:.1f} |", flush=True)
+            print(f"| {w} | {report.seconds:.1f} | {wall:.1f} | {rates[w][1]:.1f} | {cpu * 1e3:.0f} |", flush=True)
             datasets.append(load_transitions(report.directory).arrays())
         same = all(np.array_equal(d[k], datasets[0][k]) for d in datasets[1:] for k in d)
     print(f"datasets identical across worker counts: {'yes' if same else 'NO'}")
