@@ -135,6 +135,44 @@ def cmd_dataset_stats(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_train(args: argparse.Namespace) -> int:
+    """Train a Symbolic (gumbel_sigmoid) or Dynamics (sigmoid) Model on a dataset."""
+    from learned import ModelConfig, train_model
+
+    result = train_model(args.data, ModelConfig(activation=args.bottleneck), epochs=args.epochs,
+                         out_path=args.out, batch_size=args.batch_size, lr=args.lr,
+                         val_fraction=args.val_fraction, seed=args.seed, threads=args.threads,
+                         resume=args.resume)
+    print(f"best validation effect error {result.best_val_cm:.2f} cm (epoch {result.best_epoch}) -> {result.out_path}")
+    return 0
+
+
+def cmd_ablate(args: argparse.Namespace) -> int:
+    """Table I of the paper: effect error per bottleneck activation over several seeds."""
+    from learned import ablate_activations, format_ablation_markdown
+
+    result = ablate_activations(args.data, runs=args.runs, epochs=args.epochs, out_dir=args.out_dir,
+                                seed=args.seed, threads=args.threads)
+    print(format_ablation_markdown(result))
+    print(f"written to {args.out_dir}/ablation.md and ablation.json")
+    return 0
+
+
+def cmd_domain(args: argparse.Namespace) -> int:
+    """Symbols from the Symbolic Model -> learned PDDL / PPDDL domain and its statistics."""
+    from tamp.domain import learn_domain
+
+    report = learn_domain(args.model, args.data, args.out, holdout=args.holdout, seed=args.seed,
+                          sampled_domains=args.sampled)
+    held = report.get("coverage_holdout") or {}
+    print(f"{report['n_operators']} operators from {report['transitions']} transitions -> {args.out}")
+    for key in ("effects_per_operator", "coverage_train"):
+        if key in report:
+            print(f"  {key}: {json.dumps(report[key])}")
+    print(f"  coverage_holdout: {json.dumps(held)}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="tamp",
@@ -208,6 +246,58 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", type=_html_path, default=Path("replay.html"), metavar="OUT.html",
                    help="replay file (default replay.html)")
     p.set_defaults(func=cmd_view)
+
+    from learned.model import ACTIVATIONS
+
+    p = sub.add_parser(
+        "train",
+        help="train the Symbolic (gumbel_sigmoid) or Dynamics (sigmoid) Model on a dataset",
+        description="Train the effect-prediction network of the paper on a dataset written by "
+        "`tamp collect`. The best checkpoint by validation error is written to --out; "
+        "<out>.last.pt holds the state to resume from (--resume).",
+    )
+    p.add_argument("--data", required=True, help="dataset directory (tamp collect --out)")
+    p.add_argument("--bottleneck", choices=ACTIVATIONS, default="sigmoid",
+                   help="bottleneck activation: gumbel_sigmoid = Symbolic Model, sigmoid = Dynamics Model (default)")
+    p.add_argument("--epochs", type=_positive_int, default=100, help="training epochs (default 100)")
+    p.add_argument("--out", required=True, help="checkpoint file to write (e.g. models/dynamics.pt)")
+    p.add_argument("--batch-size", type=_positive_int, default=128)
+    p.add_argument("--lr", type=float, default=1e-4)
+    p.add_argument("--val-fraction", type=float, default=0.1)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--threads", type=_positive_int, default=1, help="torch threads (default 1)")
+    p.add_argument("--resume", action="store_true", help="continue from <out>.last.pt")
+    p.set_defaults(func=cmd_train)
+
+    p = sub.add_parser(
+        "ablate-activations",
+        help="Table I: effect error of the four bottleneck activations over several seeds",
+        description="Train one model per activation (gumbel_sigmoid, tanh, none, sigmoid) and seed, "
+        "and report the mean effect-prediction error (cm) on a held-out test split, as Markdown and JSON.",
+    )
+    p.add_argument("--data", required=True, help="dataset directory")
+    p.add_argument("--runs", type=_positive_int, default=3, help="seeds per activation (default 3; the paper: 10)")
+    p.add_argument("--epochs", type=_positive_int, default=20, help="epochs per run (default 20)")
+    p.add_argument("--out-dir", default="runs/ablation", help="where ablation.md / ablation.json go")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--threads", type=_positive_int, default=1)
+    p.set_defaults(func=cmd_ablate)
+
+    p = sub.add_parser(
+        "domain",
+        help="learned symbolic domain (PDDL, PPDDL, operators.json) from a Symbolic Model and data",
+        description="Compute the Symbolic Model's unary and relational bits before and after every "
+        "transition, learn lifted operators (most frequent effect and the empirical distribution), "
+        "and write domain.pddl, domain.ppddl, operators.json and stats.json (number of operators, "
+        "effects per operator, coverage on held-out transitions).",
+    )
+    p.add_argument("--model", required=True, help="Symbolic Model checkpoint (tamp train --bottleneck gumbel_sigmoid)")
+    p.add_argument("--data", required=True, help="dataset directory")
+    p.add_argument("--out", required=True, help="output directory")
+    p.add_argument("--holdout", type=float, default=0.1, help="fraction of transitions held out for coverage")
+    p.add_argument("--sampled", type=int, default=0, metavar="N", help="also write N sampled PDDL domains")
+    p.add_argument("--seed", type=int, default=0)
+    p.set_defaults(func=cmd_domain)
     return parser
 
 
