@@ -10,6 +10,10 @@ from pathlib import Path
 import numpy as np
 
 
+# learned.ACTIVATIONS, spelled out so that `tamp --help` does not import torch (tests check they agree).
+BOTTLENECKS = ("gumbel_sigmoid", "sigmoid", "tanh", "none")
+
+
 def _positive_int(text: str) -> int:
     try:
         value = int(text)
@@ -247,8 +251,6 @@ def build_parser() -> argparse.ArgumentParser:
                    help="replay file (default replay.html)")
     p.set_defaults(func=cmd_view)
 
-    from learned.model import ACTIVATIONS
-
     p = sub.add_parser(
         "train",
         help="train the Symbolic (gumbel_sigmoid) or Dynamics (sigmoid) Model on a dataset",
@@ -257,7 +259,7 @@ def build_parser() -> argparse.ArgumentParser:
         "<out>.last.pt holds the state to resume from (--resume).",
     )
     p.add_argument("--data", required=True, help="dataset directory (tamp collect --out)")
-    p.add_argument("--bottleneck", choices=ACTIVATIONS, default="sigmoid",
+    p.add_argument("--bottleneck", choices=BOTTLENECKS, default="sigmoid",
                    help="bottleneck activation: gumbel_sigmoid = Symbolic Model, sigmoid = Dynamics Model (default)")
     p.add_argument("--epochs", type=_positive_int, default=100, help="training epochs (default 100)")
     p.add_argument("--out", required=True, help="checkpoint file to write (e.g. models/dynamics.pt)")
