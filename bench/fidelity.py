@@ -51,8 +51,10 @@ def main() -> None:
     reasons = Counter()
     errors, wall_full = [], []
     t0 = time.perf_counter()
+    attempts = 0
     while executed < args.actions:
-        if executed % 5 == 0 or fast.scene is None:
+        attempts += 1
+        if attempts % 5 == 1:  # a new scene every 5 attempted actions
             fast.reset(n_objects=args.objects)
         scene, q = fast.scene, fast.q.copy()
         actions = fast.actions()

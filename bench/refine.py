@@ -38,9 +38,10 @@ def main() -> None:
     rng = np.random.default_rng(args.seed)
     times, base_times, ok = [], [], 0
     exec_wall, exec_sim, failures = [], [], []
-    n = 0
+    n, attempts = 0, 0
     while n < args.actions:
-        if n % 5 == 0 or fast.scene is None:
+        attempts += 1
+        if attempts % 5 == 1:  # a new scene every 5 attempted actions
             fast.reset(n_objects=args.objects)
         scene, q = fast.scene, fast.q.copy()
         actions = fast.actions()

@@ -194,16 +194,26 @@ class World:
             self.timeline.add_physics(record, qs["place"])
         self.scene = Scene(scene.types, settled.X_WB)
 
-        # Retreat straight up with open jaws; the released blocks are below the jaws.
+        # Retreat straight up with open jaws. The jaws opened around the released blocks, and any
+        # block that moved while settling may lean on them: those are not obstacles to lifting away.
         t_motion = time.perf_counter()
-        planner.set_block_poses(self.scene.X_WB, parked=tuple(wp.carried))
-        if self._plan(planner, [("retreat", qs["place"], qs["retreat"])], info, paths):
+        moved = [k for k in range(scene.n) if k in wp.carried
+                 or np.linalg.norm(self.scene.X_WB[k].translation() - scene.X_WB[k].translation()) > 1e-3]
+        planner.set_block_poses(self.scene.X_WB, parked=tuple(moved))
+        seed = self._motion_seed_for("retreat")
+        retreat = planner.plan(qs["place"], qs["retreat"], self.config.planning_time,
+                               direct=self.config.direct_motions, simplify=self.config.simplify_paths, seed=seed)
+        info.motion_success["retreat"] = retreat.path is not None
+        if retreat.path is not None:
+            paths["retreat"] = retreat.path
             self.q = qs["retreat"]
             if self.timeline is not None:
                 self.timeline.add_motions([paths["retreat"]], self.scene.X_WB, None)
         else:
-            self.q = qs["place"]
-            info.reason = "released, but the retreat was blocked; the arm stays at the place pose"
+            # The blocks have moved; the arm cannot leave without disturbing them. It is taken
+            # home (a reset of the arm alone) so that the next action starts collision-free.
+            self.q = Q_HOME.copy()
+            info.reason = f"released, but the retreat was blocked ({retreat.reason}); the arm was reset home"
         info.timings["motion"] += time.perf_counter() - t_motion
         info.paths = paths
         info.q_waypoints = qs
@@ -222,7 +232,9 @@ class World:
         self._planner.set_scene(scene, q)
         X_predicted, info = self._planner.step(action)
         info.X_predicted = X_predicted
-        if info.status != "ok" or not info.motion_success.get("retreat", False):
+        if info.status == "ok" and not info.motion_success.get("retreat", False):
+            info.status = "motion_failure"  # no trajectory without a way out: nothing is executed
+        if info.status != "ok":
             return scene.X(), info
         t0 = time.perf_counter()
         step = refined_action(action, info, scene.X(), X_predicted, q)
@@ -265,9 +277,8 @@ class World:
 
     def _plan(self, planner: MotionPlanner, motions, info: StepInfo, paths: dict) -> bool:
         for name, q_a, q_b in motions:
-            seed = (self._motion_seed * 1_000_003 + self._steps * 16 + MOTIONS.index(name)) % (2**31 - 1)
             result = planner.plan(q_a, q_b, self.config.planning_time, direct=self.config.direct_motions,
-                                  simplify=self.config.simplify_paths, seed=seed)
+                                  simplify=self.config.simplify_paths, seed=self._motion_seed_for(name))
             info.motion_success[name] = result.path is not None
             if result.path is None:
                 info.status = "motion_failure"
@@ -275,6 +286,10 @@ class World:
                 return False
             paths[name] = result.path
         return True
+
+    def _motion_seed_for(self, motion: str) -> int:
+        """RRTConnect's seed for one motion: a function of the scene seed, step and motion only."""
+        return (self._motion_seed * 1_000_003 + self._steps * 16 + MOTIONS.index(motion)) % (2**31 - 1)
 
     def _unchanged(self, info: StepInfo, t_start: float, t_motion: float | None = None) -> tuple[np.ndarray, StepInfo]:
         if t_motion is not None:
