@@ -1,0 +1,288 @@
+"""The bilevel planner (paper, Algorithm 1), the baselines behind one interface, and closed-loop replanning.
+
+    result = plan("bilevel", models, X_init, X_goal, PlanConfig())
+
+Methods (`METHODS`, same signature, same `PlanResult`):
+- ``bilevel``        Level 1: Sigma_init, Sigma_goal from the Symbolic Model -> probabilistic symbolic
+                     planning over N sampled domains -> verify candidates in decreasing frequency, return
+                     the first verified one. Level 2 (no verified candidate): continuous search.
+- ``probabilistic``  the most frequent plan of the probabilistic symbolic planner, not verified
+                     (its verification error is reported).
+- ``deterministic``  the plan in the most-frequent-effect domain (baseline), not verified.
+- ``cfs``            continuous forward search alone.
+
+`plan_closed_loop` is the replanning variant: plan, execute the first action with a caller-given
+`step` (a World, or any simulator), observe the real state and plan again from it, up to `rounds`
+(= k - 1) replanning rounds; the last plan is executed to its end. It stops early once the observed
+state is within eps of the goal. (The paper executes the whole plan first and replans only if it
+failed; with a deterministic simulator that differs only in plans that would have succeeded anyway
+being replaced, and it needs no rollback of the world, which a real robot cannot do.)
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field, replace
+from typing import Callable, Sequence
+
+import numpy as np
+
+from tamp.models import Models
+from tamp.search import SearchConfig, SearchResult, continuous_search
+from tamp.structs import PickPlace
+from tamp.verify import EPS_SUCCESS, TAU_VERIFY, at_goal, goal_error, verify
+
+
+@dataclass(frozen=True)
+class PlanConfig:
+    n_domains: int = 100  # N sampled PDDL domains
+    seed: int = 0  # seed of the sampled domains
+    tau_verify: float = TAU_VERIFY  # metres
+    eps: float = EPS_SUCCESS  # metres: success tolerance (goal test of the search, closed loop)
+    backend: str = "python"  # symbolic planner backend: python | fd | fd-naive
+    symbolic_time_limit: float = 10.0  # seconds per symbolic planner call
+    verify_all: bool = False  # verify every candidate (default: stop at the first verified one, Alg. 1)
+    search: SearchConfig = SearchConfig()
+
+
+@dataclass
+class Candidate:
+    """A symbolic plan of Level 1 with its verification outcome (None: not verified, Alg. 1 stopped before)."""
+
+    actions: tuple[tuple[int, int, int, int], ...]
+    count: int  # sampled domains that produced it
+    probability: float
+    error: float | None = None  # metres: max per-object distance of the predicted final state to the goal
+    verified: bool | None = None
+
+
+@dataclass
+class PlanResult:
+    method: str
+    plan: list[PickPlace] | None  # None: no plan
+    level: int | None = None  # 1 (symbolic) or 2 (continuous search) that produced the plan
+    predicted: np.ndarray | None = None  # (len(plan) + 1, n, 5) Dynamics Model rollout of the plan
+    candidates: list[Candidate] = field(default_factory=list)
+    search: SearchResult | None = None
+    timings: dict[str, float] = field(default_factory=dict)  # seconds: symbols, symbolic, verify, search, total
+    reasons: list[str] = field(default_factory=list)  # why each level did not produce the plan
+    symbolic_stats: dict = field(default_factory=dict)  # domains, unique plans, planner outcomes
+    predicted_error: float | None = None  # metres: max per-object distance, predicted final state to goal
+
+    @property
+    def solved(self) -> bool:
+        return self.plan is not None
+
+    def to_dict(self) -> dict:
+        return {"method": self.method, "solved": self.solved, "level": self.level,
+                "plan": None if self.plan is None else [list(a) for a in self.plan],
+                "predicted_error_m": self.predicted_error,
+                "candidates": [{"actions": [list(a) for a in c.actions], "count": c.count,
+                                "probability": round(c.probability, 4), "error_m": c.error,
+                                "verified": c.verified} for c in self.candidates],
+                "search": None if self.search is None else {
+                    k: getattr(self.search, k) for k in ("status", "reason", "expanded", "generated",
+                                                         "duplicates", "predict_calls", "time")},
+                "timings": {k: round(v, 6) for k, v in self.timings.items()},
+                "reasons": list(self.reasons), "symbolic": self.symbolic_stats}
+
+
+# --- the levels -------------------------------------------------------------------------------
+def _symbolic_problem(models: Models, X_init: np.ndarray, X_goal: np.ndarray):
+    from symbolic import make_problem
+
+    ui, ri = models.symbolic.symbols(X_init)
+    ug, rg = models.symbolic.symbols(X_goal)
+    return make_problem(ui, ri, ug, rg)
+
+
+def _level1_plans(models: Models, X_init, X_goal, cfg: PlanConfig, result: PlanResult,
+                  probabilistic: bool = True) -> list[Candidate]:
+    """Symbolic candidates, best first; failures go to result.reasons (prefixed 'level 1')."""
+    t = time.perf_counter()
+    try:
+        planner = models.symbolic_planner(cfg.backend, cfg.symbolic_time_limit)
+        problem = _symbolic_problem(models, X_init, X_goal)
+    except ValueError as error:
+        result.reasons.append(f"level 1: {error}")
+        return []
+    finally:
+        result.timings["symbols"] = time.perf_counter() - t
+    t = time.perf_counter()
+    if probabilistic:
+        out = planner.plan_probabilistic(problem, n_domains=cfg.n_domains, seed=cfg.seed)
+        result.timings["symbolic"] = time.perf_counter() - t
+        result.symbolic_stats = {"n_domains": out.n_domains, "unique_plans": len(out.plans),
+                                 "outcomes": dict(out.statuses)}
+        if not out.plans:
+            result.reasons.append(f"level 1: no symbolic plan in any of the {out.n_domains} sampled domains "
+                                  f"(outcomes: {dict(out.statuses)})")
+        return [Candidate(tuple(tuple(a) for a in p.actions), p.count, p.probability) for p in out.plans]
+    out = planner.plan_deterministic(problem)
+    result.timings["symbolic"] = time.perf_counter() - t
+    result.symbolic_stats = {"outcome": out.status.value}
+    if not out.solved:
+        result.reasons.append(f"level 1: no plan in the deterministic domain ({out.status.value}: {out.message})")
+        return []
+    from symbolic import steps_to_actions
+
+    actions = steps_to_actions(models.domain, out.plan, len(X_init))
+    return [Candidate(tuple(tuple(a) for a in actions), 1, 1.0)]
+
+
+def _verify(models: Models, X_init, X_goal, candidate: Candidate, cfg: PlanConfig):
+    v = verify(models.require_dynamics(), X_init, X_goal, candidate.actions, cfg.tau_verify)
+    candidate.error, candidate.verified = v.error, v.verified
+    return v
+
+
+def _take(result: PlanResult, actions, level: int, predicted: np.ndarray, X_goal) -> PlanResult:
+    result.plan, result.level, result.predicted = [PickPlace(*a) for a in actions], level, predicted
+    result.predicted_error = goal_error(predicted[-1], X_goal)
+    return result
+
+
+def _level2(models: Models, X_init, X_goal, cfg: PlanConfig, result: PlanResult) -> PlanResult:
+    t = time.perf_counter()
+    search_cfg = replace(cfg.search, eps=cfg.eps)
+    out = continuous_search(models.require_dynamics(), X_init, X_goal, search_cfg)
+    result.search = out
+    result.timings["search"] = time.perf_counter() - t
+    if out.solved:
+        return _take(result, out.plan, 2, out.trajectory, X_goal)
+    result.reasons.append(f"level 2: {out.reason}")
+    return result
+
+
+def _timed(method: str, body: Callable[[PlanResult], PlanResult]) -> PlanResult:
+    t = time.perf_counter()
+    result = body(PlanResult(method, None))
+    result.timings["total"] = time.perf_counter() - t
+    return result
+
+
+# --- the methods ------------------------------------------------------------------------------
+def plan_bilevel(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig()) -> PlanResult:
+    """Algorithm 1: verified probabilistic symbolic plan, else continuous search."""
+    def body(result: PlanResult) -> PlanResult:
+        result.candidates = _level1_plans(models, X_init, X_goal, cfg, result)
+        t, chosen = time.perf_counter(), None
+        for c in result.candidates:  # decreasing frequency
+            v = _verify(models, X_init, X_goal, c, cfg)
+            if v.verified and chosen is None:
+                chosen = v
+                if not cfg.verify_all:
+                    break
+        if result.candidates:
+            result.timings["verify"] = time.perf_counter() - t
+        if chosen is not None:
+            return _take(result, chosen.actions, 1, chosen.trajectory, X_goal)
+        if result.candidates:
+            best = min(c.error for c in result.candidates if c.error is not None)
+            result.reasons.append(f"level 1: none of the {len(result.candidates)} symbolic plans verified "
+                                  f"(best predicted error {best * 100:.1f} cm, tau {cfg.tau_verify * 100:g} cm)")
+        return _level2(models, X_init, X_goal, cfg, result)
+    return _timed("bilevel", body)
+
+
+def _symbolic_only(method: str, probabilistic: bool):
+    def run(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig()) -> PlanResult:
+        def body(result: PlanResult) -> PlanResult:
+            result.candidates = _level1_plans(models, X_init, X_goal, cfg, result, probabilistic)
+            if not result.candidates:
+                return result
+            t = time.perf_counter()
+            v = _verify(models, X_init, X_goal, result.candidates[0], cfg)  # reported, not used
+            result.timings["verify"] = time.perf_counter() - t
+            return _take(result, v.actions, 1, v.trajectory, X_goal)
+        return _timed(method, body)
+    run.__doc__ = f"The {method} symbolic planner alone (top plan, unverified)."
+    return run
+
+
+plan_probabilistic = _symbolic_only("probabilistic", True)
+plan_deterministic = _symbolic_only("deterministic", False)
+
+
+def plan_cfs(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig()) -> PlanResult:
+    """Continuous forward search alone."""
+    return _timed("cfs", lambda result: _level2(models, X_init, X_goal, cfg, result))
+
+
+Planner = Callable[[Models, np.ndarray, np.ndarray, PlanConfig], PlanResult]
+METHODS: dict[str, Planner] = {"bilevel": plan_bilevel, "probabilistic": plan_probabilistic,
+                               "deterministic": plan_deterministic, "cfs": plan_cfs}
+
+
+def plan(method: str, models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig()) -> PlanResult:
+    """Run one of METHODS on (X_init, X_goal), both (n, 5) arrays."""
+    if method not in METHODS:
+        raise ValueError(f"unknown planning method {method!r}; choose one of {', '.join(METHODS)}")
+    X_init, X_goal = np.asarray(X_init, dtype=float), np.asarray(X_goal, dtype=float)
+    if X_init.shape != X_goal.shape or X_init.ndim != 2 or X_init.shape[1] != 5:
+        raise ValueError(f"X_init and X_goal must both be (n, 5), got {X_init.shape} and {X_goal.shape}")
+    return METHODS[method](models, X_init, X_goal, cfg)
+
+
+# --- closed loop ------------------------------------------------------------------------------
+@dataclass
+class ClosedLoopResult:
+    rounds: list[PlanResult]  # one planning call per round, the first from X_init
+    executed: list[PickPlace]  # actions sent to `step`, in order
+    states: list[np.ndarray]  # observed states: X_init, then after each executed action
+    X_goal: np.ndarray
+    eps: float
+    reason: str = ""
+
+    @property
+    def X_final(self) -> np.ndarray:
+        return self.states[-1]
+
+    @property
+    def error(self) -> float:
+        """Metres: max per-object distance of the observed final state to the goal."""
+        return goal_error(self.X_final, self.X_goal)
+
+    @property
+    def success(self) -> bool:
+        return self.error < self.eps
+
+
+def plan_closed_loop(method: str, models: Models, X_init, X_goal,
+                     step: Callable[[PickPlace], np.ndarray], rounds: int,
+                     cfg: PlanConfig = PlanConfig()) -> ClosedLoopResult:
+    """Plan, execute the first action, observe, replan (at most `rounds` times); see the module doc.
+
+    `step(action)` executes one action in the real (simulated) world and returns the observed (n, 5) state.
+    """
+    X_goal = np.asarray(X_goal, dtype=float)
+    out = ClosedLoopResult([], [], [np.asarray(X_init, dtype=float)], X_goal, cfg.eps)
+    for r in range(rounds + 1):
+        X = out.states[-1]
+        if at_goal(X, X_goal, cfg.eps):
+            out.reason = "the observed state is within eps of the goal"
+            break
+        result = plan(method, models, X, X_goal, cfg)
+        out.rounds.append(result)
+        if not result.solved:
+            out.reason = f"round {r}: no plan ({'; '.join(result.reasons)})"
+            break
+        if not result.plan:
+            out.reason = f"round {r}: the planner returned an empty plan"
+            break
+        last = r == rounds
+        for action in (result.plan if last else result.plan[:1]):
+            out.executed.append(action)
+            out.states.append(np.asarray(step(action), dtype=float))
+        if last:
+            out.reason = f"executed the plan of round {r} to its end (no replanning rounds left)"
+    return out
+
+
+def replan_rounds(k: int | None, default: int = 4) -> int:
+    """k - 1 replanning rounds for a problem generated with k actions."""
+    return default if k is None else max(k - 1, 0)
+
+
+__all__: Sequence[str] = ["Candidate", "ClosedLoopResult", "METHODS", "PlanConfig", "PlanResult", "Planner",
+                          "plan", "plan_bilevel", "plan_cfs", "plan_closed_loop", "plan_deterministic",
+                          "plan_probabilistic", "replan_rounds"]

@@ -1,0 +1,81 @@
+"""The learned models a planner needs, and the models directory layout.
+
+    DIR/symbolic.pt   Symbolic Model (EffectModel, gumbel_sigmoid bottleneck): symbols of X
+    DIR/dynamics.pt   Dynamics Model (EffectModel, sigmoid bottleneck): predicted effects
+    DIR/domain/       learned symbolic domain (symbolic.build_domain output; operators.json is read)
+
+Only the parts a method uses must exist: continuous search needs dynamics.pt alone; the symbolic
+methods need all three. Anything with `symbols(X)` / `predict_effect(X, actions)` works in place of
+the trained networks (tests use stubs).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Protocol
+
+import numpy as np
+
+from tamp.verify import DynamicsModel
+
+SYMBOLIC_FILE, DYNAMICS_FILE, DOMAIN_DIR = "symbolic.pt", "dynamics.pt", "domain"
+
+
+class SymbolModel(Protocol):
+    def symbols(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Unary bits (n, d_z) and relation bits (K, n, n) of scene X."""
+
+
+@dataclass
+class Models:
+    dynamics: DynamicsModel | None
+    symbolic: SymbolModel | None = None
+    domain: object = None  # symbolic.OperatorSet
+    planners: dict = field(default_factory=dict)  # SymbolicPlanner per (backend, time limit), reused
+
+    def symbolic_planner(self, backend: str = "python", time_limit: float = 10.0):
+        """A SymbolicPlanner over `domain`, built once (it caches ground tasks per object count)."""
+        from symbolic import SymbolicPlanner
+
+        if self.symbolic is None or self.domain is None:
+            raise ValueError("the symbolic level needs a Symbolic Model and a learned domain "
+                             f"({SYMBOLIC_FILE} and {DOMAIN_DIR}/ in the models directory)")
+        if (backend, time_limit) not in self.planners:
+            self.planners[backend, time_limit] = SymbolicPlanner(self.domain, backend=backend,
+                                                                 time_limit=time_limit)
+        return self.planners[backend, time_limit]
+
+    def require_dynamics(self) -> DynamicsModel:
+        if self.dynamics is None:
+            raise ValueError(f"this method needs the Dynamics Model ({DYNAMICS_FILE} in the models directory)")
+        return self.dynamics
+
+
+def load_models(directory: str | Path, need_symbolic: bool = True) -> Models:
+    """Load DIR/dynamics.pt, and unless `need_symbolic` is False DIR/symbolic.pt and DIR/domain/.
+
+    Checks that the Symbolic Model's symbol sizes (d_z, K) match the domain's; errors name the file.
+    """
+    import learned
+    import symbolic
+
+    directory = Path(directory)
+    if not directory.is_dir():
+        raise FileNotFoundError(f"no models directory at {directory} (expected {SYMBOLIC_FILE}, "
+                                f"{DYNAMICS_FILE} and {DOMAIN_DIR}/ in it)")
+    paths = {"dynamics": directory / DYNAMICS_FILE, "symbolic": directory / SYMBOLIC_FILE,
+             "domain": directory / DOMAIN_DIR / "operators.json"}
+    wanted = ("dynamics", "symbolic", "domain") if need_symbolic else ("dynamics",)
+    missing = [str(paths[w]) for w in wanted if not paths[w].is_file()]
+    if missing:
+        raise FileNotFoundError(f"missing model file(s): {', '.join(missing)}")
+    models = Models(learned.load_model(paths["dynamics"]))
+    if need_symbolic:
+        models.symbolic = learned.load_model(paths["symbolic"])
+        models.domain = symbolic.load_domain(directory / DOMAIN_DIR)
+        cfg = models.symbolic.config
+        if (cfg.d_z, cfg.heads) != (models.domain.n_unary, models.domain.n_relations):
+            raise ValueError(f"{paths['symbolic']} has d_z={cfg.d_z}, K={cfg.heads} but the domain in "
+                             f"{paths['domain'].parent} was learned with d_z={models.domain.n_unary}, "
+                             f"K={models.domain.n_relations}")
+    return models

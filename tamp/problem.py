@@ -1,0 +1,97 @@
+"""Planning problems and their file format.
+
+A problem file is one JSON object (a problem set is one such object per line, JSONL):
+
+    {"X_init": [[0.60, 0.15, 0.025, 1, 0], [0.70, -0.10, 0.025, 0, 1]],
+     "X_goal": [[0.70, -0.10, 0.075, 1, 0], [0.70, -0.10, 0.025, 0, 1]],
+     "k": 1, "seed": 7}
+
+`X_init` and `X_goal` are (n, 5): x, y, z in metres and a one-hot type (small cube, large bar), the
+same objects in the same order (types must agree). `k` (optional, positive integer) is the number of
+actions that generated the goal; closed-loop replanning uses up to k - 1 rounds. `seed` (optional,
+integer) seeds the sampled symbolic domains. Errors name the file and the field.
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Problem:
+    X_init: np.ndarray  # (n, 5)
+    X_goal: np.ndarray  # (n, 5)
+    k: int | None = None  # actions used to generate X_goal, if known
+    seed: int = 0
+
+    @property
+    def n(self) -> int:
+        return int(self.X_init.shape[0])
+
+    def to_dict(self) -> dict:
+        d = {"X_init": np.round(self.X_init, 5).tolist(), "X_goal": np.round(self.X_goal, 5).tolist(),
+             "seed": int(self.seed)}
+        if self.k is not None:
+            d["k"] = int(self.k)
+        return d
+
+
+def _state(data: dict, field: str, where: str) -> np.ndarray:
+    if field not in data:
+        raise ValueError(f"{where}: missing field '{field}' (n rows of [x, y, z, small, large])")
+    rows = data[field]
+    if not isinstance(rows, list) or not rows or not all(isinstance(r, list) for r in rows):
+        raise ValueError(f"{where}: field '{field}' must be a non-empty list of [x, y, z, small, large] rows")
+    for i, row in enumerate(rows):
+        if len(row) != 5 or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in row):
+            raise ValueError(f"{where}: field '{field}' row {i} must be 5 numbers [x, y, z, small, large], got {row!r}")
+    X = np.array(rows, dtype=float)
+    if not np.all(np.isfinite(X)):
+        raise ValueError(f"{where}: field '{field}' contains a non-finite number")
+    onehot = X[:, 3:]
+    bad = np.flatnonzero(~(np.isin(onehot, (0.0, 1.0)).all(axis=1) & (onehot.sum(axis=1) == 1)))
+    if bad.size:
+        raise ValueError(f"{where}: field '{field}' row {bad[0]}: the type must be one-hot "
+                         f"[1, 0] (small) or [0, 1] (large), got {onehot[bad[0]].tolist()}")
+    return X
+
+
+def problem_from_dict(data: object, where: str = "problem") -> Problem:
+    """Check a parsed problem object; ValueError naming `where` and the field."""
+    if not isinstance(data, dict):
+        raise ValueError(f"{where}: expected a JSON object with fields 'X_init' and 'X_goal'")
+    X_init, X_goal = _state(data, "X_init", where), _state(data, "X_goal", where)
+    if X_goal.shape != X_init.shape:
+        raise ValueError(f"{where}: field 'X_goal' has {len(X_goal)} objects, 'X_init' has {len(X_init)}")
+    differs = np.flatnonzero(np.any(X_goal[:, 3:] != X_init[:, 3:], axis=1))
+    if differs.size:
+        raise ValueError(f"{where}: field 'X_goal' row {differs[0]} has another block type than in 'X_init'")
+    k = data.get("k")
+    if k is not None and (not isinstance(k, int) or isinstance(k, bool) or k < 1):
+        raise ValueError(f"{where}: field 'k' must be a positive integer, got {k!r}")
+    seed = data.get("seed", 0)
+    if not isinstance(seed, int) or isinstance(seed, bool):
+        raise ValueError(f"{where}: field 'seed' must be an integer, got {seed!r}")
+    unknown = sorted(set(data) - {"X_init", "X_goal", "k", "seed", "name", "actions"})
+    if unknown:
+        raise ValueError(f"{where}: unknown field '{unknown[0]}' (expected X_init, X_goal, k, seed)")
+    return Problem(X_init, X_goal, k, seed)
+
+
+def load_problem(path: str | Path) -> Problem:
+    """Read one problem file (JSON)."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"no problem file at {path}")
+    try:
+        data = json.loads(path.read_text())
+    except json.JSONDecodeError as error:
+        raise ValueError(f"{path}: not valid JSON ({error})") from None
+    return problem_from_dict(data, str(path))
+
+
+def save_problem(path: str | Path, problem: Problem) -> None:
+    Path(path).write_text(json.dumps(problem.to_dict()) + "\n")

@@ -1,0 +1,173 @@
+"""Continuous Forward Search (paper, Level 2): weighted A* in the continuous state space.
+
+A node is (X, g, plan); f = g + w h(X) with g = number of actions, w = 1.5 and
+h(X) = sum_i ||pos_i(X) - pos_i(X_goal)||_2 in units of `h_unit` metres (1 m: the paper's formula
+with positions in metres). The Dynamics Model is the transition, X' = X + e_hat; all successors of
+one expansion are predicted in one batched `predict_effect` call.
+
+Goal-oriented action pruning (paper): objects whose 2-D (x, y) distance to their goal exceeds
+`misplaced` are misplaced; for each misplaced o_i, the actions from o_i onto the other object o_j
+closest (2-D) to o_i's goal position and from o_i onto itself, each with all 9 (grasp, release)
+offset pairs: at most 18 per misplaced object. If no object is misplaced in 2-D but the goal test
+fails (only heights differ), the objects off their goal in 3-D are treated as misplaced (our
+extension; without it such states have no successors).
+
+Goal test at generation: every object within `eps` (5 cm) of its goal in 3-D. Duplicate detection:
+positions rounded to a `resolution` grid; a state is pushed again only when reached with fewer
+actions. Limits: expansions, wall-clock time and plan depth; the result says which one ended it.
+"""
+from __future__ import annotations
+
+import heapq
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from tamp.verify import EPS_SUCCESS, DynamicsModel
+
+OFFSETS = (-1, 0, 1)
+_PAIRS = np.array([(g, r) for g in OFFSETS for r in OFFSETS], dtype=np.int64)  # the 9 offset pairs
+
+
+@dataclass(frozen=True)
+class SearchConfig:
+    weight: float = 1.5  # w in f = g + w h
+    h_unit: float = 1.0  # metres per unit of h (1.0: h in metres, as in the paper)
+    eps: float = EPS_SUCCESS  # metres: goal test, every object within eps (3-D)
+    misplaced: float = EPS_SUCCESS  # metres: 2-D distance beyond which an object is misplaced
+    resolution: float = 0.01  # metres: grid of the duplicate-detection key
+    max_expansions: int = 5000
+    time_limit: float = 30.0  # seconds of wall-clock time
+    max_depth: int = 10  # longest plan considered
+    batched: bool = True  # one predict_effect call per expansion (False: one per action, for the benchmark)
+    prune: bool = True  # goal-oriented pruning (False: all 9 n^2 actions)
+
+
+@dataclass
+class SearchResult:
+    status: str  # "solved" | "exhausted" | "node_limit" | "time_limit"
+    plan: list[tuple[int, int, int, int]] | None
+    trajectory: np.ndarray | None  # (len(plan) + 1, n, 5) predicted states along the plan
+    reason: str
+    expanded: int = 0
+    generated: int = 0
+    duplicates: int = 0
+    predict_calls: int = 0
+    best_error: float = float("inf")  # metres: smallest max-object goal distance among generated states
+    time: float = 0.0  # seconds
+
+    @property
+    def solved(self) -> bool:
+        return self.status == "solved"
+
+
+def goal_oriented_actions(X: np.ndarray, X_goal: np.ndarray, misplaced: float = EPS_SUCCESS,
+                          eps: float = EPS_SUCCESS) -> np.ndarray:
+    """The pruned action set A(X) as a (B, 4) int array (see the module docstring)."""
+    d2 = np.linalg.norm(X[:, :2] - X_goal[:, :2], axis=1)
+    wrong = np.flatnonzero(d2 > misplaced)
+    if wrong.size == 0:
+        wrong = np.flatnonzero(np.linalg.norm(X[:, :3] - X_goal[:, :3], axis=1) >= eps)
+    n, rows = len(X), []
+    for i in wrong:
+        targets = [i]
+        if n > 1:
+            dist = np.linalg.norm(X[:, :2] - X_goal[i, :2], axis=1)
+            dist[i] = np.inf
+            targets.insert(0, int(np.argmin(dist)))
+        for j in targets:
+            rows.append(np.column_stack([np.full(9, i), _PAIRS[:, 0], np.full(9, j), _PAIRS[:, 1]]))
+    return np.concatenate(rows).astype(np.int64) if rows else np.zeros((0, 4), np.int64)
+
+
+def all_actions(n: int) -> np.ndarray:
+    """All 9 n^2 actions (pick, grasp_offset, place, release_offset)."""
+    return np.array([(i, g, j, r) for i in range(n) for g in OFFSETS for j in range(n) for r in OFFSETS],
+                    dtype=np.int64)
+
+
+def predict_positions(model: DynamicsModel, X: np.ndarray, actions: np.ndarray, batched: bool = True
+                      ) -> tuple[np.ndarray, int]:
+    """Successor positions (B, n, 3) and the number of predict_effect calls made."""
+    if batched:
+        return X[None, :, :3] + model.predict_effect(X, actions), 1
+    e = [model.predict_effect(X, actions[b:b + 1])[0] for b in range(len(actions))]
+    return X[None, :, :3] + np.array(e).reshape(len(actions), len(X), 3), len(actions)
+
+
+def continuous_search(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarray,
+                      config: SearchConfig = SearchConfig()) -> SearchResult:
+    """Weighted A* from X_init to X_goal with the Dynamics Model as the transition."""
+    t0 = time.perf_counter()
+    X_init, X_goal = np.asarray(X_init, dtype=float), np.asarray(X_goal, dtype=float)
+    if X_init.shape != X_goal.shape or X_init.ndim != 2 or X_init.shape[1] != 5:
+        raise ValueError(f"X_init and X_goal must both be (n, 5), got {X_init.shape} and {X_goal.shape}")
+    goal = X_goal[:, :3]
+    types = X_init[:, 3:]
+
+    def full(P: np.ndarray) -> np.ndarray:
+        return np.concatenate([P, types], axis=1)
+
+    def key(P: np.ndarray) -> bytes:
+        return np.round(P / config.resolution).astype(np.int64).tobytes()
+
+    # nodes[i] = (positions (n, 3), parent index, action, g)
+    nodes: list[tuple[np.ndarray, int, tuple | None, int]] = [(X_init[:, :3].copy(), -1, None, 0)]
+    d0 = np.linalg.norm(X_init[:, :3] - goal, axis=1)
+    out = SearchResult("exhausted", None, None, "", best_error=float(d0.max(initial=0.0)))
+
+    def finish(status: str, reason: str, index: int | None = None) -> SearchResult:
+        out.status, out.reason, out.time = status, reason, time.perf_counter() - t0
+        if index is not None:
+            plan, states = [], []
+            while index >= 0:
+                P, parent, action, _ = nodes[index]
+                states.append(full(P))
+                if action is not None:
+                    plan.append(action)
+                index = parent
+            out.plan, out.trajectory = plan[::-1], np.stack(states[::-1])
+        return out
+
+    if np.all(d0 < config.eps):
+        return finish("solved", "the initial state is already within eps of the goal", 0)
+    best_g = {key(X_init[:, :3]): 0}
+    frontier = [(config.weight * d0.sum() / config.h_unit, d0.sum(), 0)]  # (f, h, node index)
+    n_objects = len(X_init)
+    every = all_actions(n_objects)
+    while frontier:
+        if out.expanded >= config.max_expansions:
+            return finish("node_limit", f"node limit: {out.expanded} expansions without reaching the goal "
+                          f"(closest predicted state {out.best_error * 100:.1f} cm from it)")
+        if time.perf_counter() - t0 > config.time_limit:
+            return finish("time_limit", f"time limit: {config.time_limit:g} s ({out.expanded} expansions) "
+                          f"without reaching the goal (closest predicted state {out.best_error * 100:.1f} cm from it)")
+        _, _, index = heapq.heappop(frontier)
+        P, _, _, g = nodes[index]
+        if best_g.get(key(P), -1) < g or g >= config.max_depth:
+            continue  # reached again with fewer actions since it was pushed / too deep
+        out.expanded += 1
+        actions = goal_oriented_actions(full(P), X_goal, config.misplaced, config.eps) if config.prune else every
+        if len(actions) == 0:
+            continue
+        succ, calls = predict_positions(model, full(P), actions, config.batched)
+        out.predict_calls += calls
+        out.generated += len(actions)
+        dist = np.linalg.norm(succ - goal[None], axis=2)  # (B, n)
+        out.best_error = min(out.best_error, float(dist.max(axis=1).min()))
+        h = dist.sum(axis=1) / config.h_unit
+        for b in range(len(actions)):
+            k = key(succ[b])
+            if best_g.get(k, config.max_depth + 1) <= g + 1:
+                out.duplicates += 1
+                continue
+            best_g[k] = g + 1
+            nodes.append((succ[b], index, tuple(int(v) for v in actions[b]), g + 1))
+            if np.all(dist[b] < config.eps):
+                return finish("solved", f"solved: {g + 1} actions after {out.expanded} expansions",
+                              len(nodes) - 1)
+            heapq.heappush(frontier, (g + 1 + config.weight * h[b], h[b], len(nodes) - 1))
+    return finish("exhausted", f"exhausted: every state reachable within {config.max_depth} actions "
+                  f"(pruned actions, {config.resolution * 100:g} cm grid) expanded, {out.expanded} expansions; "
+                  f"closest predicted state {out.best_error * 100:.1f} cm from the goal")

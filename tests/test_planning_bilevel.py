@@ -1,0 +1,122 @@
+"""Algorithm 1 with a hand-made domain and stub models: verification order, fall-through to the
+continuous search, unsolvable problems, closed-loop replanning. No Drake, no torch model."""
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).parent))
+from planning_stubs import StubModel, two_block_domain, world_step  # noqa: E402
+
+from tamp.bilevel import PlanConfig, plan, plan_closed_loop  # noqa: E402
+from tamp.models import Models  # noqa: E402
+from tamp.search import SearchConfig  # noqa: E402
+from tamp.verify import goal_error, verify  # noqa: E402
+
+X_INIT = np.array([[0.6, 0.0, 0.025, 1, 0], [0.7, 0.1, 0.025, 1, 0]])
+A_ON_B = np.array([[0.7, 0.1, 0.075, 1, 0], [0.7, 0.1, 0.025, 1, 0]])
+
+
+@pytest.fixture(scope="module")
+def domain():
+    return two_block_domain()
+
+
+def models(domain) -> Models:
+    stub = StubModel()
+    return Models(dynamics=stub, symbolic=stub, domain=domain)
+
+
+def execute(X, actions):
+    for a in actions:
+        X = world_step(X, a)
+    return X
+
+
+def test_verify_rolls_out_and_uses_the_per_object_max():
+    stub = StubModel()
+    v = verify(stub, X_INIT, A_ON_B, [(0, 0, 1, 1)])
+    assert v.trajectory.shape == (2, 2, 5) and np.array_equal(v.trajectory[0], X_INIT)
+    # released 7.5 cm beside the small block B: it lands on the table there
+    assert np.allclose(v.X_final[0, :3], [0.7, 0.175, 0.025])
+    assert v.error == pytest.approx(np.hypot(0.075, 0.05)) and not v.verified
+    assert v.error_stacked == pytest.approx(v.error)  # B did not move
+    good = verify(stub, X_INIT, A_ON_B, [(0, 0, 1, 0)])
+    assert good.verified and good.error < 1e-9
+
+
+def test_most_frequent_plan_fails_verification_and_the_next_verified_one_is_returned(domain):
+    result = plan("bilevel", models(domain), X_INIT, A_ON_B, PlanConfig(n_domains=100, seed=0))
+    first, second = result.candidates[:2]
+    # the setting: the most frequent symbolic plan is the bad one
+    assert first.actions == ((0, 0, 1, 1),) and first.count > second.count
+    assert first.verified is False and first.error > 0.07
+    assert second.actions == ((0, 0, 1, 0),) and second.verified is True
+    assert result.level == 1 and result.plan == [(0, 0, 1, 0)]
+    assert result.search is None and "search" not in result.timings
+    assert goal_error(execute(X_INIT, result.plan), A_ON_B) < 0.05
+    assert {"symbols", "symbolic", "verify", "total"} <= set(result.timings)
+    # the unverified baselines take the most frequent plan and fail when executed
+    for method in ("probabilistic", "deterministic"):
+        base = plan(method, models(domain), X_INIT, A_ON_B, PlanConfig(n_domains=100, seed=0))
+        assert base.plan == [(0, 0, 1, 1)] and base.candidates[0].verified is False
+        assert goal_error(execute(X_INIT, base.plan), A_ON_B) > 0.05
+
+
+def test_symbolic_failure_falls_through_to_continuous_search(domain):
+    # a large bar shifted 15 cm along y: the same symbols before and after, so the symbolic plan is
+    # empty and fails verification; only the continuous search can find (0, -1, 0, +1)
+    X = np.array([[0.6, 0.0, 0.025, 0, 1], [0.75, -0.2, 0.025, 1, 0]])
+    goal = X.copy()
+    goal[0, 1] = 0.15
+    result = plan("bilevel", models(domain), X, goal, PlanConfig(n_domains=20))
+    assert result.candidates and all(c.verified is False for c in result.candidates)
+    assert result.level == 2 and result.search.solved
+    assert any(r.startswith("level 1: none of the") for r in result.reasons)
+    assert goal_error(execute(X, result.plan), goal) < 0.05
+    assert result.predicted_error < 0.05 and result.predicted.shape == (len(result.plan) + 1, 2, 5)
+    assert "search" in result.timings
+
+
+def test_unsolvable_problem_ends_within_limits_with_reasons_from_both_levels(domain):
+    goal = X_INIT.copy()
+    goal[0, :2] = (3.0, 2.0)  # far outside the arm's reach
+    cfg = PlanConfig(n_domains=20, search=SearchConfig(max_expansions=300, time_limit=10.0))
+    t0 = time.perf_counter()
+    result = plan("bilevel", models(domain), X_INIT, goal, cfg)
+    assert time.perf_counter() - t0 < 10.0
+    assert not result.solved and result.plan is None and result.level is None
+    assert result.search.status == "node_limit" and result.search.expanded == 300
+    assert len(result.reasons) == 2
+    assert result.reasons[0].startswith("level 1:") and result.reasons[1].startswith("level 2: node limit")
+    # a time limit ends it too
+    cfg = PlanConfig(n_domains=20, search=SearchConfig(max_expansions=10**9, time_limit=0.3))
+    t0 = time.perf_counter()
+    result = plan("cfs", models(domain), X_INIT, goal, cfg)
+    assert time.perf_counter() - t0 < 2.0 and result.search.status == "time_limit"
+    assert result.reasons == [f"level 2: {result.search.reason}"]
+
+
+def test_closed_loop_replans_from_the_observed_state(domain):
+    calls = []
+
+    def flaky_world(action):  # the first action grasps nothing; then the world behaves
+        calls.append(action)
+        return X if len(calls) == 1 else world_step(X, action)
+
+    X = X_INIT
+    open_loop = plan_closed_loop("bilevel", models(domain), X_INIT, A_ON_B, flaky_world, rounds=0)
+    assert not open_loop.success and len(open_loop.rounds) == 1
+    calls.clear()
+    closed = plan_closed_loop("bilevel", models(domain), X_INIT, A_ON_B, flaky_world, rounds=1)
+    assert closed.success and len(closed.rounds) == 2 and closed.executed == [(0, 0, 1, 0)] * 2
+    assert closed.error < 0.05 and len(closed.states) == 3
+
+
+def test_unknown_method_is_a_clear_error(domain):
+    with pytest.raises(ValueError, match="unknown planning method 'astar'"):
+        plan("astar", models(domain), X_INIT, A_ON_B)
