@@ -7,6 +7,7 @@ so carried motions are checked with the block in the jaws.
 """
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -126,7 +127,7 @@ class MotionPlanner:
 
     # --- planning ----------------------------------------------------------------------------
     def plan(self, q_start: np.ndarray, q_goal: np.ndarray, time_limit: float, direct: bool = True,
-             simplify: bool = False, seed: int = 0) -> MotionResult:
+             simplify: bool = False, seed: int = 0, max_checks: int = 20_000) -> MotionResult:
         """A collision-free joint path from q_start to q_goal within the joint limits; with `direct`
         the straight segment is returned when it is free."""
         for name, q in (("start", q_start), ("goal", q_goal)):
@@ -147,9 +148,14 @@ class MotionPlanner:
         if direct and si.checkMotion(start, goal):
             return MotionResult(np.array([q_start, q_goal], dtype=float), planner="direct")
         _seed_ompl(seed)
-        status = ss.solve(time_limit)
+        # Stop after a budget of collision checks, so that the outcome does not depend on how busy
+        # the machine is; the time limit only guards against a pathological case.
+        first, deadline = self.num_checks, time.perf_counter() + time_limit
+        stop = ob.PlannerTerminationCondition(
+            lambda: self.num_checks - first > max_checks or time.perf_counter() > deadline)
+        status = ss.solve(stop)
         if not ss.haveExactSolutionPath():
-            return MotionResult(None, f"no collision-free path within {time_limit:g} s ({status})")
+            return MotionResult(None, f"no collision-free path within {max_checks} collision checks ({status})")
         if simplify:
             ss.simplifySolution()  # one full shortcut-and-smooth pass
         path = ss.getSolutionPath()

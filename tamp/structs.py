@@ -54,7 +54,8 @@ class WorldConfig:
     settle_angular_speed: float = 0.05  # rad/s this) is at rest
     settle_window: float = 0.03  # all blocks at rest this long means the scene settled
     settle_max_time: float = 2.0  # cap on simulated settling time
-    planning_time: float = 1.0  # OMPL time limit per motion
+    planning_checks: int = 20_000  # RRTConnect's budget of collision checks per motion (deterministic)
+    planning_time: float = 5.0  # wall-clock cap per motion, a safety net behind the check budget
     direct_motions: bool = True  # try the straight joint-space segment before RRTConnect
     simplify_paths: bool = False  # OMPL path simplification (costly; for executed motions)
     joint_step: float = 0.005  # radians between collision checks along a motion

@@ -202,7 +202,8 @@ class World:
         planner.set_block_poses(self.scene.X_WB, parked=tuple(moved))
         seed = self._motion_seed_for("retreat")
         retreat = planner.plan(qs["place"], qs["retreat"], self.config.planning_time,
-                               direct=self.config.direct_motions, simplify=self.config.simplify_paths, seed=seed)
+                               direct=self.config.direct_motions, simplify=self.config.simplify_paths, seed=seed,
+                               max_checks=self.config.planning_checks)
         info.motion_success["retreat"] = retreat.path is not None
         if retreat.path is not None:
             paths["retreat"] = retreat.path
@@ -278,7 +279,8 @@ class World:
     def _plan(self, planner: MotionPlanner, motions, info: StepInfo, paths: dict) -> bool:
         for name, q_a, q_b in motions:
             result = planner.plan(q_a, q_b, self.config.planning_time, direct=self.config.direct_motions,
-                                  simplify=self.config.simplify_paths, seed=self._motion_seed_for(name))
+                                  simplify=self.config.simplify_paths, seed=self._motion_seed_for(name),
+                                  max_checks=self.config.planning_checks)
             info.motion_success[name] = result.path is not None
             if result.path is None:
                 info.status = "motion_failure"
