@@ -177,6 +177,13 @@ def cmd_domain(args: argparse.Namespace) -> int:
     return 0
 
 
+
+def cmd_plan(args: argparse.Namespace) -> int:
+    """Plan a problem file with the learned models; refine, execute and replay the plan."""
+    from tamp.plan_command import options_from_args, run_plan
+
+    return run_plan(args.problem, args.models, options_from_args(args))
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="tamp",
@@ -300,6 +307,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--sampled", type=int, default=0, metavar="N", help="also write N sampled PDDL domains")
     p.add_argument("--seed", type=int, default=0)
     p.set_defaults(func=cmd_domain)
+
+    p = sub.add_parser(
+        "plan",
+        help="plan a problem (X_init, X_goal) with the bilevel planner or a baseline; refine, execute, replay",
+        description="Plan with the learned models in --models DIR (symbolic.pt, dynamics.pt, domain/ from "
+        "`tamp train` and `tamp domain`), print the plan, the level that solved it, the verification of "
+        "each symbolic candidate and the timings, then refine and execute it in the Drake world and "
+        "print the final error. Exit status 0 if a plan was found (and, when executed, reached the goal).",
+    )
+    from tamp.plan_command import add_arguments as add_plan_arguments
+
+    add_plan_arguments(p)
+    p.set_defaults(func=cmd_plan)
     return parser
 
 

@@ -1,0 +1,192 @@
+"""`tamp plan`: plan a problem file with the learned models, refine and execute the plan, report.
+
+Open loop: plan with the chosen method, then (unless --execute none) refine the plan and execute it
+in the Drake world: `fast` (the refinement's own world: planned, checked motions, kinematic carry,
+physics after release) or `full` (the refined trajectory under physics). --replan executes action
+by action in a World of that fidelity and replans from each observed state (up to k - 1 rounds).
+"""
+from __future__ import annotations
+
+import argparse
+from dataclasses import dataclass
+from pathlib import Path
+
+
+from tamp.bilevel import PlanConfig, PlanResult, plan, plan_closed_loop, replan_rounds
+from tamp.search import SearchConfig
+from tamp.verify import goal_error
+
+LEVELS = {1: "level 1 (verified symbolic plan)", 2: "level 2 (continuous search)"}
+
+
+@dataclass
+class PlanOptions:
+    method: str = "bilevel"
+    execute: str = "fast"  # none | fast | full
+    replan: bool = False
+    rounds: int | None = None  # replanning rounds (default k - 1 of the problem, else 4)
+    replay: Path | None = None
+    n_domains: int = 100
+    backend: str = "python"
+    max_expansions: int = 5000
+    time_limit: float = 30.0  # seconds for the continuous search
+
+
+def _fmt_action(a) -> str:
+    return f"pick {a[0]} at {a[1]:+d}, place on {a[2]} at {a[3]:+d}"
+
+
+def _ms(t: float) -> str:
+    return f"{t * 1e3:.1f} ms" if t < 1 else f"{t:.2f} s"
+
+
+def print_result(result: PlanResult, tau: float, indent: str = "") -> None:
+    p = indent
+    if result.solved:
+        print(f"{p}{result.method}: plan of {len(result.plan)} action(s) from {LEVELS[result.level]}; "
+              f"predicted final error {result.predicted_error * 100:.1f} cm")
+    else:
+        print(f"{p}{result.method}: no plan")
+    if result.candidates:
+        print(f"{p}  symbolic candidates, most frequent first (tau_verify {tau * 100:g} cm):")
+        for i, c in enumerate(result.candidates[:10]):
+            check = "not checked" if c.error is None else \
+                f"error {c.error * 100:.1f} cm, {'verified' if c.verified else 'unverified'}"
+            chosen = "  <- plan" if result.level == 1 and result.plan == list(c.actions) else ""
+            print(f"{p}    {i + 1}. {c.count:3d} domains ({c.probability:.2f}): {list(c.actions)}; {check}{chosen}")
+        if len(result.candidates) > 10:
+            print(f"{p}    ... {len(result.candidates) - 10} more")
+    if result.search is not None:
+        s = result.search
+        print(f"{p}  continuous search: {s.reason}; {s.generated} successors in {s.predict_calls} model calls")
+    for k, a in enumerate(result.plan or []):
+        print(f"{p}  action {k}: {_fmt_action(a)}")
+    for reason in result.reasons if not result.solved else []:
+        print(f"{p}  {reason}")
+    stages = ("symbols", "symbolic", "verify", "search", "total")
+    print(f"{p}  timings: " + ", ".join(f"{k} {_ms(result.timings[k])}" for k in stages if k in result.timings))
+
+
+def _open_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timeline) -> int:
+    result = plan(options.method, models, problem.X_init, problem.X_goal, cfg)
+    print_result(result, cfg.tau_verify)
+    if not result.solved:
+        return 1
+    if options.execute == "none" or not result.plan:
+        if not result.plan:
+            print("empty plan: the initial state already meets the goal; nothing to execute")
+        return 0
+    from tamp import World, WorldConfig
+    from tamp.refine import refine
+
+    world = World(WorldConfig(simplify_paths=True))
+    if options.execute == "fast":
+        world.timeline = timeline
+    refined = refine(result.plan, problem.X_init, world=world)
+    if refined.success:
+        print(f"refinement: ok, {len(refined.steps)} action(s) refined in {refined.refine_time:.2f} s, "
+              f"{sum(s.duration for s in refined.steps):.1f} s of arm motion")
+    else:
+        print(f"refinement: failed: {refined.failure}; executing the {len(refined.steps)} action(s) before it")
+    if options.execute == "fast":
+        X_final = world.X
+    else:
+        from tamp.execute import execute
+
+        X_final = execute(refined, timeline=timeline, partial=True).X_final
+    error = goal_error(X_final, problem.X_goal)
+    ok = error < cfg.eps
+    print(f"execution ({options.execute}): final error {error * 100:.1f} cm (max over objects) -> "
+          f"{'success' if ok else 'failure'} (eps {cfg.eps * 100:g} cm)")
+    return 0 if ok and refined.success else 1
+
+
+def _closed_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timeline) -> int:
+    from tamp import World, WorldConfig
+
+    world = World(WorldConfig(fidelity=options.execute, simplify_paths=True))
+    world.timeline = timeline
+    X0 = world.reset(X=problem.X_init)
+    infos = []
+
+    def step(action):
+        X, info = world.step(action)
+        infos.append(info)
+        print(f"  executed {_fmt_action(action)}: {info.status}{': ' + info.reason if info.reason else ''}; "
+              f"now {goal_error(X, problem.X_goal) * 100:.1f} cm from the goal")
+        return X
+
+    rounds = replan_rounds(problem.k) if options.rounds is None else options.rounds
+    print(f"closed loop: up to {rounds} replanning round(s), executing in the {options.execute} world")
+    out = plan_closed_loop(options.method, models, X0, problem.X_goal, step, rounds, cfg)
+    for r, result in enumerate(out.rounds):
+        print(f"round {r}:")
+        print_result(result, cfg.tau_verify, indent="  ")
+    print(f"closed loop ended: {out.reason}")
+    print(f"execution ({options.execute}): {len(out.executed)} action(s), final error {out.error * 100:.1f} cm "
+          f"(max over objects) -> {'success' if out.success else 'failure'} (eps {cfg.eps * 100:g} cm)")
+    return 0 if out.success else 1
+
+
+def run_plan(problem_path: Path, models_dir: Path, options: PlanOptions) -> int:
+    """The `tamp plan` command; returns the exit code (0: solved, and reached the goal if executed)."""
+    from tamp.models import load_models
+    from tamp.problem import load_problem
+
+    problem = load_problem(problem_path)
+    if options.replan and options.execute == "none":
+        raise ValueError("--replan executes actions and observes the world; it needs --execute fast or full")
+    if options.replay is not None and options.execute == "none":
+        raise ValueError("--replay needs an execution (--execute fast or full)")
+    models = load_models(models_dir, need_symbolic=options.method != "cfs")
+    cfg = PlanConfig(n_domains=options.n_domains, seed=problem.seed, backend=options.backend,
+                     search=SearchConfig(max_expansions=options.max_expansions, time_limit=options.time_limit))
+    n_max = getattr(getattr(models.dynamics, "config", None), "n_max", None)
+    if n_max is not None and problem.n > n_max:
+        raise ValueError(f"{problem_path}: {problem.n} objects, but the models were trained for at most {n_max}")
+    k = "?" if problem.k is None else problem.k
+    print(f"problem {problem_path}: {problem.n} objects, k = {k}, seed {problem.seed}; initial error "
+          f"{goal_error(problem.X_init, problem.X_goal) * 100:.1f} cm")
+    timeline = None
+    if options.replay is not None:
+        from tamp.replay import Timeline
+
+        timeline = Timeline()
+    run = _closed_loop if options.replan else _open_loop
+    code = run(problem, models, options, cfg, timeline)
+    if timeline is not None:
+        if timeline.times:
+            path = timeline.write_html(options.replay)
+            print(f"replay written to {path} ({path.stat().st_size / 1e6:.1f} MB)")
+        else:
+            print("nothing was executed; no replay written")
+    return code
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--problem", type=Path, required=True, help="problem file (JSON: X_init, X_goal, k, seed)")
+    p.add_argument("--models", type=Path, required=True,
+                   help="models directory: symbolic.pt, dynamics.pt and the learned domain in domain/")
+    p.add_argument("--method", choices=("bilevel", "probabilistic", "deterministic", "cfs"), default="bilevel",
+                   help="planner (default bilevel: verified symbolic plan, else continuous search)")
+    p.add_argument("--replan", action="store_true",
+                   help="closed loop: execute the first action, observe, replan (up to k - 1 rounds)")
+    p.add_argument("--rounds", type=int, default=None, help="replanning rounds (default: k - 1 of the problem)")
+    p.add_argument("--execute", choices=("none", "fast", "full"), default="fast",
+                   help="refine and execute the plan in the fast world (default) or with the arm under "
+                   "physics (full), or not at all")
+    p.add_argument("--replay", type=Path, default=None, metavar="OUT.html", help="write a Meshcat HTML replay")
+    p.add_argument("--n-domains", type=int, default=100, help="N sampled symbolic domains (default 100)")
+    p.add_argument("--backend", choices=("python", "fd", "fd-naive"), default="python",
+                   help="symbolic planner backend (default python)")
+    p.add_argument("--max-expansions", type=int, default=5000, help="continuous search node limit (default 5000)")
+    p.add_argument("--time-limit", type=float, default=30.0, help="continuous search time limit, s (default 30)")
+
+
+def options_from_args(args: argparse.Namespace) -> PlanOptions:
+    if args.replay is not None and args.replay.suffix.lower() not in (".html", ".htm"):
+        raise ValueError(f"the replay is an HTML file; give a path ending in .html, got {args.replay}")
+    return PlanOptions(args.method, args.execute, args.replan, args.rounds, args.replay, args.n_domains,
+                       args.backend, args.max_expansions, args.time_limit)
+
+
