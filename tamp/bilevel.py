@@ -249,10 +249,12 @@ class ClosedLoopResult:
 
 def plan_closed_loop(method: str, models: Models, X_init, X_goal,
                      step: Callable[[PickPlace], np.ndarray], rounds: int,
-                     cfg: PlanConfig = PlanConfig()) -> ClosedLoopResult:
+                     cfg: PlanConfig = PlanConfig(),
+                     on_round: Callable[[int, PlanResult], None] | None = None) -> ClosedLoopResult:
     """Plan, execute the first action, observe, replan (at most `rounds` times); see the module doc.
 
-    `step(action)` executes one action in the real (simulated) world and returns the observed (n, 5) state.
+    `step(action)` executes one action in the real (simulated) world and returns the observed (n, 5)
+    state; `on_round(r, result)` is called after each planning call, before anything is executed.
     """
     X_goal = np.asarray(X_goal, dtype=float)
     out = ClosedLoopResult([], [], [np.asarray(X_init, dtype=float)], X_goal, cfg.eps)
@@ -263,6 +265,8 @@ def plan_closed_loop(method: str, models: Models, X_init, X_goal,
             break
         result = plan(method, models, X, X_goal, cfg)
         out.rounds.append(result)
+        if on_round is not None:
+            on_round(r, result)
         if not result.solved:
             out.reason = f"round {r}: no plan ({'; '.join(result.reasons)})"
             break

@@ -118,10 +118,12 @@ def _closed_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timelin
 
     rounds = replan_rounds(problem.k) if options.rounds is None else options.rounds
     print(f"closed loop: up to {rounds} replanning round(s), executing in the {options.execute} world")
-    out = plan_closed_loop(options.method, models, X0, problem.X_goal, step, rounds, cfg)
-    for r, result in enumerate(out.rounds):
+
+    def show(r: int, result: PlanResult) -> None:
         print(f"round {r}:")
         print_result(result, cfg.tau_verify, indent="  ")
+
+    out = plan_closed_loop(options.method, models, X0, problem.X_goal, step, rounds, cfg, on_round=show)
     print(f"closed loop ended: {out.reason}")
     print(f"execution ({options.execute}): {len(out.executed)} action(s), final error {out.error * 100:.1f} cm "
           f"(max over objects) -> {'success' if out.success else 'failure'} (eps {cfg.eps * 100:g} cm)")

@@ -1,0 +1,120 @@
+"""Problem files and `tamp plan`: clear errors naming the field; planning, refinement and execution."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from tamp.cli import main
+from tamp.problem import Problem, load_problem, problem_from_dict, save_problem
+
+X = [[0.6, 0.15, 0.025, 1, 0], [0.7, -0.1, 0.025, 0, 1]]
+GOAL = [[0.7, -0.1, 0.075, 1, 0], [0.7, -0.1, 0.025, 0, 1]]
+
+
+def test_problem_round_trip(tmp_path):
+    p = Problem(np.array(X, float), np.array(GOAL, float), k=2, seed=5)
+    save_problem(tmp_path / "p.json", p)
+    q = load_problem(tmp_path / "p.json")
+    assert np.array_equal(q.X_init, p.X_init) and np.array_equal(q.X_goal, p.X_goal)
+    assert (q.k, q.seed, q.n) == (2, 5, 2)
+    assert problem_from_dict({"X_init": X, "X_goal": GOAL}).seed == 0
+
+
+@pytest.mark.parametrize("data, field", [
+    ({"X_goal": GOAL}, "'X_init'"),
+    ({"X_init": X}, "'X_goal'"),
+    ({"X_init": X, "X_goal": [[0.7, -0.1, 0.075, 1, 0]]}, "'X_goal' has 1 objects"),
+    ({"X_init": X, "X_goal": [[0.7, -0.1, 0.075, 1], [0.7, -0.1, 0.025, 0, 1]]}, "'X_goal' row 0"),
+    ({"X_init": [[0.6, 0.15, 0.025, 1, 1], X[1]], "X_goal": GOAL}, "'X_init' row 0: the type must be one-hot"),
+    ({"X_init": X, "X_goal": [GOAL[0][:3] + [0, 1], GOAL[1]]}, "'X_goal' row 0 has another block type"),
+    ({"X_init": X, "X_goal": GOAL, "k": 0}, "'k' must be a positive integer"),
+    ({"X_init": X, "X_goal": GOAL, "seed": "7"}, "'seed' must be an integer"),
+    ({"X_init": X, "X_goal": GOAL, "goal": GOAL}, "unknown field 'goal'"),
+    ({"X_init": "abc", "X_goal": GOAL}, "'X_init' must be a non-empty list"),
+])
+def test_malformed_problem_names_the_field(tmp_path, data, field):
+    path = tmp_path / "bad.json"
+    path.write_text(json.dumps(data))
+    with pytest.raises(ValueError, match=str(path)) as info:
+        load_problem(path)
+    assert field in str(info.value)
+
+
+def test_cli_reports_a_malformed_problem_in_one_line(tmp_path, capsys):
+    path = tmp_path / "bad.json"
+    path.write_text(json.dumps({"X_init": X}))
+    assert main(["plan", "--problem", str(path), "--models", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "missing field 'X_goal'" in err and "Traceback" not in err
+    path.write_text("{not json")
+    assert main(["plan", "--problem", str(path), "--models", str(tmp_path)]) == 2
+    assert "not valid JSON" in capsys.readouterr().err
+
+
+@pytest.fixture(scope="module")
+def models_dir(tmp_path_factory):
+    """Untrained (seeded) networks and a domain learned from their own symbols on toy transitions."""
+    torch = pytest.importorskip("torch")
+    from learned import EffectModel, ModelConfig, save_checkpoint
+    from learned.synthetic import generate
+    from symbolic import build_domain
+
+    out = tmp_path_factory.mktemp("models")
+    torch.manual_seed(0)
+    save_checkpoint(out / "dynamics.pt", EffectModel(ModelConfig(d_z=2, heads=1)))
+    sym = EffectModel(ModelConfig(d_z=2, heads=1, activation="gumbel_sigmoid")).eval()
+    save_checkpoint(out / "symbolic.pt", sym)
+    data = generate(400, seed=0, n_choices=(2,))
+    u0, r0 = sym.symbols_batch(data.X, data.mask)
+    u1, r1 = sym.symbols_batch(data.X_next, data.mask)
+    build_domain(u0, r0, data.action, u1, r1, data.n, out / "domain", holdout=0.0)
+    return out
+
+
+def _problem_reachable_by_the_model(models_dir, tmp_path):
+    from tamp.models import load_models
+    from tamp.verify import rollout
+
+    model = load_models(models_dir).dynamics
+    X_init = np.array([[0.6, 0.15, 0.025, 1, 0], [0.7, -0.1, 0.025, 1, 0]])
+    X_goal = rollout(model, X_init, [(0, 0, 1, 0)])[-1]
+    path = tmp_path / "p.json"
+    save_problem(path, Problem(X_init, X_goal, k=1))
+    return path
+
+
+def test_cli_plans_without_execution(models_dir, tmp_path, capsys):
+    path = _problem_reachable_by_the_model(models_dir, tmp_path)
+    for method in ("bilevel", "cfs"):
+        assert main(["plan", "--problem", str(path), "--models", str(models_dir), "--method", method,
+                     "--execute", "none"]) == 0
+        out = capsys.readouterr().out
+        assert f"{method}: plan of" in out and "timings:" in out and "predicted final error" in out
+    (models_dir / "missing").mkdir()
+    assert main(["plan", "--problem", str(path), "--models", str(models_dir / "missing")]) == 2
+    assert "missing model file(s)" in capsys.readouterr().err
+
+
+def test_cli_executes_and_writes_the_replay(models_dir, tmp_path, capsys):
+    path = _problem_reachable_by_the_model(models_dir, tmp_path)
+    replay = tmp_path / "out.html"
+    code = main(["plan", "--problem", str(path), "--models", str(models_dir), "--method", "cfs",
+                 "--execute", "fast", "--replay", str(replay)])
+    out = capsys.readouterr().out
+    assert "refinement:" in out and "execution (fast): final error" in out
+    assert code == (0 if "-> success" in out else 1)
+    assert replay.is_file() and replay.stat().st_size > 10_000
+
+
+def test_cli_replans_in_a_world(models_dir, tmp_path, capsys):
+    path = _problem_reachable_by_the_model(models_dir, tmp_path)
+    assert main(["plan", "--problem", str(path), "--models", str(models_dir), "--replan", "--execute", "none"]) == 2
+    assert "--replan executes actions" in capsys.readouterr().err
+    code = main(["plan", "--problem", str(path), "--models", str(models_dir), "--method", "cfs", "--replan",
+                 "--rounds", "1"])
+    out = capsys.readouterr().out
+    assert "round 0:" in out and "closed loop ended:" in out and "execution (fast):" in out
+    assert out.index("round 0:") < out.index("executed pick")  # the plan is shown before it is executed
+    assert code == (0 if "-> success" in out else 1)

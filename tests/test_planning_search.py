@@ -1,0 +1,84 @@
+"""Continuous forward search: pruning, batched vs unbatched successor prediction, limits."""
+from __future__ import annotations
+
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).parent))
+from planning_stubs import StubModel, world_step  # noqa: E402
+
+from tamp.search import SearchConfig, continuous_search, goal_oriented_actions  # noqa: E402
+from tamp.verify import goal_error, rollout  # noqa: E402
+
+# three blocks: a large bar 0 and small cubes 1, 2
+X = np.array([[0.55, -0.15, 0.025, 0, 1], [0.7, 0.1, 0.025, 1, 0], [0.8, -0.2, 0.025, 1, 0]])
+
+
+def goal_after(actions):
+    G = X
+    for a in actions:
+        G = world_step(G, a)
+    return G
+
+
+def test_goal_oriented_pruning_follows_the_paper():
+    G = goal_after([(1, 0, 2, 0)])  # cube 1 onto cube 2: only object 1 is misplaced
+    acts = goal_oriented_actions(X, G)
+    assert len(acts) == 18
+    assert set(map(tuple, acts[:9])) == {(1, g, 2, r) for g in (-1, 0, 1) for r in (-1, 0, 1)}  # closest to its goal
+    assert set(map(tuple, acts[9:])) == {(1, g, 1, r) for g in (-1, 0, 1) for r in (-1, 0, 1)}  # itself
+    # only heights differ (2-D positions right): the 3-D misplaced objects get actions
+    H = X.copy()
+    H[1, 2] = 0.125
+    assert set(goal_oriented_actions(X, H)[:, 0]) == {1}
+    assert len(goal_oriented_actions(X, X)) == 0
+
+
+@pytest.mark.parametrize("plan", [[(1, 0, 2, 0)], [(1, 0, 2, 0), (0, -1, 0, 1)],
+                                  [(2, 0, 0, 1), (1, 0, 2, 0), (0, 1, 0, -1)]])
+def test_search_finds_plans_that_reach_the_goal(plan):
+    G = goal_after(plan)
+    result = continuous_search(StubModel(), X, G)
+    assert result.solved, result.reason
+    assert len(result.plan) <= len(plan)
+    assert goal_error(goal_after(result.plan), G) < 0.05
+    assert np.allclose(result.trajectory, rollout(StubModel(), X, result.plan))
+
+
+def test_batched_and_unbatched_prediction_give_the_same_search():
+    G = goal_after([(2, 0, 0, 1), (1, 0, 2, 0), (0, 1, 0, -1)])
+    stubs = {True: StubModel(), False: StubModel()}
+    out = {b: continuous_search(stubs[b], X, G, SearchConfig(batched=b)) for b in (True, False)}
+    assert out[True].solved
+    for f in ("plan", "status", "expanded", "generated", "duplicates"):
+        assert getattr(out[True], f) == getattr(out[False], f), f
+    assert np.array_equal(out[True].trajectory, out[False].trajectory)
+    # one call per expansion vs one per successor
+    assert out[True].predict_calls == stubs[True].calls == out[True].expanded
+    assert out[False].predict_calls == stubs[False].calls == out[True].generated > out[True].expanded
+
+
+def test_batched_equals_unbatched_with_a_real_effect_model():
+    torch = pytest.importorskip("torch")
+    from learned import EffectModel, ModelConfig
+
+    torch.manual_seed(0)
+    model = EffectModel(ModelConfig(n_max=4)).eval()
+    G = rollout(model, X, [(1, 0, 2, 0), (0, 0, 0, 1)])[-1]  # reachable under this model
+    cfg = SearchConfig(max_expansions=200)
+    a, b = (continuous_search(model, X, G, replace(cfg, batched=m)) for m in (True, False))
+    assert a.solved and a.plan == b.plan and a.expanded == b.expanded and a.generated == b.generated
+    assert np.allclose(a.trajectory, b.trajectory, atol=1e-6)
+
+
+def test_depth_limit_and_exhaustion_are_reported():
+    G = goal_after([(2, 0, 0, 1), (1, 0, 2, 0)])
+    out = continuous_search(StubModel(), X, G, SearchConfig(max_depth=1))
+    assert not out.solved and out.status == "exhausted" and "within 1 actions" in out.reason
+    assert continuous_search(StubModel(), X, X).plan == []
+    with pytest.raises(ValueError, match="must both be"):
+        continuous_search(StubModel(), X, X[:2])
