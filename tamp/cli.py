@@ -143,7 +143,9 @@ def cmd_train(args: argparse.Namespace) -> int:
     """Train a Symbolic (gumbel_sigmoid) or Dynamics (sigmoid) Model on a dataset."""
     from learned import ModelConfig, train_model
 
-    result = train_model(args.data, ModelConfig(activation=args.bottleneck), epochs=args.epochs,
+    sizes = {k: v for k, v in (("d_z", args.d_z), ("heads", args.heads)) if v is not None}
+    config = ModelConfig(activation=args.bottleneck, **sizes)
+    result = train_model(args.data, config, epochs=args.epochs,
                          out_path=args.out, batch_size=args.batch_size, lr=args.lr,
                          val_fraction=args.val_fraction, seed=args.seed, threads=args.threads,
                          resume=args.resume)
@@ -270,6 +272,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="bottleneck activation: gumbel_sigmoid = Symbolic Model, sigmoid = Dynamics Model (default)")
     p.add_argument("--epochs", type=_positive_int, default=100, help="training epochs (default 100)")
     p.add_argument("--out", required=True, help="checkpoint file to write (e.g. models/dynamics.pt)")
+    p.add_argument("--d-z", type=_positive_int, default=None,
+                   help="unary symbol bits per object (default: learned.ModelConfig's; more bits, more operators)")
+    p.add_argument("--heads", type=_positive_int, default=None,
+                   help="relation types = attention heads (default: learned.ModelConfig's)")
     p.add_argument("--batch-size", type=_positive_int, default=128)
     p.add_argument("--lr", type=float, default=1e-4)
     p.add_argument("--val-fraction", type=float, default=0.1)
