@@ -4,12 +4,14 @@
     .venv/bin/python bench/planning.py --synthetic .cache/toy-models   # toy models, trained on first use (~4 min)
 
 Problem set (fixed, seeded): n = 2, 3, 4 objects, k = 1..5 random actions per goal, --per-cell problems
-each; scenes and goals from the toy pick-place rules of `learned.synthetic` (no Drake). Prints, per n:
+each; with --models, random Drake scenes and goals after k executed random actions, success judged
+by executing the plan in the fast Drake world; with --synthetic, the toy rules of `learned.synthetic`
+(no Drake). Prints, per n:
 success and planning time (median, mean) of the bilevel planner and of the continuous search on the
 same problems, their ratio, the share solved at Level 1; then, on the hardest continuous-search
 problems per n, the search with one batched predict_effect call per expansion against one call per
-successor (time and identical results). Success = the plan, executed with the toy rules, leaves every
-object within 5 cm of its goal. One-off costs (symbolic grounding per n) are paid before timing.
+successor (time and identical results). Success = the executed plan leaves every object within
+5 cm of its goal. One-off costs (symbolic grounding per n) are paid before timing.
 """
 from __future__ import annotations
 
@@ -73,6 +75,45 @@ def problem_set(per_cell: int, seed: int = 0):
     return problems
 
 
+def drake_problem_set(per_cell: int, seed: int = 0):
+    """[(n, k, X_init, X_goal)]: random Drake scenes, goals after k random actions that changed the
+    scene (actions that change nothing are redrawn, so k counts real steps)."""
+    from tamp import World, WorldConfig
+
+    world = World(WorldConfig(), seed=seed)
+    problems = []
+    for n in (2, 3, 4):
+        for k in range(1, 6):
+            for i in range(per_cell):
+                scene_seed = int(np.random.SeedSequence([seed, n, k, i]).generate_state(1)[0])
+                X = world.reset(n_objects=n, seed=scene_seed)
+                done = 0
+                for _ in range(200):
+                    if done == k:
+                        break
+                    actions = world.actions()
+                    _, info = world.step(actions[world.rng.integers(len(actions))])
+                    done += info.status == "ok"
+                problems.append((n, k, X, world.X))
+    return problems
+
+
+_DRAKE_WORLD = None
+
+
+def drake_executed_ok(X, G, plan) -> bool:
+    """Execute the plan in the fast Drake world from X; success = every object within eps of G."""
+    from tamp import World, WorldConfig
+    from tamp.verify import at_goal
+
+    global _DRAKE_WORLD
+    _DRAKE_WORLD = _DRAKE_WORLD or World(WorldConfig())
+    _DRAKE_WORLD.reset(X=X)
+    for a in plan:
+        _DRAKE_WORLD.step(tuple(a))
+    return at_goal(_DRAKE_WORLD.X, G)
+
+
 def executed_ok(X, G, plan) -> bool:
     from learned.synthetic import apply_action
     from tamp.verify import at_goal
@@ -110,8 +151,11 @@ def main() -> int:
     models = load_models(directory)
     cfg = PlanConfig(symbolic_time_limit=args.symbolic_time_limit,
                      search=SearchConfig(time_limit=args.time_limit, max_expansions=10**6))
-    problems = problem_set(args.per_cell)
-    print(f"{len(problems)} problems; models {directory} ({len(models.domain)} operators)")
+    drake = args.models is not None  # real models plan in the Drake world; toy models in the toy one
+    problems = drake_problem_set(args.per_cell) if drake else problem_set(args.per_cell)
+    succeeded = drake_executed_ok if drake else executed_ok
+    print(f"{len(problems)} problems ({'Drake world' if drake else 'toy world'}); models {directory} "
+          f"({len(models.domain)} operators)", flush=True)
     rows = []
     for n in (2, 3, 4):
         t = time.perf_counter()
@@ -124,7 +168,7 @@ def main() -> int:
             for method in ("bilevel", "cfs"):
                 r = plan(method, models, X, G, cfg)
                 row[method] = {"time": r.timings["total"], "level": r.level, "planned": r.solved,
-                               "ok": r.solved and executed_ok(X, G, r.plan),
+                               "ok": r.solved and succeeded(X, G, r.plan),
                                "expanded": r.search.expanded if r.search else 0,
                                "level1": sum(r.timings.get(k, 0.0) for k in ("symbols", "symbolic", "verify"))}
             rows.append(row)
