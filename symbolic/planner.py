@@ -97,13 +97,16 @@ class SymbolicPlanner:
 
     # ---- probabilistic -------------------------------------------------------------------------
     def plan_probabilistic(self, problem: SymbolicProblem, n_domains: int = 100, seed: int = 0,
-                           min_prob: float = 0.0) -> ProbabilisticPlanResult:
+                           min_prob: float = 0.0, time_budget: float | None = None) -> ProbabilisticPlanResult:
+        """Plan in N sampled domains and rank the plans by frequency. With `time_budget` (seconds,
+        python backend) the domains not searched when it runs out count as timed out."""
         check_problem(self.ops, problem)
+        deadline = None if time_budget is None else time.perf_counter() + time_budget
         t0 = time.perf_counter()
         choices = sample_choices(self.ops, n_domains, seed, min_prob)
         timings = {"sampling": time.perf_counter() - t0}
         if self.backend == "python":
-            per_domain, n_unique, n_searches = self._run_python(problem, choices, timings)
+            per_domain, n_unique, n_searches = self._run_python(problem, choices, timings, deadline)
         elif self.backend == "fd":
             per_domain, n_unique, n_searches = self._run_fd(problem, choices, timings)
         else:
@@ -132,7 +135,7 @@ class SymbolicPlanner:
         order = sorted(found.items(), key=lambda kv: (-kv[1][1], len(kv[0]), kv[0]))
         return [RankedPlan(k, s, c, c / total) for k, (s, c) in order]
 
-    def _run_python(self, problem, choices, timings):
+    def _run_python(self, problem, choices, timings, deadline: float | None = None):
         t0 = time.perf_counter()
         task = self.ground(problem.n)
         task.clear_cache()  # no state cache carried over between problems (honest per-problem cost)
@@ -144,12 +147,17 @@ class SymbolicPlanner:
         t0 = time.perf_counter()
         memo: list[tuple[np.ndarray, np.ndarray, PlannerResult]] = []
         results: list[PlannerResult] = []
+        out_of_time = PlannerResult(PlannerStatus.TIMEOUT, None, "Level-1 time budget used up")
         for k in reps:
             c = choices[k]
             hit = next((res for touched, vals, res in memo if np.array_equal(c[touched], vals)), None)
+            if hit is None and deadline is not None and time.perf_counter() > deadline:
+                hit = out_of_time
             if hit is None:
                 start = time.perf_counter()
-                out = bfs(task, c, init, goal, self.max_expansions, self.time_limit)
+                limit = self.time_limit if deadline is None else \
+                    max(0.0, min(self.time_limit, deadline - time.perf_counter()))
+                out = bfs(task, c, init, goal, self.max_expansions, limit)
                 plan = None if out.plan is None else [task.step(g) for g in out.plan]
                 hit = PlannerResult(out.status, plan, out.message, time.perf_counter() - start)
                 if out.status is not PlannerStatus.TIMEOUT:

@@ -40,6 +40,7 @@ class PlanConfig:
     eps: float = EPS_SUCCESS  # metres: success tolerance (goal test of the search, closed loop)
     backend: str = "python"  # symbolic planner backend: python | fd | fd-naive
     symbolic_time_limit: float = 10.0  # seconds per symbolic planner call
+    level1_time_budget: float | None = 2.0  # seconds for all N symbolic planner calls of one problem
     verify_all: bool = False  # verify every candidate (default: stop at the first verified one, Alg. 1)
     search: SearchConfig = SearchConfig()
 
@@ -109,7 +110,8 @@ def _level1_plans(models: Models, X_init, X_goal, cfg: PlanConfig, result: PlanR
         result.timings["symbols"] = time.perf_counter() - t
     t = time.perf_counter()
     if probabilistic:
-        out = planner.plan_probabilistic(problem, n_domains=cfg.n_domains, seed=cfg.seed)
+        out = planner.plan_probabilistic(problem, n_domains=cfg.n_domains, seed=cfg.seed,
+                                         time_budget=cfg.level1_time_budget)
         result.timings["symbolic"] = time.perf_counter() - t
         result.symbolic_stats = {"n_domains": out.n_domains, "unique_plans": len(out.plans),
                                  "outcomes": dict(out.statuses)}

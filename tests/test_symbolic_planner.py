@@ -168,3 +168,12 @@ def _counter(k: int, reachable: bool = True) -> tuple[str, str]:
     goal = " ".join(f"(one b{j})" for j in range(k)) + ("" if reachable else " (stuck)")
     init = " ".join(f"(zero b{j})" for j in range(k))
     return domain, f"(define (problem c{k}) (:domain counter) (:init {init}) (:goal (and {goal})))\n"
+
+
+def test_level1_time_budget_bounds_probabilistic_planning(ops, problems):
+    problem = problems[2]
+    unbounded = SymbolicPlanner(ops, backend="python").plan_probabilistic(problem, n_domains=60, seed=4)
+    same = SymbolicPlanner(ops, backend="python").plan_probabilistic(problem, n_domains=60, seed=4, time_budget=60.0)
+    assert [(p.actions, p.count) for p in same.plans] == [(p.actions, p.count) for p in unbounded.plans]
+    spent = SymbolicPlanner(ops, backend="python").plan_probabilistic(problem, n_domains=60, seed=4, time_budget=0.0)
+    assert spent.statuses == {"timeout": 60} and spent.plans == []
