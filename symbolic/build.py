@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from symbolic.atoms import check_bits
-from symbolic.dataset import make_dataset, split_dataset
+from symbolic.dataset import make_dataset, restrict_to_involved, split_dataset
 from symbolic.operators import coverage, learn_operators, load_operators, save_operators, stats
 from symbolic.pddl import write_domains
 from symbolic.sampling import write_sampled_domains
@@ -17,7 +17,7 @@ from symbolic.structs import OperatorSet, SymbolicDataset, SymbolicProblem
 
 def build_domain(unary_pre, rel_pre, actions, unary_post, rel_post, n_per_transition, out_dir,
                  holdout: float | SymbolicDataset = 0.1, seed: int = 0, min_prob: float = 0.0,
-                 sampled_domains: int = 0) -> dict:
+                 sampled_domains: int = 0, involved_only: bool = False) -> dict:
     """Learn operators from symbolic transitions and write the domain files.
 
     Inputs: padded bit arrays unary (T, n_max, d_z), relations (T, K, n_max, n_max), actions (T, 4),
@@ -25,8 +25,14 @@ def build_domain(unary_pre, rel_pre, actions, unary_post, rel_post, n_per_transi
     an explicit held-out `SymbolicDataset`. Writes into out_dir: domain.pddl (most frequent effects),
     domain.ppddl, operators.json, stats.json, and with sampled_domains = N > 0 the distinct sampled
     PDDL domains in sampled/ (sampled.json has their multiplicities). Returns the statistics dict.
+    With `involved_only`, operators mention only the objects a transition involves (picked, target,
+    and those whose bits change; see `restrict_to_involved`) instead of every object in the scene.
     """
     data = make_dataset(unary_pre, rel_pre, actions, unary_post, rel_post, n_per_transition)
+    if involved_only:
+        data = restrict_to_involved(data)
+        if isinstance(holdout, SymbolicDataset):
+            holdout = restrict_to_involved(holdout)
     if isinstance(holdout, SymbolicDataset):
         train, held = data, holdout
     else:
@@ -38,6 +44,7 @@ def build_domain(unary_pre, rel_pre, actions, unary_post, rel_post, n_per_transi
     save_operators(ops, out / "operators.json")
     report = stats(ops)
     report["train_transitions"] = len(train)
+    report["involved_only"] = involved_only
     report["coverage_train"] = coverage(ops, train)
     report["coverage_holdout"] = coverage(ops, held) if held is not None and len(held) else None
     report["files"] = {k: p.name for k, p in paths.items()} | {"operators": "operators.json"}

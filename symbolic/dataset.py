@@ -68,3 +68,35 @@ def split_dataset(data: SymbolicDataset, holdout: float, seed: int = 0) -> tuple
     if k == 0 or k == len(data):
         return data, None
     return data.subset(np.sort(perm[k:])), data.subset(np.sort(perm[:k]))
+
+
+def restrict_to_involved(data: SymbolicDataset) -> SymbolicDataset:
+    """Each transition restricted to the objects it involves: the picked object, the target, and
+    every object whose unary or relation bits change. Operators learned from the result mention
+    only those objects, so they apply to any scene that contains such a sub-state (a frame
+    assumption on the other objects), which keeps learned domains small when the full pre-state of
+    every object would make nearly every transition its own operator."""
+    T, n_max, d_z = data.unary_pre.shape
+    K = data.rel_pre.shape[1]
+    up = np.zeros_like(data.unary_pre)
+    uq = np.zeros_like(data.unary_post)
+    rp = np.zeros_like(data.rel_pre)
+    rq = np.zeros_like(data.rel_post)
+    actions = data.actions.copy()
+    n_new = np.zeros(T, np.int64)
+    for t in range(T):
+        n = int(data.n[t])
+        pick, place = int(data.actions[t, 0]), int(data.actions[t, 2])
+        du = (data.unary_pre[t, :n] != data.unary_post[t, :n]).any(axis=1)
+        dr = data.rel_pre[t, :, :n, :n] != data.rel_post[t, :, :n, :n]
+        changed = du | dr.any(axis=(0, 2)) | dr.any(axis=(0, 1))
+        objects = [pick] + ([place] if place != pick else [])
+        objects += [o for o in range(n) if changed[o] and o not in objects]
+        o = np.array(objects)
+        m = len(objects)
+        up[t, :m], uq[t, :m] = data.unary_pre[t, o], data.unary_post[t, o]
+        rp[t, :, :m, :m] = data.rel_pre[t][:, o][:, :, o]
+        rq[t, :, :m, :m] = data.rel_post[t][:, o][:, :, o]
+        actions[t, 0], actions[t, 2] = 0, (0 if place == pick else 1)
+        n_new[t] = m
+    return SymbolicDataset(up, rp, actions, uq, rq, n_new)

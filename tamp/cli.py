@@ -169,7 +169,7 @@ def cmd_domain(args: argparse.Namespace) -> int:
     from tamp.domain import learn_domain
 
     report = learn_domain(args.model, args.data, args.out, holdout=args.holdout, seed=args.seed,
-                          sampled_domains=args.sampled)
+                          sampled_domains=args.sampled, involved_only=args.involved_only)
     held = report.get("coverage_holdout") or {}
     print(f"{report['n_operators']} operators from {report['transitions']} transitions -> {args.out}")
     for key in ("effects_per_operator", "coverage_train"):
@@ -311,6 +311,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="output directory")
     p.add_argument("--holdout", type=float, default=0.1, help="fraction of transitions held out for coverage")
     p.add_argument("--sampled", type=int, default=0, metavar="N", help="also write N sampled PDDL domains")
+    p.add_argument("--involved-only", action="store_true",
+                   help="operators mention only the objects a transition involves (picked, target, and "
+                   "those whose symbols change) rather than every object in the scene: far fewer operators")
     p.add_argument("--seed", type=int, default=0)
     p.set_defaults(func=cmd_domain)
 

@@ -12,7 +12,8 @@ import numpy as np
 
 
 def learn_domain(model_path: str | Path, data_dir: str | Path, out_dir: str | Path, holdout: float = 0.1,
-                 seed: int = 0, sampled_domains: int = 0, skip_corrupt: bool = True) -> dict:
+                 seed: int = 0, sampled_domains: int = 0, skip_corrupt: bool = True,
+                 involved_only: bool = False) -> dict:
     """Write the learned domain of `model_path` on the transitions in `data_dir`; returns stats."""
     import learned
     import symbolic
@@ -29,7 +30,8 @@ def learn_domain(model_path: str | Path, data_dir: str | Path, out_dir: str | Pa
     u_pre, r_pre = model.symbols_batch(data.X, data.mask)
     u_post, r_post = model.symbols_batch(data.X_next, data.mask)
     report = symbolic.build_domain(u_pre, r_pre, np.asarray(data.action), u_post, r_post, np.asarray(data.n),
-                                   out_dir, holdout=holdout, seed=seed, sampled_domains=sampled_domains)
+                                   out_dir, holdout=holdout, seed=seed, sampled_domains=sampled_domains,
+                                   involved_only=involved_only)
     report["model"] = str(model_path)
     report["data"] = str(data_dir)
     report["transitions"] = int(len(data))

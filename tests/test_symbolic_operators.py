@@ -203,3 +203,36 @@ def test_bad_input_gives_clear_value_error(mutate, message):
             "unary_post": data.unary_post, "rel_post": data.rel_post, "n_per_transition": data.n}
     with pytest.raises(ValueError, match=message):
         make_dataset(**mutate(args))
+
+
+def test_involved_only_keeps_the_objects_a_transition_involves():
+    from symbolic.dataset import restrict_to_involved
+
+    # Two transitions in a 3-object scene (1 unary bit, 1 relation): object 2 changes in the first
+    # (a block carried along), nothing besides pick/place is touched in the second.
+    U = np.array([[[0], [1], [0]], [[0], [1], [1]]], np.uint8)
+    R = np.zeros((2, 1, 3, 3), np.uint8)
+    Uq = U.copy()
+    Uq[0, 2, 0] = 1
+    Rq = R.copy()
+    Rq[1, 0, 0, 1] = 1  # picked object 0 now on object 1
+    data = make_dataset(U, R, np.array([[0, 0, 1, 0], [0, 0, 1, 0]]), Uq, Rq, np.array([3, 3]))
+    small = restrict_to_involved(data)
+    assert small.n.tolist() == [3, 2]
+    assert small.actions[:, [0, 2]].tolist() == [[0, 1], [0, 1]]
+    np.testing.assert_array_equal(small.unary_post[0, :3, 0], [0, 1, 1])
+    assert small.rel_post[1, 0, 0, 1] == 1
+    # The same involved sub-state in scenes with more bystanders becomes one operator.
+    ops = learn_operators(restrict_to_involved(bw.random_dataset(2000, (2, 3), seed=1)))
+    full = learn_operators(bw.random_dataset(2000, (2, 3), seed=1))
+    assert len(ops) < len(full)
+    assert max(op.arity for op in ops.operators) <= max(op.arity for op in full.operators)
+
+
+def test_build_domain_involved_only_plans_with_fewer_operators(tmp_path):
+    data = bw.random_dataset(3000, (2, 3), seed=4)
+    args = (data.unary_pre, data.rel_pre, data.actions, data.unary_post, data.rel_post, data.n)
+    full = build_domain(*args, tmp_path / "full", holdout=0.2, seed=0)
+    small = build_domain(*args, tmp_path / "small", holdout=0.2, seed=0, involved_only=True)
+    assert small["involved_only"] and small["n_operators"] < full["n_operators"]
+    assert small["coverage_holdout"]["matched"] >= full["coverage_holdout"]["matched"]
