@@ -69,6 +69,11 @@ class MotionPlanner:
             bounds.setHigh(i, float(Q_UPPER[i]))
         self._space.setBounds(bounds)
 
+    @property
+    def arm_position_indices(self) -> np.ndarray:
+        """Where the six arm joints sit in the motion plant's position vector."""
+        return self._arm_idx
+
     # --- scene -------------------------------------------------------------------------------
     def _set_block(self, i: int, q7: np.ndarray) -> None:
         s = self._block_idx[i]

@@ -16,15 +16,21 @@ import numpy as np
 from tamp.structs import PickPlace
 
 
+def read_json_file(path: str | Path, kind: str):
+    """The parsed content of a JSON file; a missing file or bad JSON is an error naming the file."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"no {kind} file at {path}")
+    try:
+        return json.loads(path.read_text())
+    except json.JSONDecodeError as error:
+        raise ValueError(f"{path}: not valid JSON ({error})") from None
+
+
 def load_plan_file(path: str | Path) -> tuple[np.ndarray, list[PickPlace]]:
     """Read and check a plan file; errors name the file and the field."""
     path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"no plan file at {path}")
-    try:
-        data = json.loads(path.read_text())
-    except json.JSONDecodeError as error:
-        raise ValueError(f"{path}: not valid JSON ({error})") from None
+    data = read_json_file(path, "plan")
     if not isinstance(data, dict):
         raise ValueError(f"{path}: expected a JSON object with fields 'X' and 'actions'")
     key = "X" if "X" in data else "X_init" if "X_init" in data else None

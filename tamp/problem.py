@@ -19,6 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
+from tamp.plan_file import read_json_file
+
 
 @dataclass(frozen=True)
 class Problem:
@@ -83,14 +85,7 @@ def problem_from_dict(data: object, where: str = "problem") -> Problem:
 
 def load_problem(path: str | Path) -> Problem:
     """Read one problem file (JSON)."""
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"no problem file at {path}")
-    try:
-        data = json.loads(path.read_text())
-    except json.JSONDecodeError as error:
-        raise ValueError(f"{path}: not valid JSON ({error})") from None
-    return problem_from_dict(data, str(path))
+    return problem_from_dict(read_json_file(path, "problem"), str(path))
 
 
 def save_problem(path: str | Path, problem: Problem) -> None:

@@ -274,7 +274,7 @@ class World:
     def _numerical_ik(planner: MotionPlanner, X_WTcp: RigidTransform, q_seed: np.ndarray):
         plant = planner.scene.plant
         q_full = planner.full_configuration(q_seed)
-        return drake_ik(plant, planner._arm_idx, X_WTcp, q_full, plant.GetFrameByName("tcp"))
+        return drake_ik(plant, planner.arm_position_indices, X_WTcp, q_full, plant.GetFrameByName("tcp"))
 
     def _plan(self, planner: MotionPlanner, motions, info: StepInfo, paths: dict) -> bool:
         for name, q_a, q_b in motions:
