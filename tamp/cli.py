@@ -329,7 +329,20 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_plan_arguments(p)
     p.set_defaults(func=cmd_plan)
+    _add_plugin_commands(sub)
     return parser
+
+
+def _add_plugin_commands(sub) -> None:
+    """Subcommands of the packages above `tamp` (e.g. `evaluate`, `reproduce` from `evaluation`).
+
+    They register through the `tamp.commands` entry-point group (see pyproject.toml), each a function
+    `register(subparsers)`, so that `tamp` itself never imports the packages that import it.
+    """
+    from importlib.metadata import entry_points
+
+    for ep in sorted(entry_points(group="tamp.commands"), key=lambda e: e.name):
+        ep.load()(sub)
 
 
 def main(argv: list[str] | None = None) -> int:

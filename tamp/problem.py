@@ -9,17 +9,25 @@ A problem file is one JSON object (a problem set is one such object per line, JS
 `X_init` and `X_goal` are (n, 5): x, y, z in metres and a one-hot type (small cube, large bar), the
 same objects in the same order (types must agree). `k` (optional, positive integer) is the number of
 actions that generated the goal; closed-loop replanning uses up to k - 1 rounds. `seed` (optional,
-integer) seeds the sampled symbolic domains. Errors name the file and the field.
+integer) seeds the sampled symbolic domains. `name` (optional string) names the problem within a set,
+`actions` (optional) are the actions that generated the goal. Errors name the file and the field.
+`random_problem(n, k, seed)` makes one from a random scene and k random actions in the fast world.
 """
 from __future__ import annotations
 
 import json
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from tamp.plan_file import read_json_file
+
+if TYPE_CHECKING:
+    from tamp.world import World
+
+MOVED_M = 0.01  # metres: a goal-generating action counts when some block moved at least this far
 
 
 @dataclass(frozen=True)
@@ -28,6 +36,8 @@ class Problem:
     X_goal: np.ndarray  # (n, 5)
     k: int | None = None  # actions used to generate X_goal, if known
     seed: int = 0
+    name: str | None = None  # unique within a problem set
+    actions: tuple[tuple[int, int, int, int], ...] = ()  # the actions that generated X_goal, if known
 
     @property
     def n(self) -> int:
@@ -38,6 +48,10 @@ class Problem:
              "seed": int(self.seed)}
         if self.k is not None:
             d["k"] = int(self.k)
+        if self.name is not None:
+            d = {"name": self.name, **d}
+        if self.actions:
+            d["actions"] = [list(a) for a in self.actions]
         return d
 
 
@@ -79,8 +93,18 @@ def problem_from_dict(data: object, where: str = "problem") -> Problem:
         raise ValueError(f"{where}: field 'seed' must be an integer, got {seed!r}")
     unknown = sorted(set(data) - {"X_init", "X_goal", "k", "seed", "name", "actions"})
     if unknown:
-        raise ValueError(f"{where}: unknown field '{unknown[0]}' (expected X_init, X_goal, k, seed)")
-    return Problem(X_init, X_goal, k, seed)
+        raise ValueError(f"{where}: unknown field '{unknown[0]}' (expected X_init, X_goal, k, seed, name, actions)")
+    name = data.get("name")
+    if name is not None and not isinstance(name, str):
+        raise ValueError(f"{where}: field 'name' must be a string, got {name!r}")
+    actions = data.get("actions", [])
+    n = len(X_init)
+    if not isinstance(actions, list) or not all(
+            isinstance(a, list) and len(a) == 4 and all(isinstance(v, int) and not isinstance(v, bool) for v in a)
+            and 0 <= a[0] < n and 0 <= a[2] < n and a[1] in (-1, 0, 1) and a[3] in (-1, 0, 1) for a in actions):
+        raise ValueError(f"{where}: field 'actions' must be a list of [pick, grasp_offset, place, release_offset] "
+                         f"with objects in 0..{n - 1} and offsets in -1, 0, 1")
+    return Problem(X_init, X_goal, k, seed, name, tuple(tuple(a) for a in actions))
 
 
 def load_problem(path: str | Path) -> Problem:
@@ -90,3 +114,38 @@ def load_problem(path: str | Path) -> Problem:
 
 def save_problem(path: str | Path, problem: Problem) -> None:
     Path(path).write_text(json.dumps(problem.to_dict()) + "\n")
+
+
+def random_problem(n: int, k: int, seed: int, world: "World | None" = None, name: str | None = None,
+                   max_tries: int = 200) -> Problem:
+    """A random scene of n blocks and the goal after k random actions that moved something.
+
+    Everything depends on `seed` alone (the scene, the drawn actions and their simulated outcomes in
+    the fast world), so any one problem of a set can be regenerated on its own. Actions that fail or
+    move no block by `MOVED_M` are redrawn, so k counts real steps; `seed` also seeds the sampled
+    symbolic domains when the problem is planned.
+    """
+    import numpy as np
+
+    from tamp.structs import WorldConfig
+    from tamp.world import World
+
+    if n < 1 or k < 1:
+        raise ValueError(f"a random problem needs n >= 1 objects and k >= 1 actions, got n={n}, k={k}")
+    world = world or World(WorldConfig())
+    X_init = world.reset(n_objects=n, seed=seed)
+    rng = np.random.default_rng([seed, 1])  # the actions' stream, apart from the scene's
+    actions: list[tuple[int, int, int, int]] = []
+    for _ in range(max_tries):
+        if len(actions) == k:
+            break
+        X = world.X
+        candidates = world.actions()
+        action = tuple(int(v) for v in candidates[rng.integers(len(candidates))])
+        X_next, info = world.step(action)
+        if info.status == "ok" and np.max(np.linalg.norm(X_next[:, :3] - X[:, :3], axis=1)) >= MOVED_M:
+            actions.append(action)
+    if len(actions) < k:
+        raise RuntimeError(f"seed {seed}: only {len(actions)} of {k} random actions changed the scene "
+                           f"in {max_tries} draws")
+    return Problem(X_init, world.X, k, seed, name, tuple(actions))
