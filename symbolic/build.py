@@ -61,11 +61,12 @@ def load_domain(domain_dir: str | Path) -> OperatorSet:
     return load_operators(Path(domain_dir) / "operators.json")
 
 
-def make_problem(init_unary, init_rel, goal_unary, goal_rel) -> SymbolicProblem:
-    """Sigma_init / Sigma_goal bits -> problem (shapes checked against each other)."""
+def make_problem(init_unary, init_rel, goal_unary, goal_rel, nonempty: bool = False) -> SymbolicProblem:
+    """Sigma_init / Sigma_goal bits -> problem (shapes checked against each other); `nonempty`: see
+    SymbolicProblem."""
     iu, ir, gu, gr = (np.asarray(x) for x in (init_unary, init_rel, goal_unary, goal_rel))
     iu, ir = check_bits(iu, ir, "init")
     gu, gr = check_bits(gu, gr, "goal", iu.shape[1], ir.shape[0])
     if gu.shape != iu.shape:
         raise ValueError(f"goal has {gu.shape[0]} objects, init has {iu.shape[0]}")
-    return SymbolicProblem(iu, ir, gu, gr)
+    return SymbolicProblem(iu, ir, gu, gr, nonempty)

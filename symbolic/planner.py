@@ -17,6 +17,7 @@ Backends, all giving shortest plans with the default search:
 
 from __future__ import annotations
 
+import itertools
 import os
 import time
 from collections import Counter
@@ -29,7 +30,7 @@ from symbolic.grounding import GroundTask, check_problem, problem_states, steps_
 from symbolic.pddl import DomainWriter, problem_pddl
 from symbolic.sampling import dedup_choices, sample_choices
 from symbolic.search import bfs
-from symbolic.structs import (OperatorSet, PlannerResult, PlannerStatus, PlanStep, ProbabilisticPlanResult,
+from symbolic.structs import (Action, OperatorSet, PlannerResult, PlannerStatus, PlanStep, ProbabilisticPlanResult,
                               RankedPlan, SymbolicProblem)
 
 BACKENDS = ("python", "fd", "fd-naive")
@@ -84,9 +85,8 @@ class SymbolicPlanner:
             task = self.ground(problem.n)
             init, goal = problem_states(problem)
             start = time.perf_counter()
-            out = bfs(task, ch, init, goal, self.max_expansions, self.time_limit)
-            plan = None if out.plan is None else [task.step(g) for g in out.plan]
-            return PlannerResult(out.status, plan, out.message, time.perf_counter() - start)
+            out = bfs(task, ch, init, goal, self.max_expansions, self.time_limit, problem.nonempty)
+            return self._result(task, ch, init, out, time.perf_counter() - start)
         result = fd.run_fast_downward(self._domain_text(ch, problem.n), problem_pddl(self.ops, problem),
                                       self.search, self.time_limit)
         return result
@@ -130,10 +130,10 @@ class SymbolicPlanner:
             if key in found:
                 found[key][1] += 1
             else:
-                found[key] = [steps, 1]
-        total = sum(c for _, c in found.values())
+                found[key] = [steps, 1, None if r.states is None else tuple(r.states)]
+        total = sum(v[1] for v in found.values())
         order = sorted(found.items(), key=lambda kv: (-kv[1][1], len(kv[0]), kv[0]))
-        return [RankedPlan(k, s, c, c / total) for k, (s, c) in order]
+        return [RankedPlan(k, s, c, c / total, states) for k, (s, c, states) in order]
 
     def _run_python(self, problem, choices, timings, deadline: float | None = None):
         t0 = time.perf_counter()
@@ -157,14 +157,49 @@ class SymbolicPlanner:
                 start = time.perf_counter()
                 limit = self.time_limit if deadline is None else \
                     max(0.0, min(self.time_limit, deadline - time.perf_counter()))
-                out = bfs(task, c, init, goal, self.max_expansions, limit)
-                plan = None if out.plan is None else [task.step(g) for g in out.plan]
-                hit = PlannerResult(out.status, plan, out.message, time.perf_counter() - start)
+                out = bfs(task, c, init, goal, self.max_expansions, limit, problem.nonempty)
+                hit = self._result(task, c, init, out, time.perf_counter() - start)
                 if out.status is not PlannerStatus.TIMEOUT:
                     memo.append((out.touched, c[out.touched], hit))
             results.append(hit)
         timings["planner"] = time.perf_counter() - t0
         return [results[g] for g in group], len(reps), len(memo)
+
+    @staticmethod
+    def _result(task: GroundTask, choice: np.ndarray, init: int, out, seconds: float) -> PlannerResult:
+        """A PlannerResult of the python search, with the plan's ground actions and symbolic states."""
+        if out.plan is None:
+            return PlannerResult(out.status, None, out.message, seconds)
+        states = [init]
+        for g in out.plan:
+            states.append(states[-1] ^ task.flips[g][int(choice[task.op_index[g]])])
+        return PlannerResult(out.status, [task.step(g) for g in out.plan], out.message, seconds,
+                             ground=list(out.plan), states=states)
+
+    def alternatives(self, n: int, actions: tuple[Action, ...], states: tuple[int, ...] | None,
+                     limit: int = 64) -> list[tuple[Action, ...]]:
+        """Other plans through the same symbolic `states` as `actions` (a RankedPlan's), at most `limit`.
+
+        At each step, every ground action applicable in that state one of whose learned effects
+        leads to the next state. The symbols cannot tell these plans apart (typically the grasp and
+        release offsets, or which of two symbolically alike blocks is used), but their continuous
+        outcomes differ, so verification may accept one of them when `plan` itself fails.
+        """
+        if states is None or not actions or limit < 1:
+            return []
+        task = self.ground(n)
+        options = []
+        for s, t in zip(states[:-1], states[1:]):
+            gs, _ = task.applicable(s)
+            acts = dict.fromkeys(task.action(g) for g in gs if any(s ^ f == t for f in task.flips[g]))
+            options.append(list(acts))
+        out = []
+        for combo in itertools.product(*options):
+            if combo != tuple(actions):
+                out.append(combo)
+                if len(out) == limit:
+                    break
+        return out
 
     def _probabilistic_columns(self) -> np.ndarray:
         return np.flatnonzero([len(op.effects) > 1 for op in self.ops.operators])

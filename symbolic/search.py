@@ -29,11 +29,15 @@ class SearchOutcome:
 
 
 def bfs(task: GroundTask, choice: np.ndarray, init: int, goal: int,
-        max_expansions: int = 200_000, time_limit: float | None = None) -> SearchOutcome:
-    """Shortest plan from `init` to the full goal state `goal` with effect choice[op] per operator."""
+        max_expansions: int = 200_000, time_limit: float | None = None,
+        nonempty: bool = False) -> SearchOutcome:
+    """Shortest plan from `init` to the full goal state `goal` with effect choice[op] per operator.
+
+    With `nonempty`, a goal equal to `init` needs a plan of at least one action (a shortest cycle).
+    """
     deadline = None if time_limit is None else time.perf_counter() + time_limit
     touched: set[int] = set()
-    if init == goal:
+    if init == goal and not nonempty:
         return SearchOutcome(PlannerStatus.SOLVED, [], np.empty(0, np.int64), 0)
     parent: dict[int, tuple[int, int] | None] = {init: None}
     frontier = deque([init])
@@ -51,16 +55,16 @@ def bfs(task: GroundTask, choice: np.ndarray, init: int, goal: int,
         touched.update(opis)
         for g, oi in zip(gs, opis):
             t = s ^ flips[g][ch[oi]]
-            if t in parent:
-                continue
-            parent[t] = (s, g)
-            if t == goal:
-                plan = []
-                while parent[t] is not None:
-                    t, g2 = parent[t]
+            if t == goal:  # tested before the duplicate check: the goal may be init (nonempty)
+                plan, u = [g], s
+                while parent[u] is not None:
+                    u, g2 = parent[u]
                     plan.append(g2)
                 return SearchOutcome(PlannerStatus.SOLVED, plan[::-1],
                                      np.array(sorted(touched), np.int64), expanded)
+            if t in parent:
+                continue
+            parent[t] = (s, g)
             frontier.append(t)
     return SearchOutcome(PlannerStatus.UNSOLVABLE, None, np.array(sorted(touched), np.int64), expanded,
                          f"goal unreachable: {len(parent)} states explored")

@@ -126,6 +126,10 @@ class SymbolicProblem:
     init_rel: np.ndarray  # (K, n, n)
     goal_unary: np.ndarray
     goal_rel: np.ndarray
+    # At least one action, even when Sigma_init already equals Sigma_goal: the caller knows the
+    # continuous goal is not met (the symbols cannot tell where on the table a block stands).
+    # Honoured by the python backend; Fast Downward still returns the empty plan then.
+    nonempty: bool = False
 
     @property
     def n(self) -> int:
@@ -156,6 +160,8 @@ class PlannerResult:
     wall_time: float = 0.0
     returncode: int | None = None
     stderr_tail: str = ""
+    ground: list[int] | None = None  # python backend: the plan's ground action ids
+    states: list[int] | None = None  # python backend: packed symbolic states along the plan (len + 1)
 
     @property
     def solved(self) -> bool:
@@ -170,6 +176,7 @@ class RankedPlan:
     steps: tuple[PlanStep, ...]  # operator names of the first domain that produced it
     count: int
     probability: float
+    states: tuple[int, ...] | None = None  # packed states along it in that domain (python backend)
 
 
 @dataclass

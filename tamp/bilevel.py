@@ -29,7 +29,7 @@ import numpy as np
 from tamp.models import Models
 from tamp.search import SearchConfig, SearchResult, continuous_search
 from tamp.structs import PickPlace
-from tamp.verify import EPS_SUCCESS, TAU_VERIFY, at_goal, goal_error, verify
+from tamp.verify import EPS_SUCCESS, TAU_VERIFY, Verification, at_goal, goal_error, verify, verify_many
 
 
 @dataclass(frozen=True)
@@ -40,8 +40,12 @@ class PlanConfig:
     eps: float = EPS_SUCCESS  # metres: success tolerance (goal test of the search, closed loop)
     backend: str = "python"  # symbolic planner backend: python | fd | fd-naive
     symbolic_time_limit: float = 10.0  # seconds per symbolic planner call
-    level1_time_budget: float | None = 2.0  # seconds for all N symbolic planner calls of one problem
+    level1_time_budget: float | None = 0.5  # seconds for all N symbolic planner calls of one problem
     verify_all: bool = False  # verify every candidate (default: stop at the first verified one, Alg. 1)
+    # Beyond the paper (0 and False give its Algorithm 1 exactly):
+    alternatives: int = 64  # per symbolic plan, plans through the same symbolic states, verified after it
+    alternatives_total: int = 256  # per problem; later symbolic plans are verified alone
+    nonempty: bool = True  # X_init not within tau of X_goal: the symbolic plan needs >= 1 action
     search: SearchConfig = SearchConfig()
 
 
@@ -54,6 +58,8 @@ class Candidate:
     probability: float
     error: float | None = None  # metres: max per-object distance of the predicted final state to the goal
     verified: bool | None = None
+    alternative_of: int | None = None  # index of the ranked symbolic plan whose symbolic states it shares
+    states: tuple[int, ...] | None = field(default=None, repr=False)  # packed symbolic states (python backend)
 
 
 @dataclass
@@ -79,7 +85,8 @@ class PlanResult:
                 "predicted_error_m": self.predicted_error,
                 "candidates": [{"actions": [list(a) for a in c.actions], "count": c.count,
                                 "probability": round(c.probability, 4), "error_m": c.error,
-                                "verified": c.verified} for c in self.candidates],
+                                "verified": c.verified, "alternative_of": c.alternative_of}
+                               for c in self.candidates],
                 "search": None if self.search is None else {
                     k: getattr(self.search, k) for k in ("status", "reason", "expanded", "generated",
                                                          "duplicates", "predict_calls", "time")},
@@ -88,12 +95,14 @@ class PlanResult:
 
 
 # --- the levels -------------------------------------------------------------------------------
-def _symbolic_problem(models: Models, X_init: np.ndarray, X_goal: np.ndarray):
+def _symbolic_problem(models: Models, X_init: np.ndarray, X_goal: np.ndarray, cfg: PlanConfig):
+    """Sigma_init, Sigma_goal; with cfg.nonempty, the empty plan is ruled out when it cannot verify
+    (X_init itself is not within tau of X_goal although the symbols may agree)."""
     from symbolic import make_problem
 
     ui, ri = models.symbolic.symbols(X_init)
     ug, rg = models.symbolic.symbols(X_goal)
-    return make_problem(ui, ri, ug, rg)
+    return make_problem(ui, ri, ug, rg, nonempty=cfg.nonempty and goal_error(X_init, X_goal) >= cfg.tau_verify)
 
 
 def _level1_plans(models: Models, X_init, X_goal, cfg: PlanConfig, result: PlanResult,
@@ -102,7 +111,7 @@ def _level1_plans(models: Models, X_init, X_goal, cfg: PlanConfig, result: PlanR
     t = time.perf_counter()
     try:
         planner = models.symbolic_planner(cfg.backend, cfg.symbolic_time_limit)
-        problem = _symbolic_problem(models, X_init, X_goal)
+        problem = _symbolic_problem(models, X_init, X_goal, cfg)
     except ValueError as error:
         result.reasons.append(f"level 1: {error}")
         return []
@@ -118,7 +127,8 @@ def _level1_plans(models: Models, X_init, X_goal, cfg: PlanConfig, result: PlanR
         if not out.plans:
             result.reasons.append(f"level 1: no symbolic plan in any of the {out.n_domains} sampled domains "
                                   f"(outcomes: {dict(out.statuses)})")
-        return [Candidate(tuple(tuple(a) for a in p.actions), p.count, p.probability) for p in out.plans]
+        return [Candidate(tuple(tuple(a) for a in p.actions), p.count, p.probability, states=p.states)
+                for p in out.plans]
     out = planner.plan_deterministic(problem)
     result.timings["symbolic"] = time.perf_counter() - t
     result.symbolic_stats = {"outcome": out.status.value}
@@ -163,25 +173,49 @@ def _timed(method: str, body: Callable[[PlanResult], PlanResult]) -> PlanResult:
 
 
 # --- the methods ------------------------------------------------------------------------------
+def _verify_group(models: Models, X_init, X_goal, index: int, candidate: Candidate, cfg: PlanConfig,
+                  limit: int) -> tuple[list[Candidate], Verification | None]:
+    """Verify a ranked symbolic plan and its alternatives (plans through the same symbolic states) in
+    one shared rollout; returns them and the chosen verification: the plan itself if verified, else
+    the verified alternative with the smallest predicted error (the symbols cannot rank them)."""
+    group = [candidate]
+    if limit > 0 and candidate.states is not None:
+        planner = models.symbolic_planner(cfg.backend, cfg.symbolic_time_limit)
+        group += [Candidate(alt, candidate.count, candidate.probability, alternative_of=index)
+                  for alt in planner.alternatives(len(X_init), candidate.actions, candidate.states, limit)]
+    checks = verify_many(models.require_dynamics(), X_init, X_goal, [c.actions for c in group], cfg.tau_verify)
+    for c, v in zip(group, checks):
+        c.error, c.verified = v.error, v.verified
+    passed = [v for v in checks if v.verified]
+    if not passed:
+        return group, None
+    return group, checks[0] if checks[0].verified else min(passed, key=lambda v: v.error)
+
+
 def plan_bilevel(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig()) -> PlanResult:
     """Algorithm 1: verified probabilistic symbolic plan, else continuous search."""
     def body(result: PlanResult) -> PlanResult:
-        result.candidates = _level1_plans(models, X_init, X_goal, cfg, result)
-        t, chosen = time.perf_counter(), None
-        for c in result.candidates:  # decreasing frequency
-            v = _verify(models, X_init, X_goal, c, cfg)
-            if v.verified and chosen is None:
+        ranked = _level1_plans(models, X_init, X_goal, cfg, result)
+        t, chosen, checked = time.perf_counter(), None, []
+        for i, c in enumerate(ranked):  # decreasing frequency
+            left = cfg.alternatives_total - sum(c.alternative_of is not None for c in checked)
+            group, v = _verify_group(models, X_init, X_goal, i, c, cfg, min(cfg.alternatives, left))
+            checked += group
+            if v is not None and chosen is None:
                 chosen = v
                 if not cfg.verify_all:
                     break
-        if result.candidates:
+        result.candidates = checked + ranked[sum(c.alternative_of is None for c in checked):]  # + unchecked
+        if ranked:
             result.timings["verify"] = time.perf_counter() - t
         if chosen is not None:
             return _take(result, chosen.actions, 1, chosen.trajectory, X_goal)
-        if result.candidates:
-            best = min(c.error for c in result.candidates if c.error is not None)
-            result.reasons.append(f"level 1: none of the {len(result.candidates)} symbolic plans verified "
-                                  f"(best predicted error {best * 100:.1f} cm, tau {cfg.tau_verify * 100:g} cm)")
+        if ranked:
+            best = min(c.error for c in checked if c.error is not None)
+            alts = sum(c.alternative_of is not None for c in checked)
+            result.reasons.append(f"level 1: none of the {len(ranked)} symbolic plans verified"
+                                  + (f" (nor {alts} alternatives through the same symbols)" if alts else "")
+                                  + f" (best predicted error {best * 100:.1f} cm, tau {cfg.tau_verify * 100:g} cm)")
         return _level2(models, X_init, X_goal, cfg, result)
     return _timed("bilevel", body)
 

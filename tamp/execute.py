@@ -160,6 +160,8 @@ class Executor:
         self.context.SetTime(0.0)
         self.simulator.Initialize()
         t_offset = timeline.t_end if timeline is not None else 0.0
+        if timeline is not None:
+            timeline.mark_action()
         frame = 1.0 / REPLAY_FPS
         max_error = 0.0
         grasped, note = False, ""

@@ -21,6 +21,12 @@ from tamp.verify import DynamicsModel
 SYMBOLIC_FILE, DYNAMICS_FILE, DOMAIN_DIR = "symbolic.pt", "dynamics.pt", "domain"
 
 
+def pretrained_dir() -> Path:
+    """The quick-scale models shipped inside the package (tamp/pretrained/; PROVENANCE.md says how
+    they were made), the default of `tamp demo --models`."""
+    return Path(__file__).resolve().parent / "pretrained"
+
+
 class SymbolModel(Protocol):
     def symbols(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Unary bits (n, d_z) and relation bits (K, n, n) of scene X."""

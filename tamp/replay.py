@@ -3,9 +3,17 @@
 A `Timeline` collects frames (time, arm joints, block poses) while the world steps; `write_html`
 plays them through a MeshcatVisualizer recording and saves Meshcat's static HTML, which works
 offline in any browser.
+
+A timeline can also carry *ghosts*: translucent copies of the blocks at positions that were not
+executed, drawn beside the executed blocks (the paper's Fig. 3): the goal, shown throughout, and
+the Dynamics Model's prediction after each action, shown from the start of that action until the
+next action's prediction replaces it. The world and the executor call `mark_action()` when an
+action starts, which is what ties predictions to the replay's clock.
 """
 from __future__ import annotations
 
+import html
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -13,13 +21,44 @@ import numpy as np
 from pydrake.math import RigidTransform
 
 from tamp.kinematics import V_MAX, tcp_pose
+from tamp.structs import BLOCK_SIZES
 
 REPLAY_FPS = 30.0
 _REPLAY_SPEED = 0.5  # fraction of the joint velocity limits used to time kinematic motions
 
 
+GOAL_RGBA = (0.1, 0.8, 0.2, 0.35)  # translucent green
+PREDICTED_RGBA = (1.0, 0.55, 0.0, 0.35)  # translucent orange
+GHOST_SCALE = 1.04  # ghosts are slightly larger than the blocks, so that one on a block stays visible
+
+
 def _pose7(X: RigidTransform) -> np.ndarray:
     return np.r_[X.rotation().ToQuaternion().wxyz(), X.translation()]
+
+
+@dataclass
+class Ghosts:
+    """Translucent blocks at states that were not executed (goal, predictions), under /ghosts/<name>/.
+
+    `states[i]` (n, 5: x, y, z in metres and the one-hot type; blocks upright and axis-aligned) is
+    shown from `times[i]` (seconds of the replay) until `times[i + 1]`, the last one to the end;
+    before `times[0]` the ghosts are hidden.
+    """
+
+    name: str
+    states: np.ndarray  # (m, n, 5)
+    times: list[float]
+    rgba: tuple[float, float, float, float]
+    label: str = ""  # legend text
+
+    def __post_init__(self) -> None:
+        self.states = np.asarray(self.states, dtype=float)
+        if self.states.ndim != 3 or self.states.shape[2] != 5 or len(self.states) != len(self.times):
+            raise ValueError(f"ghosts {self.name!r}: need one (n, 5) state per time, got states of shape "
+                             f"{self.states.shape} and {len(self.times)} time(s)")
+
+    def paths(self) -> list[str]:
+        return [f"/ghosts/{self.name}/block_{j}" for j in range(self.states.shape[1])]
 
 
 @dataclass
@@ -30,10 +69,32 @@ class Timeline:
     times: list[float] = field(default_factory=list)
     q_arm: list[np.ndarray] = field(default_factory=list)
     blocks: list[np.ndarray] = field(default_factory=list)
+    action_starts: list[float] = field(default_factory=list)  # seconds: when each executed action began
+    ghosts: list[Ghosts] = field(default_factory=list)
+    caption: list[str] = field(default_factory=list)  # lines shown over the replay, above the legend
 
     @property
     def t_end(self) -> float:
         return self.times[-1] if self.times else 0.0
+
+    def mark_action(self) -> None:
+        """Note that an action starts now (called by the world and the executor before its frames)."""
+        self.action_starts.append(self.t_end)
+
+    def show_goal(self, X_goal: np.ndarray) -> None:
+        """The goal as translucent green blocks, throughout the replay."""
+        self.ghosts.append(Ghosts("goal", np.asarray(X_goal)[None], [0.0], GOAL_RGBA, "goal"))
+
+    def show_predictions(self, predicted: np.ndarray, first_action: int = 0) -> None:
+        """The Dynamics Model's rollout of the plan, `predicted` (len + 1, n, 5) with predicted[0] the
+        initial state, as translucent orange blocks: predicted[i + 1] from the start of the timeline's
+        action `first_action + i`. Call after the actions ran; predictions of actions that never
+        started (refinement stopped before them) are not shown."""
+        predicted = np.asarray(predicted, dtype=float)
+        starts = self.action_starts[first_action:first_action + len(predicted) - 1]
+        if starts:
+            self.ghosts.append(Ghosts("predicted", predicted[1:len(starts) + 1], list(starts), PREDICTED_RGBA,
+                                      "Dynamics Model's prediction after the current action"))
 
     def start(self, scene, q: np.ndarray) -> None:
         """Begin a new scene (a reset); earlier frames are kept and the replay continues."""
@@ -69,7 +130,7 @@ class Timeline:
             self._add(t0 + t, q_arm, [_pose7(X) for X in poses])
 
     def write_html(self, path: str | Path) -> Path:
-        """Render the frames to a self-contained Meshcat HTML file."""
+        """Render the frames (and ghosts) to a self-contained Meshcat HTML file, written atomically."""
         if not self.times or self.types is None:
             raise ValueError("the timeline is empty: reset and step the world with a timeline attached")
         from pydrake.geometry import Meshcat, MeshcatVisualizer, MeshcatVisualizerParams, Role
@@ -102,13 +163,64 @@ class Timeline:
                 q[s:s + 7] = poses[i]
             plant.SetPositions(plant_ctx, q)
             visualizer.ForcedPublish(vis_ctx)
+        for ghosts in self.ghosts:
+            _draw_ghosts(meshcat, recording, ghosts)
         del robot_ctx, recording
         visualizer.StopRecording()
         visualizer.PublishRecording()
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(meshcat.StaticHtml())
-        return path
+        page = meshcat.StaticHtml()
+        if self.ghosts or self.caption:
+            page = page.replace("</body>", self._overlay() + "</body>", 1)
+        return _write_atomic(Path(path), page)
+
+    def _overlay(self) -> str:
+        """A caption and a colour legend in the page's top-left corner."""
+        def swatch(rgba) -> str:
+            r, g, b, a = rgba
+            return (f'<span style="display:inline-block;width:0.9em;height:0.9em;margin-right:0.4em;'
+                    f'background:rgba({r * 255:.0f},{g * 255:.0f},{b * 255:.0f},{max(a, 0.6)})"></span>')
+        lines = [html.escape(line) for line in self.caption]
+        lines.append(swatch((0.85, 0.25, 0.25, 1)) + swatch((0.25, 0.45, 0.85, 1)) + "executed blocks (small, large)")
+        seen = set()
+        for g in self.ghosts:
+            if g.name not in seen:
+                seen.add(g.name)
+                lines.append(swatch(g.rgba) + html.escape(g.label or g.name) + " (translucent)")
+        return ('<div id="tamp-legend" style="position:fixed;left:8px;top:8px;padding:6px 10px;'
+                'background:rgba(255,255,255,0.85);font:13px sans-serif;line-height:1.5;border-radius:4px;'
+                'pointer-events:none">' + "<br>".join(lines) + "</div>\n")
+
+
+def _draw_ghosts(meshcat, recording, ghosts: Ghosts) -> None:
+    """Translucent boxes for `ghosts`, their poses (and visibility) keyed into the recording."""
+    from pydrake.geometry import Box, Rgba
+
+    frames = [recording.frame(t) for t in ghosts.times]
+    for j, path in enumerate(ghosts.paths()):
+        kind = int(np.argmax(ghosts.states[0, j, 3:]))
+        meshcat.SetObject(path, Box(*(GHOST_SCALE * np.array(BLOCK_SIZES[kind]))), Rgba(*ghosts.rgba))
+        poses = [RigidTransform(state[j, :3]) for state in ghosts.states]
+        meshcat.SetTransform(path, poses[0])
+        if frames[0] > 0:
+            recording.SetProperty(0, path, "visible", False)
+            recording.SetProperty(frames[0] - 1, path, "visible", False)
+        recording.SetProperty(frames[0], path, "visible", True)
+        for i, (frame, X) in enumerate(zip(frames, poses)):
+            if i > 0 and frame > frames[i - 1]:
+                recording.SetTransform(frame - 1, path, poses[i - 1])  # hold, then jump (no sliding)
+            recording.SetTransform(frame, path, X)
+
+
+def _write_atomic(path: Path, text: str) -> Path:
+    """Write through a temporary file beside `path` and rename it, so a replay is never half written."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        tmp.write_text(text)
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+    return path
 
 
 def _position_layout(scene):

@@ -78,6 +78,37 @@ class Verification:
         return self.error < self.tau
 
 
+def verify_many(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarray, plans: Sequence[Sequence],
+                tau: float = TAU_VERIFY) -> list[Verification]:
+    """`verify` for many plans, sharing rollouts: one batched forward pass per distinct plan prefix.
+
+    Plans that agree on their first t actions share the predicted state after them, so M variants of
+    a k-step plan that differ in the last action cost k calls instead of M k.
+    """
+    X_init, X_goal = np.asarray(X_init, dtype=float), np.asarray(X_goal, dtype=float)
+    plans = [tuple(tuple(int(v) for v in a) for a in plan) for plan in plans]
+    states: dict[tuple, np.ndarray] = {(): X_init}
+    for t in range(max((len(p) for p in plans), default=0)):
+        by_prefix: dict[tuple, list[tuple]] = {}
+        for plan in plans:
+            if len(plan) > t and plan[:t + 1] not in states:
+                by_prefix.setdefault(plan[:t], [])
+                if plan[t] not in by_prefix[plan[:t]]:
+                    by_prefix[plan[:t]].append(plan[t])
+        for prefix, actions in by_prefix.items():
+            X = states[prefix]
+            effects = model.predict_effect(X, np.asarray(actions, dtype=np.int64))
+            for a, e in zip(actions, effects):
+                X_next = X.copy()
+                X_next[:, :3] += e
+                states[prefix + (a,)] = X_next
+    out = []
+    for plan in plans:
+        trajectory = np.stack([states[plan[:t]] for t in range(len(plan) + 1)])
+        out.append(Verification(plan, trajectory, goal_errors(trajectory[-1], X_goal), tau))
+    return out
+
+
 def verify(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarray, actions: Sequence,
            tau: float = TAU_VERIFY) -> Verification:
     """Roll `actions` out from X_init with the Dynamics Model and compare with X_goal."""

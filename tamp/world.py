@@ -133,6 +133,8 @@ class World:
         if self._planner is not None:
             return self._step_full(action)
         self._steps += 1
+        if self.timeline is not None:
+            self.timeline.mark_action()
         info = StepInfo(action)
         t_start = time.perf_counter()
         planner, physics = self._layout(scene.types)

@@ -45,9 +45,10 @@ def world_step(X, action):
     return apply_action(X, tuple(action))[0]
 
 
-def two_block_domain(p_bad: float = 0.9, p_good: float = 0.3):
+def two_block_domain(p_bad: float = 0.9, p_good: float = 0.3, shift: bool = False):
     """A hand-made 2-object domain: putting object p on object t (both on the table) with release
-    offset +1 ('bad') or 0 ('good') gives 'p on t' with probability p_bad / p_good, else nothing."""
+    offset +1 ('bad') or 0 ('good') gives 'p on t' with probability p_bad / p_good, else nothing.
+    With `shift`, also 'pick p at -1, place on itself at +1' (a shift along y): symbolically nothing."""
     from symbolic.dataset import make_dataset
     from symbolic.operators import learn_operators
 
@@ -57,7 +58,7 @@ def two_block_domain(p_bad: float = 0.9, p_good: float = 0.3):
     u0, r0 = stub.symbols(X)
     u1, r1 = stub.symbols(on)
     rows = []
-    for action, p in (((0, 0, 1, 1), p_bad), ((0, 0, 1, 0), p_good)):
+    for action, p in (((0, 0, 1, 1), p_bad), ((0, 0, 1, 0), p_good)) + ((((0, -1, 0, 1), 0.0),) if shift else ()):
         hits = int(round(10 * p))
         rows += [(action, u1, r1)] * hits + [(action, u0, r0)] * (10 - hits)
     T = len(rows)

@@ -49,8 +49,11 @@ def test_verify_rolls_out_and_uses_the_per_object_max():
     assert good.verified and good.error < 1e-9
 
 
+PAPER = dict(alternatives=0, nonempty=False)  # Algorithm 1 exactly, without our two additions
+
+
 def test_most_frequent_plan_fails_verification_and_the_next_verified_one_is_returned(domain):
-    result = plan("bilevel", models(domain), X_INIT, A_ON_B, PlanConfig(n_domains=100, seed=0))
+    result = plan("bilevel", models(domain), X_INIT, A_ON_B, PlanConfig(n_domains=100, seed=0, **PAPER))
     first, second = result.candidates[:2]
     # the setting: the most frequent symbolic plan is the bad one
     assert first.actions == ((0, 0, 1, 1),) and first.count > second.count
@@ -65,6 +68,33 @@ def test_most_frequent_plan_fails_verification_and_the_next_verified_one_is_retu
         base = plan(method, models(domain), X_INIT, A_ON_B, PlanConfig(n_domains=100, seed=0))
         assert base.plan == [(0, 0, 1, 1)] and base.candidates[0].verified is False
         assert goal_error(execute(X_INIT, base.plan), A_ON_B) > 0.05
+
+
+def test_an_alternative_through_the_same_symbols_is_verified_before_the_next_ranked_plan(domain):
+    # the most frequent plan (release at +1) fails; (0, 0, 1, 0) reaches the same symbolic states
+    # (it is an operator of the same pre-state with the same 'on' effect), so it is tried right after
+    result = plan("bilevel", models(domain), X_INIT, A_ON_B, PlanConfig(n_domains=100, seed=0))
+    first, alternative = result.candidates[:2]
+    assert first.actions == ((0, 0, 1, 1),) and first.verified is False and first.alternative_of is None
+    assert alternative.actions == ((0, 0, 1, 0),) and alternative.alternative_of == 0 and alternative.verified
+    assert result.level == 1 and result.plan == [(0, 0, 1, 0)]
+    assert goal_error(execute(X_INIT, result.plan), A_ON_B) < 0.05
+
+
+def test_same_symbols_but_goal_elsewhere_needs_a_nonempty_plan():
+    # a large bar shifted 15 cm along y: the same symbols before and after. The empty plan cannot
+    # verify (X_init is 15 cm from the goal), so Level 1 asks for at least one action and finds the
+    # shift, a symbolic no-op; the paper's Algorithm 1 returns the empty plan and falls through.
+    domain = two_block_domain(shift=True)
+    X = np.array([[0.6, 0.0, 0.025, 0, 1], [0.75, -0.2, 0.025, 1, 0]])
+    goal = X.copy()
+    goal[0, 1] = 0.15
+    ours = plan("bilevel", models(domain), X, goal, PlanConfig(n_domains=20))
+    assert ours.level == 1 and ours.plan == [(0, -1, 0, 1)] and ours.search is None
+    assert goal_error(execute(X, ours.plan), goal) < 0.05
+    paper = plan("bilevel", models(domain), X, goal, PlanConfig(n_domains=20, **PAPER))
+    assert paper.candidates[0].actions == () and paper.candidates[0].verified is False
+    assert paper.level == 2 and paper.plan == [(0, -1, 0, 1)]
 
 
 def test_symbolic_failure_falls_through_to_continuous_search(domain):
@@ -120,3 +150,16 @@ def test_closed_loop_replans_from_the_observed_state(domain):
 def test_unknown_method_is_a_clear_error(domain):
     with pytest.raises(ValueError, match="unknown planning method 'astar'"):
         plan("astar", models(domain), X_INIT, A_ON_B)
+
+
+def test_verify_many_shares_prefixes_and_equals_verify_one_by_one():
+    from tamp.verify import verify_many
+
+    plans = [[(0, 0, 1, 1), (1, 0, 0, 0)], [(0, 0, 1, 1), (1, 1, 0, 0)], [(0, 0, 1, 0)], []]
+    stub = StubModel()
+    many = verify_many(stub, X_INIT, A_ON_B, plans)
+    assert stub.calls == 2  # one call for the first actions, one for the two second actions
+    for p, v in zip(plans, many):
+        one = verify(StubModel(), X_INIT, A_ON_B, p)
+        assert v.actions == one.actions and np.allclose(v.trajectory, one.trajectory)
+        assert v.error == pytest.approx(one.error) and v.verified == one.verified

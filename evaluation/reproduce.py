@@ -1,0 +1,213 @@
+"""`tamp reproduce`: the paper's experiments end to end, from nothing to `report.md`.
+
+    collect -> train (Dynamics, Symbolic and the two Fig. 4 variants; Table I ablation alongside)
+            -> learned domains -> problem set -> evaluate every method -> report
+
+Layout of the output directory:
+
+    OUT/data/                 interaction transitions (`tamp collect`)
+    OUT/models/               symbolic.pt, dynamics.pt, domain/   (`tamp plan --models OUT/models`)
+    OUT/models/variants/      symbolic_sigmoid.pt, domain_sigmoid/, dynamics_gumbel.pt (Fig. 4)
+    OUT/ablation/             ablation.json, ablation.md (Table I)
+    OUT/problems.jsonl        the problem set (regenerable from its seeds)
+    OUT/results/              rows.jsonl, meta.json, report.md, report.json, figures/
+    OUT/stages.json           finished stages with their wall time; a rerun skips them
+
+Every stage resumes: collection re-collects only missing shards, training continues from the last
+checkpoint, the evaluation recomputes only missing rows. The Symbolic Model is smaller than the
+Dynamics Model (d_z 1, K 1 against 8, 4) and its operators mention only the objects a transition
+involves: with the paper's 4000 training epochs out of reach, wider Gumbel bottlenecks give noisy
+bits and tens of thousands of operators (see symbolic/README.md). Each Fig. 4 variant changes the
+activation alone: the Sigmoid Symbolic Model has the Symbolic Model's size, the Gumbel Dynamics
+Model the Dynamics Model's.
+"""
+from __future__ import annotations
+
+import json
+import os
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import asdict, dataclass, field
+from multiprocessing import get_context
+from pathlib import Path
+from typing import Any
+
+
+@dataclass(frozen=True)
+class ModelSpec:
+    """One network to train: where it goes and its bottleneck."""
+
+    path: str  # relative to OUT/models
+    activation: str
+    d_z: int
+    heads: int
+
+
+@dataclass(frozen=True)
+class Scale:
+    """Sizes of one reproduction. `quick` fits in an hour on 2 cores; `paper` is the paper's."""
+
+    samples: int
+    epochs: int  # per model (the paper: 4000)
+    train_time_limit_s: float | None  # cap per model, so that a slow machine still finishes
+    ablation_runs: int  # seeds per activation (the paper: 10)
+    ablation_epochs: int
+    per_cell: int  # problems per (n, k) (the paper: 100)
+    search_time_limit_s: float  # continuous search, per problem
+    objects: tuple[int, ...] = (2, 3, 4)
+    actions: tuple[int, ...] = (1, 2, 3, 4, 5)
+    lr: float = 1e-4  # Adam, batch 128: the paper's
+    seed: int = 0
+    models: tuple[ModelSpec, ...] = (
+        ModelSpec("dynamics.pt", "sigmoid", 8, 4),
+        ModelSpec("symbolic.pt", "gumbel_sigmoid", 1, 1),
+        ModelSpec("variants/symbolic_sigmoid.pt", "sigmoid", 1, 1),
+        ModelSpec("variants/dynamics_gumbel.pt", "gumbel_sigmoid", 8, 4),
+    )
+    domains: dict[str, str] = field(default_factory=lambda: {
+        "symbolic.pt": "domain", "variants/symbolic_sigmoid.pt": "variants/domain_sigmoid"})
+
+
+SCALES: dict[str, Scale] = {
+    "quick": Scale(samples=20_000, epochs=300, train_time_limit_s=540.0, ablation_runs=2, ablation_epochs=15,
+                   per_cell=10, search_time_limit_s=10.0),
+    "paper": Scale(samples=160_000, epochs=4000, train_time_limit_s=None, ablation_runs=10, ablation_epochs=4000,
+                   per_cell=100, search_time_limit_s=60.0),
+}
+
+
+def _say(message: str) -> None:
+    print(f"[{time.strftime('%H:%M:%S')}] {message}", flush=True)
+
+
+class Stages:
+    """OUT/stages.json: which stages finished, and how long they took (seconds)."""
+
+    def __init__(self, out: Path, scale_name: str, scale: Scale) -> None:
+        self.path = out / "stages.json"
+        setup = {"scale": scale_name, "config": json.loads(json.dumps(asdict(scale)))}
+        if self.path.is_file():
+            self.state = json.loads(self.path.read_text())
+            if self.state.get("setup") != setup:
+                raise ValueError(f"{out} holds a reproduction with other settings ({self.path}: scale "
+                                 f"{self.state.get('setup', {}).get('scale')!r}); use another --out")
+        else:
+            self.state = {"setup": setup, "finished": {}}
+            self._write()
+
+    def done(self, name: str) -> bool:
+        return name in self.state["finished"]
+
+    def finish(self, name: str, seconds: float, **info: Any) -> None:
+        self.state["finished"][name] = {"seconds": round(seconds, 1), **info}
+        self._write()
+
+    def _write(self) -> None:
+        tmp = self.path.with_suffix(".tmp")
+        tmp.write_text(json.dumps(self.state, indent=1) + "\n")
+        os.replace(tmp, self.path)
+
+
+# --- the training jobs (run in worker processes) ---------------------------------------------------
+def _train_job(data: str, out: str, spec: ModelSpec, scale: Scale) -> dict:
+    import torch
+
+    from learned import ModelConfig, train_model
+    from learned.train import last_path
+
+    torch.set_num_threads(1)
+    path = Path(out) / spec.path
+    path.parent.mkdir(parents=True, exist_ok=True)
+    config = ModelConfig(activation=spec.activation, d_z=spec.d_z, heads=spec.heads)
+    result = train_model(data, config, epochs=scale.epochs, out_path=path, lr=scale.lr, seed=scale.seed,
+                         threads=1, progress=False, resume=last_path(path).is_file(),
+                         time_limit_s=scale.train_time_limit_s)
+    return {"model": spec.path, "val_cm": round(result.best_val_cm, 3), "best_epoch": result.best_epoch}
+
+
+def _ablation_job(data: str, out: str, scale: Scale) -> dict:
+    from learned import ablate_activations
+
+    result = ablate_activations(data, runs=scale.ablation_runs, epochs=scale.ablation_epochs, out_dir=out,
+                                seed=scale.seed, threads=1, progress=False)
+    return {"model": "ablation", "mean_cm": {a: round(r["mean_cm"], 3) for a, r in result["activations"].items()}}
+
+
+# --- the pipeline ----------------------------------------------------------------------------------
+def reproduce(out: str | Path, scale_name: str = "quick", workers: int | None = None, backend: str = "local",
+              fidelity: str = "fast") -> Path:
+    """Run (or resume) every stage; returns the path of report.md."""
+    from tamp.collect import available_cpus
+
+    if scale_name not in SCALES:
+        raise ValueError(f"unknown scale {scale_name!r}; choose one of {', '.join(SCALES)}")
+    scale, out = SCALES[scale_name], Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    workers = workers or available_cpus()
+    stages = Stages(out, scale_name, scale)
+    data, models = out / "data", out / "models"
+    t_all = time.perf_counter()
+    _say(f"reproduce --scale {scale_name} into {out} with {workers} worker(s)")
+
+    if not stages.done("collect"):
+        from tamp.collect import CollectConfig, collect
+
+        _say(f"collect: {scale.samples} random pick-place transitions, {','.join(map(str, scale.objects))} objects")
+        t = time.perf_counter()
+        report = collect(data, CollectConfig(samples=scale.samples, objects=scale.objects, seed=scale.seed),
+                         workers=workers, backend=backend, progress=True)
+        stages.finish("collect", time.perf_counter() - t, samples=report.samples)
+
+    if not stages.done("train"):
+        _say(f"train: {len(scale.models)} models ({scale.epochs} epochs each, at most "
+             f"{scale.train_time_limit_s or 'unlimited'} s) and the Table I ablation, {workers} at a time")
+        t = time.perf_counter()
+        results = []
+        with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
+            jobs = [pool.submit(_train_job, str(data), str(models), spec, scale) for spec in scale.models]
+            jobs.append(pool.submit(_ablation_job, str(data), str(out / "ablation"), scale))
+            for job in as_completed(jobs):
+                results.append(job.result())
+                _say(f"  trained {json.dumps(results[-1])}")
+        stages.finish("train", time.perf_counter() - t, results=results)
+
+    if not stages.done("domains"):
+        from tamp.domain import learn_domain
+
+        t, results = time.perf_counter(), []
+        for model, domain in scale.domains.items():
+            report = learn_domain(models / model, data, models / domain, seed=scale.seed, involved_only=True)
+            results.append({"model": model, "operators": report["n_operators"]})
+            _say(f"domain: {report['n_operators']} operators from {model} -> {models / domain}")
+        stages.finish("domains", time.perf_counter() - t, results=results)
+
+    problems = out / "problems.jsonl"
+    if not stages.done("problems"):
+        from evaluation.problems import generate_problems, write_problems
+
+        _say(f"problems: {scale.per_cell} per (n, k), n in {scale.objects}, k in {scale.actions}")
+        t = time.perf_counter()
+        write_problems(problems, generate_problems(scale.objects, scale.actions, scale.per_cell, seed=scale.seed))
+        stages.finish("problems", time.perf_counter() - t)
+
+    results_dir = out / "results"
+    if not stages.done("evaluate"):
+        from evaluation.run import EvalConfig, evaluate
+
+        _say(f"evaluate every method on {problems} ({fidelity} world)")
+        t = time.perf_counter()
+        evaluate(models, problems, results_dir, config=EvalConfig(
+            fidelity=fidelity, workers=workers, backend=backend, search_time_limit=scale.search_time_limit_s))
+        stages.finish("evaluate", time.perf_counter() - t)
+
+    from evaluation.report import write_report
+
+    report_path = write_report(results_dir, ablation=out / "ablation" / "ablation.json")
+    stages.finish("report", 0.0)
+    _say(f"done in {(time.perf_counter() - t_all) / 60:.1f} min (this call); report: {report_path}")
+    return report_path
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit("use `tamp reproduce`")

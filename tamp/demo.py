@@ -1,0 +1,254 @@
+"""`tamp demo`: one random problem solved end to end, with a replay that shows the model's predictions.
+
+A random scene of `objects` blocks and the goal after `actions` random actions that moved something
+(`tamp.problem.random_problem`) is planned with the bilevel planner and the pretrained models shipped
+in the package (or --models), refined into joint trajectories, executed with the full arm under
+physics (or in the fast world), and summarised. The Meshcat replay shows, beside the executed
+blocks, the goal (translucent green) and the Dynamics Model's predicted blocks after the current
+action (translucent orange), as in the paper's Fig. 3. With `candidates` = N, the first N symbolic
+candidates that failed verification are executed the same way, each into its own replay, so one
+can see why verification rejected them.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from tamp.bilevel import PlanConfig, PlanResult, plan
+from tamp.plan_command import LEVELS, _fmt_action, print_result
+from tamp.problem import Problem, random_problem
+from tamp.replay import Timeline
+from tamp.structs import TYPE_NAMES, PickPlace, WorldConfig
+from tamp.trajectory import RefinedPlan
+from tamp.verify import goal_error, goal_errors, rollout
+
+DEFAULT_REPLAY = Path("demo_replay.html")
+
+
+@dataclass(frozen=True)
+class DemoConfig:
+    seed: int = 0  # seeds the scene, the goal-generating actions and the sampled symbolic domains
+    objects: int = 3
+    actions: int = 3  # k: random actions that generate the goal
+    models: Path | None = None  # models directory; None: the pretrained models in the package
+    fidelity: str = "full"  # full: the arm under physics; fast: the refinement's own world
+    replay: Path | None = DEFAULT_REPLAY
+    candidates: int = 0  # also replay this many symbolic candidates that failed verification
+
+
+@dataclass
+class Execution:
+    """A plan refined and executed from X_init: outcome and times (seconds)."""
+
+    refined: RefinedPlan
+    X_after: list[np.ndarray]  # executed state after each action that ran
+    X_final: np.ndarray
+    error: float  # metres: max per-object distance of X_final to the goal
+    refine_time: float
+    execute_time: float  # wall clock; 0 in the fast world, where refinement already executed the plan
+    sim_time: float  # simulated seconds of execution (arm motion and settling); fast: arm motion alone
+    notes: list[str] = field(default_factory=list)  # per-action remarks of the executor (missed grasps)
+
+
+@dataclass
+class DemoResult:
+    problem: Problem
+    result: PlanResult
+    execution: Execution | None  # None: no plan
+    eps: float  # metres
+    replays: list[Path] = field(default_factory=list)
+
+    @property
+    def outcome(self) -> str:
+        """success | no plan | refinement failed | goal missed"""
+        if self.execution is None:
+            return "no plan"
+        if not self.execution.refined.success:
+            return "refinement failed"
+        return "success" if self.execution.error < self.eps else "goal missed"
+
+    @property
+    def success(self) -> bool:
+        return self.outcome == "success"
+
+
+def refine_and_execute(actions: list[PickPlace], X_init: np.ndarray, X_goal: np.ndarray, fidelity: str,
+                       timeline: Timeline | None = None) -> Execution:
+    """Refine `actions` from X_init and execute them, `full` (the arm under physics) or `fast` (the
+    refinement world: kinematic carry, physics after release). Actions before a refinement failure
+    are executed, none after it."""
+    from tamp import World
+    from tamp.refine import refine
+
+    world = World(WorldConfig(simplify_paths=True))
+    if fidelity == "fast":
+        world.timeline = timeline
+    refined = refine(actions, X_init, world=world)
+    if fidelity == "fast":
+        X_after = [s.X_after for s in refined.steps]
+        X_final, execute_time, notes = world.X, 0.0, []
+        sim_time = sum(s.duration for s in refined.steps)
+    else:
+        from tamp.execute import execute
+
+        t = time.perf_counter()
+        executed = execute(refined, timeline=timeline, partial=True)
+        execute_time = time.perf_counter() - t
+        X_after = [a.X_after for a in executed.log]
+        X_final, sim_time = executed.X_final, executed.sim_time
+        notes = [f"action {a.index}: {a.note}" for a in executed.log if a.note]
+    if timeline is not None and not timeline.times:  # nothing ran: show the initial scene
+        timeline.start(refined.scene_init, refined.q_init)
+    return Execution(refined, X_after, X_final, goal_error(X_final, X_goal), refined.refine_time,
+                     execute_time, sim_time, notes)
+
+
+def run_demo(cfg: DemoConfig = DemoConfig()) -> DemoResult:
+    """Generate, plan, refine, execute, print the summary and write the replay(s)."""
+    import torch
+
+    from tamp.models import load_models, pretrained_dir
+
+    if cfg.fidelity not in ("full", "fast"):
+        raise ValueError(f"fidelity must be 'full' or 'fast', got {cfg.fidelity!r}")
+    if cfg.candidates < 0:
+        raise ValueError(f"candidates must be 0 or more, got {cfg.candidates}")
+    if cfg.candidates and cfg.replay is None:
+        raise ValueError("candidate replays need a replay path")
+    torch.set_num_threads(1)
+    models_dir = pretrained_dir() if cfg.models is None else Path(cfg.models)
+    models = load_models(models_dir)
+    n_max = getattr(getattr(models.dynamics, "config", None), "n_max", None)
+    if n_max is not None and cfg.objects > n_max:
+        raise ValueError(f"--objects {cfg.objects}: the models in {models_dir} were trained for at most {n_max} objects")
+    plan_cfg = PlanConfig(seed=cfg.seed)
+
+    problem = random_problem(cfg.objects, cfg.actions, cfg.seed)
+    _print_problem(problem, models_dir)
+    print(f"\nplanning (bilevel, {plan_cfg.n_domains} sampled domains):", flush=True)
+    result = plan("bilevel", models, problem.X_init, problem.X_goal, plan_cfg)
+    print_result(result, plan_cfg.tau_verify, indent="  ")
+    out = DemoResult(problem, result, None, plan_cfg.eps)
+
+    timeline = Timeline() if cfg.replay is not None else None
+    if result.solved:
+        what = "the arm under physics" if cfg.fidelity == "full" else "the fast world"
+        print(f"\nrefining and executing {len(result.plan)} action(s) with {what}:", flush=True)
+        out.execution = refine_and_execute(result.plan, problem.X_init, problem.X_goal, cfg.fidelity, timeline)
+        _print_execution(out.execution, result.plan, result.predicted, problem.X_goal, cfg.fidelity)
+    elif timeline is not None:  # show the problem: the initial scene and the goal
+        from tamp import World
+
+        world = World(WorldConfig())
+        world.timeline = timeline
+        world.reset(X=problem.X_init)
+
+    _print_summary(out, cfg)
+    if timeline is not None:
+        timeline.caption = [f"tamp demo --seed {cfg.seed}: {problem.n} blocks, goal from {problem.k} random actions",
+                            _verdict(out)]
+        _write_replay(timeline, problem.X_goal, None if out.execution is None else result.predicted, cfg.replay, out)
+    if cfg.candidates:
+        _replay_candidates(out, models, cfg)
+    return out
+
+
+def _write_replay(timeline: Timeline, X_goal, predicted, path: Path, out: DemoResult) -> None:
+    timeline.show_goal(X_goal)
+    if predicted is not None:
+        timeline.show_predictions(predicted)
+    path = timeline.write_html(path)
+    out.replays.append(path)
+    print(f"replay written to {path} ({path.stat().st_size / 1e6:.1f} MB): open it in a browser", flush=True)
+
+
+def _replay_candidates(out: DemoResult, models, cfg: DemoConfig) -> None:
+    """Execute the first `cfg.candidates` candidates that failed verification, one replay each."""
+    problem, rejected = out.problem, [(i, c) for i, c in enumerate(out.result.candidates, 1) if c.verified is False]
+    if not rejected:
+        print("\nno symbolic candidate failed verification; no candidate replays")
+        return
+    shown = rejected[:cfg.candidates]
+    print(f"\nreplaying {len(shown)} of the {len(rejected)} candidate(s) that failed verification "
+          f"(numbers as in the list above):", flush=True)
+    for rank, c in shown:
+        actions = [PickPlace(*a) for a in c.actions]
+        predicted = rollout(models.require_dynamics(), problem.X_init, c.actions)
+        timeline = Timeline()
+        ex = refine_and_execute(actions, problem.X_init, problem.X_goal, cfg.fidelity, timeline)
+        ran = f"all {len(actions)} action(s)" if ex.refined.success else \
+            f"{len(ex.refined.steps)} of {len(actions)} action(s), refinement failed: {ex.refined.failure}"
+        verdict = "reached the goal: verification was too strict" if ex.refined.success and ex.error < out.eps \
+            else "missed the goal, as verification predicted"
+        print(f"  candidate {rank} {list(c.actions)}: predicted {c.error * 100:.1f} cm from the goal; "
+              f"executed {ran}; final error {ex.error * 100:.1f} cm: {verdict}")
+        timeline.caption = [f"tamp demo --seed {cfg.seed}: candidate {rank}, rejected by verification "
+                            f"(predicted {c.error * 100:.1f} cm from the goal)",
+                            f"executed: final error {ex.error * 100:.1f} cm"]
+        path = cfg.replay.with_name(f"{cfg.replay.stem}.candidate{rank}{cfg.replay.suffix}")
+        _write_replay(timeline, problem.X_goal, predicted, path, out)
+
+
+def _print_problem(problem: Problem, models_dir: Path) -> None:
+    print(f"problem (seed {problem.seed}): {problem.n} blocks; the goal is where {problem.k} random actions "
+          f"took them ({', '.join(str(tuple(a)) for a in problem.actions)}); initial error "
+          f"{goal_error(problem.X_init, problem.X_goal) * 100:.1f} cm")
+    for i, (x, g) in enumerate(zip(problem.X_init, problem.X_goal)):
+        kind = TYPE_NAMES[int(np.argmax(x[3:]))]
+        print(f"  block {i} ({kind:5s}): ({x[0]:.3f}, {x[1]:.3f}, {x[2]:.3f}) m -> goal "
+              f"({g[0]:.3f}, {g[1]:.3f}, {g[2]:.3f}) m, {np.linalg.norm(g[:3] - x[:3]) * 100:.1f} cm away")
+    print(f"models: {models_dir}")
+
+
+def _print_execution(ex: Execution, actions, predicted, X_goal, fidelity: str) -> None:
+    r = ex.refined
+    if r.success:
+        print(f"  refinement: ok, {len(r.steps)} action(s) in {ex.refine_time:.2f} s, "
+              f"{sum(s.duration for s in r.steps):.1f} s of arm motion")
+    else:
+        print(f"  refinement: failed: {r.failure}; executing the {len(r.steps)} action(s) before it")
+    for k, X in enumerate(ex.X_after):
+        off = goal_errors(X, predicted[k + 1]).max()
+        print(f"  action {k} ({_fmt_action(actions[k])}): blocks within {off * 100:.1f} cm of the Dynamics "
+              f"Model's prediction, {goal_error(X, X_goal) * 100:.1f} cm from the goal")
+    for note in ex.notes:
+        print(f"  {note}")
+    if fidelity == "full":
+        print(f"  execution (full): {ex.sim_time:.1f} s simulated in {ex.execute_time:.1f} s")
+
+
+def _verdict(out: DemoResult) -> str:
+    ex = out.execution
+    if ex is None:
+        return "no plan: " + "; ".join(out.result.reasons)
+    if not ex.refined.success:
+        return f"refinement failed at {ex.refined.failure}"
+    met = "success" if ex.error < out.eps else "goal missed"
+    return f"final error {ex.error * 100:.1f} cm (eps {out.eps * 100:g} cm): {met}"
+
+
+def _print_summary(out: DemoResult, cfg: DemoConfig) -> None:
+    result, ex = out.result, out.execution
+    print(f"\nsummary (seed {cfg.seed}, {cfg.fidelity} execution):")
+    if result.solved:
+        print(f"  plan        {len(result.plan)} action(s) from {LEVELS[result.level]}; predicted error "
+              f"{result.predicted_error * 100:.1f} cm")
+    else:
+        print(f"  plan        none: {'; '.join(result.reasons)}")
+    times = f"  times       planning {result.timings['total']:.2f} s"
+    if ex is not None:
+        times += f", refinement {ex.refine_time:.2f} s"
+        times += f", execution {ex.execute_time:.1f} s" if cfg.fidelity == "full" else \
+            " (execution: the refinement world's, included)"
+    print(times)
+    if ex is not None:
+        print(f"  final error {ex.error * 100:.1f} cm (max over blocks; eps {out.eps * 100:g} cm)")
+    outcome = {"success": "success: every block within eps of its goal",
+               "no plan": "failure: the planner found no plan",
+               "refinement failed": "failure: the plan could not be refined into arm motions "
+                                    f"({ex.refined.failure if ex else ''})",
+               "goal missed": "failure: the plan was executed but missed the goal"}[out.outcome]
+    print(f"  outcome     {outcome}", flush=True)

@@ -1,0 +1,380 @@
+"""The evaluation report: every number in report.md recomputed from the rows, degraded sections, bad input.
+
+The tables of report.md are parsed back (a small Markdown parser below) and each cell is compared
+with a value recomputed here from the JSONL rows with plain numpy/scipy, so a wrong aggregation,
+pairing or formatting fails.
+"""
+import json
+import random
+
+import numpy as np
+import pytest
+from scipy.stats import ttest_rel
+
+from evaluation.report import write_report
+
+METHODS = ("deterministic", "probabilistic", "cfs", "bilevel", "bilevel_replan", "symbolic_sigmoid", "cfs_gumbel")
+OUTCOMES = ("success", "no_plan", "kinematic_failure", "refinement_failure", "wrong_plan")
+
+
+# --- synthetic rows ------------------------------------------------------------------------------
+def make_rows(methods=METHODS, per_cell=4, seed=3):
+    """Rows of the runner's schema with plans, no plans, refinement failures and wrong plans."""
+    rng = random.Random(seed)
+    rows = []
+    for n in (2, 3, 4):
+        for k in (1, 2, 3, 4, 5):
+            for i in range(per_cell):
+                name = f"n{n}-k{k}-{i:03d}"
+                for m in methods:
+                    solved = rng.random() < 0.8
+                    failure = None
+                    if solved and rng.random() < 0.2:
+                        failure = {"action": 0, "stage": rng.choice(["ik", "motion", "grasp"]), "where": "grasp",
+                                   "reason": "no IK solution"}
+                    final = rng.uniform(0.0, 0.1)
+                    success = solved and failure is None and final < 0.05
+                    outcome = ("no_plan" if not solved else "kinematic_failure" if failure and failure["stage"] == "ik"
+                               else "refinement_failure" if failure else "success" if success else "wrong_plan")
+                    rows.append({
+                        "problem": name, "n": n, "k": k, "method": m, "solved": solved,
+                        "level": rng.choice([1, 2]) if solved and m.startswith("bilevel") else None,
+                        "plan": [[0, 0, 1, 0]] * k if solved else None,
+                        "planning_time_s": rng.uniform(0.001, 2.0), "level1_time_s": 0.004,
+                        "predicted_error_m": rng.uniform(0.0, 0.16) if solved else None,
+                        "candidates": [], "refined": None if not solved else failure is None,
+                        "refine_failure": failure,
+                        "refine_time_s": [rng.uniform(0.05, 0.3) for _ in range(k if failure is None else 1)]
+                        if solved else [],
+                        "executed_actions": k if solved and failure is None else 0,
+                        "final_error_m": final, "success": success, "outcome": outcome,
+                        "rounds": k - 1 if m == "bilevel_replan" else None,
+                        "fidelity": "fast", "eps_m": 0.05, "tau_verify_m": 0.07})
+    # k = 1: the top probabilistic plan is the deterministic one, so Table II's k=1 p is "identical"
+    det = {r["problem"]: r for r in rows if r["method"] == "deterministic"}
+    for r in rows:
+        if r["method"] == "probabilistic" and r["k"] == 1:
+            for f in ("solved", "predicted_error_m", "refined", "refine_failure", "success", "outcome"):
+                r[f] = det[r["problem"]][f]
+    return rows
+
+
+def write_rows(path, rows):
+    path.mkdir(parents=True, exist_ok=True)
+    (path / "rows.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
+
+
+ABLATION = {"source": "data/", "runs": 2, "epochs": 15, "num_test": 400, "num_train_val": 1600,
+            "activations": {"gumbel_sigmoid": {"label": "Gumbel-Sigmoid", "mean_cm": 3.456, "std_cm": 0.123},
+                            "tanh": {"label": "Tanh", "mean_cm": 2.5, "std_cm": 0.2},
+                            "none": {"label": "No activation", "mean_cm": 2.4, "std_cm": 0.05},
+                            "sigmoid": {"label": "Sigmoid", "mean_cm": 2.104, "std_cm": 0.011}}}
+
+
+# --- reading the report back ---------------------------------------------------------------------
+def parse(md):
+    """{section number: {"text": [...], "tables": [[{header: cell}, ...], ...]}} from report.md."""
+    sections, cur, table = {}, None, None
+    for line in md.splitlines():
+        if line.startswith("## "):
+            cur = sections.setdefault(line[3:].split(".")[0], {"text": [], "tables": []})
+            table = None
+        elif cur is None:
+            continue
+        elif line.startswith("|"):
+            cells = [c.strip() for c in line.strip().strip("|").split("|")]
+            if table is None:
+                table = {"header": cells, "rows": []}
+                cur["tables"].append(table)
+            elif not set("".join(cells)) <= {"-"}:
+                table["rows"].append(dict(zip(table["header"], cells)))
+        else:
+            table = None
+            if line.strip():
+                cur["text"].append(line)
+    return {k: {"text": v["text"], "tables": [t["rows"] for t in v["tables"]]} for k, v in sections.items()}
+
+
+def num(cell):
+    return float(cell.replace("≈", ""))
+
+
+def close(cell, expected, digits):
+    """The cell shows `expected` rounded to `digits` decimals ('—' for None)."""
+    if expected is None:
+        assert cell == "—"
+    else:
+        assert abs(num(cell) - expected) <= 0.5 * 10 ** -digits + 1e-9, (cell, expected)
+
+
+def close_pm(cell, values, digits):
+    m, s = cell.split(" ± ")
+    v = np.asarray(values, dtype=float)
+    close(m, v.mean(), digits)
+    close(s, v.std(ddof=1) if v.size > 1 else 0.0, digits)
+
+
+def expected_p(a, b):
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    if len(a) < 2:
+        return "—"
+    if np.all(a == b):
+        return "identical"
+    return ttest_rel(a, b).pvalue
+
+
+def check_p(cell, a, b):
+    p = expected_p(a, b)
+    if isinstance(p, str):
+        assert cell == p
+    elif p < 1e-4:
+        assert cell == "< 0.0001"
+    else:
+        close(cell, p, 4)
+
+
+def pct(flags):
+    return 100.0 * sum(flags) / len(flags) if flags else None
+
+
+class Rows:
+    def __init__(self, rows):
+        self.rows = rows
+        self.by = {}
+        for r in rows:
+            self.by.setdefault(r["method"], {})[r["problem"]] = r
+
+    def pairs(self, a, b, keep=lambda r: True):
+        common = sorted(set(self.by[a]) & set(self.by[b]))
+        return [(self.by[a][p], self.by[b][p]) for p in common if keep(self.by[a][p])]
+
+    def of(self, m, keep=lambda r: True):
+        return [r for r in self.by[m].values() if keep(r)]
+
+
+def group_keep(label, field):
+    if label.startswith("all"):
+        return (lambda r: r["k"] > 1) if label == "all k > 1" else (lambda r: True)
+    return lambda r: r[field] == int(label)
+
+
+def check_comparison(table, data, a, b, col_a, col_b, field):
+    labels = [row[next(iter(row))] for row in table if row[next(iter(row))] != "paper"]
+    assert labels[-1].startswith("all") and len(labels) >= 3
+    for row in table:
+        label = row[next(iter(row))]
+        if label == "paper":
+            continue
+        pairs = data.pairs(a, b, group_keep(label, field))
+        sa, sb = [x["success"] for x, _ in pairs], [y["success"] for _, y in pairs]
+        assert int(row["problems"]) == len(pairs)
+        close(row[col_a], pct(sa), 1)
+        close(row[col_b], pct(sb), 1)
+        check_p(row["p"], sa, sb)
+
+
+# --- the tests -----------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def full_report(tmp_path_factory):
+    out = tmp_path_factory.mktemp("results")
+    rows = make_rows()
+    write_rows(out, rows)
+    (out / "meta.json").write_text(json.dumps({"models_dir": "/models/run1", "problems": "problems.jsonl",
+                                               "config": {"fidelity": "fast", "n_domains": 100}}))
+    ablation = out / "abl.json"
+    ablation.write_text(json.dumps(ABLATION))
+    md_path = write_report(out, ablation=ablation)
+    return out, Rows(rows), parse(md_path.read_text())
+
+
+def test_setup_and_table1(full_report):
+    out, data, s = full_report
+    items = {r["item"]: r["value"] for r in s["1"]["tables"][0]}
+    assert items["rows"] == str(len(data.rows)) and items["problems"] == "60"
+    assert items["meta: models_dir"] == "/models/run1" and items["meta: config.n_domains"] == "100"
+    assert items["eps (cm)"] == "5" and items["tau_verify (cm)"] == "7" and items["fidelity"] == "fast"
+    for row in s["1"]["tables"][1]:
+        for k in range(1, 6):
+            want = len({r["problem"] for r in data.rows if (row["n"] == "all" or r["n"] == int(row["n"])) and r["k"] == k})
+            assert int(row[f"k={k}"]) == want
+    assert {r["method"]: int(r["rows"]) for r in s["1"]["tables"][2]} == {f"`{m}`": 60 for m in METHODS}
+    t1 = {r["activation"]: r for r in s["2"]["tables"][0]}
+    for act in ABLATION["activations"].values():
+        m, sd = t1[act["label"]]["ours (cm)"].split(" ± ")
+        close(m, act["mean_cm"], 2)
+        close(sd, act["std_cm"], 2)
+    assert t1["Gumbel-Sigmoid"]["paper (cm)"] == "3.34 ± 0.18" and t1["Sigmoid"]["paper (cm)"] == "2.01 ± 0.13"
+
+
+def test_dual_model_and_table2(full_report):
+    _, data, s = full_report
+    sym, search = s["3"]["tables"]
+    check_comparison(sym, data, "deterministic", "symbolic_sigmoid", "Gumbel-Sigmoid `deterministic` (%)",
+                     "Sigmoid `symbolic_sigmoid` (%)", "n")
+    check_comparison(search, data, "cfs", "cfs_gumbel", "Sigmoid `cfs` (%)", "Gumbel-Sigmoid `cfs_gumbel` (%)", "n")
+    assert sym[-1]["p"] == search[-1]["p"] == "< 0.0001"  # the paper's row
+    (t2,) = s["4"]["tables"]
+    check_comparison(t2, data, "deterministic", "probabilistic", "deterministic (%)", "probabilistic (%)", "k")
+    assert t2[0]["p"] == "identical"  # k = 1: the same plans by construction
+    assert t2[0]["paper deterministic (%)"] == "62.40 ± 3.86" and t2[4]["paper probabilistic (%)"] == "28.93 ± 5.56"
+    assert t2[-1]["paper p"] == "< 0.0001"
+
+
+def test_verifier_confusion_and_sweep(full_report):
+    _, data, s = full_report
+    prob = data.of("probabilistic")
+    plans = [r for r in prob if r["solved"]]
+    assert any(f"{len(plans)} plans, {len(prob) - len(plans)} rows without a plan left out" in t for t in s["5"]["text"])
+    conf, sweep = s["5"]["tables"]
+
+    def counts(rs, tau):
+        v = [r["predicted_error_m"] < tau for r in rs]
+        ok = [r["success"] for r in rs]
+        return (sum(a and b for a, b in zip(v, ok)), sum(a and not b for a, b in zip(v, ok)),
+                sum(not a and not b for a, b in zip(v, ok)), sum(not a and b for a, b in zip(v, ok)))
+
+    for row in conf:
+        if row["n"] == "paper":
+            assert [row[c] for c in ("verified: success (%)", "unverified: failure (%)", "accuracy", "F1")] == \
+                ["94.2", "90.9", "0.93", "0.90"]
+            continue
+        rs = [r for r in plans if row["n"] == "all" or r["n"] == int(row["n"])]
+        tp, fp, tn, fn = counts(rs, 0.07)
+        assert (int(row["plans"]), int(row["TP"]), int(row["FP"]), int(row["TN"]), int(row["FN"])) == \
+            (len(rs), tp, fp, tn, fn)
+        close(row["verified: success (%)"], 100 * tp / (tp + fp), 1)
+        close(row["unverified: failure (%)"], 100 * tn / (tn + fn), 1)
+        close(row["accuracy"], (tp + tn) / len(rs), 2)
+        close(row["F1"], 2 * tp / (2 * tp + fp + fn), 2)
+    assert [int(r["tau (cm)"]) for r in sweep] == list(range(1, 16))
+    for row in sweep:
+        tau = int(row["tau (cm)"]) / 100
+        for g in ("n=2", "n=3", "n=4", "all"):
+            rs = [r for r in plans if g == "all" or r["n"] == int(g[2:])]
+            tp, fp, tn, fn = counts(rs, tau)
+            close(row[f"{g} accuracy"], (tp + tn) / len(rs), 2)
+            close(row[f"{g} F1"], 2 * tp / (2 * tp + fp + fn) if 2 * tp + fp + fn else None, 2)
+
+
+def test_success_per_cell_levels_and_outcomes(full_report):
+    _, data, s = full_report
+    cells, bvc, outcomes = s["6"]["tables"]
+    assert len(cells) == 15 + 3 + 1
+    for row in cells:
+        def keep(r, row=row):
+            return (row["n"] == "all" or r["n"] == int(row["n"])) and (row["k"] == "all" or r["k"] == int(row["k"]))
+        assert int(row["problems"]) == len({r["problem"] for r in data.rows if keep(r)})
+        for m in METHODS:
+            close(row[f"`{m}` (%)"], pct([r["success"] for r in data.of(m, keep)]), 1)
+        b = data.of("bilevel", keep)
+        for lvl in (1, 2):
+            close(row[f"`bilevel` Level {lvl} (%)"], pct([r["success"] and r["level"] == lvl for r in b]), 1)
+    check_comparison(bvc, data, "bilevel", "cfs", "`bilevel` (%)", "`cfs` (%)", "n")
+    assert bvc[-1]["paper p"] == "0.21"
+    for row in outcomes:
+        rs = data.of(row["method"].strip("`"))
+        assert int(row["rows"]) == len(rs)
+        for o in OUTCOMES:
+            close(row[f"{o} (%)"], pct([r["outcome"] == o for r in rs]), 1)
+    assert any("not given as numbers" in t or "without numbers" in t for t in s["6"]["text"])
+
+
+def test_planning_time_table3(full_report):
+    _, data, s = full_report
+    times, split = s["7"]["tables"]
+    for row in times:
+        pairs = data.pairs("bilevel", "cfs", group_keep(row["n"], "n"))
+        tb = [a["planning_time_s"] for a, _ in pairs]
+        tc = [b["planning_time_s"] for _, b in pairs]
+        assert int(row["problems"]) == len(pairs)
+        close_pm(row["`bilevel` (s)"], tb, 3)
+        close_pm(row["`cfs` (s)"], tc, 3)
+        close(row["`bilevel` median (s)"], np.median(tb), 3)
+        close(row["`cfs` median (s)"], np.median(tc), 3)
+        close(row["speedup"], np.mean(tc) / np.mean(tb), 2)
+        check_p(row["p"], tb, tc)
+    assert [r["paper bilevel (s)"] for r in times] == ["0.83 ± 0.15", "2.63 ± 0.79", "4.75 ± 3.10", "—"]
+    assert [r["paper speedup"] for r in times] == ["1.16", "1.21", "1.81", "—"]
+    for row in split:
+        if row["subset"].startswith("paper"):
+            continue
+        every = data.pairs("bilevel", "cfs", group_keep(row["n"], "n"))
+        pairs = [(a, b) for a, b in every if (a["level"] == 1) == (row["subset"] == "Level 1")]
+        assert int(row["problems"]) == len(pairs)
+        close(row["share (%)"], 100 * len(pairs) / len(every), 1)
+        close_pm(row["`bilevel` (s)"], [a["planning_time_s"] for a, _ in pairs], 3)
+        close_pm(row["`cfs` (s)"], [b["planning_time_s"] for _, b in pairs], 3)
+        close(row["`bilevel` success (%)"], pct([a["success"] for a, _ in pairs]), 1)
+        close(row["`cfs` success (%)"], pct([b["success"] for _, b in pairs]), 1)
+    paper_l1 = next(r for r in split if r["subset"] == "paper: Level 1")
+    assert paper_l1["`bilevel` (s)"] == "0.006 ± 0.003" and paper_l1["`cfs` (s)"] == "0.932 ± 0.566"
+
+
+def test_replanning_and_refinement(full_report):
+    _, data, s = full_report
+    (rp,) = s["8"]["tables"]
+    assert [r["k"] for r in rp] == ["2", "3", "4", "5", "all k > 1"]
+    check_comparison(rp, data, "bilevel", "bilevel_replan", "`bilevel` (%)", "`bilevel_replan` (%)", "k")
+    for row in rp:
+        pairs = data.pairs("bilevel", "bilevel_replan", group_keep(row["k"], "k"))
+        close(row["gain (points)"], pct([b["success"] for _, b in pairs]) - pct([a["success"] for a, _ in pairs]), 1)
+        close(row["rounds (mean)"], np.mean([b["rounds"] for _, b in pairs]), 2)
+    assert rp[0]["paper w/o (%)"] == "82.0 ± 3.0" and rp[3]["paper w (%)"] == "72.0 ± 5.0"
+    (ref,) = s["9"]["tables"]
+    for row in ref:
+        rs = data.of(row["method"].strip("`"))
+        plans = [r for r in rs if r["refined"] is not None]
+        times = [t for r in rs for t in r["refine_time_s"]]
+        assert (int(row["rows"]), int(row["plans"]), int(row["actions refined"])) == (len(rs), len(plans), len(times))
+        close(row["refined (%)"], pct([r["refined"] for r in plans]), 1)
+        for stage in ("ik", "motion", "grasp"):
+            assert int(row[f"{stage} failures"]) == sum(1 for r in rs if (r["refine_failure"] or {}).get("stage") == stage)
+        close(row["refine time median (s)"], np.median(times), 3)
+        close(row["refine time p90 (s)"], np.percentile(times, 90), 3)
+        close(row["executed actions (mean)"], np.mean([r["executed_actions"] for r in plans]), 2)
+
+
+def test_figures_and_json(full_report):
+    out, data, s = full_report
+    for name in ("dual_model", "verifier_tau", "verifier_confusion", "success", "planning_time"):
+        png = out / "figures" / f"{name}.png"
+        assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 5000
+    numbers = json.loads((out / "report.json").read_text())
+    assert numbers["skipped"] == []
+    t2 = numbers["sections"]["table2"]["groups"]
+    assert [g["group"] for g in t2] == ["1", "2", "3", "4", "5", "all"]
+    assert t2[0]["p"] == "identical"
+    assert numbers["sections"]["verifier"]["confusion"]["all"]["tp"] == int(s["5"]["tables"][0][3]["TP"])
+
+
+def test_missing_sections_are_one_line_notes(tmp_path):
+    write_rows(tmp_path, make_rows(methods=("deterministic", "cfs"), per_cell=2))
+    md = write_report(tmp_path).read_text()
+    s = parse(md)
+    for key in ("2", "3", "4", "5", "7", "8"):
+        assert s[key]["tables"] == [] and len(s[key]["text"]) == 1, (key, s[key])
+    assert "ablation" in s["2"]["text"][0] and "symbolic_sigmoid" in s["3"]["text"][0]
+    assert "No meta.json" in md
+    assert {r["method"] for r in s["6"]["tables"][-1]} == {"`deterministic`", "`cfs`"}
+    skipped = json.loads((tmp_path / "report.json").read_text())["skipped"]
+    assert skipped == ["table1", "dual_model", "table2", "verifier", "table3", "replanning"]
+    assert (tmp_path / "figures" / "success.png").stat().st_size > 0
+
+
+def test_bad_rows_name_the_file_and_line(tmp_path):
+    with pytest.raises(ValueError, match="rows.jsonl"):
+        write_report(tmp_path)
+    rows = make_rows(methods=("cfs",), per_cell=1)
+    text = [json.dumps(r) for r in rows]
+    text[2] = text[2][:40]  # a truncated line
+    (tmp_path / "rows.jsonl").write_text("\n".join(text) + "\n")
+    with pytest.raises(ValueError, match=r"rows.jsonl, line 3: not valid JSON"):
+        write_report(tmp_path)
+    bad = dict(rows[1], outcome="exploded")
+    (tmp_path / "rows.jsonl").write_text("\n".join([text[0], json.dumps(bad)]) + "\n")
+    with pytest.raises(ValueError, match=r"line 2: field 'outcome'"):
+        write_report(tmp_path)
+    (tmp_path / "rows.jsonl").write_text("\n".join([text[0], text[0]]) + "\n")
+    with pytest.raises(ValueError, match=r"line 2: problem 'n2-k1-000' with method 'cfs' already on line 1"):
+        write_report(tmp_path)
+    assert not (tmp_path / "report.md").exists()

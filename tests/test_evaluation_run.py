@@ -1,0 +1,251 @@
+"""The evaluation runner: regenerable problem sets, result rows, resumption after kill -9, workers.
+
+Planning uses the stub models of planning_stubs (exact toy dynamics, hand-written symbols); the
+plans are refined and executed in the real (fast) Drake world. The CLI test uses small untrained
+networks saved as a models directory, so that `tamp evaluate` loads models as users' runs do.
+"""
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).parent))
+from planning_stubs import StubModel, two_block_domain  # noqa: E402
+
+from evaluation.problems import generate_problems, read_problems, write_problems  # noqa: E402
+from evaluation.run import OUTCOMES, ROW_KEYS, EvalConfig, evaluate, read_rows, strip_timings  # noqa: E402
+from tamp.models import Models  # noqa: E402
+from tamp.problem import Problem  # noqa: E402
+from tamp.verify import goal_error  # noqa: E402
+
+SET = dict(ns=(2,), ks=(1, 2, 3), per_cell=1, seed=0)
+METHODS = ("deterministic", "probabilistic", "cfs", "bilevel", "bilevel_replan")
+CONFIG = EvalConfig(search_max_expansions=300, progress=False)
+
+
+def stub_models() -> dict[str, Models]:
+    stub = StubModel()
+    models = Models(stub, stub, two_block_domain())
+    return {m: models for m in METHODS}
+
+
+@pytest.fixture(scope="module")
+def problems_file(tmp_path_factory) -> Path:
+    """Three random Drake problems (n = 2, k = 1, 2, 3) and one nothing can solve (a block in the air)."""
+    problems = generate_problems(**SET, progress=False)
+    X = problems[0].X_init
+    G = X.copy()
+    G[0, 2] = 0.3
+    problems.append(Problem(X, G, k=1, seed=3, name="n2-unreachable"))
+    return write_problems(tmp_path_factory.mktemp("problems") / "problems.jsonl", problems)
+
+
+@pytest.fixture(scope="module")
+def serial(problems_file, tmp_path_factory) -> Path:
+    """The rows of one worker."""
+    out = tmp_path_factory.mktemp("serial")
+    (out / "models").mkdir()
+    return evaluate(out / "models", problems_file, out / "results", config=CONFIG, models=stub_models())
+
+
+def _by_key(rows: list[dict]) -> dict:
+    return {(r["problem"], r["method"]): strip_timings(r) for r in rows}
+
+
+def test_problem_sets_are_regenerated_byte_for_byte(problems_file, tmp_path):
+    again = write_problems(tmp_path / "again.jsonl", generate_problems(**SET, progress=False))
+    first = problems_file.read_bytes().splitlines(keepends=True)[:3]
+    assert again.read_bytes() == b"".join(first)
+    problems = read_problems(again)
+    assert [p.name for p in problems] == ["n2-k1-000", "n2-k2-000", "n2-k3-000"]
+    for p in problems:  # the stored actions generated the goal, and they moved something
+        assert len(p.actions) == p.k and goal_error(p.X_init, p.X_goal) > 0.01
+    other = write_problems(tmp_path / "other.jsonl", generate_problems(ns=(2,), ks=(1,), per_cell=1, seed=1,
+                                                                       progress=False))
+    assert other.read_bytes() != first[0]
+
+
+@pytest.mark.parametrize("edit, message", [
+    (lambda lines: lines[:1] + ["{not json"] + lines[2:], "line 2: not valid JSON"),
+    (lambda lines: lines[:2] + [lines[2].replace('"X_goal"', '"X_gaol"')] + lines[3:], "line 3: missing field 'X_goal'"),
+    (lambda lines: lines[:1] + [lines[1].replace('"seed": ', '"seed": "x", "s": ')] + lines[2:],
+     "line 2: field 'seed' must be an integer"),
+    (lambda lines: lines + [lines[0]], "line 5: duplicate problem name 'n2-k1-000' (also on line 1)"),
+])
+def test_a_malformed_problem_set_names_the_line_and_field(problems_file, tmp_path, edit, message):
+    bad = tmp_path / "bad.jsonl"
+    bad.write_text("\n".join(edit(problems_file.read_text().splitlines())) + "\n")
+    with pytest.raises(ValueError) as info:
+        read_problems(bad)
+    assert str(bad) in str(info.value) and message in str(info.value)
+
+
+def test_rows_follow_the_schema_and_their_outcomes_agree(serial, problems_file):
+    rows = read_rows(serial)
+    problems = {p.name: p for p in read_problems(problems_file)}
+    assert sorted((r["problem"], r["method"]) for r in rows) == sorted((p, m) for p in problems for m in METHODS)
+    for r in rows:
+        assert tuple(r) == ROW_KEYS
+        p = problems[r["problem"]]
+        assert (r["n"], r["k"], r["fidelity"], r["eps_m"], r["tau_verify_m"]) == (p.n, p.k, "fast", 0.05, 0.07)
+        assert r["outcome"] in OUTCOMES
+        assert r["success"] == (r["outcome"] == "success")
+        assert r["success"] == (r["solved"] and r["refined"] is True and r["final_error_m"] < r["eps_m"])
+        assert (r["refine_failure"] is None) == (r["refined"] is not False)
+        assert r["planning_time_s"] > 0 and 0 <= r["level1_time_s"] <= r["planning_time_s"]
+        assert len(r["candidates"]) <= 20
+        assert (r["rounds"] is None) == (r["method"] != "bilevel_replan")
+        if not r["solved"]:
+            assert r["outcome"] == "no_plan" and r["plan"] is None and r["refined"] is None
+            assert r["executed_actions"] == 0 and r["predicted_error_m"] is None
+            assert r["final_error_m"] == pytest.approx(goal_error(p.X_init, p.X_goal), abs=1e-6)
+            continue
+        assert r["level"] in (1, 2) and r["predicted_error_m"] >= 0
+        assert r["executed_actions"] == len(r["refine_time_s"]) <= len(r["plan"])
+        if r["refine_failure"] is not None:
+            stage = r["refine_failure"]["stage"]
+            assert r["outcome"] == ("kinematic_failure" if stage == "ik" else "refinement_failure")
+            if r["method"] != "bilevel_replan":  # open loop: execution stops at the failing action
+                assert r["refine_failure"]["action"] == r["executed_actions"]
+        else:
+            assert r["outcome"] == ("success" if r["final_error_m"] < 0.05 else "wrong_plan")
+            if r["method"] != "bilevel_replan":
+                assert r["executed_actions"] == len(r["plan"])
+    outcomes = {r["outcome"] for r in rows}
+    assert {"success", "no_plan", "wrong_plan"} <= outcomes  # the set exercises the branches
+    assert all(not r["solved"] for r in rows if r["problem"] == "n2-unreachable" and r["method"] != "bilevel_replan")
+    assert [r["level"] for r in rows if r["method"] == "cfs" and r["solved"]] == [2] * sum(
+        r["solved"] for r in rows if r["method"] == "cfs")
+
+
+def test_an_evaluation_killed_midway_resumes_without_redoing_or_losing_rows(serial, problems_file, tmp_path):
+    (tmp_path / "models").mkdir()
+    out = tmp_path / "results"
+    script = (f"import sys; sys.path.insert(0, {str(Path(__file__).parent)!r})\n"
+              "from test_evaluation_run import CONFIG, stub_models\n"
+              "from evaluation.run import evaluate\n"
+              f"evaluate({str(tmp_path / 'models')!r}, {str(problems_file)!r}, {str(out)!r}, config=CONFIG, "
+              "models=stub_models())\n")
+    proc = subprocess.Popen([sys.executable, "-c", script], cwd=Path(__file__).parents[1])
+    rows_path = out / "rows.jsonl"
+    deadline = time.monotonic() + 120
+    while not (rows_path.exists() and rows_path.read_bytes().count(b"\n") >= 2):
+        assert proc.poll() is None and time.monotonic() < deadline, "the evaluation ended before any row"
+        time.sleep(0.01)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    before = rows_path.read_bytes()
+    complete = before[:before.rfind(b"\n") + 1]
+    n_before = complete.count(b"\n")
+    total = 4 * len(METHODS)
+    assert 2 <= n_before < total, "killed too late to test resumption"
+    with open(rows_path, "ab") as f:  # a kill in the middle of writing a row leaves half a line
+        f.write(complete.splitlines(keepends=True)[0][:40])
+    evaluate(tmp_path / "models", problems_file, out, config=CONFIG, models=stub_models())
+    after = rows_path.read_bytes()
+    assert after.startswith(complete)  # the finished rows are untouched
+    rows = read_rows(rows_path)
+    keys = [(r["problem"], r["method"]) for r in rows]
+    assert len(keys) == len(set(keys)) == total
+    assert _by_key(rows) == _by_key(read_rows(serial))
+    # running again computes nothing
+    evaluate(tmp_path / "models", problems_file, out, config=CONFIG, models=stub_models())
+    assert rows_path.read_bytes() == after
+
+
+def test_two_workers_give_the_same_rows_as_one(serial, problems_file, tmp_path):
+    (tmp_path / "models").mkdir()
+    rows = read_rows(evaluate(tmp_path / "models", problems_file, tmp_path / "results",
+                              config=EvalConfig(search_max_expansions=300, progress=False, workers=2),
+                              models=stub_models()))
+    assert _by_key(rows) == _by_key(read_rows(serial))
+
+
+def test_a_results_directory_refuses_other_inputs(serial, problems_file, tmp_path):
+    other = tmp_path / "other.jsonl"
+    write_problems(other, read_problems(problems_file)[:2])
+    with pytest.raises(ValueError, match="another problem set"):
+        evaluate(serial.parents[1] / "models", other, serial.parent, config=CONFIG, models=stub_models())
+    (tmp_path / "models").mkdir()
+    with pytest.raises(ValueError, match="another models directory"):
+        evaluate(tmp_path / "models", problems_file, serial.parent, config=CONFIG, models=stub_models())
+    with pytest.raises(ValueError, match="another evaluation settings"):
+        evaluate(serial.parents[1] / "models", problems_file, serial.parent, models=stub_models(),
+                 config=EvalConfig(search_max_expansions=300, progress=False, fidelity="full"))
+
+
+# --------------------------------------------------------------------------- the CLI, real model files
+
+@pytest.fixture(scope="module")
+def models_dir(tmp_path_factory) -> Path:
+    """Untrained (seeded) networks, a domain learned from their symbols, and the optional variants."""
+    torch = pytest.importorskip("torch")
+    from learned import EffectModel, ModelConfig, save_checkpoint
+    from learned.synthetic import generate
+    from symbolic import build_domain
+
+    out = tmp_path_factory.mktemp("models")
+    torch.manual_seed(0)
+    data = generate(300, seed=0, n_choices=(2,))
+    for prefix, symbolic_activation in (("", "gumbel_sigmoid"), ("variants/", "sigmoid")):
+        (out / prefix).mkdir(exist_ok=True)
+        save_checkpoint(out / prefix / ("dynamics.pt" if not prefix else "dynamics_gumbel.pt"),
+                        EffectModel(ModelConfig(d_z=2, heads=1, activation="sigmoid" if not prefix else "gumbel_sigmoid")))
+        sym = EffectModel(ModelConfig(d_z=2, heads=1, activation=symbolic_activation)).eval()
+        save_checkpoint(out / prefix / ("symbolic.pt" if not prefix else "symbolic_sigmoid.pt"), sym)
+        u0, r0 = sym.symbols_batch(data.X, data.mask)
+        u1, r1 = sym.symbols_batch(data.X_next, data.mask)
+        build_domain(u0, r0, data.action, u1, r1, data.n, out / prefix / ("domain" if not prefix else "domain_sigmoid"),
+                     holdout=0.0)
+    return out
+
+
+def test_cli_evaluates_with_model_files_and_keeps_the_rows_when_the_report_fails(models_dir, tmp_path, capsys,
+                                                                               monkeypatch):
+    from evaluation import cli
+    from evaluation.methods import default_methods
+    from tamp.cli import main
+
+    assert default_methods(models_dir) == list(METHODS) + ["symbolic_sigmoid", "cfs_gumbel"]
+    problems = tmp_path / "p.jsonl"
+    assert main(["problems", "--out", str(problems), "--objects", "2", "--actions", "1", "--per-cell", "1",
+                 "--quiet"]) == 0
+    assert [p.name for p in read_problems(problems)] == ["n2-k1-000"]
+
+    def broken_report(directory, ablation=None):
+        raise RuntimeError("the report module broke")
+
+    monkeypatch.setattr(cli, "_write_report", broken_report)
+    out = tmp_path / "results"
+    capsys.readouterr()
+    assert main(["evaluate", "--models", str(models_dir), "--problems", str(problems), "--out", str(out),
+                 "--methods", "cfs_gumbel,symbolic_sigmoid,cfs", "--max-expansions", "50", "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert "warning: no report" in err and "the report module broke" in err and "Traceback" not in err
+    rows = read_rows(out / "rows.jsonl")
+    assert [r["method"] for r in rows] == ["cfs", "symbolic_sigmoid", "cfs_gumbel"]  # the report order
+    assert all(tuple(r) == ROW_KEYS for r in rows)
+    meta = json.loads((out / "meta.json").read_text())
+    assert meta["models_dir"] == str(models_dir.resolve()) and "variants/dynamics_gumbel.pt" in meta["model_files"]
+
+
+def test_cli_names_a_missing_variant_and_a_bad_method(problems_file, tmp_path, capsys):
+    from tamp.cli import main
+
+    models = tmp_path / "models"
+    models.mkdir()
+    (models / "dynamics.pt").write_bytes(b"")
+    problems = problems_file
+    for methods, message in (("cfs_gumbel", f"{models / 'variants' / 'dynamics_gumbel.pt'}"),
+                             ("bilevel,nope", "unknown method 'nope'")):
+        assert main(["evaluate", "--models", str(models), "--problems", str(problems), "--out",
+                     str(tmp_path / "out"), "--methods", methods]) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.count("\n") == 0 and message in err
