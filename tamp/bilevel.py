@@ -42,7 +42,8 @@ class PlanConfig:
     symbolic_time_limit: float = 10.0  # seconds per symbolic planner call
     level1_time_budget: float | None = 0.5  # seconds for all N symbolic planner calls of one problem
     verify_all: bool = False  # verify every candidate (default: stop at the first verified one, Alg. 1)
-    # Beyond the paper (0 and False give its Algorithm 1 exactly):
+    # Beyond the paper, bilevel only (0 and False give its Algorithm 1 exactly; the unverified
+    # baselines never use them: without verification they would pick among look-alike plans blindly):
     alternatives: int = 64  # per symbolic plan, plans through the same symbolic states, verified after it
     alternatives_total: int = 256  # per problem; later symbolic plans are verified alone
     nonempty: bool = True  # X_init not within tau of X_goal: the symbolic plan needs >= 1 action
@@ -223,7 +224,8 @@ def plan_bilevel(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig())
 def _symbolic_only(method: str, probabilistic: bool):
     def run(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig()) -> PlanResult:
         def body(result: PlanResult) -> PlanResult:
-            result.candidates = _level1_plans(models, X_init, X_goal, cfg, result, probabilistic)
+            result.candidates = _level1_plans(models, X_init, X_goal, replace(cfg, nonempty=False), result,
+                                          probabilistic)
             if not result.candidates:
                 return result
             t = time.perf_counter()

@@ -1,0 +1,676 @@
+"""The evaluation report: the paper's tables and figures next to ours, from OUT/rows.jsonl.
+
+    write_report(Path("OUT"))   # -> OUT/report.md, OUT/report.json, OUT/figures/*.png
+
+One row per (problem, method) (see `load_rows` for the fields used). Every table compares methods
+on the problems both were run on (paired by problem name), so that the paired t-tests
+(`scipy.stats.ttest_rel` on per-problem 0/1 success, or planning times) and the rates describe the
+same problems. Success is a percentage of problems with one decimal, times are seconds with three
+decimals; the paper's numbers (`evaluation.paper`) are quoted as printed. A section whose rows or
+files are absent says so in one line.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Iterable, Sequence
+
+from . import paper, plots
+from .stats import IDENTICAL, confusion, mean_std, median, paired_ttest, percentile, rate_pct
+
+METHOD_ORDER = ("deterministic", "probabilistic", "cfs", "bilevel", "bilevel_replan", "symbolic_sigmoid",
+                "cfs_gumbel")
+METHOD_INFO = {
+    "deterministic": "deterministic symbolic planner, Gumbel-Sigmoid Symbolic Model (baseline)",
+    "probabilistic": "probabilistic symbolic planner, top plan of N sampled domains, unverified",
+    "cfs": "continuous forward search, Sigmoid Dynamics Model",
+    "bilevel": "Algorithm 1: verified probabilistic plan (Level 1), else continuous search (Level 2)",
+    "bilevel_replan": "bilevel in closed loop, up to k - 1 replanning rounds",
+    "symbolic_sigmoid": "deterministic symbolic planner, Sigmoid Symbolic Model and its domain (Fig. 4)",
+    "cfs_gumbel": "continuous forward search, Gumbel-Sigmoid Dynamics Model (Fig. 4)",
+}
+OUTCOMES = ("success", "no_plan", "kinematic_failure", "refinement_failure", "wrong_plan")
+STAGES = ("ik", "motion", "grasp")
+TAUS_CM = tuple(range(1, 16))  # the verifier sweep (the paper's Fig. 6)
+DASH = "—"
+
+
+# --- formatting ----------------------------------------------------------------------------------
+def fmt_pct(x: float | None) -> str:
+    return DASH if x is None else f"{x:.1f}"
+
+
+def fmt_s(x: float | None) -> str:
+    return DASH if x is None else f"{x:.3f}"
+
+
+def fmt_pm(pair: tuple[float | None, float | None], digits: int = 3) -> str:
+    m, s = pair
+    return DASH if m is None else f"{m:.{digits}f} ± {s:.{digits}f}"
+
+
+def fmt_ratio(x: float | None, digits: int = 2) -> str:
+    return DASH if x is None else f"{x:.{digits}f}"
+
+
+def fmt_p(p: float | str | None) -> str:
+    """'identical', '—' (fewer than two pairs), '< 0.0001', else four decimals."""
+    if p is None:
+        return DASH
+    if p == IDENTICAL:
+        return IDENTICAL
+    return "< 0.0001" if p < paper.P_BELOW else f"{p:.4f}"
+
+
+def fmt_paper_p(p: float) -> str:
+    """A p-value of the paper as printed: '< 0.0001' for `paper.P_BELOW`, else two decimals."""
+    return "< 0.0001" if p <= paper.P_BELOW else f"{p:.2f}"
+
+
+def md_table(header: Sequence[str], rows: Iterable[Sequence[str]]) -> list[str]:
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    lines += ["| " + " | ".join(str(c) for c in r) + " |" for r in rows]
+    return lines + [""]
+
+
+def _paper_pm(pair: tuple[float, float], digits: int = 2, scale: float = 1.0) -> str:
+    return f"{pair[0] * scale:.{digits}f} ± {pair[1] * scale:.{digits}f}"
+
+
+# --- the rows ------------------------------------------------------------------------------------
+_NUMBER = (int, float)
+
+
+def _check(path: Path, line: int, row: dict, name: str, types: tuple, nullable: bool, what: str) -> None:
+    value = row.get(name)
+    if name not in row and not nullable:
+        raise ValueError(f"{path}, line {line}: missing field {name!r}")
+    if value is None and nullable:
+        return
+    if (isinstance(value, bool) and bool not in types) or not isinstance(value, types):
+        raise ValueError(f"{path}, line {line}: field {name!r} must be {what}, got {value!r}")
+
+
+def load_rows(path: Path) -> list[dict]:
+    """The result rows of `path` (JSONL); a ValueError names the file and line of any malformed row.
+
+    Fields used: problem, n, k, method, solved, success, outcome, planning_time_s (required);
+    level, predicted_error_m, refined, refine_failure, refine_time_s, executed_actions, rounds,
+    eps_m, tau_verify_m, fidelity (may be null or absent). A last line cut short by an interrupted
+    evaluation (no newline, not JSON) is left out, as the runner does when it resumes.
+    """
+    return _read_rows(Path(path))[0]
+
+
+def _read_rows(path: Path) -> tuple[list[dict], int | None]:
+    """(rows, number of an incomplete last line that was left out, or None)."""
+    if not path.is_file():
+        raise ValueError(f"{path}: no rows file (expected the JSONL written by `tamp evaluate`)")
+    rows, seen, cells, dropped = [], {}, {}, None
+    try:
+        lines = path.read_text().split("\n")
+    except UnicodeDecodeError as error:
+        raise ValueError(f"{path}: not a text file ({error.reason} at byte {error.start})") from None
+    for i, text in enumerate(lines, start=1):
+        if not text.strip():
+            continue
+        try:
+            row = json.loads(text)
+        except json.JSONDecodeError as error:
+            if i == len(lines):  # no newline after it: an append cut short
+                dropped = i
+                break
+            raise ValueError(f"{path}, line {i}: not valid JSON ({error.msg})") from None
+        if not isinstance(row, dict):
+            raise ValueError(f"{path}, line {i}: expected a JSON object, got {type(row).__name__}")
+        _check_row(path, i, row)
+        key = (row["problem"], row["method"])
+        if key in seen:
+            raise ValueError(f"{path}, line {i}: problem {key[0]!r} with method {key[1]!r} already on "
+                             f"line {seen[key]}")
+        seen[key] = i
+        cell = cells.setdefault(row["problem"], (row["n"], row["k"], i))
+        if cell[:2] != (row["n"], row["k"]):
+            raise ValueError(f"{path}, line {i}: problem {row['problem']!r} has n={row['n']}, k={row['k']} "
+                             f"but n={cell[0]}, k={cell[1]} on line {cell[2]}")
+        rows.append(row)
+    if not rows:
+        raise ValueError(f"{path}: no rows")
+    return rows, dropped
+
+
+def _check_row(path: Path, i: int, row: dict) -> None:
+    for name, types, what in (("problem", (str,), "a string"), ("method", (str,), "a string"),
+                              ("n", (int,), "an integer"), ("k", (int,), "an integer"),
+                              ("solved", (bool,), "true or false"), ("success", (bool,), "true or false"),
+                              ("outcome", (str,), "a string"), ("planning_time_s", _NUMBER, "a number")):
+        _check(path, i, row, name, types, False, what)
+    for name in ("level", "predicted_error_m", "executed_actions", "rounds", "eps_m", "tau_verify_m",
+                 "level1_time_s", "final_error_m"):
+        _check(path, i, row, name, _NUMBER, True, "a number or null")
+    _check(path, i, row, "refined", (bool,), True, "true, false or null")
+    _check(path, i, row, "refine_failure", (dict,), True, "an object or null")
+    _check(path, i, row, "refine_time_s", (list,), True, "a list of seconds or null")
+    if row["outcome"] not in OUTCOMES:
+        raise ValueError(f"{path}, line {i}: field 'outcome' must be one of {', '.join(OUTCOMES)}, "
+                         f"got {row['outcome']!r}")
+    if isinstance(row.get("refine_failure"), dict) and row["refine_failure"].get("stage") not in STAGES:
+        raise ValueError(f"{path}, line {i}: field 'refine_failure.stage' must be one of "
+                         f"{', '.join(STAGES)}, got {row['refine_failure'].get('stage')!r}")
+    if not all(isinstance(t, _NUMBER) and not isinstance(t, bool) for t in row.get("refine_time_s") or []):
+        raise ValueError(f"{path}, line {i}: field 'refine_time_s' must be a list of seconds")
+
+
+def _read_json(path: Path, what: str) -> dict:
+    try:
+        data = json.loads(path.read_text())
+    except json.JSONDecodeError as error:
+        raise ValueError(f"{path}: not valid JSON ({error.msg}, line {error.lineno}); expected {what}") from None
+    if not isinstance(data, dict):
+        raise ValueError(f"{path}: expected a JSON object ({what})")
+    return data
+
+
+def load_ablation(path: Path) -> dict:
+    """The JSON of `tamp ablate-activations` (`learned.ablation`); a ValueError names the file and field."""
+    data = _read_json(path, "the output of `tamp ablate-activations`")
+    acts = data.get("activations")
+    if not isinstance(acts, dict) or not acts:
+        raise ValueError(f"{path}: field 'activations' must be an object of activation -> results")
+    for name, r in acts.items():
+        for f in ("mean_cm", "std_cm"):
+            if not isinstance(r, dict) or not isinstance(r.get(f), _NUMBER):
+                raise ValueError(f"{path}: field 'activations.{name}.{f}' must be a number")
+    return data
+
+
+@dataclass
+class Results:
+    """The rows, indexed by method and problem."""
+
+    rows: list[dict]
+    meta: dict | None = None
+    notes: list[str] = field(default_factory=list)  # said under Setup (e.g. an incomplete last line)
+    by_method: dict[str, dict[str, dict]] = field(init=False)
+    cells: dict[str, tuple[int, int]] = field(init=False)  # problem -> (n, k)
+
+    def __post_init__(self) -> None:
+        self.by_method, self.cells = {}, {}
+        for r in self.rows:
+            self.by_method.setdefault(r["method"], {})[r["problem"]] = r
+            self.cells[r["problem"]] = (r["n"], r["k"])
+
+    @property
+    def methods(self) -> list[str]:
+        return [m for m in METHOD_ORDER if m in self.by_method] + sorted(set(self.by_method) - set(METHOD_ORDER))
+
+    @property
+    def ns(self) -> list[int]:
+        return sorted({n for n, _ in self.cells.values()})
+
+    @property
+    def ks(self) -> list[int]:
+        return sorted({k for _, k in self.cells.values()})
+
+    def has(self, *methods: str) -> bool:
+        return all(m in self.by_method for m in methods)
+
+    def common(self, name: str, default: Any = None) -> Any:
+        """The most frequent non-null value of a field over the rows."""
+        values = Counter(r.get(name) for r in self.rows if r.get(name) is not None)
+        return values.most_common(1)[0][0] if values else default
+
+    def paired(self, a: str, b: str, keep: Callable[[int, int], bool] = lambda n, k: True
+               ) -> list[tuple[dict, dict]]:
+        """(row of a, row of b) for every problem both methods were run on, by problem name."""
+        ra, rb = self.by_method.get(a, {}), self.by_method.get(b, {})
+        return [(ra[p], rb[p]) for p in sorted(set(ra) & set(rb)) if keep(*self.cells[p])]
+
+    def select(self, method: str, keep: Callable[[int, int], bool] = lambda n, k: True) -> list[dict]:
+        rows = self.by_method.get(method, {})
+        return [rows[p] for p in sorted(rows) if keep(*self.cells[p])]
+
+
+def _by_n(res: Results) -> list[tuple[str, Callable[[int, int], bool]]]:
+    return [(str(n), lambda n_, k_, n=n: n_ == n) for n in res.ns] + [("all", lambda n, k: True)]
+
+
+def _by_k(res: Results, ks: Sequence[int] | None = None, all_label: str = "all"
+          ) -> list[tuple[str, Callable[[int, int], bool]]]:
+    ks = res.ks if ks is None else ks
+    return [(str(k), lambda n_, k_, k=k: k_ == k) for k in ks] + \
+        [(all_label, lambda n_, k_, ks=tuple(ks): k_ in ks)]
+
+
+def compare_success(res: Results, a: str, b: str, groups) -> list[dict]:
+    """Per group: paired problems, success (%) of a and b on them, paired t-test p on 0/1 success."""
+    out = []
+    for label, keep in groups:
+        pairs = res.paired(a, b, keep)
+        sa = [ra["success"] for ra, _ in pairs]
+        sb = [rb["success"] for _, rb in pairs]
+        out.append({"group": label, "problems": len(pairs), a: rate_pct(sa), b: rate_pct(sb),
+                    "p": paired_ttest(sa, sb)})
+    return out
+
+
+# --- the sections --------------------------------------------------------------------------------
+@dataclass
+class Section:
+    key: str
+    title: str
+    lines: list[str]
+    data: dict | None  # None: skipped (the one line in `lines` says why)
+
+
+def _skipped(key: str, title: str, why: str) -> Section:
+    return Section(key, title, [why, ""], None)
+
+
+def _flatten(d: dict, prefix: str = "") -> list[tuple[str, Any]]:
+    out = []
+    for k, v in d.items():
+        if isinstance(v, dict):
+            out += _flatten(v, f"{prefix}{k}.")
+        elif not isinstance(v, list):
+            out.append((f"{prefix}{k}", v))
+    return out
+
+
+def _short(value: Any) -> str:
+    """A meta.json value for a table cell; sha256 digests shortened to 12 characters."""
+    text = str(value)
+    return text[:12] + "…" if len(text) == 64 and all(c in "0123456789abcdef" for c in text) else text
+
+
+def section_setup(res: Results, figures: Path) -> Section:
+    eps, tau = res.common("eps_m"), res.common("tau_verify_m")
+    distinct = {f: sorted({str(r.get(f)) for r in res.rows if r.get(f) is not None})
+                for f in ("fidelity", "eps_m", "tau_verify_m")}
+    items = [("rows", str(len(res.rows))), ("problems", str(len(res.cells))),
+             ("methods", ", ".join(res.methods)), ("fidelity", ", ".join(distinct["fidelity"]) or DASH),
+             ("eps (cm)", ", ".join(f"{float(e) * 100:g}" for e in distinct["eps_m"]) or DASH),
+             ("tau_verify (cm)", ", ".join(f"{float(t) * 100:g}" for t in distinct["tau_verify_m"]) or DASH)]
+    items += [(f"meta: {k}", _short(v)) for k, v in _flatten(res.meta or {})]
+    lines = md_table(["item", "value"], items) + [note for n in res.notes for note in (n, "")]
+    if res.meta is None:
+        lines += ["No meta.json beside the rows: models and configuration unknown.", ""]
+    counts = Counter(res.cells.values())
+    grid = [[str(n)] + [str(counts.get((n, k), 0)) for k in res.ks] + [str(sum(counts.get((n, k), 0) for k in res.ks))]
+            for n in res.ns]
+    grid.append(["all"] + [str(sum(counts.get((n, k), 0) for n in res.ns)) for k in res.ks] + [str(len(res.cells))])
+    lines += ["Problems per (n, k):", ""] + md_table(["n"] + [f"k={k}" for k in res.ks] + ["all"], grid)
+    per_method = [[f"`{m}`", str(len(res.by_method[m])), METHOD_INFO.get(m, "")] for m in res.methods]
+    lines += md_table(["method", "rows", "what"], per_method)
+    data = {"rows": len(res.rows), "notes": res.notes, "problems": len(res.cells), "methods": res.methods,
+            "distinct": distinct, "eps_m": eps, "tau_verify_m": tau, "meta": res.meta,
+            "problems_per_cell": {f"{n},{k}": c for (n, k), c in sorted(counts.items())},
+            "rows_per_method": {m: len(res.by_method[m]) for m in res.methods}}
+    return Section("setup", "1. Setup", lines, data)
+
+
+def section_table1(ablation: dict | None, source: Path) -> Section:
+    title = "2. Table I: effect prediction error per bottleneck activation"
+    if ablation is None:
+        return _skipped("table1", title, f"No ablation results ({source} not found; run `tamp "
+                                          "ablate-activations`): Table I is not reproduced here.")
+    acts = ablation["activations"]
+    order = [a for a in paper.TABLE1_ERROR_CM if a in acts] + [a for a in acts if a not in paper.TABLE1_ERROR_CM]
+    rows, data = [], {}
+    for a in order:
+        ours = (acts[a]["mean_cm"], acts[a]["std_cm"])
+        p = paper.TABLE1_ERROR_CM.get(a)
+        rows.append([acts[a].get("label", a), fmt_pm(ours, 2), _paper_pm(p) if p else DASH])
+        data[a] = {"ours_cm": {"mean": ours[0], "std": ours[1]},
+                   "paper_cm": None if p is None else {"mean": p[0], "std": p[1]}}
+    lines = md_table(["activation", "ours (cm)", "paper (cm)"], rows)
+    lines += [f"Ours: mean ± sample std over {ablation.get('runs', '?')} run(s) of {ablation.get('epochs', '?')} "
+              f"epochs, {ablation.get('num_test', '?')} held-out test transitions ({source}). Paper: ten runs.", ""]
+    return Section("table1", title, lines, {"activations": data, "runs": ablation.get("runs"),
+                                            "epochs": ablation.get("epochs"), "num_test": ablation.get("num_test")})
+
+
+def section_dual_model(res: Results, figures: Path) -> Section:
+    title = "3. Fig. 4: dual-model validation"
+    comparisons = (("symbolic", "Symbolic Model in symbolic planning", "deterministic", "symbolic_sigmoid",
+                    "Gumbel-Sigmoid", "Sigmoid", paper.FIG4_SYMBOLIC_BETTER),
+                   ("search", "Dynamics Model in continuous forward search", "cfs", "cfs_gumbel",
+                    "Sigmoid", "Gumbel-Sigmoid", paper.FIG4_SEARCH_BETTER))
+    lines, data, series = [], {}, {}
+    for key, what, a, b, la, lb, better in comparisons:
+        if not res.has(a, b):
+            missing = ", ".join(f"`{m}`" for m in (a, b) if not res.has(m))
+            lines += [f"{what}: no {missing} rows, comparison skipped.", ""]
+            continue
+        table = compare_success(res, a, b, _by_n(res))
+        lines += [f"{what} (success %, problems both were run on):", ""]
+        rows = [[t["group"], str(t["problems"]), fmt_pct(t[a]), fmt_pct(t[b]), fmt_p(t["p"])] for t in table]
+        worse = b if better == a else a
+        rows.append(["paper", DASH, "higher" if better == a else "lower", "higher" if better == b else "lower",
+                     fmt_paper_p(paper.FIG4_P)])
+        lines += md_table(["n", "problems", f"{la} `{a}` (%)", f"{lb} `{b}` (%)", "p"], rows)
+        data[key] = {"methods": [a, b], "paper_better": better, "paper_worse": worse, "paper_p_below": paper.FIG4_P,
+                     "groups": table}
+        series[f"{la} ({a})"] = [t[a] for t in table]
+        series[f"{lb} ({b})"] = [t[b] for t in table]
+    if not data:
+        return _skipped("dual_model", title, "No `symbolic_sigmoid` or `cfs_gumbel` rows (the models directory has "
+                                             "no variants/): the dual-model comparison is skipped.")
+    png = plots.grouped_bars(figures / "dual_model.png", "Fig. 4: success by bottleneck activation",
+                             [f"n={g}" if g != "all" else "all" for g in [str(n) for n in res.ns] + ["all"]], series)
+    lines += ["The paper gives Fig. 4 as bars without numbers: only the ordering and p are compared.", "",
+              f"![Fig. 4]({png.parent.name}/{png.name})", ""]
+    return Section("dual_model", title, lines, data)
+
+
+def section_table2(res: Results, figures: Path) -> Section:
+    title = "4. Table II: deterministic vs probabilistic symbolic planning"
+    if not res.has("deterministic", "probabilistic"):
+        return _skipped("table2", title, "No `deterministic` and `probabilistic` rows together: Table II skipped.")
+    table = compare_success(res, "deterministic", "probabilistic", _by_k(res))
+    rows = []
+    for t in table:
+        pk = paper.TABLE2_SUCCESS_PCT.get(int(t["group"])) if t["group"] != "all" else None
+        rows.append([t["group"], str(t["problems"]), fmt_pct(t["deterministic"]),
+                     _paper_pm(pk["deterministic"]) if pk else DASH, fmt_pct(t["probabilistic"]),
+                     _paper_pm(pk["probabilistic"]) if pk else DASH, fmt_p(t["p"]),
+                     fmt_paper_p(paper.TABLE2_P) if t["group"] == "all" else DASH])
+    lines = md_table(["k", "problems", "deterministic (%)", "paper deterministic (%)", "probabilistic (%)",
+                      "paper probabilistic (%)", "p", "paper p"], rows)
+    lines += ["Ours: one run, all n pooled (problems both were run on). Paper: mean ± std over ten runs, "
+              "averaged over n.", ""]
+    return Section("table2", title, lines, {"groups": table, "paper": paper.TABLE2_SUCCESS_PCT})
+
+
+def _verifier_rows(res: Results) -> tuple[list[dict], int]:
+    rows = res.select("probabilistic")
+    planned = [r for r in rows if r["solved"] and r.get("predicted_error_m") is not None]
+    return planned, len(rows) - len(planned)
+
+
+def section_verifier(res: Results, figures: Path) -> Section:
+    title = "5. The verifier (Figs. 6 and 7)"
+    if not res.has("probabilistic"):
+        return _skipped("verifier", title, "No `probabilistic` rows: the verifier is not evaluated.")
+    planned, left_out = _verifier_rows(res)
+    tau = res.common("tau_verify_m", paper.VERIFIER_TAU_M)
+    groups = [(str(n), [r for r in planned if r["n"] == n]) for n in res.ns] + [("all", planned)]
+    conf = {g: confusion([r["predicted_error_m"] for r in rs], [r["success"] for r in rs], tau) for g, rs in groups}
+    rows = [[g, str(c.total), str(c.tp), str(c.fp), str(c.tn), str(c.fn), fmt_pct(c.verified_success_pct),
+             fmt_pct(c.unverified_failure_pct), fmt_ratio(c.accuracy), fmt_ratio(c.f1)] for g, c in conf.items()]
+    pv = paper.VERIFIER
+    rows.append(["paper", DASH, DASH, DASH, DASH, DASH, fmt_pct(pv["verified_success_pct"]),
+                 fmt_pct(pv["unverified_failure_pct"]), fmt_ratio(pv["accuracy"]), fmt_ratio(pv["f1"])])
+    lines = [f"The top plan of every `probabilistic` row, executed whatever its verification: verified iff its "
+             f"predicted error < tau_verify = {tau * 100:g} cm; {len(planned)} plans, {left_out} rows without a "
+             f"plan left out.", ""]
+    lines += md_table(["n", "plans", "TP", "FP", "TN", "FN", "verified: success (%)", "unverified: failure (%)",
+                       "accuracy", "F1"], rows)
+    lines += ["TP verified and succeeded, FP verified and failed, TN unverified and failed, FN unverified and "
+              "succeeded. Ours pooled over k; the paper's accuracy and F1 are means over its test scenarios.", ""]
+    sweep = {g: {"accuracy": [], "f1": []} for g, _ in groups}
+    for tau_cm in TAUS_CM:
+        for g, rs in groups:
+            c = confusion([r["predicted_error_m"] for r in rs], [r["success"] for r in rs], tau_cm / 100)
+            sweep[g]["accuracy"].append(c.accuracy)
+            sweep[g]["f1"].append(c.f1)
+    header = ["tau (cm)"] + [f"{'n=' + g if g != 'all' else 'all'} {m}" for g, _ in groups for m in ("accuracy", "F1")]
+    grid = [[str(t)] + [fmt_ratio(sweep[g][m][i]) for g, _ in groups for m in ("accuracy", "f1")]
+            for i, t in enumerate(TAUS_CM)]
+    lines += ["Accuracy and F1 against tau_verify (the paper's Fig. 6):", ""] + md_table(header, grid)
+    labels = [f"n={g}" if g != "all" else "all" for g, _ in groups]
+    f1 = plots.verifier_sweep(figures / "verifier_tau.png", TAUS_CM,
+                              {lab: sweep[g] for lab, (g, _) in zip(labels, groups)}, tau * 100)
+    f2 = plots.confusion_bars(figures / "verifier_confusion.png", labels, list(conf.values()), tau * 100)
+    lines += [f"![Fig. 6]({f1.parent.name}/{f1.name}) ![Fig. 7]({f2.parent.name}/{f2.name})", ""]
+    data = {"tau_m": tau, "plans": len(planned), "left_out_no_plan": left_out,
+            "confusion": {g: c.to_dict() for g, c in conf.items()}, "paper": pv,
+            "sweep": {"tau_cm": list(TAUS_CM), "groups": sweep}}
+    return Section("verifier", title, lines, data)
+
+
+def section_success(res: Results, figures: Path) -> Section:
+    title = "6. Success per (n, k) (Fig. 5) and failure breakdown"
+    methods = res.methods
+    split = "bilevel" in res.by_method
+    cells = [(str(n), str(k), lambda n_, k_, n=n, k=k: (n_, k_) == (n, k)) for n in res.ns for k in res.ks]
+    cells += [(str(n), "all", lambda n_, k_, n=n: n_ == n) for n in res.ns] + [("all", "all", lambda n, k: True)]
+    header = ["n", "k", "problems"] + [f"`{m}` (%)" for m in methods]
+    if split:
+        header += ["`bilevel` Level 1 (%)", "`bilevel` Level 2 (%)"]
+    rows, data = [], []
+    for n, k, keep in cells:
+        entry = {"n": n, "k": k, "problems": sum(1 for c in res.cells.values() if keep(*c)), "success_pct": {}}
+        for m in methods:
+            entry["success_pct"][m] = rate_pct([r["success"] for r in res.select(m, keep)])
+        if split:
+            b = res.select("bilevel", keep)
+            entry["bilevel_level_pct"] = {lvl: rate_pct([r["success"] and r.get("level") == lvl for r in b])
+                                          for lvl in (1, 2)}
+        rows.append([n, k, str(entry["problems"])] + [fmt_pct(entry["success_pct"][m]) for m in methods] +
+                    ([fmt_pct(entry["bilevel_level_pct"][1]), fmt_pct(entry["bilevel_level_pct"][2])] if split else []))
+        data.append(entry)
+    lines = ["Success (%) of each method over its rows in the cell; the `bilevel` split counts successes whose "
+             "plan came from Level 1 (verified symbolic plan) or Level 2 (continuous search).", ""]
+    lines += md_table(header, rows)
+    lines += ["The paper gives Fig. 5 as bars without numbers, so no cell can be compared; it reports continuous "
+              "forward search above both symbolic planners in every condition.", ""]
+    out: dict[str, Any] = {"cells": data}
+    if res.has("bilevel", "cfs"):
+        table = compare_success(res, "bilevel", "cfs", _by_n(res))
+        lines += ["Bilevel vs continuous forward search (problems both were run on):", ""]
+        lines += md_table(["n", "problems", "`bilevel` (%)", "`cfs` (%)", "p", "paper p"],
+                          [[t["group"], str(t["problems"]), fmt_pct(t["bilevel"]), fmt_pct(t["cfs"]), fmt_p(t["p"]),
+                            fmt_paper_p(paper.BILEVEL_VS_CFS_P) if t["group"] == "all" else DASH] for t in table])
+        out["bilevel_vs_cfs"] = {"groups": table, "paper_p": paper.BILEVEL_VS_CFS_P}
+    else:
+        lines += ["No `bilevel` and `cfs` rows together: no bilevel vs continuous search test.", ""]
+    breakdown = {}
+    brows = []
+    for m in methods:
+        rs = res.select(m)
+        breakdown[m] = {"rows": len(rs), **{o: rate_pct([r["outcome"] == o for r in rs]) for o in OUTCOMES}}
+        brows.append([f"`{m}`", str(len(rs))] + [fmt_pct(breakdown[m][o]) for o in OUTCOMES])
+    lines += ["Outcomes per method (% of its rows): no_plan (planner failed), kinematic_failure (an IK stage of "
+              "refinement failed), refinement_failure (motion or grasp), wrong_plan (executed, final error >= eps):",
+              ""]
+    lines += md_table(["method", "rows"] + [f"{o} (%)" for o in OUTCOMES], brows)
+    out["outcomes"] = breakdown
+    ns, ks = res.ns, res.ks
+    per_cell = {m: {(int(e["n"]), int(e["k"])): e["success_pct"][m] for e in data if "all" not in (e["n"], e["k"])}
+                for m in methods}
+    levels = {(int(e["n"]), int(e["k"])): (e["bilevel_level_pct"][1], e["bilevel_level_pct"][2])
+              for e in data if "all" not in (e["n"], e["k"])} if split else None
+    png = plots.success_by_nk(figures / "success.png", ns, ks, per_cell, levels)
+    lines += [f"![Fig. 5]({png.parent.name}/{png.name})", ""]
+    return Section("success", title, lines, out)
+
+
+def _times(pairs: list[tuple[dict, dict]]) -> tuple[list[float], list[float]]:
+    return [a["planning_time_s"] for a, _ in pairs], [b["planning_time_s"] for _, b in pairs]
+
+
+def section_table3(res: Results, figures: Path) -> Section:
+    title = "7. Table III: planning time, bilevel vs continuous forward search"
+    if not res.has("bilevel", "cfs"):
+        return _skipped("table3", title, "No `bilevel` and `cfs` rows together: Table III skipped.")
+    rows, groups = [], []
+    for label, keep in _by_n(res):
+        pairs = res.paired("bilevel", "cfs", keep)
+        tb, tc = _times(pairs)
+        mb, mc = mean_std(tb), mean_std(tc)
+        speedup = mc[0] / mb[0] if pairs and mb[0] > 0 else None
+        p3 = paper.TABLE3_TIME_S.get(int(label)) if label != "all" else None
+        ps = paper.TABLE3_SPEEDUP.get(int(label)) if label != "all" else None
+        g = {"group": label, "problems": len(pairs), "bilevel_s": mb, "bilevel_median_s": median(tb), "cfs_s": mc,
+             "cfs_median_s": median(tc), "speedup": speedup, "p": paired_ttest(tb, tc)}
+        groups.append(g)
+        rows.append([label, str(len(pairs)), fmt_pm(mb), fmt_s(g["bilevel_median_s"]), fmt_pm(mc),
+                     fmt_s(g["cfs_median_s"]), fmt_ratio(speedup), fmt_p(g["p"]),
+                     _paper_pm(p3["bilevel"]) if p3 else DASH, _paper_pm(p3["cfs"]) if p3 else DASH,
+                     fmt_ratio(ps) if ps else DASH])
+    lines = ["Planning time (s) of every problem both were run on, solved or not (the planner call alone); "
+             "mean ± std, median; speedup = mean `cfs` / mean `bilevel`; p on paired times.", ""]
+    lines += md_table(["n", "problems", "`bilevel` (s)", "`bilevel` median (s)", "`cfs` (s)", "`cfs` median (s)",
+                       "speedup", "p", "paper bilevel (s)", "paper cfs (s)", "paper speedup"], rows)
+    split_rows, split = [], []
+    for subset, want in (("Level 1", True), ("rest", False)):
+        for label, keep in _by_n(res):
+            everything = res.paired("bilevel", "cfs", keep)
+            pairs = [(a, b) for a, b in everything if (a.get("level") == 1) == want]
+            tb, tc = _times(pairs)
+            s = {"subset": subset, "group": label, "problems": len(pairs),
+                 "share_pct": 100.0 * len(pairs) / len(everything) if everything else None,
+                 "bilevel_s": mean_std(tb), "cfs_s": mean_std(tc),
+                 "bilevel_success_pct": rate_pct([a["success"] for a, _ in pairs]),
+                 "cfs_success_pct": rate_pct([b["success"] for _, b in pairs])}
+            split.append(s)
+            split_rows.append([subset, label, str(s["problems"]), fmt_pct(s["share_pct"]), fmt_pm(s["bilevel_s"]),
+                               fmt_pm(s["cfs_s"]), fmt_pct(s["bilevel_success_pct"]), fmt_pct(s["cfs_success_pct"])])
+    split_rows.append(["paper: Level 1", "all", DASH, f"≈{paper.LEVEL1_SHARE_PCT:.0f}",
+                       _paper_pm(paper.LEVEL1_TIME_S["bilevel"], 3), _paper_pm(paper.LEVEL1_TIME_S["cfs"], 3),
+                       DASH, DASH])
+    split_rows.append(["paper: rest", "all", DASH, DASH, _paper_pm(paper.REST_TIME_S["bilevel"]),
+                       _paper_pm(paper.REST_TIME_S["cfs"]), DASH, DASH])
+    lines += ["Problems the bilevel planner solved at Level 1 (a verified symbolic plan) and the rest (Level 2 or "
+              "no plan), with both methods' planning time (s) and success on the same problems:", ""]
+    lines += md_table(["subset", "n", "problems", "share (%)", "`bilevel` (s)", "`cfs` (s)", "`bilevel` success (%)",
+                       "`cfs` success (%)"], split_rows)
+    series, errors = {}, {}
+    for m in ("bilevel", "cfs"):  # one bar per n and method, ours and the paper's
+        ours = [g[f"{m}_s"] for g in groups[:-1]]
+        theirs = [paper.TABLE3_TIME_S.get(n, {}).get(m, (None, None)) for n in res.ns]
+        series[f"{m} (ours)"], errors[f"{m} (ours)"] = [v[0] for v in ours], [v[1] for v in ours]
+        series[f"{m} (paper)"], errors[f"{m} (paper)"] = [v[0] for v in theirs], [v[1] for v in theirs]
+    png = plots.grouped_bars(figures / "planning_time.png", "Table III: planning time", [f"n={n}" for n in res.ns],
+                             series, ylabel="planning time (s)", errors=errors, ylim=None,
+                             colors={"bilevel (ours)": plots.COLORS["bilevel"], "cfs (ours)": plots.COLORS["cfs"],
+                                     "bilevel (paper)": "#98df8a", "cfs (paper)": "#aec7e8"})
+    lines += [f"![Table III]({png.parent.name}/{png.name})", ""]
+    return Section("table3", title, lines, {"groups": groups, "levels": split,
+                                            "paper": {"time_s": paper.TABLE3_TIME_S, "speedup": paper.TABLE3_SPEEDUP,
+                                                      "level1_share_pct": paper.LEVEL1_SHARE_PCT,
+                                                      "level1_time_s": paper.LEVEL1_TIME_S,
+                                                      "rest_time_s": paper.REST_TIME_S}})
+
+
+def section_replanning(res: Results, figures: Path) -> Section:
+    title = "8. Replanning (Table IV)"
+    if not res.has("bilevel", "bilevel_replan"):
+        return _skipped("replanning", title, "No `bilevel` and `bilevel_replan` rows together: replanning skipped.")
+    ks = [k for k in res.ks if k > 1]
+    if not ks:
+        return _skipped("replanning", title, "No problems with k > 1: replanning skipped.")
+    table = compare_success(res, "bilevel", "bilevel_replan", _by_k(res, ks, "all k > 1"))
+    rows = []
+    for t, (_, keep) in zip(table, _by_k(res, ks)):
+        rounds = [b["rounds"] for _, b in res.paired("bilevel", "bilevel_replan", keep) if b.get("rounds") is not None]
+        t["rounds_mean"] = mean_std(rounds)[0]
+        t["gain_points"] = None if t["bilevel"] is None else t["bilevel_replan"] - t["bilevel"]
+        pk = paper.REPLAN_SUCCESS.get(int(t["group"])) if t["group"].isdigit() else None
+        rows.append([t["group"], str(t["problems"]), fmt_pct(t["bilevel"]), fmt_pct(t["bilevel_replan"]),
+                     fmt_pct(t["gain_points"]), fmt_p(t["p"]), fmt_ratio(t["rounds_mean"]),
+                     _paper_pm(pk["bilevel"], 1, 100) if pk else DASH,
+                     _paper_pm(pk["bilevel_replan"], 1, 100) if pk else DASH])
+    lines = md_table(["k", "problems", "`bilevel` (%)", "`bilevel_replan` (%)", "gain (points)", "p",
+                      "rounds (mean)", "paper w/o (%)", "paper w (%)"], rows)
+    lines += ["Paper: success fractions of its Table IV as percent, mean ± std over ten runs, averaged over n; "
+              "it gives no p-values.", ""]
+    return Section("replanning", title, lines, {"groups": table, "paper": paper.REPLAN_SUCCESS})
+
+
+def section_refinement(res: Results, figures: Path) -> Section:
+    title = "9. Refinement"
+    rows, data = [], {}
+    for m in res.methods:
+        rs = res.select(m)
+        plans = [r for r in rs if r.get("refined") is not None]
+        stages = Counter((r.get("refine_failure") or {}).get("stage") for r in rs if r.get("refine_failure"))
+        times = [t for r in rs for t in (r.get("refine_time_s") or [])]
+        executed = [r.get("executed_actions") or 0 for r in plans]
+        d = {"rows": len(rs), "plans": len(plans), "refined_pct": rate_pct([r["refined"] for r in plans]),
+             "failures": {s: stages.get(s, 0) for s in STAGES}, "refine_time_median_s": median(times),
+             "refine_time_p90_s": percentile(times, 90), "refined_actions": len(times),
+             "executed_actions_mean": mean_std(executed)[0]}
+        data[m] = d
+        rows.append([f"`{m}`", str(len(rs)), str(len(plans)), fmt_pct(d["refined_pct"])] +
+                    [str(d["failures"][s]) for s in STAGES] +
+                    [str(len(times)), fmt_s(d["refine_time_median_s"]), fmt_s(d["refine_time_p90_s"]),
+                     fmt_ratio(d["executed_actions_mean"])])
+    lines = ["Plans are rows with a refinement outcome; refined (%) = every action refined (IK, motion, grasp); "
+             "failures by stage count rows; refinement time per action over every action it was tried on "
+             "(closed loop: the whole step).", ""]
+    lines += md_table(["method", "rows", "plans", "refined (%)", "ik failures", "motion failures", "grasp failures",
+                       "actions timed", "refine time median (s)", "refine time p90 (s)", "executed actions (mean)"],
+                      rows)
+    lines += ["The paper reports no refinement figures.", ""]
+    return Section("refinement", title, lines, data)
+
+
+# --- the report ----------------------------------------------------------------------------------
+def _json_safe(x: Any) -> Any:
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    if isinstance(x, dict):
+        return {str(k): _json_safe(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_json_safe(v) for v in x]
+    return x
+
+
+def _write_atomic(path: Path, text: str) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(text)
+    os.replace(tmp, path)
+
+
+def build_report(res: Results, figures: Path, ablation: dict | None = None,
+                 ablation_source: Path = Path("ablation.json"), source: str = "rows.jsonl") -> tuple[str, dict]:
+    """The Markdown report and its numbers (a JSON-ready dict); writes the PNGs into `figures`."""
+    figures.mkdir(parents=True, exist_ok=True)
+    sections = [section_setup(res, figures), section_table1(ablation, ablation_source),
+                section_dual_model(res, figures), section_table2(res, figures), section_verifier(res, figures),
+                section_success(res, figures), section_table3(res, figures), section_replanning(res, figures),
+                section_refinement(res, figures)]
+    lines = ["# Evaluation report", "",
+             f"From `{source}` ({len(res.rows)} rows, {len(res.cells)} problems). Ours next to the paper's "
+             "numbers (Dogangun et al., quoted as printed). Success in % of problems (one decimal), times in "
+             "seconds (three decimals); p from `scipy.stats.ttest_rel` on per-problem pairs, 'identical' when "
+             "the two agree on every problem, '—' with fewer than two pairs.", ""]
+    for s in sections:
+        lines += [f"## {s.title}", ""] + s.lines
+    numbers = {"source": source, "sections": {s.key: s.data for s in sections},
+               "skipped": [s.key for s in sections if s.data is None]}
+    return "\n".join(lines).rstrip() + "\n", _json_safe(numbers)
+
+
+def write_report(results_dir: Path, ablation: Path | None = None) -> Path:
+    """Write results_dir/report.md, report.json and figures/*.png from results_dir/rows.jsonl; returns report.md.
+
+    `ablation`: the JSON of `tamp ablate-activations` (default results_dir/ablation.json, if present).
+    """
+    results_dir = Path(results_dir)
+    rows_path = results_dir / "rows.jsonl"
+    rows, dropped = _read_rows(rows_path)
+    notes = [] if dropped is None else [f"Line {dropped} of {rows_path} is incomplete (an interrupted evaluation) "
+                                        "and was left out."]
+    meta_path = results_dir / "meta.json"
+    meta = _read_json(meta_path, "the evaluation's meta.json") if meta_path.is_file() else None
+    if ablation is not None and not Path(ablation).is_file():
+        raise ValueError(f"{ablation}: no such ablation file")
+    ablation_path = Path(ablation) if ablation is not None else results_dir / "ablation.json"
+    ablation_data = load_ablation(ablation_path) if ablation_path.is_file() else None
+    md, numbers = build_report(Results(rows, meta, notes), results_dir / "figures", ablation_data, ablation_path,
+                               str(rows_path))
+    out = results_dir / "report.md"
+    _write_atomic(results_dir / "report.json", json.dumps(numbers, indent=1, ensure_ascii=False) + "\n")
+    _write_atomic(out, md)
+    return out
+
+
+__all__ = ["METHOD_ORDER", "OUTCOMES", "Results", "build_report", "compare_success", "load_ablation", "load_rows",
+           "write_report"]
