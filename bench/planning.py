@@ -76,26 +76,11 @@ def problem_set(per_cell: int, seed: int = 0):
 
 
 def drake_problem_set(per_cell: int, seed: int = 0):
-    """[(n, k, X_init, X_goal)]: random Drake scenes, goals after k random actions that changed the
-    scene (actions that change nothing are redrawn, so k counts real steps)."""
-    from tamp import World, WorldConfig
+    """[(n, k, X_init, X_goal)]: the evaluation's problem set (random Drake scenes, goals after k
+    random actions that changed the scene; see evaluation.problems)."""
+    from evaluation.problems import generate_problems
 
-    world = World(WorldConfig(), seed=seed)
-    problems = []
-    for n in (2, 3, 4):
-        for k in range(1, 6):
-            for i in range(per_cell):
-                scene_seed = int(np.random.SeedSequence([seed, n, k, i]).generate_state(1)[0])
-                X = world.reset(n_objects=n, seed=scene_seed)
-                done = 0
-                for _ in range(200):
-                    if done == k:
-                        break
-                    actions = world.actions()
-                    _, info = world.step(actions[world.rng.integers(len(actions))])
-                    done += info.status == "ok"
-                problems.append((n, k, X, world.X))
-    return problems
+    return [(p.n, p.k, p.X_init, p.X_goal) for p in generate_problems(per_cell=per_cell, seed=seed)]
 
 
 _DRAKE_WORLD = None

@@ -19,7 +19,8 @@ from tamp.structs import PickPlace, WorldConfig
 from tamp.trajectory import RefinedPlan, RefinementFailure, concatenate, refined_action
 from tamp.world import World, validate_action
 
-_STAGES = {"ik_failure": "ik", "motion_failure": "motion", "nothing_grasped": "grasp"}
+FAILURE_STAGES = {  # StepInfo.status of a failed action -> refinement stage
+    "ik_failure": "ik", "motion_failure": "motion", "nothing_grasped": "grasp"}
 
 
 def refine(
@@ -54,9 +55,9 @@ def refine(
         X_before, q_before = world.X, world.q.copy()
         X_after, info = world.step(action)
         if info.status != "ok" or not info.motion_success.get("retreat", False):
-            where = _failed_at(info)
+            where = failed_at(info)
             reason = info.reason or "the retreat after release was blocked"
-            result.failure = RefinementFailure(k, action, _STAGES.get(info.status, "motion"), where, reason)
+            result.failure = RefinementFailure(k, action, FAILURE_STAGES.get(info.status, "motion"), where, reason)
             break
         step = refined_action(action, info, X_before, X_after, q_before)
         step.refine_time = time.perf_counter() - t0
@@ -67,7 +68,8 @@ def refine(
     return result
 
 
-def _failed_at(info) -> str:
+def failed_at(info) -> str:
+    """The first waypoint (IK) or motion of a failed action, or "grasp" / "retreat"."""
     for name, ok in list(info.ik_success.items()) + list(info.motion_success.items()):
         if not ok:
             return name

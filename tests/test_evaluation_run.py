@@ -74,7 +74,8 @@ def test_problem_sets_are_regenerated_byte_for_byte(problems_file, tmp_path):
 
 @pytest.mark.parametrize("edit, message", [
     (lambda lines: lines[:1] + ["{not json"] + lines[2:], "line 2: not valid JSON"),
-    (lambda lines: lines[:2] + [lines[2].replace('"X_goal"', '"X_gaol"')] + lines[3:], "line 3: missing field 'X_goal'"),
+    (lambda lines: lines[:2] + [lines[2].replace('"X_goal"', '"X_gaol"')] + lines[3:],
+     "line 3: missing field 'X_goal'"),
     (lambda lines: lines[:1] + [lines[1].replace('"seed": ', '"seed": "x", "s": ')] + lines[2:],
      "line 2: field 'seed' must be an integer"),
     (lambda lines: lines + [lines[0]], "line 5: duplicate problem name 'n2-k1-000' (also on line 1)"),
@@ -171,12 +172,12 @@ def test_two_workers_give_the_same_rows_as_one(serial, problems_file, tmp_path):
 def test_a_results_directory_refuses_other_inputs(serial, problems_file, tmp_path):
     other = tmp_path / "other.jsonl"
     write_problems(other, read_problems(problems_file)[:2])
-    with pytest.raises(ValueError, match="another problem set"):
+    with pytest.raises(ValueError, match="problems_sha256: "):
         evaluate(serial.parents[1] / "models", other, serial.parent, config=CONFIG, models=stub_models())
     (tmp_path / "models").mkdir()
-    with pytest.raises(ValueError, match="another models directory"):
+    with pytest.raises(ValueError, match="models_dir: "):
         evaluate(tmp_path / "models", problems_file, serial.parent, config=CONFIG, models=stub_models())
-    with pytest.raises(ValueError, match="another evaluation settings"):
+    with pytest.raises(ValueError, match='config.fidelity: "fast" there, "full" now'):
         evaluate(serial.parents[1] / "models", problems_file, serial.parent, models=stub_models(),
                  config=EvalConfig(search_max_expansions=300, progress=False, fidelity="full"))
 
@@ -192,18 +193,20 @@ def models_dir(tmp_path_factory) -> Path:
     from symbolic import build_domain
 
     out = tmp_path_factory.mktemp("models")
+    (out / "variants").mkdir()
     torch.manual_seed(0)
     data = generate(300, seed=0, n_choices=(2,))
-    for prefix, symbolic_activation in (("", "gumbel_sigmoid"), ("variants/", "sigmoid")):
-        (out / prefix).mkdir(exist_ok=True)
-        save_checkpoint(out / prefix / ("dynamics.pt" if not prefix else "dynamics_gumbel.pt"),
-                        EffectModel(ModelConfig(d_z=2, heads=1, activation="sigmoid" if not prefix else "gumbel_sigmoid")))
-        sym = EffectModel(ModelConfig(d_z=2, heads=1, activation=symbolic_activation)).eval()
-        save_checkpoint(out / prefix / ("symbolic.pt" if not prefix else "symbolic_sigmoid.pt"), sym)
+    # (dynamics file, its activation, symbolic file, its activation, domain directory)
+    for dyn, dyn_act, sym_file, sym_act, domain in (
+            ("dynamics.pt", "sigmoid", "symbolic.pt", "gumbel_sigmoid", "domain"),
+            ("variants/dynamics_gumbel.pt", "gumbel_sigmoid", "variants/symbolic_sigmoid.pt", "sigmoid",
+             "variants/domain_sigmoid")):
+        save_checkpoint(out / dyn, EffectModel(ModelConfig(d_z=2, heads=1, activation=dyn_act)))
+        sym = EffectModel(ModelConfig(d_z=2, heads=1, activation=sym_act)).eval()
+        save_checkpoint(out / sym_file, sym)
         u0, r0 = sym.symbols_batch(data.X, data.mask)
         u1, r1 = sym.symbols_batch(data.X_next, data.mask)
-        build_domain(u0, r0, data.action, u1, r1, data.n, out / prefix / ("domain" if not prefix else "domain_sigmoid"),
-                     holdout=0.0)
+        build_domain(u0, r0, data.action, u1, r1, data.n, out / domain, holdout=0.0)
     return out
 
 

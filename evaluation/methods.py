@@ -1,0 +1,124 @@
+"""The methods compared by the evaluation, and the model sets they plan with.
+
+Each method is a `tamp.bilevel` planner, a model variant and open or closed loop:
+
+    deterministic     deterministic symbolic planner (baseline), Gumbel-Sigmoid Symbolic Model
+    probabilistic     probabilistic symbolic planner, N sampled domains, top plan, unverified
+    cfs               continuous forward search with the (Sigmoid) Dynamics Model
+    bilevel           Algorithm 1
+    bilevel_replan    Algorithm 1 in closed loop, up to k - 1 replanning rounds
+    symbolic_sigmoid  deterministic symbolic planner, Sigmoid Symbolic Model and its own domain (Fig. 4)
+    cfs_gumbel        continuous forward search, Gumbel-Sigmoid Dynamics Model (Fig. 4)
+
+The default model set is the models directory (symbolic.pt, dynamics.pt, domain/); the last two
+methods use optional variants in DIR/variants/: symbolic_sigmoid.pt with domain_sigmoid/, and
+dynamics_gumbel.pt. The symbolic_sigmoid set keeps DIR/dynamics.pt to report its plans'
+predicted error.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Sequence
+
+from tamp.models import DOMAIN_DIR, DYNAMICS_FILE, SYMBOLIC_FILE, Models
+
+VARIANTS_DIR = "variants"
+SYMBOLIC_SIGMOID, DOMAIN_SIGMOID, DYNAMICS_GUMBEL = "symbolic_sigmoid.pt", "domain_sigmoid", "dynamics_gumbel.pt"
+
+
+@dataclass(frozen=True)
+class Method:
+    name: str
+    planner: str  # a tamp.bilevel.METHODS key
+    models: str  # model set: "default" | "symbolic_sigmoid" | "dynamics_gumbel"
+    closed_loop: bool = False
+
+    @property
+    def symbolic(self) -> bool:
+        """Whether the method needs a Symbolic Model and a domain."""
+        return self.planner != "cfs"
+
+
+METHODS: dict[str, Method] = {m.name: m for m in (
+    Method("deterministic", "deterministic", "default"),
+    Method("probabilistic", "probabilistic", "default"),
+    Method("cfs", "cfs", "default"),
+    Method("bilevel", "bilevel", "default"),
+    Method("bilevel_replan", "bilevel", "default", closed_loop=True),
+    Method("symbolic_sigmoid", "deterministic", "symbolic_sigmoid"),
+    Method("cfs_gumbel", "cfs", "dynamics_gumbel"),
+)}
+DEFAULT_METHODS = ("deterministic", "probabilistic", "cfs", "bilevel", "bilevel_replan")
+VARIANT_METHODS = ("symbolic_sigmoid", "cfs_gumbel")
+
+
+def required_files(models_dir: str | Path, method: str) -> list[Path]:
+    """The files a method loads from the models directory (domains: their operators.json)."""
+    d = Path(models_dir)
+    v = d / VARIANTS_DIR
+    m = METHODS[method]
+    if m.models == "symbolic_sigmoid":
+        return [d / DYNAMICS_FILE, v / SYMBOLIC_SIGMOID, v / DOMAIN_SIGMOID / "operators.json"]
+    if m.models == "dynamics_gumbel":
+        return [v / DYNAMICS_GUMBEL]
+    if m.symbolic:
+        return [d / DYNAMICS_FILE, d / SYMBOLIC_FILE, d / DOMAIN_DIR / "operators.json"]
+    return [d / DYNAMICS_FILE]
+
+
+def default_methods(models_dir: str | Path) -> list[str]:
+    """The first five methods, and the variant methods whose files exist in the models directory."""
+    return list(DEFAULT_METHODS) + [m for m in VARIANT_METHODS
+                                    if all(p.is_file() for p in required_files(models_dir, m))]
+
+
+def resolve_methods(models_dir: str | Path, methods: Sequence[str] | None = None) -> list[str]:
+    """Check the requested methods (default: `default_methods`) and that their files exist.
+
+    Returns them in the report order of METHODS. An unknown method or a missing file is an error
+    naming it.
+    """
+    models_dir = Path(models_dir)
+    if not models_dir.is_dir():
+        raise FileNotFoundError(f"no models directory at {models_dir}")
+    if methods is None:
+        methods = default_methods(models_dir)
+    methods = list(methods)
+    if not methods:
+        raise ValueError("no methods to evaluate")
+    unknown = [m for m in methods if m not in METHODS]
+    if unknown:
+        raise ValueError(f"unknown method {unknown[0]!r}; choose from {', '.join(METHODS)}")
+    for m in methods:
+        missing = [p for p in required_files(models_dir, m) if not p.is_file()]
+        if missing:
+            raise FileNotFoundError(f"method {m} needs {missing[0]}, which does not exist")
+    return [m for m in METHODS if m in methods]
+
+
+def load_method_models(models_dir: str | Path, methods: Sequence[str]) -> dict[str, Models]:
+    """Models per method; each model set (and each network file) is loaded once and shared."""
+    import learned
+    import symbolic
+
+    models_dir = Path(models_dir)
+    methods = resolve_methods(models_dir, methods)
+    sets: dict[str, Models] = {}
+    needed = {METHODS[m].models for m in methods}
+    if "default" in needed or "symbolic_sigmoid" in needed:
+        from tamp.models import load_models
+
+        need_symbolic = any(METHODS[m].models == "default" and METHODS[m].symbolic for m in methods)
+        sets["default"] = load_models(models_dir, need_symbolic=need_symbolic)
+    if "symbolic_sigmoid" in needed:
+        path, domain_dir = models_dir / VARIANTS_DIR / SYMBOLIC_SIGMOID, models_dir / VARIANTS_DIR / DOMAIN_SIGMOID
+        model, domain = learned.load_model(path), symbolic.load_domain(domain_dir)
+        cfg = model.config
+        if (cfg.d_z, cfg.heads) != (domain.n_unary, domain.n_relations):
+            raise ValueError(f"{path} has d_z={cfg.d_z}, K={cfg.heads} but the domain in {domain_dir} was "
+                             f"learned with d_z={domain.n_unary}, K={domain.n_relations}")
+        sets["symbolic_sigmoid"] = Models(sets["default"].dynamics, model, domain)
+    if "dynamics_gumbel" in needed:
+        sets["dynamics_gumbel"] = Models(learned.load_model(models_dir / VARIANTS_DIR / DYNAMICS_GUMBEL))
+    return {m: sets[METHODS[m].models] for m in methods}

@@ -1,0 +1,117 @@
+"""Problem sets: random Drake scenes and goals after k random actions, stored as JSONL.
+
+Problem (n, k, i) of a set with seed s has its own scene seed, drawn from (s, n, k, i) alone
+(`scene_seed`); from it `tamp.problem.random_problem` makes the scene and the k random actions
+that give X_goal in the fast world (actions that fail or move no block are redrawn, with a cap, so
+k counts real steps). Any one problem can therefore be regenerated on its own, and the same
+arguments give a byte-identical file. Each line of the file is one `tamp plan --problem` object
+with its name ("n{n}-k{k}-{i:03d}"), seed, k and the actions that generated the goal.
+"""
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Iterable, Sequence
+
+import numpy as np
+
+from tamp.problem import Problem, problem_from_dict, random_problem
+
+
+def scene_seed(seed: int, n: int, k: int, i: int) -> int:
+    """The seed of problem (n, k, i) of the set with `seed` (a 32-bit integer)."""
+    return int(np.random.SeedSequence([seed, n, k, i]).generate_state(1)[0])
+
+
+def problem_name(n: int, k: int, i: int) -> str:
+    return f"n{n}-k{k}-{i:03d}"
+
+
+def generate_problems(ns: Sequence[int] = (2, 3, 4), ks: Sequence[int] = (1, 2, 3, 4, 5), per_cell: int = 10,
+                      seed: int = 0, progress: bool = True) -> list[Problem]:
+    """`per_cell` problems for every n in `ns` objects and every k in `ks` random actions, n-major."""
+    from tqdm import tqdm
+
+    from tamp import World, WorldConfig
+
+    ns, ks = _counts(ns, "--objects", 1, 6), _counts(ks, "--actions", 1, None)
+    if per_cell < 1:
+        raise ValueError(f"--per-cell must be a positive integer, got {per_cell}")
+    if not 0 <= seed < 2**63:
+        raise ValueError(f"--seed must be in [0, 2^63), got {seed}")
+    world = World(WorldConfig())
+    cells = [(n, k, i) for n in ns for k in ks for i in range(per_cell)]
+    return [random_problem(n, k, scene_seed(seed, n, k, i), world=world, name=problem_name(n, k, i))
+            for n, k, i in tqdm(cells, desc="problems", unit="problem", disable=not progress)]
+
+
+def _counts(values: Iterable[int], option: str, low: int, high: int | None) -> tuple[int, ...]:
+    values = tuple(int(v) for v in values)
+    if not values:
+        raise ValueError(f"{option} needs at least one value")
+    bad = [v for v in values if v < low or (high is not None and v > high)]
+    if bad:
+        limit = f"{low}..{high}" if high is not None else f">= {low}"
+        raise ValueError(f"{option}: values must be {limit}, got {bad[0]}")
+    if len(set(values)) != len(values):
+        raise ValueError(f"{option} lists a value twice: {','.join(map(str, values))}")
+    return values
+
+
+def write_problems(path: str | Path, problems: Sequence[Problem]) -> Path:
+    """Write a problem set as JSONL (one `tamp plan --problem` object per line), atomically."""
+    seen: set[str] = set()
+    for p in problems:
+        if p.name is None:
+            raise ValueError("every problem of a set needs a name")
+        if p.name in seen:
+            raise ValueError(f"duplicate problem name {p.name!r}")
+        seen.add(p.name)
+    text = "".join(json.dumps(p.to_dict()) + "\n" for p in problems)
+    return atomic_write_text(path, text)
+
+
+def read_problems(path: str | Path) -> list[Problem]:
+    """Read a problem set; errors name the file, the line and the field. Names must be unique."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"no problem set at {path}")
+    problems: list[Problem] = []
+    first_line: dict[str, int] = {}
+    for number, line in enumerate(path.read_text().splitlines(), start=1):
+        if not line.strip():
+            continue
+        where = f"{path} line {number}"
+        try:
+            data = json.loads(line)
+        except json.JSONDecodeError as error:
+            raise ValueError(f"{where}: not valid JSON ({error})") from None
+        problem = problem_from_dict(data, where)
+        if problem.name is None:
+            raise ValueError(f"{where}: missing field 'name' (every problem of a set is named)")
+        if problem.name in first_line:
+            raise ValueError(f"{where}: duplicate problem name {problem.name!r} (also on line "
+                             f"{first_line[problem.name]})")
+        first_line[problem.name] = number
+        problems.append(problem)
+    if not problems:
+        raise ValueError(f"{path}: no problems in the file")
+    return problems
+
+
+def atomic_write_text(path: str | Path, text: str) -> Path:
+    """Write `text` to a temp file next to `path`, fsync, and rename it over `path`."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    try:
+        with open(tmp, "w") as f:
+            f.write(text)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+    return path

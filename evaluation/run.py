@@ -1,0 +1,497 @@
+"""`evaluate`: every method on every problem of a set, planned, refined and executed in Drake.
+
+For each (problem, method) the planner runs with the learned models (timed alone, after a one-off
+warm-up per object count), then the plan is refined (IK, collision-checked motions, grasps) and
+executed: `fast` in the refinement's own world (as `tamp plan` does), `full` with the arm following
+the refined trajectory under physics. `bilevel_replan` runs in closed loop instead: action by
+action in a World of the chosen fidelity, replanning from each observed state, up to k - 1 rounds.
+One JSON row per pair is appended (whole line, flushed) to OUT/rows.jsonl as it finishes; see
+ROW_KEYS and `row_outcome` for the fields. OUT/meta.json records the models, the problem set, the
+configuration and the package versions.
+
+Closed-loop rows: `plan` holds the actions sent to the world (a failed one included, the loop goes
+on from the observed state), `refine_time_s` the wall time of each World.step (planning and, in
+`full`, execution), `level`, `predicted_error_m` and `candidates` are the first round's, timings are
+summed over rounds and `rounds` counts the replanning rounds (planning calls - 1). `candidates` are
+the planner's in its order (ranked symbolic plans, with the alternatives it verified after each).
+
+Resumable: rows already in rows.jsonl are kept and not recomputed (a line cut short by a kill is
+dropped and its row redone); an OUT started with other models, another problem file or another
+configuration is refused. Worlds are reseeded for every row, so a row does not depend on which
+worker computed it or what that worker did before: the rows are the same for any number of workers
+(timings aside), as long as no planner hits its wall-clock limit.
+"""
+from __future__ import annotations
+
+import dataclasses
+import fcntl
+import hashlib
+import json
+import multiprocessing as mp
+import os
+import sys
+import threading
+import time
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from importlib import metadata
+from pathlib import Path
+from typing import Any, Iterator, Sequence
+
+import numpy as np
+
+from evaluation.methods import METHODS, Method, load_method_models, required_files, resolve_methods
+from evaluation.problems import atomic_write_text, read_problems
+from tamp.bilevel import PlanConfig
+from tamp.problem import Problem
+from tamp.verify import EPS_SUCCESS, TAU_VERIFY, goal_error
+
+ROWS_NAME, META_NAME, LOCK_NAME = "rows.jsonl", "meta.json", ".evaluate.lock"
+FORMAT = "tamp-evaluation/1"
+ROW_KEYS = ("problem", "n", "k", "method", "solved", "level", "plan", "planning_time_s", "level1_time_s",
+            "predicted_error_m", "candidates", "refined", "refine_failure", "refine_time_s", "executed_actions",
+            "final_error_m", "success", "outcome", "rounds", "fidelity", "eps_m", "tau_verify_m")
+TIMING_KEYS = ("planning_time_s", "level1_time_s", "refine_time_s")  # the only fields that vary between runs
+OUTCOMES = ("success", "no_plan", "kinematic_failure", "refinement_failure", "wrong_plan")
+MAX_CANDIDATES = 20
+# meta.json fields that define the rows: a results directory is resumed only if all of them match
+DEFINING_KEYS = ("models_dir", "model_files", "problems", "problems_sha256", "config")
+LEVEL1_STAGES = ("symbols", "symbolic", "verify")
+
+
+@dataclass(frozen=True)
+class EvalConfig:
+    """How to evaluate. Lengths in metres, times in seconds."""
+
+    fidelity: str = "fast"  # execution: "fast" (refinement's world) or "full" (arm under physics)
+    eps: float = EPS_SUCCESS  # success: every object within eps of its goal
+    tau_verify: float = TAU_VERIFY  # Level-1 verification threshold
+    n_domains: int = 100  # N sampled symbolic domains
+    search_time_limit: float = 10.0  # continuous search, per planning call
+    search_max_expansions: int = 5000  # continuous search node limit, per planning call
+    level1_time_budget: float | None = PlanConfig.level1_time_budget  # all N symbolic planner calls of a call
+    workers: int = 1  # worker processes or Ray actors
+    backend: str = "local"  # "local" process pool or "ray"
+    progress: bool = True  # progress bar on stderr
+
+    def __post_init__(self) -> None:
+        if self.fidelity not in ("fast", "full"):
+            raise ValueError(f"--fidelity must be 'fast' or 'full', got {self.fidelity!r}")
+        if self.backend not in ("local", "ray"):
+            raise ValueError(f"--backend must be 'local' or 'ray', got {self.backend!r}")
+        if isinstance(self.workers, bool) or not isinstance(self.workers, int) or self.workers < 1:
+            raise ValueError(f"--workers must be a positive integer, got {self.workers!r}")
+        for name in ("eps", "tau_verify", "search_time_limit"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"EvalConfig.{name} must be positive, got {getattr(self, name)}")
+        if self.n_domains < 1 or self.search_max_expansions < 1:
+            raise ValueError("--n-domains and the node limit must be positive integers")
+
+    def defining(self) -> dict[str, Any]:
+        """The settings rows depend on (a results directory holds rows of one setting only)."""
+        return {"fidelity": self.fidelity, "eps_m": self.eps, "tau_verify_m": self.tau_verify,
+                "n_domains": self.n_domains, "search_time_limit_s": self.search_time_limit,
+                "search_max_expansions": self.search_max_expansions, "level1_time_budget_s": self.level1_time_budget}
+
+    def plan_config(self, seed: int) -> PlanConfig:
+        from tamp.search import SearchConfig
+
+        return PlanConfig(n_domains=self.n_domains, seed=seed, tau_verify=self.tau_verify, eps=self.eps,
+                          level1_time_budget=self.level1_time_budget,
+                          search=SearchConfig(max_expansions=self.search_max_expansions,
+                                                 time_limit=self.search_time_limit))
+
+
+# --------------------------------------------------------------------------- one (problem, method)
+
+def row_outcome(solved: bool, refine_failure: dict | None, final_error: float, eps: float) -> str:
+    """no_plan | kinematic_failure (IK) | refinement_failure (motion, grasp) | wrong_plan | success."""
+    if not solved:
+        return "no_plan"
+    if refine_failure is not None:
+        return "kinematic_failure" if refine_failure["stage"] == "ik" else "refinement_failure"
+    return "success" if final_error < eps else "wrong_plan"
+
+
+def _round(x: float | None, digits: int = 6) -> float | None:
+    return None if x is None else round(float(x), digits)
+
+
+def _actions(plan) -> list[list[int]] | None:
+    return None if plan is None else [[int(v) for v in a] for a in plan]
+
+
+def _level1_time(result) -> float:
+    return sum(result.timings.get(k, 0.0) for k in LEVEL1_STAGES)
+
+
+def _candidates(result) -> list[dict]:
+    return [{"error_m": _round(c.error), "verified": None if c.verified is None else bool(c.verified),
+             "count": int(c.count), "alternative_of": c.alternative_of}
+            for c in result.candidates[:MAX_CANDIDATES]]
+
+
+def _failure(index: int, stage: str, where: str, reason: str) -> dict:
+    return {"action": int(index), "stage": stage, "where": where, "reason": reason}
+
+
+class Evaluator:
+    """Plans, refines and executes (problem, method) pairs; one per worker, reused for its lifetime."""
+
+    def __init__(self, models: dict, config: EvalConfig) -> None:
+        self.models, self.config = models, config
+        self._warm: set[tuple[int, int]] = set()
+        self._worlds: dict[str, Any] = {}
+
+    def world(self, fidelity: str):
+        """This worker's World of a fidelity (paths simplified: they are executed), reseeded as a new
+        World(seed=0) would be, so that nothing depends on the rows computed before."""
+        if fidelity not in self._worlds:
+            from tamp import World, WorldConfig
+
+            self._worlds[fidelity] = World(WorldConfig(fidelity=fidelity, simplify_paths=True))
+        world = self._worlds[fidelity]
+        world.rng = np.random.default_rng(0)
+        world.timeline = None
+        return world
+
+    def warm_up(self, models, problem: Problem) -> None:
+        """One-off costs for n objects, paid before any planner is timed: the symbolic planner's
+        ground task cache and the networks' first forward passes."""
+        key = (id(models), problem.n)
+        if key in self._warm:
+            return
+        n_max = getattr(getattr(models.dynamics, "config", None), "n_max", None)
+        if n_max is not None and problem.n > n_max:
+            raise ValueError(f"problem {problem.name}: {problem.n} objects, but the models were trained for "
+                             f"at most {n_max}")
+        cfg = self.config.plan_config(problem.seed)
+        if models.symbolic is not None and models.domain is not None:
+            models.symbolic_planner(cfg.backend, cfg.symbolic_time_limit).ground(problem.n)
+            models.symbolic.symbols(problem.X_init)
+        if models.dynamics is not None:
+            models.dynamics.predict_effect(problem.X_init, np.zeros((1, 4), dtype=np.int64))
+        self._warm.add(key)
+
+    def run(self, problem: Problem, method_name: str) -> dict:
+        """The result row of one method on one problem (keys ROW_KEYS)."""
+        method, models = METHODS[method_name], self.models[method_name]
+        self.warm_up(models, problem)
+        try:
+            body = self._closed_loop if method.closed_loop else self._open_loop
+            fields = body(problem, method, models)
+        except Exception as error:  # name the pair; the rows written so far stay and a rerun resumes
+            raise RuntimeError(f"problem {problem.name}, method {method_name}: {type(error).__name__}: "
+                               f"{error}") from error
+        c = self.config
+        row = {"problem": problem.name, "n": problem.n, "k": problem.k, "method": method_name, **fields,
+               "fidelity": c.fidelity, "eps_m": c.eps, "tau_verify_m": c.tau_verify}
+        row["outcome"] = row_outcome(row["solved"], row["refine_failure"], row["final_error_m"], c.eps)
+        row["success"] = row["outcome"] == "success"
+        return {k: row[k] for k in ROW_KEYS}
+
+    def _open_loop(self, problem: Problem, method: Method, models) -> dict:
+        from tamp.bilevel import plan
+
+        result = plan(method.planner, models, problem.X_init, problem.X_goal, self.config.plan_config(problem.seed))
+        fields = {"solved": result.solved, "level": result.level, "plan": _actions(result.plan),
+                  "planning_time_s": _round(result.timings["total"]), "level1_time_s": _round(_level1_time(result)),
+                  "predicted_error_m": _round(result.predicted_error), "candidates": _candidates(result),
+                  "refined": None, "refine_failure": None, "refine_time_s": [], "executed_actions": 0,
+                  "final_error_m": _round(goal_error(problem.X_init, problem.X_goal)), "rounds": None}
+        if not result.solved:
+            return fields
+        if not result.plan:  # the planner says the initial state meets the goal: nothing to refine
+            return {**fields, "refined": True}
+        from tamp.refine import refine
+
+        world = self.world("fast")
+        refined = refine(result.plan, problem.X_init, world=world)
+        if self.config.fidelity == "fast":  # the scene after the refined actions (not a failed one's)
+            X_final = refined.X_predicted
+        else:
+            from tamp.execute import execute
+
+            X_final = execute(refined, partial=True).X_final
+        f = refined.failure
+        executed = len(refined.steps)
+        return {**fields, "refined": refined.success,
+                "refine_failure": None if f is None else _failure(f.action_index, f.stage, f.where, f.reason),
+                "refine_time_s": [_round(s.refine_time) for s in refined.steps], "executed_actions": executed,
+                "final_error_m": _round(goal_error(X_final if executed else problem.X_init, problem.X_goal))}
+
+    def _closed_loop(self, problem: Problem, method: Method, models) -> dict:
+        from tamp.bilevel import plan_closed_loop, replan_rounds
+        from tamp.refine import FAILURE_STAGES, failed_at
+
+        world = self.world(self.config.fidelity)
+        X0 = world.reset(X=problem.X_init)
+        failures: list[dict] = []
+        step_times: list[float] = []
+
+        def step(action):
+            t = time.perf_counter()
+            X, info = world.step(action)
+            step_times.append(time.perf_counter() - t)
+            if info.status != "ok" and not failures:
+                failures.append(_failure(len(step_times) - 1, FAILURE_STAGES.get(info.status, "motion"), failed_at(info),
+                                         info.reason))
+            return X
+
+        out = plan_closed_loop(method.planner, models, X0, problem.X_goal, step, replan_rounds(problem.k),
+                               self.config.plan_config(problem.seed))
+        first = out.rounds[0] if out.rounds else None
+        solved = first is None or first.solved  # no round: the initial state already met the goal
+        executed = len(out.executed)
+        X_final = out.X_final if executed else problem.X_init
+        return {"solved": solved, "level": None if first is None else first.level,
+                "plan": _actions(out.executed) if solved else None,
+                "planning_time_s": _round(sum(r.timings["total"] for r in out.rounds)),
+                "level1_time_s": _round(sum(_level1_time(r) for r in out.rounds)),
+                "predicted_error_m": None if first is None else _round(first.predicted_error) if solved else None,
+                "candidates": [] if first is None else _candidates(first),
+                "refined": (not failures) if solved else None, "refine_failure": failures[0] if failures else None,
+                "refine_time_s": [_round(t) for t in step_times], "executed_actions": executed,
+                "final_error_m": _round(goal_error(X_final, problem.X_goal)),
+                "rounds": max(len(out.rounds) - 1, 0)}
+
+
+# --------------------------------------------------------------------------- workers
+
+_EVALUATOR: Evaluator | None = None  # the one Evaluator of a worker process
+
+
+def _make_evaluator(models_dir: str, methods: list[str], models: dict | None, config: EvalConfig) -> Evaluator:
+    import torch
+
+    torch.set_num_threads(1)
+    return Evaluator(models if models is not None else load_method_models(models_dir, methods), config)
+
+
+def _init_pool_worker(models_dir: str, methods: list[str], models: dict | None, config: EvalConfig,
+                      parent_pid: int) -> None:
+    """Pool initializer: load the models once, and exit if the parent dies (e.g. kill -9)."""
+    def watch() -> None:
+        while os.getppid() == parent_pid:
+            time.sleep(0.5)
+        os._exit(1)
+
+    threading.Thread(target=watch, daemon=True).start()
+    global _EVALUATOR
+    _EVALUATOR = _make_evaluator(models_dir, methods, models, config)
+
+
+def _pool_run(task: tuple[Problem, str]) -> dict:
+    return _EVALUATOR.run(*task)
+
+
+class RayEvaluator:
+    """A Ray actor (wrapped with ray.remote at run time) holding one Evaluator."""
+
+    def __init__(self, models_dir: str, methods: list[str], models: dict | None, config: EvalConfig) -> None:
+        self.evaluator = _make_evaluator(models_dir, methods, models, config)
+
+    def run(self, problem: Problem, method: str) -> dict:
+        # Ray hands numpy arrays over read-only (zero copy); the planners expect their own arrays
+        problem = dataclasses.replace(problem, X_init=problem.X_init.copy(), X_goal=problem.X_goal.copy())
+        return self.evaluator.run(problem, method)
+
+
+def _run_local(tasks, models_dir, methods, models, config: EvalConfig) -> Iterator[dict]:
+    if config.workers == 1 or len(tasks) <= 1:
+        evaluator = _make_evaluator(models_dir, methods, models, config)
+        for problem, method in tasks:
+            yield evaluator.run(problem, method)
+        return
+    ctx = mp.get_context("spawn")
+    initargs = (models_dir, methods, models, config, os.getpid())
+    with ctx.Pool(min(config.workers, len(tasks)), initializer=_init_pool_worker, initargs=initargs) as pool:
+        yield from pool.imap_unordered(_pool_run, tasks, chunksize=1)
+
+
+def _run_ray(tasks, models_dir, methods, models, config: EvalConfig) -> Iterator[dict]:
+    import logging
+
+    from tamp.collect import import_ray
+
+    ray = import_ray()
+    started_here = not ray.is_initialized()
+    if started_here:
+        ray.init(num_cpus=config.workers, include_dashboard=False, logging_level=logging.WARNING)
+    try:
+        Actor = ray.remote(num_cpus=1)(RayEvaluator)
+        actors = [Actor.remote(models_dir, methods, models, config) for _ in range(min(config.workers, len(tasks)))]
+        todo, pending = iter(tasks), {}
+
+        def submit(actor) -> None:
+            task = next(todo, None)
+            if task is not None:
+                pending[actor.run.remote(*task)] = actor
+
+        for actor in actors * 2:  # two tasks in flight per actor hide the round trip
+            submit(actor)
+        while pending:
+            done, _ = ray.wait(list(pending), num_returns=1)
+            submit(pending.pop(done[0]))
+            yield ray.get(done[0])
+    finally:
+        if started_here:
+            ray.shutdown()
+
+
+# --------------------------------------------------------------------------- the results directory
+
+def package_versions() -> dict[str, str]:
+    out = {"python": sys.version.split()[0]}
+    for name in ("bilevel-tamp", "drake", "torch", "ompl", "numpy"):
+        try:
+            out[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            out[name] = "not installed"
+    return out
+
+
+def _sha256(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def _model_files(models_dir: Path) -> dict[str, str]:
+    """sha256 of every model file any method could load (those that exist), by relative path."""
+    paths = {p for m in METHODS for p in required_files(models_dir, m) if p.is_file()}
+    return {str(p.relative_to(models_dir)): _sha256(p) for p in sorted(paths)}
+
+
+def read_rows(path: str | Path) -> list[dict]:
+    """The rows of a rows.jsonl file (a last line cut short by a kill is left out)."""
+    return _scan_rows(Path(path))[0]
+
+
+def _scan_rows(path: Path) -> tuple[list[dict], int]:
+    """(complete rows, byte length of the complete lines); a broken line before the last is an error."""
+    if not path.exists():
+        return [], 0
+    data = path.read_bytes()
+    rows, end = [], 0
+    lines = data.split(b"\n")
+    for number, line in enumerate(lines[:-1], start=1):  # lines[-1]: after the last newline
+        try:
+            row = json.loads(line)
+            if not isinstance(row, dict) or "problem" not in row or "method" not in row:
+                raise ValueError("not a result row")
+        except ValueError as error:
+            raise ValueError(f"{path} line {number} is not a result row ({error}); the file was damaged "
+                             "by something other than an interrupted evaluation") from None
+        rows.append(row)
+        end += len(line) + 1
+    return rows, end
+
+
+def _prepare(out: Path, meta: dict) -> None:
+    """Create OUT/meta.json, or check that OUT holds rows of the same models, problems and config."""
+    path = out / META_NAME
+    if not path.exists():
+        if (out / ROWS_NAME).exists():
+            raise ValueError(f"{out} has {ROWS_NAME} but no {META_NAME}; give a new --out directory")
+        atomic_write_text(path, json.dumps(meta, indent=2) + "\n")
+        return
+    try:
+        old = json.loads(path.read_text())
+    except json.JSONDecodeError as error:
+        raise ValueError(f"{path}: not valid JSON ({error})") from None
+    if old.get("format") != FORMAT:
+        raise ValueError(f"{path} is not the meta file of a `tamp evaluate` results directory")
+    diffs = []
+    for key in DEFINING_KEYS:
+        a, b = old.get(key), meta[key]
+        if isinstance(a, dict) and isinstance(b, dict):
+            diffs += [f"{key}.{k}: {_short(a.get(k))} there, {_short(b.get(k))} now"
+                      for k in sorted(set(a) | set(b)) if a.get(k) != b.get(k)]
+        elif a != b:
+            diffs.append(f"{key}: {_short(a)} there, {_short(b)} now")
+    if diffs:
+        raise ValueError(f"{out} holds rows of other inputs ({'; '.join(diffs[:3])}); use a new --out "
+                         "directory, or the same models, problem set and settings to resume")
+    if old.get("versions") != meta["versions"]:
+        from tqdm import tqdm
+
+        tqdm.write(f"warning: {out} was started with other package versions ({old.get('versions')}); "
+                   "resuming anyway", file=sys.stderr)
+    old["methods"] = [m for m in METHODS if m in set(old.get("methods", [])) | set(meta["methods"])]
+    old["runs"] = old.get("runs", []) + meta["runs"]
+    atomic_write_text(path, json.dumps(old, indent=2) + "\n")
+
+
+def _short(value) -> str:
+    text = json.dumps(value)
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
+def _lock(out: Path):
+    f = open(out / LOCK_NAME, "w")
+    try:
+        fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        f.close()
+        raise RuntimeError(f"another `tamp evaluate` is writing to {out}") from None
+    return f
+
+
+def evaluate(models_dir: str | Path, problems_path: str | Path, out_dir: str | Path,
+             methods: Sequence[str] | None = None, config: EvalConfig = EvalConfig(),
+             models: dict | None = None) -> Path:
+    """Evaluate `methods` (default: evaluation.methods.default_methods) on every problem of the set.
+
+    Appends the missing rows to OUT/rows.jsonl and returns its path. `models` (method name ->
+    tamp.models.Models) replaces loading them from `models_dir`, for tests with stub models.
+    """
+    from tqdm import tqdm
+
+    models_dir, problems_path, out = Path(models_dir).resolve(), Path(problems_path).resolve(), Path(out_dir)
+    if models is None:
+        methods = resolve_methods(models_dir, methods)
+    else:
+        methods = [m for m in METHODS if m in (methods or models)]
+        missing = [m for m in methods if m not in models]
+        if missing:
+            raise ValueError(f"no models given for method {missing[0]}")
+    problems = read_problems(problems_path)
+    started = datetime.now(timezone.utc).isoformat(timespec="seconds")
+    meta = {"format": FORMAT, "models_dir": str(models_dir), "model_files": _model_files(models_dir),
+            "problems": str(problems_path), "problems_sha256": _sha256(problems_path), "n_problems": len(problems),
+            "config": config.defining(), "methods": methods, "versions": package_versions(), "started": started,
+            "runs": [{"started": started, "methods": methods, "workers": config.workers, "backend": config.backend}]}
+    out.mkdir(parents=True, exist_ok=True)
+    lock = _lock(out)
+    try:
+        _prepare(out, meta)
+        rows_path = out / ROWS_NAME
+        rows, end = _scan_rows(rows_path)
+        if rows_path.exists() and rows_path.stat().st_size > end:
+            tqdm.write(f"warning: dropping the incomplete last line of {rows_path} (from an interrupted run); "
+                       "that row is computed again", file=sys.stderr)
+            os.truncate(rows_path, end)
+        done = {(r["problem"], r["method"]) for r in rows}
+        if len(done) < len(rows):
+            raise ValueError(f"{rows_path} holds a (problem, method) row twice; the file was edited")
+        pairs = [(p, m) for p in problems for m in methods]
+        tasks = [(p, m) for p, m in pairs if (p.name, m) not in done]
+        run = _run_ray if config.backend == "ray" else _run_local
+        with open(rows_path, "a") as f, tqdm(total=len(pairs), initial=len(pairs) - len(tasks), desc="evaluate",
+                                             unit="row", disable=not config.progress, file=sys.stderr) as bar:
+            if tasks:
+                for row in run(tasks, str(models_dir), methods, models, config):
+                    f.write(json.dumps(row) + "\n")
+                    f.flush()
+                    bar.update()
+        return rows_path
+    finally:
+        lock.close()
+
+
+def strip_timings(row: dict) -> dict:
+    """A row without its wall-clock fields (what must agree between runs and worker counts)."""
+    return {k: v for k, v in row.items() if k not in TIMING_KEYS}
+
+
+__all__ = ["EvalConfig", "Evaluator", "OUTCOMES", "ROW_KEYS", "evaluate", "read_rows", "row_outcome",
+           "strip_timings"]
