@@ -18,7 +18,7 @@ $(STAMP): pyproject.toml
 install: $(STAMP)
 
 demo: $(STAMP)
-	$(BIN)/tamp simulate --objects 3 --seed 6 --steps 5 --replay demo_replay.html
+	$(BIN)/tamp demo
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q

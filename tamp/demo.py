@@ -181,8 +181,12 @@ def _replay_candidates(out: DemoResult, models, cfg: DemoConfig) -> None:
         ex = refine_and_execute(actions, problem.X_init, problem.X_goal, cfg.fidelity, timeline)
         ran = f"all {len(actions)} action(s)" if ex.refined.success else \
             f"{len(ex.refined.steps)} of {len(actions)} action(s), refinement failed: {ex.refined.failure}"
-        verdict = "reached the goal: verification was too strict" if ex.refined.success and ex.error < out.eps \
-            else "missed the goal, as verification predicted"
+        if not ex.refined.success:
+            verdict = "it could not be carried out"
+        elif ex.error < out.eps:
+            verdict = "it reached the goal: verification rejected a plan that works"
+        else:
+            verdict = "it missed the goal, as verification predicted"
         print(f"  candidate {rank} {list(c.actions)}: predicted {c.error * 100:.1f} cm from the goal; "
               f"executed {ran}; final error {ex.error * 100:.1f} cm: {verdict}")
         timeline.caption = [f"tamp demo --seed {cfg.seed}: candidate {rank}, rejected by verification "
@@ -236,6 +240,8 @@ def _print_summary(out: DemoResult, cfg: DemoConfig) -> None:
     if result.solved:
         print(f"  plan        {len(result.plan)} action(s) from {LEVELS[result.level]}; predicted error "
               f"{result.predicted_error * 100:.1f} cm")
+        for reason in result.reasons:  # why Level 1 did not give the plan
+            print(f"              {reason}")
     else:
         print(f"  plan        none: {'; '.join(result.reasons)}")
     times = f"  times       planning {result.timings['total']:.2f} s"

@@ -25,8 +25,6 @@ from tamp.structs import BLOCK_SIZES
 
 REPLAY_FPS = 30.0
 _REPLAY_SPEED = 0.5  # fraction of the joint velocity limits used to time kinematic motions
-
-
 GOAL_RGBA = (0.1, 0.8, 0.2, 0.35)  # translucent green
 PREDICTED_RGBA = (1.0, 0.55, 0.0, 0.35)  # translucent orange
 GHOST_SCALE = 1.04  # ghosts are slightly larger than the blocks, so that one on a block stays visible
