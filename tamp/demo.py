@@ -30,6 +30,8 @@ DEFAULT_REPLAY = Path("demo_replay.html")
 
 @dataclass(frozen=True)
 class DemoConfig:
+    """Options of `tamp demo` (see the module docstring)."""
+
     seed: int = 0  # seeds the scene, the goal-generating actions and the sampled symbolic domains
     objects: int = 3
     actions: int = 3  # k: random actions that generate the goal

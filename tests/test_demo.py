@@ -1,0 +1,94 @@
+"""`tamp demo`, the pretrained models shipped in the package, and replays with ghost blocks."""
+from __future__ import annotations
+
+import base64
+import re
+
+import numpy as np
+import pytest
+
+from tamp.cli import main
+from tamp.models import DOMAIN_DIR, DYNAMICS_FILE, SYMBOLIC_FILE, load_models, pretrained_dir
+from tamp.replay import Timeline
+
+
+def _scene_paths(html_file) -> bytes:
+    """The Meshcat commands embedded in a static replay (base64 msgpack), concatenated."""
+    blobs = re.findall(r'base64,([A-Za-z0-9+/=]+)"', html_file.read_text())
+    return b"".join(base64.b64decode(b) for b in blobs)
+
+
+def test_the_shipped_models_are_small_load_and_plan():
+    import torch
+
+    from tamp.bilevel import PlanConfig, plan
+    from tamp.problem import random_problem
+
+    torch.set_num_threads(1)
+    directory = pretrained_dir()
+    files = [directory / SYMBOLIC_FILE, directory / DYNAMICS_FILE, directory / DOMAIN_DIR / "operators.json",
+             directory / "PROVENANCE.md"]
+    assert all(f.is_file() for f in files), [str(f) for f in files if not f.is_file()]
+    assert sum(f.stat().st_size for f in directory.rglob("*") if f.is_file()) < 5e6  # "a few MB at most"
+    models = load_models(directory)
+    problem = random_problem(2, 1, seed=0)
+    result = plan("bilevel", models, problem.X_init, problem.X_goal, PlanConfig(seed=0))
+    assert result.solved, result.reasons
+    assert result.predicted.shape == (len(result.plan) + 1, 2, 5)
+    assert result.predicted_error < PlanConfig().tau_verify
+
+
+@pytest.mark.parametrize("fidelity, candidates", [("fast", 1), ("full", 0)])
+def test_demo_prints_the_summary_and_writes_replays_with_ghosts(tmp_path, capsys, fidelity, candidates):
+    replay = tmp_path / "demo.html"
+    code = main(["demo", "--seed", "0", "--fidelity", fidelity, "--replay", str(replay),
+                 "--candidates", str(candidates)])
+    out = capsys.readouterr().out
+    for part in ("problem (seed 0): 3 blocks", "goal (", "symbolic candidates",
+                 f"summary (seed 0, {fidelity} execution)", "  plan ", "planning ", "final error", "outcome "):
+        assert part in out, part
+    outcome = re.search(r"outcome +(\w+)", out).group(1)
+    assert code == (0 if outcome == "success" else 1)
+    assert replay.is_file()
+    scene = _scene_paths(replay)
+    for j in range(3):
+        assert f"/ghosts/goal/block_{j}".encode() in scene
+    if "no plan" not in out:
+        assert b"/ghosts/predicted/block_0" in scene
+    assert "Dynamics Model&#x27;s prediction" in replay.read_text()  # the legend
+    # The first candidate that failed verification was executed into its own replay.
+    rejected = re.search(r"candidate (\d+) \[", out)
+    if candidates and "unverified" in out:
+        assert rejected is not None
+        candidate = tmp_path / f"demo.candidate{rejected.group(1)}.html"
+        assert candidate.is_file() and b"/ghosts/predicted/block_0" in _scene_paths(candidate)
+
+
+def test_demo_with_a_bad_models_directory_is_a_one_line_error(tmp_path, capsys):
+    missing = tmp_path / "no-such-models"
+    assert main(["demo", "--models", str(missing), "--replay", str(tmp_path / "r.html")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("tamp demo: error:") and str(missing) in err and "\n" not in err
+    (tmp_path / "partial").mkdir()
+    (tmp_path / "partial" / DYNAMICS_FILE).write_bytes(b"not a checkpoint")
+    assert main(["demo", "--models", str(tmp_path / "partial")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("tamp demo: error:") and SYMBOLIC_FILE in err and "\n" not in err
+    assert not (tmp_path / "r.html").exists()
+
+
+def test_predictions_are_tied_to_the_start_of_each_action():
+    timeline = Timeline()
+    for t in (0.0, 1.0, 2.0):  # action 0 starts at 0 s, action 1 at 1 s; action 2 never starts
+        timeline._add(t, np.zeros(6), np.zeros((2, 7)))
+        if t < 2.0:
+            timeline.mark_action()
+    predicted = np.arange(4 * 2 * 5, dtype=float).reshape(4, 2, 5)  # X_init and after each of 3 actions
+    timeline.show_goal(predicted[-1])
+    timeline.show_predictions(predicted)
+    goal, shown = timeline.ghosts
+    assert goal.times == [0.0] and np.array_equal(goal.states[0], predicted[-1])
+    assert shown.times == [0.0, 1.0]  # the state after action i from the start of action i
+    assert np.array_equal(shown.states, predicted[1:3])
+    with pytest.raises(ValueError, match="one \\(n, 5\\) state per time"):
+        type(goal)("bad", predicted, [0.0], goal.rgba)
