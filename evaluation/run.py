@@ -69,6 +69,7 @@ class EvalConfig:
     n_domains: int = 100  # N sampled symbolic domains
     search_time_limit: float = 10.0  # continuous search, per planning call
     search_max_expansions: int = 5000  # continuous search node limit, per planning call
+    level1_expansions: int | None = PlanConfig.level1_expansions  # symbolic search expansions, all N domains
     level1_time_budget: float | None = PlanConfig.level1_time_budget  # all N symbolic planner calls of a call
     workers: int = 1  # worker processes or Ray actors
     backend: str = "local"  # "local" process pool or "ray"
@@ -91,13 +92,14 @@ class EvalConfig:
         """The settings rows depend on (a results directory holds rows of one setting only)."""
         return {"fidelity": self.fidelity, "eps_m": self.eps, "tau_verify_m": self.tau_verify,
                 "n_domains": self.n_domains, "search_time_limit_s": self.search_time_limit,
-                "search_max_expansions": self.search_max_expansions, "level1_time_budget_s": self.level1_time_budget}
+                "search_max_expansions": self.search_max_expansions, "level1_expansions": self.level1_expansions,
+                "level1_time_budget_s": self.level1_time_budget}
 
     def plan_config(self, seed: int) -> PlanConfig:
         from tamp.search import SearchConfig
 
         return PlanConfig(n_domains=self.n_domains, seed=seed, tau_verify=self.tau_verify, eps=self.eps,
-                          level1_time_budget=self.level1_time_budget,
+                          level1_expansions=self.level1_expansions, level1_time_budget=self.level1_time_budget,
                           search=SearchConfig(max_expansions=self.search_max_expansions,
                                                  time_limit=self.search_time_limit))
 

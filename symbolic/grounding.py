@@ -69,6 +69,12 @@ class GroundTask:
                 key = (b[0], val & self.own_mask[b[0]])
                 self.buckets.setdefault(key, []).append(g)
         self._succ: dict[int, tuple[tuple[int, ...], tuple[int, ...]]] = {}
+        # States of at most 62 bits fit in int64: test every precondition in one vectorized pass.
+        self._vectorized = self.n_bits <= 62
+        if self._vectorized:
+            self._pm = np.array(self.pre_mask, dtype=np.int64)
+            self._pv = np.array(self.pre_val, dtype=np.int64)
+            self._opi = np.array(self.op_index, dtype=np.int64)
 
     def __len__(self) -> int:
         return len(self.op_index)
@@ -81,6 +87,11 @@ class GroundTask:
         """(ground action ids in ascending order, their operator ids) applicable in `state`; cached."""
         hit = self._succ.get(state)
         if hit is not None:
+            return hit
+        if self._vectorized:
+            gs_arr = np.flatnonzero((np.int64(state) & self._pm) == self._pv)
+            hit = (tuple(gs_arr.tolist()), tuple(self._opi[gs_arr].tolist()))
+            self._succ[state] = hit
             return hit
         cands: list[int] = []
         for o in range(self.n):

@@ -97,16 +97,19 @@ class SymbolicPlanner:
 
     # ---- probabilistic -------------------------------------------------------------------------
     def plan_probabilistic(self, problem: SymbolicProblem, n_domains: int = 100, seed: int = 0,
-                           min_prob: float = 0.0, time_budget: float | None = None) -> ProbabilisticPlanResult:
-        """Plan in N sampled domains and rank the plans by frequency. With `time_budget` (seconds,
-        python backend) the domains not searched when it runs out count as timed out."""
+                           min_prob: float = 0.0, time_budget: float | None = None,
+                           expansion_budget: int | None = None) -> ProbabilisticPlanResult:
+        """Plan in N sampled domains and rank the plans by frequency. Python backend: with
+        `expansion_budget` (search expansions over all domains; machine-independent) or `time_budget`
+        (seconds), the domains not searched when either runs out count as timed out."""
         check_problem(self.ops, problem)
         deadline = None if time_budget is None else time.perf_counter() + time_budget
         t0 = time.perf_counter()
         choices = sample_choices(self.ops, n_domains, seed, min_prob)
         timings = {"sampling": time.perf_counter() - t0}
         if self.backend == "python":
-            per_domain, n_unique, n_searches = self._run_python(problem, choices, timings, deadline)
+            per_domain, n_unique, n_searches = self._run_python(problem, choices, timings, deadline,
+                                                                expansion_budget)
         elif self.backend == "fd":
             per_domain, n_unique, n_searches = self._run_fd(problem, choices, timings)
         else:
@@ -135,7 +138,8 @@ class SymbolicPlanner:
         order = sorted(found.items(), key=lambda kv: (-kv[1][1], len(kv[0]), kv[0]))
         return [RankedPlan(k, s, c, c / total, states) for k, (s, c, states) in order]
 
-    def _run_python(self, problem, choices, timings, deadline: float | None = None):
+    def _run_python(self, problem, choices, timings, deadline: float | None = None,
+                    expansion_budget: int | None = None):
         t0 = time.perf_counter()
         task = self.ground(problem.n)
         task.clear_cache()  # no state cache carried over between problems (honest per-problem cost)
@@ -148,16 +152,21 @@ class SymbolicPlanner:
         memo: list[tuple[np.ndarray, np.ndarray, PlannerResult]] = []
         results: list[PlannerResult] = []
         out_of_time = PlannerResult(PlannerStatus.TIMEOUT, None, "Level-1 time budget used up")
+        out_of_expansions = PlannerResult(PlannerStatus.TIMEOUT, None, "Level-1 expansion budget used up")
+        left = self.max_expansions * len(reps) if expansion_budget is None else expansion_budget
         for k in reps:
             c = choices[k]
             hit = next((res for touched, vals, res in memo if np.array_equal(c[touched], vals)), None)
             if hit is None and deadline is not None and time.perf_counter() > deadline:
                 hit = out_of_time
+            if hit is None and left <= 0:
+                hit = out_of_expansions
             if hit is None:
                 start = time.perf_counter()
                 limit = self.time_limit if deadline is None else \
                     max(0.0, min(self.time_limit, deadline - time.perf_counter()))
-                out = bfs(task, c, init, goal, self.max_expansions, limit, problem.nonempty)
+                out = bfs(task, c, init, goal, min(self.max_expansions, left), limit, problem.nonempty)
+                left -= out.expanded
                 hit = self._result(task, c, init, out, time.perf_counter() - start)
                 if out.status is not PlannerStatus.TIMEOUT:
                     memo.append((out.touched, c[out.touched], hit))

@@ -40,7 +40,8 @@ class PlanConfig:
     eps: float = EPS_SUCCESS  # metres: success tolerance (goal test of the search, closed loop)
     backend: str = "python"  # symbolic planner backend: python | fd | fd-naive
     symbolic_time_limit: float = 10.0  # seconds per symbolic planner call
-    level1_time_budget: float | None = 0.5  # seconds for all N symbolic planner calls of one problem
+    level1_expansions: int | None = 10_000  # search expansions for all N domains of one problem (deterministic)
+    level1_time_budget: float | None = None  # seconds for all N symbolic planner calls (machine-dependent)
     verify_all: bool = False  # verify every candidate (default: stop at the first verified one, Alg. 1)
     # Beyond the paper, bilevel only (0 and False give its Algorithm 1 exactly; the unverified
     # baselines never use them: without verification they would pick among look-alike plans blindly):
@@ -121,7 +122,8 @@ def _level1_plans(models: Models, X_init, X_goal, cfg: PlanConfig, result: PlanR
     t = time.perf_counter()
     if probabilistic:
         out = planner.plan_probabilistic(problem, n_domains=cfg.n_domains, seed=cfg.seed,
-                                         time_budget=cfg.level1_time_budget)
+                                         time_budget=cfg.level1_time_budget,
+                                         expansion_budget=cfg.level1_expansions)
         result.timings["symbolic"] = time.perf_counter() - t
         result.symbolic_stats = {"n_domains": out.n_domains, "unique_plans": len(out.plans),
                                  "outcomes": dict(out.statuses)}
