@@ -3,7 +3,7 @@
 Problem (n, k, i) of a set with seed s has its own scene seed, drawn from (s, n, k, i) alone
 (`scene_seed`); from it `tamp.problem.random_problem` makes the scene and the k random actions
 that give X_goal in the fast world (actions that fail or move no block are redrawn, with a cap, so
-k counts real steps). Any one problem can therefore be regenerated on its own, and the same
+k counts real steps; a scene that gets stuck is replaced by the next seed of that problem). Any one problem can therefore be regenerated on its own, and the same
 arguments give a byte-identical file. Each line of the file is one `tamp plan --problem` object
 with its name ("n{n}-k{k}-{i:03d}"), seed, k and the actions that generated the goal.
 """
@@ -19,9 +19,26 @@ import numpy as np
 from tamp.problem import Problem, problem_from_dict, random_problem
 
 
-def scene_seed(seed: int, n: int, k: int, i: int) -> int:
-    """The seed of problem (n, k, i) of the set with `seed` (a 32-bit integer)."""
-    return int(np.random.SeedSequence([seed, n, k, i]).generate_state(1)[0])
+MAX_ATTEMPTS = 10  # scenes drawn per problem before giving up (see `generate_problems`)
+
+
+def scene_seed(seed: int, n: int, k: int, i: int, attempt: int = 0) -> int:
+    """The seed of problem (n, k, i) of the set with `seed` (a 32-bit integer); `attempt` > 0 gives
+    the seeds of the scenes drawn after one that got stuck."""
+    key = [seed, n, k, i] + ([attempt] if attempt else [])
+    return int(np.random.SeedSequence(key).generate_state(1)[0])
+
+
+def _problem(n: int, k: int, i: int, seed: int, world) -> Problem:
+    """Problem (n, k, i): the first of its scenes in which k random actions change something (a scene
+    can get stuck, e.g. when every remaining action fails), so the set stays regenerable."""
+    for attempt in range(MAX_ATTEMPTS):
+        try:
+            return random_problem(n, k, scene_seed(seed, n, k, i, attempt), world=world, name=problem_name(n, k, i))
+        except RuntimeError:
+            continue
+    raise RuntimeError(f"problem {problem_name(n, k, i)}: no scene out of {MAX_ATTEMPTS} allowed {k} "
+                       "scene-changing random actions")
 
 
 def problem_name(n: int, k: int, i: int) -> str:
@@ -42,7 +59,7 @@ def generate_problems(ns: Sequence[int] = (2, 3, 4), ks: Sequence[int] = (1, 2, 
         raise ValueError(f"--seed must be in [0, 2^63), got {seed}")
     world = World(WorldConfig())
     cells = [(n, k, i) for n in ns for k in ks for i in range(per_cell)]
-    return [random_problem(n, k, scene_seed(seed, n, k, i), world=world, name=problem_name(n, k, i))
+    return [_problem(n, k, i, seed, world)
             for n, k, i in tqdm(cells, desc="problems", unit="problem", disable=not progress)]
 
 

@@ -70,7 +70,7 @@ class Scale:
 
 
 SCALES: dict[str, Scale] = {
-    "quick": Scale(samples=20_000, epochs=300, train_time_limit_s=540.0, ablation_runs=2, ablation_epochs=15,
+    "quick": Scale(samples=40_000, epochs=250, train_time_limit_s=600.0, ablation_runs=2, ablation_epochs=15,
                    per_cell=10, search_time_limit_s=10.0),
     "paper": Scale(samples=160_000, epochs=4000, train_time_limit_s=None, ablation_runs=10, ablation_epochs=4000,
                    per_cell=100, search_time_limit_s=60.0),

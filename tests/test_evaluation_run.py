@@ -72,6 +72,26 @@ def test_problem_sets_are_regenerated_byte_for_byte(problems_file, tmp_path):
     assert other.read_bytes() != first[0]
 
 
+def test_a_stuck_scene_is_replaced_by_the_next_seed_of_its_problem(monkeypatch):
+    import evaluation.problems as ep
+
+    real, tried = ep.random_problem, []
+
+    def stuck_first(n, k, seed, world=None, name=None):
+        tried.append(seed)
+        if len(tried) == 1:
+            raise RuntimeError("stuck")
+        return real(n, k, seed, world=world, name=name)
+
+    monkeypatch.setattr(ep, "random_problem", stuck_first)
+    (problem,) = ep.generate_problems(ns=(2,), ks=(1,), per_cell=1, seed=5, progress=False)
+    assert tried == [ep.scene_seed(5, 2, 1, 0), ep.scene_seed(5, 2, 1, 0, attempt=1)]
+    assert problem.seed == tried[1] and problem.name == "n2-k1-000"
+    monkeypatch.setattr(ep, "random_problem", lambda *a, **kw: (_ for _ in ()).throw(RuntimeError("stuck")))
+    with pytest.raises(RuntimeError, match="n2-k1-000: no scene out of 10"):
+        ep.generate_problems(ns=(2,), ks=(1,), per_cell=1, seed=5, progress=False)
+
+
 @pytest.mark.parametrize("edit, message", [
     (lambda lines: lines[:1] + ["{not json"] + lines[2:], "line 2: not valid JSON"),
     (lambda lines: lines[:2] + [lines[2].replace('"X_goal"', '"X_gaol"')] + lines[3:],
