@@ -4,14 +4,16 @@ Plan in each of N sampled domains, record each unique plan (as pick-place action
 number of domains that produced it, rank by normalised frequency (ties: shorter plan first, then
 the action tuples), so the ranking is a deterministic function of (operators, problem, N, seed).
 
-Backends, all giving shortest plans with the default search:
-- ``python``   in-process BFS over the grounded task (`search.py`); ground actions are built once per
-               (operator set, n) and a search is reused for every domain that agrees with it on the
-               operators it touched. Fast path for Level 1.
+Backends:
+- ``python``   in-process search over the grounded task (`search.py`): by default the first shortest
+               plan of a breadth-first search, or with objective="likely" the most probable plan
+               (uniform-cost search, cost 1 - ln p(effect) per step). Ground actions
+               are built once per (operator set, n) and a search is reused for every domain that
+               agrees with it on the operators it touched. Fast path for Level 1.
 - ``fd``       Fast Downward: one translation per problem of the *union* domain (each effect
                variant is an action), then the search binary alone on the SAS task restricted to
                each distinct domain (distinct on the operators that survived translation), run in
-               parallel.
+               parallel. Shortest plans with the default search (astar(lmcut())).
 - ``fd-naive`` Fast Downward driver per sampled domain (write PDDL, translate, search): the baseline.
 """
 
@@ -27,13 +29,18 @@ import numpy as np
 
 from symbolic import fast_downward as fd
 from symbolic.grounding import GroundTask, check_problem, problem_states, steps_to_actions
-from symbolic.pddl import DomainWriter, problem_pddl
+from symbolic.pddl import DomainWriter, effect_probabilities, problem_pddl
 from symbolic.sampling import dedup_choices, sample_choices
-from symbolic.search import bfs
+from symbolic.search import action_costs, bfs, most_likely
 from symbolic.structs import (Action, OperatorSet, PlannerResult, PlannerStatus, PlanStep, ProbabilisticPlanResult,
                               RankedPlan, SymbolicProblem)
 
 BACKENDS = ("python", "fd", "fd-naive")
+# python backend: "shortest" = breadth-first search, the first shortest plan in ground-action order
+# (as Fast Downward's optimal searches); "likely" = most probable plan (cost 1 - ln p per step,
+# `search.most_likely`). On learned Drake-world domains "likely" did not help: 1 instead of 4 of 60
+# unverified symbolic plans succeeded (the symbols, not the choice among plans, limit them).
+OBJECTIVES = ("likely", "shortest")
 
 
 def _strip_variant(steps: list[PlanStep]) -> list[PlanStep]:
@@ -45,9 +52,13 @@ class SymbolicPlanner:
 
     def __init__(self, ops: OperatorSet, backend: str = "python", search: str = fd.DEFAULT_SEARCH,
                  time_limit: float = 10.0, scope: str = "subset", workers: int | None = None,
-                 max_expansions: int = 200_000):
+                 max_expansions: int = 200_000, objective: str = "shortest"):
         if backend not in BACKENDS:
             raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
+        if objective not in OBJECTIVES:
+            raise ValueError(f"objective must be one of {OBJECTIVES}, got {objective!r}")
+        self.objective = objective
+        self._costs = action_costs([effect_probabilities(op) for op in ops.operators])
         if scope not in ("subset", "exact"):
             raise ValueError(f"scope must be 'subset' or 'exact', got {scope!r}")
         if len(ops) == 0:
@@ -85,7 +96,7 @@ class SymbolicPlanner:
             task = self.ground(problem.n)
             init, goal = problem_states(problem)
             start = time.perf_counter()
-            out = bfs(task, ch, init, goal, self.max_expansions, self.time_limit, problem.nonempty)
+            out = self._search(task, ch, init, goal, self.max_expansions, self.time_limit, problem.nonempty)
             return self._result(task, ch, init, out, time.perf_counter() - start)
         result = fd.run_fast_downward(self._domain_text(ch, problem.n), problem_pddl(self.ops, problem),
                                       self.search, self.time_limit)
@@ -165,7 +176,7 @@ class SymbolicPlanner:
                 start = time.perf_counter()
                 limit = self.time_limit if deadline is None else \
                     max(0.0, min(self.time_limit, deadline - time.perf_counter()))
-                out = bfs(task, c, init, goal, min(self.max_expansions, left), limit, problem.nonempty)
+                out = self._search(task, c, init, goal, min(self.max_expansions, left), limit, problem.nonempty)
                 left -= out.expanded
                 hit = self._result(task, c, init, out, time.perf_counter() - start)
                 if out.status is not PlannerStatus.TIMEOUT:
@@ -173,6 +184,12 @@ class SymbolicPlanner:
             results.append(hit)
         timings["planner"] = time.perf_counter() - t0
         return [results[g] for g in group], len(reps), len(memo)
+
+    def _search(self, task: GroundTask, choice, init: int, goal: int, max_expansions: int,
+                time_limit: float | None, nonempty: bool):
+        if self.objective == "shortest":
+            return bfs(task, choice, init, goal, max_expansions, time_limit, nonempty)
+        return most_likely(task, choice, init, goal, self._costs, max_expansions, time_limit, nonempty)
 
     @staticmethod
     def _result(task: GroundTask, choice: np.ndarray, init: int, out, seconds: float) -> PlannerResult:

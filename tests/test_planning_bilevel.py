@@ -163,3 +163,20 @@ def test_verify_many_shares_prefixes_and_equals_verify_one_by_one():
         one = verify(StubModel(), X_INIT, A_ON_B, p)
         assert v.actions == one.actions and np.allclose(v.trajectory, one.trajectory)
         assert v.error == pytest.approx(one.error) and v.verified == one.verified
+
+
+def test_the_symbolic_search_prefers_the_operator_more_likely_to_give_the_needed_effect():
+    from symbolic import SymbolicPlanner, make_problem, steps_to_actions
+
+    stub = StubModel()
+    problem = make_problem(*stub.symbols(X_INIT), *stub.symbols(A_ON_B))
+    # both releases usually stack, so both are in the deterministic domain; breadth-first search
+    # takes the first one it generates, (0, 0, 1, 0), whichever is more reliable
+    for p_plus, p_zero, likely in ((0.9, 0.6, (0, 0, 1, 1)), (0.6, 0.9, (0, 0, 1, 0))):
+        domain = two_block_domain(p_bad=p_plus, p_good=p_zero)
+        plans = {}
+        for objective in ("likely", "shortest"):
+            out = SymbolicPlanner(domain, objective=objective).plan_deterministic(problem)
+            plans[objective] = steps_to_actions(domain, out.plan, 2)
+        assert plans["likely"] == [likely]
+        assert plans["shortest"] == [(0, 0, 1, 0)]
