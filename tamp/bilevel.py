@@ -290,11 +290,13 @@ class ClosedLoopResult:
 def plan_closed_loop(method: str, models: Models, X_init, X_goal,
                      step: Callable[[PickPlace], np.ndarray], rounds: int,
                      cfg: PlanConfig = PlanConfig(),
-                     on_round: Callable[[int, PlanResult], None] | None = None) -> ClosedLoopResult:
+                     on_round: Callable[[int, PlanResult], None] | None = None,
+                     planner: Callable[..., PlanResult] | None = None) -> ClosedLoopResult:
     """Plan, execute the first action, observe, replan (at most `rounds` times); see the module doc.
 
     `step(action)` executes one action in the real (simulated) world and returns the observed (n, 5)
     state; `on_round(r, result)` is called after each planning call, before anything is executed.
+    `planner` (default `plan`, same signature) lets a caller reuse a plan it already has.
     """
     X_goal = np.asarray(X_goal, dtype=float)
     out = ClosedLoopResult([], [], [np.asarray(X_init, dtype=float)], X_goal, cfg.eps)
@@ -303,7 +305,7 @@ def plan_closed_loop(method: str, models: Models, X_init, X_goal,
         if at_goal(X, X_goal, cfg.eps):
             out.reason = "the observed state is within eps of the goal"
             break
-        result = plan(method, models, X, X_goal, cfg)
+        result = (planner or plan)(method, models, X, X_goal, cfg)
         out.rounds.append(result)
         if on_round is not None:
             on_round(r, result)

@@ -17,8 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
-from tamp.bilevel import PlanConfig, PlanResult, plan
-from tamp.plan_command import LEVELS, _fmt_action, print_result
+from tamp.bilevel import ClosedLoopResult, PlanConfig, PlanResult, plan, plan_closed_loop, replan_rounds
+from tamp.plan_command import LEVELS, fmt_action, print_result
 from tamp.problem import Problem, random_problem
 from tamp.replay import Timeline
 from tamp.structs import TYPE_NAMES, PickPlace, WorldConfig
@@ -39,6 +39,7 @@ class DemoConfig:
     fidelity: str = "full"  # full: the arm under physics; fast: the refinement's own world
     replay: Path | None = DEFAULT_REPLAY
     candidates: int = 0  # also replay this many symbolic candidates that failed verification
+    replan: bool = True  # closed loop: execute, observe, replan (up to k - 1 rounds); False: one plan
 
 
 @dataclass
@@ -62,10 +63,15 @@ class DemoResult:
     execution: Execution | None  # None: no plan
     eps: float  # metres
     replays: list[Path] = field(default_factory=list)
+    loop: ClosedLoopResult | None = None  # closed loop (replan): every round and executed action
 
     @property
     def outcome(self) -> str:
         """success | no plan | refinement failed | goal missed"""
+        if self.loop is not None:
+            if self.loop.success:
+                return "success"
+            return "no plan" if not self.loop.executed else "goal missed"
         if self.execution is None:
             return "no plan"
         if not self.execution.refined.success:
@@ -109,7 +115,8 @@ def refine_and_execute(actions: list[PickPlace], X_init: np.ndarray, X_goal: np.
 
 
 def run_demo(cfg: DemoConfig = DemoConfig()) -> DemoResult:
-    """Generate, plan, refine, execute, print the summary and write the replay(s)."""
+    """Generate, plan, refine, execute (closed loop unless cfg.replan is False), print the summary and
+    write the replay(s)."""
     import torch
 
     from tamp.models import load_models, pretrained_dir
@@ -136,6 +143,19 @@ def run_demo(cfg: DemoConfig = DemoConfig()) -> DemoResult:
     out = DemoResult(problem, result, None, plan_cfg.eps)
 
     timeline = Timeline() if cfg.replay is not None else None
+    if cfg.replan:
+        out.loop = _closed_loop(problem, models, plan_cfg, cfg, result, timeline)
+        _print_loop_summary(out, cfg)
+        if timeline is not None:
+            timeline.caption = [f"tamp demo --seed {cfg.seed}: {problem.n} blocks, goal from {problem.k} random "
+                                f"actions, closed loop", _verdict(out)]
+            timeline.show_goal(problem.X_goal)
+            path = timeline.write_html(cfg.replay)
+            out.replays.append(path)
+            print(f"replay written to {path} ({path.stat().st_size / 1e6:.1f} MB): open it in a browser", flush=True)
+        if cfg.candidates:
+            _replay_candidates(out, models, cfg)
+        return out
     if result.solved:
         what = "the arm under physics" if cfg.fidelity == "full" else "the fast world"
         print(f"\nrefining and executing {len(result.plan)} action(s) with {what}:", flush=True)
@@ -218,7 +238,7 @@ def _print_execution(ex: Execution, actions, predicted, X_goal, fidelity: str) -
         print(f"  refinement: failed: {r.failure}; executing the {len(r.steps)} action(s) before it")
     for k, X in enumerate(ex.X_after):
         off = goal_errors(X, predicted[k + 1]).max()
-        print(f"  action {k} ({_fmt_action(actions[k])}): blocks within {off * 100:.1f} cm of the Dynamics "
+        print(f"  action {k} ({fmt_action(actions[k])}): blocks within {off * 100:.1f} cm of the Dynamics "
               f"Model's prediction, {goal_error(X, X_goal) * 100:.1f} cm from the goal")
     for note in ex.notes:
         print(f"  {note}")
@@ -227,6 +247,10 @@ def _print_execution(ex: Execution, actions, predicted, X_goal, fidelity: str) -
 
 
 def _verdict(out: DemoResult) -> str:
+    if out.loop is not None:
+        met = "success" if out.loop.success else "goal missed"
+        return (f"{len(out.loop.executed)} action(s) in {len(out.loop.rounds)} round(s); final error "
+                f"{out.loop.error * 100:.1f} cm (eps {out.eps * 100:g} cm): {met}")
     ex = out.execution
     if ex is None:
         return "no plan: " + "; ".join(out.result.reasons)
@@ -259,4 +283,81 @@ def _print_summary(out: DemoResult, cfg: DemoConfig) -> None:
                "refinement failed": "failure: the plan could not be refined into arm motions "
                                     f"({ex.refined.failure if ex else ''})",
                "goal missed": "failure: the plan was executed but missed the goal"}[out.outcome]
+    print(f"  outcome     {outcome}", flush=True)
+
+
+def _closed_loop(problem: Problem, models, plan_cfg: PlanConfig, cfg: DemoConfig, first: PlanResult,
+                 timeline: Timeline | None) -> ClosedLoopResult:
+    """Execute the first action of the plan, observe the scene, replan from it (up to k - 1 rounds;
+    the last plan runs to its end), in a World of the demo's fidelity: each action is refined and
+    executed there, an action that cannot be refined changes nothing and the loop goes on. The first
+    round reuses the plan already printed. The replay shows each round's prediction of the action it
+    executed (the last round: of each of its actions)."""
+    from tamp import World
+
+    world = World(WorldConfig(fidelity=cfg.fidelity, simplify_paths=True))
+    world.timeline = timeline
+    X0 = world.reset(X=problem.X_init)
+    rounds = replan_rounds(problem.k)
+    print(f"\nclosed loop ({cfg.fidelity} world): execute, observe, replan; up to {rounds} replanning "
+          f"round(s)", flush=True)
+    planned: list[tuple[int, PlanResult]] = []  # (index of the round's first executed action, result)
+    executed = []
+
+    def plan_round(method, models_, X, X_goal, config):
+        result = first if not planned else plan(method, models_, X, X_goal, config)
+        planned.append((len(executed), result))
+        if len(planned) > 1:
+            print(f"round {len(planned) - 1}: replanned from the observed scene", flush=True)
+            print_result(result, config.tau_verify, indent="  ")
+        return result
+
+    def step(action: PickPlace) -> np.ndarray:
+        t, marks = time.perf_counter(), len(timeline.action_starts) if timeline is not None else 0
+        X, info = world.step(action)
+        started = timeline is not None and len(timeline.action_starts) > marks  # it moved the arm
+        executed.append(timeline.action_starts[marks] if started else None)
+        why = f" ({info.reason})" if info.status != "ok" and info.reason else ""
+        print(f"  executed {fmt_action(action)}: {info.status}{why}; blocks {goal_error(X, problem.X_goal) * 100:.1f} "
+              f"cm from the goal, {time.perf_counter() - t:.1f} s", flush=True)
+        return X
+
+    loop = plan_closed_loop("bilevel", models, X0, problem.X_goal, step, rounds, plan_cfg, planner=plan_round)
+    if timeline is not None:
+        _show_loop_predictions(timeline, planned, executed)
+    return loop
+
+
+def _show_loop_predictions(timeline: Timeline, planned: list[tuple[int, PlanResult]],
+                           starts: list[float | None]) -> None:
+    """Ghosts of each round's predictions, each from the replay time its action started (actions that
+    never moved the arm, e.g. not refinable, have no start and no ghost)."""
+    from tamp.replay import PREDICTED_RGBA, Ghosts
+
+    states, times = [], []
+    for r, (first, result) in enumerate(planned):
+        end = planned[r + 1][0] if r + 1 < len(planned) else len(starts)
+        for i in range(end - first):
+            if result.predicted is not None and i + 1 < len(result.predicted) and starts[first + i] is not None:
+                states.append(result.predicted[i + 1])
+                times.append(starts[first + i])
+    if states:
+        timeline.ghosts.append(Ghosts("predicted", np.stack(states), times, PREDICTED_RGBA,
+                                      "Dynamics Model's prediction after the current action"))
+
+
+def _print_loop_summary(out: DemoResult, cfg: DemoConfig) -> None:
+    loop = out.loop
+    print(f"\nsummary (seed {cfg.seed}, {cfg.fidelity} execution, closed loop):")
+    levels = ", ".join("no plan" if r.level is None else f"level {r.level}" for r in loop.rounds)
+    print(f"  plans       {len(loop.rounds)} round(s): {levels}; {len(loop.executed)} action(s) executed")
+    for a in loop.executed:
+        print(f"              {fmt_action(a)}")
+    print(f"  ended       {loop.reason}")
+    planning = sum(r.timings.get("total", 0.0) for r in loop.rounds)
+    print(f"  times       planning {planning:.2f} s (all rounds)")
+    print(f"  final error {loop.error * 100:.1f} cm (max over blocks; eps {out.eps * 100:g} cm)")
+    outcome = {"success": "success: every block within eps of its goal",
+               "no plan": "failure: the planner found no plan",
+               "goal missed": "failure: the goal was not reached within the replanning rounds"}[out.outcome]
     print(f"  outcome     {outcome}", flush=True)

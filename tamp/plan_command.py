@@ -32,12 +32,18 @@ class PlanOptions:
     time_limit: float = 30.0  # seconds for the continuous search
 
 
-def _fmt_action(a) -> str:
+def fmt_action(a) -> str:
     return f"pick {a[0]} at {a[1]:+d}, place on {a[2]} at {a[3]:+d}"
 
 
 def _ms(t: float) -> str:
     return f"{t * 1e3:.1f} ms" if t < 1 else f"{t:.2f} s"
+
+
+def _rank(result: PlanResult, ranked_index: int) -> int:
+    """The printed number (1-based position in result.candidates) of ranked symbolic plan `ranked_index`."""
+    ranked = [i for i, c in enumerate(result.candidates) if c.alternative_of is None]
+    return ranked[ranked_index] + 1
 
 
 def print_result(result: PlanResult, tau: float, indent: str = "") -> None:
@@ -53,14 +59,16 @@ def print_result(result: PlanResult, tau: float, indent: str = "") -> None:
             check = "not checked" if c.error is None else \
                 f"error {c.error * 100:.1f} cm, {'verified' if c.verified else 'unverified'}"
             chosen = "  <- plan" if result.level == 1 and result.plan == list(c.actions) else ""
-            print(f"{p}    {i + 1}. {c.count:3d} domains ({c.probability:.2f}): {list(c.actions)}; {check}{chosen}")
+            source = f"{c.count:3d} domains ({c.probability:.2f})" if c.alternative_of is None else \
+                f"same symbols as plan {_rank(result, c.alternative_of)}"
+            print(f"{p}    {i + 1}. {source}: {list(c.actions)}; {check}{chosen}")
         if len(result.candidates) > 10:
             print(f"{p}    ... {len(result.candidates) - 10} more")
     if result.search is not None:
         s = result.search
         print(f"{p}  continuous search: {s.reason}; {s.generated} successors in {s.predict_calls} model calls")
     for k, a in enumerate(result.plan or []):
-        print(f"{p}  action {k}: {_fmt_action(a)}")
+        print(f"{p}  action {k}: {fmt_action(a)}")
     for reason in result.reasons if not result.solved else []:
         print(f"{p}  {reason}")
     stages = ("symbols", "symbolic", "verify", "search", "total")
@@ -112,7 +120,7 @@ def _closed_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timelin
     def step(action):
         X, info = world.step(action)
         infos.append(info)
-        print(f"  executed {_fmt_action(action)}: {info.status}{': ' + info.reason if info.reason else ''}; "
+        print(f"  executed {fmt_action(action)}: {info.status}{': ' + info.reason if info.reason else ''}; "
               f"now {goal_error(X, problem.X_goal) * 100:.1f} cm from the goal")
         return X
 

@@ -38,15 +38,22 @@ def test_the_shipped_models_are_small_load_and_plan():
     assert result.predicted_error < PlanConfig().tau_verify
 
 
-@pytest.mark.parametrize("fidelity, candidates", [("fast", 1), ("full", 0)])
-def test_demo_prints_the_summary_and_writes_replays_with_ghosts(tmp_path, capsys, fidelity, candidates):
+@pytest.mark.parametrize("fidelity, candidates, loop", [("fast", 1, "open"), ("fast", 0, "closed"),
+                                                      ("full", 0, "open")])
+def test_demo_prints_the_summary_and_writes_replays_with_ghosts(tmp_path, capsys, fidelity, candidates, loop):
     replay = tmp_path / "demo.html"
     code = main(["demo", "--seed", "0", "--fidelity", fidelity, "--replay", str(replay),
-                 "--candidates", str(candidates)])
+                 "--candidates", str(candidates)] + (["--open-loop"] if loop == "open" else []))
     out = capsys.readouterr().out
-    for part in ("problem (seed 0): 3 blocks", "goal (", "symbolic candidates",
-                 f"summary (seed 0, {fidelity} execution)", "  plan ", "planning ", "final error", "outcome "):
+    summary = f"summary (seed 0, {fidelity} execution)" if loop == "open" else \
+        f"summary (seed 0, {fidelity} execution, closed loop)"
+    for part in ("problem (seed 0): 3 blocks", "goal (", "symbolic candidates", summary,
+                 "  plan" + (" " if loop == "open" else "s "), "planning ", "final error", "outcome "):
         assert part in out, part
+    if loop == "closed":  # every executed action is reported, and the summary lists the same actions
+        executed = re.findall(r"  executed (pick \d at [+-]\d, place on \d at [+-]\d)", out)
+        listed = re.search(r"  plans +\d+ round\(s\): [^;]+; (\d+) action\(s\) executed", out)
+        assert executed and listed is not None and int(listed.group(1)) == len(executed)
     outcome = re.search(r"outcome +(\w+)", out).group(1)
     assert code == (0 if outcome == "success" else 1)
     assert replay.is_file()
