@@ -102,7 +102,7 @@ def main() -> None:
 
         naive = SymbolicPlanner(ops, backend="fd-naive", search=args.search, time_limit=60)
         calls, agree_status, agree_len, same_plan, compared = [], 0, 0, 0, 0
-        write_t, parse_t = [], []
+        write_t = []
         for p in problems[: args.naive_problems]:
             choices = sample_choices(ops, args.naive_domains, seed=0)
             for c in choices:

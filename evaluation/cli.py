@@ -5,6 +5,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from tamp.cli import positive_int
+
 
 def _int_list(text: str) -> tuple[int, ...]:
     try:
@@ -18,16 +20,6 @@ def _name_list(text: str) -> list[str]:
     if not names:
         raise argparse.ArgumentTypeError(f"expected method names like bilevel,cfs, got {text!r}")
     return names
-
-
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        value = 0
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
-    return value
 
 
 def _positive_float(text: str) -> float:
@@ -104,7 +96,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--objects", type=_int_list, default=(2, 3, 4), help="object counts (default 2,3,4)")
     p.add_argument("--actions", type=_int_list, default=(1, 2, 3, 4, 5),
                    help="numbers k of random actions per goal (default 1,2,3,4,5)")
-    p.add_argument("--per-cell", type=_positive_int, default=10, help="problems per (objects, k) (default 10)")
+    p.add_argument("--per-cell", type=positive_int, default=10, help="problems per (objects, k) (default 10)")
     p.add_argument("--seed", type=int, default=0, help="seed of the set (default 0)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_problems)
@@ -126,14 +118,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--methods", type=_name_list, default=None, help="comma-separated methods (default: all available)")
     p.add_argument("--fidelity", choices=("fast", "full"), default="fast",
                    help="execute in the fast world (default) or with the arm under physics")
-    p.add_argument("--workers", type=_positive_int, default=1, help="worker processes or Ray actors (default 1)")
+    p.add_argument("--workers", type=positive_int, default=1, help="worker processes or Ray actors (default 1)")
     p.add_argument("--backend", choices=("local", "ray"), default="local",
                    help="local process pool (default) or Ray actors")
     p.add_argument("--time-limit", type=_positive_float, default=10.0,
                    help="continuous search time limit per planning call, s (default 10)")
-    p.add_argument("--max-expansions", type=_positive_int, default=5000,
+    p.add_argument("--max-expansions", type=positive_int, default=5000,
                    help="continuous search node limit per planning call (default 5000)")
-    p.add_argument("--n-domains", type=_positive_int, default=100, help="N sampled symbolic domains (default 100)")
+    p.add_argument("--n-domains", type=positive_int, default=100, help="N sampled symbolic domains (default 100)")
     p.add_argument("--no-report", action="store_true", help="write the rows only (tamp report makes the report)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_evaluate)
@@ -161,7 +153,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--scale", choices=("quick", "paper"), default="quick", help="sizes (default quick)")
     p.add_argument("--out", type=Path, required=True, help="output directory (new, or the one to resume)")
-    p.add_argument("--workers", type=_positive_int, default=None,
+    p.add_argument("--workers", type=positive_int, default=None,
                    help="worker processes or Ray actors (default: all CPUs)")
     p.add_argument("--backend", choices=("local", "ray"), default="local",
                    help="collection and evaluation on a local process pool (default) or Ray")

@@ -34,7 +34,6 @@ import threading
 import time
 from dataclasses import dataclass
 from datetime import datetime, timezone
-from importlib import metadata
 from pathlib import Path
 from typing import Any, Iterator, Sequence
 
@@ -43,6 +42,7 @@ import numpy as np
 from evaluation.methods import METHODS, Method, load_method_models, required_files, resolve_methods
 from evaluation.problems import atomic_write_text, read_problems
 from tamp.bilevel import PlanConfig
+from tamp.collect import package_versions
 from tamp.problem import Problem
 from tamp.verify import EPS_SUCCESS, TAU_VERIFY, goal_error
 
@@ -342,16 +342,6 @@ def _run_ray(tasks, models_dir, methods, models, config: EvalConfig) -> Iterator
 
 
 # --------------------------------------------------------------------------- the results directory
-
-def package_versions() -> dict[str, str]:
-    out = {"python": sys.version.split()[0]}
-    for name in ("bilevel-tamp", "drake", "torch", "ompl", "numpy"):
-        try:
-            out[name] = metadata.version(name)
-        except metadata.PackageNotFoundError:
-            out[name] = "not installed"
-    return out
-
 
 def _sha256(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()

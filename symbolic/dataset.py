@@ -77,7 +77,6 @@ def restrict_to_involved(data: SymbolicDataset) -> SymbolicDataset:
     assumption on the other objects), which keeps learned domains small when the full pre-state of
     every object would make nearly every transition its own operator."""
     T, n_max, d_z = data.unary_pre.shape
-    K = data.rel_pre.shape[1]
     up = np.zeros_like(data.unary_pre)
     uq = np.zeros_like(data.unary_post)
     rp = np.zeros_like(data.rel_pre)

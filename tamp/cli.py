@@ -14,7 +14,8 @@ import numpy as np
 BOTTLENECKS = ("gumbel_sigmoid", "sigmoid", "tanh", "none")
 
 
-def _positive_int(text: str) -> int:
+def positive_int(text: str) -> int:
+    """argparse type: an integer >= 1."""
     try:
         value = int(text)
     except ValueError:
@@ -211,9 +212,9 @@ def build_parser() -> argparse.ArgumentParser:
         "(IK, OMPL motions, physics after release). Prints one line per action: the action, what "
         "happened and where the time went.",
     )
-    p.add_argument("--objects", type=_positive_int, default=3, help="number of blocks, 1..6 (default 3)")
+    p.add_argument("--objects", type=positive_int, default=3, help="number of blocks, 1..6 (default 3)")
     p.add_argument("--seed", type=int, default=0, help="seed of the scene and the actions (default 0)")
-    p.add_argument("--steps", type=_positive_int, default=5, help="number of random actions (default 5)")
+    p.add_argument("--steps", type=positive_int, default=5, help="number of random actions (default 5)")
     p.add_argument("--json", action="store_true", help="print JSON lines instead of text")
     p.add_argument("--replay", type=_html_path, metavar="OUT.html",
                    help="write a self-contained Meshcat HTML replay of the arm and blocks")
@@ -231,7 +232,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--objects", type=_object_counts, default=(2, 3, 4),
                    help="object counts drawn uniformly per scene, e.g. 2,3,4 (default)")
     p.add_argument("--out", type=Path, required=True, help="dataset directory (new, or the one to resume)")
-    p.add_argument("--workers", type=_positive_int, default=None,
+    p.add_argument("--workers", type=positive_int, default=None,
                    help="worker processes or Ray actors (default: all CPUs, of the cluster with --address)")
     p.add_argument("--backend", choices=("local", "ray"), default="local",
                    help="local process pool (default) or Ray (optional extra: pip install ray)")
@@ -280,17 +281,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--data", required=True, help="dataset directory (tamp collect --out)")
     p.add_argument("--bottleneck", choices=BOTTLENECKS, default="sigmoid",
                    help="bottleneck activation: gumbel_sigmoid = Symbolic Model, sigmoid = Dynamics Model (default)")
-    p.add_argument("--epochs", type=_positive_int, default=100, help="training epochs (default 100)")
+    p.add_argument("--epochs", type=positive_int, default=100, help="training epochs (default 100)")
     p.add_argument("--out", required=True, help="checkpoint file to write (e.g. models/dynamics.pt)")
-    p.add_argument("--d-z", type=_positive_int, default=None,
+    p.add_argument("--d-z", type=positive_int, default=None,
                    help="unary symbol bits per object (default: learned.ModelConfig's; more bits, more operators)")
-    p.add_argument("--heads", type=_positive_int, default=None,
+    p.add_argument("--heads", type=positive_int, default=None,
                    help="relation types = attention heads (default: learned.ModelConfig's)")
-    p.add_argument("--batch-size", type=_positive_int, default=128)
+    p.add_argument("--batch-size", type=positive_int, default=128)
     p.add_argument("--lr", type=float, default=1e-4)
     p.add_argument("--val-fraction", type=float, default=0.1)
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--threads", type=_positive_int, default=1, help="torch threads (default 1)")
+    p.add_argument("--threads", type=positive_int, default=1, help="torch threads (default 1)")
     p.add_argument("--resume", action="store_true", help="continue from <out>.last.pt")
     p.set_defaults(func=cmd_train)
 
@@ -301,11 +302,11 @@ def build_parser() -> argparse.ArgumentParser:
         "and report the mean effect-prediction error (cm) on a held-out test split, as Markdown and JSON.",
     )
     p.add_argument("--data", required=True, help="dataset directory")
-    p.add_argument("--runs", type=_positive_int, default=3, help="seeds per activation (default 3; the paper: 10)")
-    p.add_argument("--epochs", type=_positive_int, default=20, help="epochs per run (default 20)")
+    p.add_argument("--runs", type=positive_int, default=3, help="seeds per activation (default 3; the paper: 10)")
+    p.add_argument("--epochs", type=positive_int, default=20, help="epochs per run (default 20)")
     p.add_argument("--out-dir", default="runs/ablation", help="where ablation.md / ablation.json go")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--threads", type=_positive_int, default=1)
+    p.add_argument("--threads", type=positive_int, default=1)
     p.set_defaults(func=cmd_ablate)
 
     p = sub.add_parser(
@@ -356,8 +357,8 @@ def build_parser() -> argparse.ArgumentParser:
         "success, 1 if there was no plan, the plan could not be refined or it missed the goal.",
     )
     p.add_argument("--seed", type=int, default=0, help="seed of the problem and the planner (default 0)")
-    p.add_argument("--objects", type=_positive_int, default=3, help="number of blocks (default 3)")
-    p.add_argument("--actions", type=_positive_int, default=3,
+    p.add_argument("--objects", type=positive_int, default=3, help="number of blocks (default 3)")
+    p.add_argument("--actions", type=positive_int, default=3,
                    help="k: random actions that generate the goal (default 3)")
     p.add_argument("--models", type=Path, default=None,
                    help="models directory (symbolic.pt, dynamics.pt, domain/); default: the pretrained "

@@ -121,8 +121,9 @@ class CollectConfig:
 
 
 def package_versions() -> dict[str, str]:
+    """Versions of Python and the packages results depend on (read from metadata: imports nothing)."""
     out = {"python": sys.version.split()[0]}
-    for name in ("bilevel-tamp", "drake", "ompl", "ur-analytic-ik", "numpy"):
+    for name in ("bilevel-tamp", "drake", "ompl", "ur-analytic-ik", "torch", "numpy"):
         try:
             out[name] = metadata.version(name)
         except metadata.PackageNotFoundError:

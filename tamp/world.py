@@ -17,7 +17,7 @@ from typing import Iterable
 import numpy as np
 from pydrake.math import RigidTransform
 
-from tamp.kinematics import Q_HOME, analytic_ik, drake_ik, tcp_pose
+from tamp.kinematics import Q_HOME, analytic_ik, drake_ik
 from tamp.motion import MotionPlanner
 from tamp.physics import BlockPhysics
 from tamp.plants import X_FlangeTcp, build_motion_scene, build_physics_scene

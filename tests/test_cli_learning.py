@@ -1,7 +1,6 @@
 """CLI commands that train models and learn domains: argument checks and a tiny end-to-end run."""
 import json
 
-import numpy as np
 import pytest
 
 import learned

@@ -1,7 +1,6 @@
 """The block world: the pick-place skill's outcomes, its motions, its determinism and its errors."""
 import numpy as np
 import pytest
-from pydrake.math import RigidTransform
 
 from tamp import PickPlace, World, WorldConfig
 from tamp.kinematics import Q_LOWER, Q_UPPER, tcp_pose
