@@ -64,6 +64,7 @@ class DemoResult:
     eps: float  # metres
     replays: list[Path] = field(default_factory=list)
     loop: ClosedLoopResult | None = None  # closed loop (replan): every round and executed action
+    step_times: list[tuple[float, float]] = field(default_factory=list)  # closed loop: (refine, execute) s
 
     @property
     def outcome(self) -> str:
@@ -144,7 +145,7 @@ def run_demo(cfg: DemoConfig = DemoConfig()) -> DemoResult:
 
     timeline = Timeline() if cfg.replay is not None else None
     if cfg.replan:
-        out.loop = _closed_loop(problem, models, plan_cfg, cfg, result, timeline)
+        out.loop = _closed_loop(problem, models, plan_cfg, cfg, result, timeline, out.step_times)
         _print_loop_summary(out, cfg)
         if timeline is not None:
             timeline.caption = [f"tamp demo --seed {cfg.seed}: {problem.n} blocks, goal from {problem.k} random "
@@ -287,7 +288,7 @@ def _print_summary(out: DemoResult, cfg: DemoConfig) -> None:
 
 
 def _closed_loop(problem: Problem, models, plan_cfg: PlanConfig, cfg: DemoConfig, first: PlanResult,
-                 timeline: Timeline | None) -> ClosedLoopResult:
+                 timeline: Timeline | None, step_times: list[tuple[float, float]]) -> ClosedLoopResult:
     """Execute the first action of the plan, observe the scene, replan from it (up to k - 1 rounds;
     the last plan runs to its end), in a World of the demo's fidelity: each action is refined and
     executed there, an action that cannot be refined changes nothing and the loop goes on. The first
@@ -317,6 +318,8 @@ def _closed_loop(problem: Problem, models, plan_cfg: PlanConfig, cfg: DemoConfig
         X, info = world.step(action)
         started = timeline is not None and len(timeline.action_starts) > marks  # it moved the arm
         executed.append(timeline.action_starts[marks] if started else None)
+        execute = info.timings.get("execute", 0.0)  # full fidelity; the fast world's step is all refinement
+        step_times.append((time.perf_counter() - t - execute, execute))
         why = f" ({info.reason})" if info.status != "ok" and info.reason else ""
         print(f"  executed {fmt_action(action)}: {info.status}{why}; blocks {goal_error(X, problem.X_goal) * 100:.1f} "
               f"cm from the goal, {time.perf_counter() - t:.1f} s", flush=True)
@@ -349,13 +352,17 @@ def _show_loop_predictions(timeline: Timeline, planned: list[tuple[int, PlanResu
 def _print_loop_summary(out: DemoResult, cfg: DemoConfig) -> None:
     loop = out.loop
     print(f"\nsummary (seed {cfg.seed}, {cfg.fidelity} execution, closed loop):")
-    levels = ", ".join("no plan" if r.level is None else f"level {r.level}" for r in loop.rounds)
+    levels = ", ".join("no plan" if r.level is None else
+                       f"level {r.level} (predicted {r.predicted_error * 100:.1f} cm from the goal)" for r in loop.rounds)
     print(f"  plans       {len(loop.rounds)} round(s): {levels}; {len(loop.executed)} action(s) executed")
     for a in loop.executed:
         print(f"              {fmt_action(a)}")
     print(f"  ended       {loop.reason}")
     planning = sum(r.timings.get("total", 0.0) for r in loop.rounds)
-    print(f"  times       planning {planning:.2f} s (all rounds)")
+    refine, execute = (sum(t[i] for t in out.step_times) for i in (0, 1))
+    times = f"  times       planning {planning:.2f} s (all rounds), refinement {refine:.2f} s"
+    print(times + (f", execution {execute:.1f} s" if cfg.fidelity == "full" else
+                   " (execution: the refinement world's, included)"))
     print(f"  final error {loop.error * 100:.1f} cm (max over blocks; eps {out.eps * 100:g} cm)")
     outcome = {"success": "success: every block within eps of its goal",
                "no plan": "failure: the planner found no plan",
