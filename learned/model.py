@@ -195,6 +195,36 @@ class EffectModel(nn.Module):
         return (e + shift).numpy()
 
     @torch.no_grad()
+    def predict_effects(self, Xs: np.ndarray, actions) -> np.ndarray:
+        """Displacements (B, n, 3) in metres for B different scenes Xs (B, n, 5), one action each.
+
+        `predict_effect` shares one scene among its actions; this is its counterpart for many plans
+        rolled out side by side (Level-1 verification): one forward pass for all B, same numbers.
+        """
+        Xs = np.asarray(Xs, dtype=np.float64)
+        a = as_action_array(actions)
+        if Xs.ndim != 3 or Xs.shape[2] != STATE_DIM or Xs.shape[0] != a.shape[0]:
+            raise ValueError(f"Xs must have shape (B, n, {STATE_DIM}) with one action per scene, "
+                             f"got {Xs.shape} and {a.shape[0]} actions")
+        B, n = Xs.shape[:2]
+        if B == 0:
+            return np.zeros((0, n, 3))
+        if n > self.config.n_max:
+            raise ValueError(f"scene has {n} objects, model built for n_max={self.config.n_max}")
+        check_actions(a, n)
+        was_training = self.training
+        self.eval()
+        try:
+            Xt, at = torch.as_tensor(Xs, dtype=torch.float32), torch.from_numpy(a)
+            mask = torch.ones(B, n, dtype=torch.bool)
+            u, r = self.encode(Xt, mask)
+            e = self.decode(Xt, at, mask, u, r).double()
+            shift = arm_shift(torch.as_tensor(Xs), at)
+        finally:
+            self.train(was_training)
+        return (e + shift).numpy()
+
+    @torch.no_grad()
     def symbols(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Discrete symbols of one scene: unary bits (n, d_z) and relation bits (K, n, n), uint8.
 

@@ -98,6 +98,21 @@ def test_predict_effect_is_absolute_and_batched():
         m.predict_effect(scene(5, seed=1), [(0, 0, 1, 0)])
 
 
+def test_predict_effects_rolls_many_scenes_out_in_one_pass_with_the_same_numbers():
+    m = make_model(seed=7)
+    scenes = np.stack([scene(3, seed=s) for s in range(6)])
+    acts = np.array(all_actions(3))[[0, 5, 17, 40, 62, 80]]
+    e = m.predict_effects(scenes, acts)
+    assert e.shape == (6, 3, 3) and e.dtype == np.float64
+    one = np.stack([m.predict_effect(X, [a])[0] for X, a in zip(scenes, acts)])
+    np.testing.assert_allclose(e, one, atol=1e-6)
+    assert m.predict_effects(scenes[:0], acts[:0]).shape == (0, 3, 3)
+    with pytest.raises(ValueError, match="one action per scene"):
+        m.predict_effects(scenes, acts[:2])
+    with pytest.raises(ValueError, match="out of range"):
+        m.predict_effects(scenes[:1], [(3, 0, 0, 0)])
+
+
 def test_gumbel_is_stochastic_in_training_and_binary_at_inference():
     m = make_model("gumbel_sigmoid", seed=7)
     X = torch.tensor(scene(3, seed=8), dtype=torch.float32)[None]

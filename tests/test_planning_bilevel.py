@@ -165,6 +165,26 @@ def test_verify_many_shares_prefixes_and_equals_verify_one_by_one():
         assert v.error == pytest.approx(one.error) and v.verified == one.verified
 
 
+def test_verify_many_predicts_all_prefixes_of_one_length_in_one_pass_when_the_model_can():
+    from tamp.verify import verify_many
+
+    class BatchedStub(StubModel):
+        """predict_effects: many scenes, one action each (the learned models' batched call)."""
+        batched = 0
+
+        def predict_effects(self, Xs, actions):
+            self.batched += 1
+            return np.stack([self.predict_effect(X, [a])[0] for X, a in zip(Xs, actions)])
+
+    plans = [[(0, 0, 1, 1), (1, 0, 0, 0)], [(0, 0, 1, 0), (1, 1, 0, 0)], [(1, 0, 0, 0)], [(0, 0, 1, 1)]]
+    stub = BatchedStub()
+    many = verify_many(stub, X_INIT, A_ON_B, plans)
+    assert stub.batched == 2  # three distinct first actions, then two second actions from two scenes
+    for p, v in zip(plans, many):
+        one = verify(StubModel(), X_INIT, A_ON_B, p)
+        assert v.actions == one.actions and np.allclose(v.trajectory, one.trajectory)
+
+
 def test_the_symbolic_search_prefers_the_operator_more_likely_to_give_the_needed_effect():
     from symbolic import SymbolicPlanner, make_problem, steps_to_actions
 
