@@ -112,6 +112,11 @@ def continuous_search(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarr
     def key(P: np.ndarray) -> bytes:
         return np.round(P / config.resolution).astype(np.int64).tobytes()
 
+    def keys_of(Ps: np.ndarray) -> list[bytes]:
+        """key() of each of the (B, n, 3) states, in one vectorized rounding."""
+        grid = np.ascontiguousarray(np.round(Ps / config.resolution).astype(np.int64).reshape(len(Ps), -1))
+        return [row.tobytes() for row in grid]
+
     # nodes[i] = (positions (n, 3), parent index, action, g)
     nodes: list[tuple[np.ndarray, int, tuple | None, int]] = [(X_init[:, :3].copy(), -1, None, 0)]
     d0 = np.linalg.norm(X_init[:, :3] - goal, axis=1)
@@ -156,15 +161,17 @@ def continuous_search(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarr
         out.generated += len(actions)
         dist = np.linalg.norm(succ - goal[None], axis=2)  # (B, n)
         out.best_error = min(out.best_error, float(dist.max(axis=1).min()))
-        h = dist.sum(axis=1) / config.h_unit
-        for b in range(len(actions)):
-            k = key(succ[b])
+        h = (dist.sum(axis=1) / config.h_unit).tolist()
+        reached = np.all(dist < config.eps, axis=1).tolist()
+        keys = keys_of(succ)
+        for b, action in enumerate(actions.tolist()):
+            k = keys[b]
             if best_g.get(k, config.max_depth + 1) <= g + 1:
                 out.duplicates += 1
                 continue
             best_g[k] = g + 1
-            nodes.append((succ[b], index, tuple(int(v) for v in actions[b]), g + 1))
-            if np.all(dist[b] < config.eps):
+            nodes.append((succ[b], index, tuple(action), g + 1))
+            if reached[b]:
                 return finish("solved", f"solved: {g + 1} actions after {out.expanded} expansions",
                               len(nodes) - 1)
             heapq.heappush(frontier, (g + 1 + config.weight * h[b], h[b], len(nodes) - 1))

@@ -127,6 +127,12 @@ def test_gumbel_is_stochastic_in_training_and_binary_at_inference():
     acts = all_actions(3)
     np.testing.assert_array_equal(m.predict_effect(X[0].numpy(), acts),
                                   m.predict_effect(X[0].numpy(), acts))
+    # A model still training predicts deterministically too, and stays in training mode.
+    expected = m.predict_effect(X[0].numpy(), acts)
+    m.train()
+    np.testing.assert_array_equal(m.predict_effect(X[0].numpy(), acts), expected)
+    np.testing.assert_allclose(m.predict_effects(np.repeat(X.numpy(), 2, 0), acts[:2]), expected[:2], atol=1e-6)
+    assert m.training and m.bottleneck.training
 
 
 def test_checkpoint_round_trips_exactly(tmp_path):
