@@ -6,6 +6,8 @@ import sys
 from pathlib import Path
 
 from tamp.cli import positive_int
+from evaluation.methods import SYMBOLIC_BACKENDS
+from tamp.problem import PROTOCOLS
 
 
 def _int_list(text: str) -> tuple[int, ...]:
@@ -36,10 +38,14 @@ def cmd_problems(args: argparse.Namespace) -> int:
     """Generate a problem set (JSONL) of random Drake scenes and goals."""
     from evaluation.problems import generate_problems, write_problems
 
-    problems = generate_problems(args.objects, args.actions, args.per_cell, args.seed, progress=not args.quiet)
+    problems = generate_problems(args.objects, args.actions, args.per_cell, args.seed, progress=not args.quiet,
+                                 protocol=args.protocol, runs=args.runs, workers=args.workers)
     path = write_problems(args.out, problems)
+    seeds = f"seed {args.seed}" if args.runs == 1 else f"{args.runs} runs, seeds {args.seed}..{args.seed + args.runs - 1}"
+    moved = sum(p.moved for p in problems)
     print(f"wrote {len(problems)} problems to {path} (objects {','.join(map(str, args.objects))}, actions "
-          f"{','.join(map(str, args.actions))}, {args.per_cell} per cell, seed {args.seed})")
+          f"{','.join(map(str, args.actions))}, {args.per_cell} per cell, {seeds}, {args.protocol} protocol: "
+          f"{moved} of {sum(p.k for p in problems)} actions moved a block)")
     return 0
 
 
@@ -55,6 +61,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 
     config = EvalConfig(fidelity=args.fidelity, n_domains=args.n_domains, search_time_limit=args.time_limit,
                         search_max_expansions=args.max_expansions, workers=args.workers, backend=args.backend,
+                        symbolic_backend=args.symbolic_backend, oracle_max_plans=args.oracle_max_plans,
                         progress=not args.quiet)
     rows_path = evaluate(args.models, args.problems, args.out, args.methods, config)
     rows = read_rows(rows_path)
@@ -87,17 +94,26 @@ def register(sub: argparse._SubParsersAction) -> None:
         "problems",
         help="a problem set: random Drake scenes and the goals after k random actions (JSONL)",
         description="Generate --per-cell problems for every object count and every number of random "
-        "actions: a random scene, then k random actions that move something, simulated in the fast "
-        "Drake world, give the goal. Each line of --out is a `tamp plan --problem` object with its "
-        "name (n{n}-k{k}-{i}), seed and generating actions; the same arguments give the same file, byte "
-        "for byte.",
+        "actions: a random scene, then k random actions simulated in the fast Drake world give the goal. "
+        "--protocol strict (default) redraws actions that fail or move nothing, so every one of the k "
+        "moves a block; --protocol paper keeps every drawn action whatever its outcome, as the paper's "
+        "authors do (about half of them move nothing, so many k = 1 goals equal the initial scene). Each "
+        "line of --out is a `tamp plan --problem` object with its name (n{n}-k{k}-{i}, or r{run}-n{n}-k{k}-{i} "
+        "with --runs), seed, generating actions and how many of them moved a block; the same arguments "
+        "give the same file, byte for byte, for any number of workers.",
     )
     p.add_argument("--out", type=Path, required=True, help="problem set file to write (JSONL)")
     p.add_argument("--objects", type=_int_list, default=(2, 3, 4), help="object counts (default 2,3,4)")
     p.add_argument("--actions", type=_int_list, default=(1, 2, 3, 4, 5),
                    help="numbers k of random actions per goal (default 1,2,3,4,5)")
     p.add_argument("--per-cell", type=positive_int, default=10, help="problems per (objects, k) (default 10)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the set (default 0)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the set (default 0); run j uses seed + j")
+    p.add_argument("--protocol", choices=PROTOCOLS, default="strict",
+                   help="strict: every action moves something (default); paper: actions kept whatever their "
+                   "outcome, as the paper's authors do")
+    p.add_argument("--runs", type=positive_int, default=1,
+                   help="problem sets of seeds seed, seed + 1, ... in one file, for mean ± std over runs (default 1)")
+    p.add_argument("--workers", type=positive_int, default=1, help="worker processes (default 1)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_problems)
 
@@ -108,8 +124,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         "refine the plan (IK, collision-checked motions, grasps) and execute it in the Drake world, or "
         "plan and execute in closed loop (bilevel_replan). One JSON row per pair is appended to "
         "OUT/rows.jsonl as it finishes; running the same command again resumes. Methods: "
-        "deterministic, probabilistic, cfs, bilevel, bilevel_replan (default), and symbolic_sigmoid, "
-        "cfs_gumbel when DIR/variants/ holds their models.",
+        "deterministic, probabilistic, probabilistic_oracle (the paper's measure: the sampled domains' "
+        "plans executed until one succeeds, an execution oracle), cfs, bilevel (with our Level-1 "
+        "extensions), bilevel_alg1 (the paper's Algorithm 1 exactly), bilevel_replan (default: all of "
+        "these), and symbolic_sigmoid, cfs_gumbel when DIR/variants/ holds their models. A problem set "
+        "with several runs (tamp problems --runs) is reported as mean ± std over its runs.",
     )
     p.add_argument("--models", type=Path, required=True,
                    help="models directory: symbolic.pt, dynamics.pt, domain/ (and optionally variants/)")
@@ -126,6 +145,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--max-expansions", type=positive_int, default=5000,
                    help="continuous search node limit per planning call (default 5000)")
     p.add_argument("--n-domains", type=positive_int, default=100, help="N sampled symbolic domains (default 100)")
+    p.add_argument("--symbolic-backend", choices=SYMBOLIC_BACKENDS, default="python",
+                   help="symbolic planner: python (in-process search, default) or fd (Fast Downward, as in "
+                   "the paper); recorded in meta.json and named by the report")
+    p.add_argument("--oracle-max-plans", type=positive_int, default=20,
+                   help="probabilistic_oracle: ranked plans executed at most per problem (default 20)")
     p.add_argument("--no-report", action="store_true", help="write the rows only (tamp report makes the report)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_evaluate)

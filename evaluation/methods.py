@@ -2,13 +2,18 @@
 
 Each method is a `tamp.bilevel` planner, a model variant and open or closed loop:
 
-    deterministic     deterministic symbolic planner (baseline), Gumbel-Sigmoid Symbolic Model
-    probabilistic     probabilistic symbolic planner, N sampled domains, top plan, unverified
-    cfs               continuous forward search with the (Sigmoid) Dynamics Model
-    bilevel           Algorithm 1
-    bilevel_replan    Algorithm 1 in closed loop, up to k - 1 replanning rounds
-    symbolic_sigmoid  deterministic symbolic planner, Sigmoid Symbolic Model and its own domain (Fig. 4)
-    cfs_gumbel        continuous forward search, Gumbel-Sigmoid Dynamics Model (Fig. 4)
+    deterministic         deterministic symbolic planner (baseline), Gumbel-Sigmoid Symbolic Model
+    probabilistic         probabilistic symbolic planner, N sampled domains, top plan, unverified
+    probabilistic_oracle  the paper's measure of the probabilistic planner, an EXECUTION ORACLE: the
+                          plans of the N sampled domains, most frequent first, each executed from
+                          X_init until one reaches the goal (at most EvalConfig.oracle_max_plans);
+                          no planner could choose this way without the simulator
+    cfs                   continuous forward search with the (Sigmoid) Dynamics Model
+    bilevel               Algorithm 1 with our Level-1 extensions (look-alike alternatives, non-empty plans)
+    bilevel_alg1          the paper's Algorithm 1 exactly (both extensions off)
+    bilevel_replan        `bilevel` in closed loop, up to k - 1 replanning rounds
+    symbolic_sigmoid      deterministic symbolic planner, Sigmoid Symbolic Model and its own domain (Fig. 4)
+    cfs_gumbel            continuous forward search, Gumbel-Sigmoid Dynamics Model (Fig. 4)
 
 The default model set is the models directory (symbolic.pt, dynamics.pt, domain/); the last two
 methods use optional variants in DIR/variants/: symbolic_sigmoid.pt with domain_sigmoid/, and
@@ -24,6 +29,7 @@ from typing import Sequence
 from tamp.models import DOMAIN_DIR, DYNAMICS_FILE, SYMBOLIC_FILE, Models
 
 VARIANTS_DIR = "variants"
+SYMBOLIC_BACKENDS = ("python", "fd")  # in-process search, Fast Downward (tamp.bilevel.PlanConfig.backend)
 SYMBOLIC_SIGMOID, DOMAIN_SIGMOID, DYNAMICS_GUMBEL = "symbolic_sigmoid.pt", "domain_sigmoid", "dynamics_gumbel.pt"
 
 
@@ -33,6 +39,7 @@ class Method:
     planner: str  # a tamp.bilevel.METHODS key
     models: str  # model set: "default" | "symbolic_sigmoid" | "dynamics_gumbel"
     closed_loop: bool = False
+    oracle: bool = False  # execute the ranked plans until one succeeds (the authors' measure)
 
     @property
     def symbolic(self) -> bool:
@@ -43,13 +50,16 @@ class Method:
 METHODS: dict[str, Method] = {m.name: m for m in (
     Method("deterministic", "deterministic", "default"),
     Method("probabilistic", "probabilistic", "default"),
+    Method("probabilistic_oracle", "probabilistic", "default", oracle=True),
     Method("cfs", "cfs", "default"),
     Method("bilevel", "bilevel", "default"),
+    Method("bilevel_alg1", "bilevel_alg1", "default"),
     Method("bilevel_replan", "bilevel", "default", closed_loop=True),
     Method("symbolic_sigmoid", "deterministic", "symbolic_sigmoid"),
     Method("cfs_gumbel", "cfs", "dynamics_gumbel"),
 )}
-DEFAULT_METHODS = ("deterministic", "probabilistic", "cfs", "bilevel", "bilevel_replan")
+DEFAULT_METHODS = ("deterministic", "probabilistic", "probabilistic_oracle", "cfs", "bilevel", "bilevel_alg1",
+                   "bilevel_replan")
 VARIANT_METHODS = ("symbolic_sigmoid", "cfs_gumbel")
 
 
@@ -68,7 +78,7 @@ def required_files(models_dir: str | Path, method: str) -> list[Path]:
 
 
 def default_methods(models_dir: str | Path) -> list[str]:
-    """The first five methods, and the variant methods whose files exist in the models directory."""
+    """DEFAULT_METHODS, and the variant methods whose files exist in the models directory."""
     return list(DEFAULT_METHODS) + [m for m in VARIANT_METHODS
                                     if all(p.is_file() for p in required_files(models_dir, m))]
 

@@ -2,13 +2,21 @@
 
 Problem (n, k, i) of a set with seed s has its own scene seed, drawn from (s, n, k, i) alone
 (`scene_seed`); from it `tamp.problem.random_problem` makes the scene and the k random actions
-that give X_goal in the fast world (actions that fail or move no block are redrawn, with a cap, so
-k counts real steps; a scene that gets stuck is replaced by the next seed of that problem). Any one problem can therefore be regenerated on its own, and the same
-arguments give a byte-identical file. Each line of the file is one `tamp plan --problem` object
-with its name ("n{n}-k{k}-{i:03d}"), seed, k and the actions that generated the goal.
+that give X_goal in the fast world. Two protocols (`tamp.problem.PROTOCOLS`): `strict` redraws
+actions that fail or move no block, with a cap, so k counts real steps (a scene that gets stuck is
+replaced by the next seed of that problem); `paper` keeps every drawn action whatever its outcome,
+as the paper's authors do, and records how many of the k moved something. Any one problem can
+therefore be regenerated on its own, and the same arguments give a byte-identical file, for any
+number of workers.
+
+Several runs (the paper reports mean +- std over ten): run j of a file is the set of seed s + j, its
+problems named "r{j}-n{n}-k{k}-{i:03d}" and marked `"run": j`. Each line of the file is one
+`tamp plan --problem` object with its name ("n{n}-k{k}-{i:03d}" for a single run), seed, k, the
+actions that generated the goal, the protocol and the count of actions that moved something.
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 from pathlib import Path
@@ -16,7 +24,7 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from tamp.problem import Problem, problem_from_dict, random_problem
+from tamp.problem import PROTOCOLS, Problem, problem_from_dict, random_problem
 
 
 MAX_ATTEMPTS = 10  # scenes drawn per problem before giving up (see `generate_problems`)
@@ -29,38 +37,68 @@ def scene_seed(seed: int, n: int, k: int, i: int, attempt: int = 0) -> int:
     return int(np.random.SeedSequence(key).generate_state(1)[0])
 
 
-def _problem(n: int, k: int, i: int, seed: int, world) -> Problem:
+Cell = tuple[int, int, int, int, int | None, str]  # n, k, i, set seed, run (None: a single run), protocol
+
+
+def _problem(n: int, k: int, i: int, seed: int, world, run: int | None = None,
+             protocol: str = "strict") -> Problem:
     """Problem (n, k, i): the first of its scenes in which k random actions change something (a scene
     can get stuck, e.g. when every remaining action fails), so the set stays regenerable."""
+    name = problem_name(n, k, i, run)
     for attempt in range(MAX_ATTEMPTS):
         try:
-            return random_problem(n, k, scene_seed(seed, n, k, i, attempt), world=world, name=problem_name(n, k, i))
+            problem = random_problem(n, k, scene_seed(seed, n, k, i, attempt), world=world, name=name,
+                                     protocol=protocol)
+            return problem if run is None else dataclasses.replace(problem, run=run)
         except RuntimeError:
             continue
-    raise RuntimeError(f"problem {problem_name(n, k, i)}: no scene out of {MAX_ATTEMPTS} allowed {k} "
+    raise RuntimeError(f"problem {name}: no scene out of {MAX_ATTEMPTS} allowed {k} "
                        "scene-changing random actions")
 
 
-def problem_name(n: int, k: int, i: int) -> str:
-    return f"n{n}-k{k}-{i:03d}"
+def problem_name(n: int, k: int, i: int, run: int | None = None) -> str:
+    return f"n{n}-k{k}-{i:03d}" if run is None else f"r{run}-n{n}-k{k}-{i:03d}"
+
+
+_WORLD = None  # the World of a worker process
+
+
+def _cell_problem(cell: Cell) -> Problem:
+    global _WORLD
+    if _WORLD is None:
+        from tamp import World, WorldConfig
+
+        _WORLD = World(WorldConfig())
+    n, k, i, seed, run, protocol = cell
+    return _problem(n, k, i, seed, _WORLD, run, protocol)
 
 
 def generate_problems(ns: Sequence[int] = (2, 3, 4), ks: Sequence[int] = (1, 2, 3, 4, 5), per_cell: int = 10,
-                      seed: int = 0, progress: bool = True) -> list[Problem]:
-    """`per_cell` problems for every n in `ns` objects and every k in `ks` random actions, n-major."""
+                      seed: int = 0, progress: bool = True, protocol: str = "strict", runs: int = 1,
+                      workers: int = 1) -> list[Problem]:
+    """`per_cell` problems for every n in `ns` objects and every k in `ks` random actions, n-major,
+    for each of `runs` sets (run j has seed `seed + j`), drawn under `protocol`. `workers` processes
+    share the cells; the problems do not depend on how many."""
     from tqdm import tqdm
-
-    from tamp import World, WorldConfig
 
     ns, ks = _counts(ns, "--objects", 1, 6), _counts(ks, "--actions", 1, None)
     if per_cell < 1:
         raise ValueError(f"--per-cell must be a positive integer, got {per_cell}")
-    if not 0 <= seed < 2**63:
-        raise ValueError(f"--seed must be in [0, 2^63), got {seed}")
-    world = World(WorldConfig())
-    cells = [(n, k, i) for n in ns for k in ks for i in range(per_cell)]
-    return [_problem(n, k, i, seed, world)
-            for n, k, i in tqdm(cells, desc="problems", unit="problem", disable=not progress)]
+    if runs < 1:
+        raise ValueError(f"--runs must be a positive integer, got {runs}")
+    if not (0 <= seed and seed + runs - 1 < 2**63):
+        raise ValueError(f"--seed must be in [0, 2^63 - runs], got {seed}")
+    if protocol not in PROTOCOLS:
+        raise ValueError(f"--protocol must be one of {', '.join(PROTOCOLS)}, got {protocol!r}")
+    cells: list[Cell] = [(n, k, i, seed + j, None if runs == 1 else j, protocol)
+                         for j in range(runs) for n in ns for k in ks for i in range(per_cell)]
+    bar = dict(total=len(cells), desc="problems", unit="problem", disable=not progress)
+    if workers <= 1 or len(cells) == 1:
+        return list(tqdm(map(_cell_problem, cells), **bar))
+    import multiprocessing as mp
+
+    with mp.get_context("spawn").Pool(min(workers, len(cells))) as pool:
+        return list(tqdm(pool.imap(_cell_problem, cells, chunksize=1), **bar))
 
 
 def _counts(values: Iterable[int], option: str, low: int, high: int | None) -> tuple[int, ...]:

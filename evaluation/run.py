@@ -9,6 +9,11 @@ One JSON row per pair is appended (whole line, flushed) to OUT/rows.jsonl as it 
 ROW_KEYS and `row_outcome` for the fields. OUT/meta.json records the models, the problem set, the
 configuration and the package versions.
 
+`probabilistic_oracle` rows (the paper's measure, an execution oracle): the ranked plans of the
+probabilistic planner are refined and executed from X_init one after the other, most frequent
+first, until one succeeds or `EvalConfig.oracle_max_plans` were executed; `executed_plans` counts
+them, and `plan` and the refinement fields are those of the last one executed.
+
 Closed-loop rows: `plan` holds the actions sent to the world (a failed one included, the loop goes
 on from the observed state), `refine_time_s` the wall time of each World.step (planning and, in
 `full`, execution), `level`, `predicted_error_m` and `candidates` are the first round's, timings are
@@ -39,7 +44,7 @@ from typing import Any, Iterator, Sequence
 
 import numpy as np
 
-from evaluation.methods import METHODS, Method, load_method_models, required_files, resolve_methods
+from evaluation.methods import METHODS, SYMBOLIC_BACKENDS, Method, load_method_models, required_files, resolve_methods
 from evaluation.problems import atomic_write_text, read_problems
 from tamp.bilevel import PlanConfig
 from tamp.collect import package_versions
@@ -48,9 +53,10 @@ from tamp.verify import EPS_SUCCESS, TAU_VERIFY, goal_error
 
 ROWS_NAME, META_NAME, LOCK_NAME = "rows.jsonl", "meta.json", ".evaluate.lock"
 FORMAT = "tamp-evaluation/1"
-ROW_KEYS = ("problem", "n", "k", "method", "solved", "level", "plan", "planning_time_s", "level1_time_s",
-            "predicted_error_m", "candidates", "refined", "refine_failure", "refine_time_s", "executed_actions",
-            "final_error_m", "success", "outcome", "rounds", "fidelity", "eps_m", "tau_verify_m")
+ROW_KEYS = ("problem", "n", "k", "run", "protocol", "moved", "method", "solved", "level", "plan", "planning_time_s",
+            "level1_time_s", "predicted_error_m", "candidates", "refined", "refine_failure", "refine_time_s",
+            "executed_actions", "executed_plans", "final_error_m", "success", "outcome", "rounds", "fidelity",
+            "eps_m", "tau_verify_m", "symbolic_backend")
 TIMING_KEYS = ("planning_time_s", "level1_time_s", "refine_time_s")  # the only fields that vary between runs
 OUTCOMES = ("success", "no_plan", "kinematic_failure", "refinement_failure", "wrong_plan")
 MAX_CANDIDATES = 20
@@ -71,6 +77,8 @@ class EvalConfig:
     search_max_expansions: int = 5000  # continuous search node limit, per planning call
     level1_expansions: int | None = PlanConfig.level1_expansions  # symbolic search expansions, all N domains
     level1_time_budget: float | None = PlanConfig.level1_time_budget  # all N symbolic planner calls of a call
+    symbolic_backend: str = "python"  # "python" (in-process search) or "fd" (Fast Downward, the paper's)
+    oracle_max_plans: int = 20  # probabilistic_oracle: ranked plans executed at most, per problem
     workers: int = 1  # worker processes or Ray actors
     backend: str = "local"  # "local" process pool or "ray"
     progress: bool = True  # progress bar on stderr
@@ -80,6 +88,12 @@ class EvalConfig:
             raise ValueError(f"--fidelity must be 'fast' or 'full', got {self.fidelity!r}")
         if self.backend not in ("local", "ray"):
             raise ValueError(f"--backend must be 'local' or 'ray', got {self.backend!r}")
+        if self.symbolic_backend not in SYMBOLIC_BACKENDS:
+            raise ValueError(f"--symbolic-backend must be one of {', '.join(SYMBOLIC_BACKENDS)}, "
+                             f"got {self.symbolic_backend!r}")
+        if isinstance(self.oracle_max_plans, bool) or not isinstance(self.oracle_max_plans, int) \
+                or self.oracle_max_plans < 1:
+            raise ValueError(f"--oracle-max-plans must be a positive integer, got {self.oracle_max_plans!r}")
         if isinstance(self.workers, bool) or not isinstance(self.workers, int) or self.workers < 1:
             raise ValueError(f"--workers must be a positive integer, got {self.workers!r}")
         for name in ("eps", "tau_verify", "search_time_limit"):
@@ -93,12 +107,14 @@ class EvalConfig:
         return {"fidelity": self.fidelity, "eps_m": self.eps, "tau_verify_m": self.tau_verify,
                 "n_domains": self.n_domains, "search_time_limit_s": self.search_time_limit,
                 "search_max_expansions": self.search_max_expansions, "level1_expansions": self.level1_expansions,
-                "level1_time_budget_s": self.level1_time_budget}
+                "level1_time_budget_s": self.level1_time_budget, "symbolic_backend": self.symbolic_backend,
+                "oracle_max_plans": self.oracle_max_plans}
 
     def plan_config(self, seed: int) -> PlanConfig:
         from tamp.search import SearchConfig
 
         return PlanConfig(n_domains=self.n_domains, seed=seed, tau_verify=self.tau_verify, eps=self.eps,
+                          backend=self.symbolic_backend,
                           level1_expansions=self.level1_expansions, level1_time_budget=self.level1_time_budget,
                           search=SearchConfig(max_expansions=self.search_max_expansions,
                                                  time_limit=self.search_time_limit))
@@ -186,8 +202,10 @@ class Evaluator:
             raise RuntimeError(f"problem {problem.name}, method {method_name}: {type(error).__name__}: "
                                f"{error}") from error
         c = self.config
-        row = {"problem": problem.name, "n": problem.n, "k": problem.k, "method": method_name, **fields,
-               "fidelity": c.fidelity, "eps_m": c.eps, "tau_verify_m": c.tau_verify}
+        row = {"problem": problem.name, "n": problem.n, "k": problem.k, "run": problem.run or 0,
+               "protocol": problem.protocol, "moved": problem.moved, "method": method_name, **fields,
+               "fidelity": c.fidelity, "eps_m": c.eps, "tau_verify_m": c.tau_verify,
+               "symbolic_backend": c.symbolic_backend if method.symbolic else None}
         row["outcome"] = row_outcome(row["solved"], row["refine_failure"], row["final_error_m"], c.eps)
         row["success"] = row["outcome"] == "success"
         return {k: row[k] for k in ROW_KEYS}
@@ -200,15 +218,29 @@ class Evaluator:
                   "planning_time_s": _round(result.timings["total"]), "level1_time_s": _round(_level1_time(result)),
                   "predicted_error_m": _round(result.predicted_error), "candidates": _candidates(result),
                   "refined": None, "refine_failure": None, "refine_time_s": [], "executed_actions": 0,
-                  "final_error_m": _round(goal_error(problem.X_init, problem.X_goal)), "rounds": None}
+                  "executed_plans": 0, "final_error_m": _round(goal_error(problem.X_init, problem.X_goal)),
+                  "rounds": None}
         if not result.solved:
             return fields
-        if not result.plan:  # the planner says the initial state meets the goal: nothing to refine
-            return {**fields, "refined": True}
+        plans = [c.actions for c in result.candidates[:self.config.oracle_max_plans]] if method.oracle \
+            else [result.plan]
+        for number, actions in enumerate(plans, start=1):
+            outcome = self._execute(problem, actions)
+            fields = {**fields, "plan": _actions(actions), **outcome, "executed_plans": number}
+            if outcome["refined"] and outcome["final_error_m"] < self.config.eps:
+                break
+        return fields
+
+    def _execute(self, problem: Problem, actions) -> dict:
+        """Refine and execute one plan from X_init: the refinement fields of a row."""
+        if not actions:  # the planner says the initial state meets the goal: nothing to refine
+            return {"refined": True, "refine_failure": None, "refine_time_s": [], "executed_actions": 0,
+                    "final_error_m": _round(goal_error(problem.X_init, problem.X_goal))}
         from tamp.refine import refine
+        from tamp.structs import PickPlace
 
         world = self.world("fast")
-        refined = refine(result.plan, problem.X_init, world=world)
+        refined = refine([PickPlace(*a) for a in actions], problem.X_init, world=world)
         if self.config.fidelity == "fast":  # the scene after the refined actions (not a failed one's)
             X_final = refined.X_predicted
         else:
@@ -217,7 +249,7 @@ class Evaluator:
             X_final = execute(refined, partial=True).X_final
         f = refined.failure
         executed = len(refined.steps)
-        return {**fields, "refined": refined.success,
+        return {"refined": refined.success,
                 "refine_failure": None if f is None else _failure(f.action_index, f.stage, f.where, f.reason),
                 "refine_time_s": [_round(s.refine_time) for s in refined.steps], "executed_actions": executed,
                 "final_error_m": _round(goal_error(X_final if executed else problem.X_init, problem.X_goal))}
@@ -254,7 +286,7 @@ class Evaluator:
                 "candidates": [] if first is None else _candidates(first),
                 "refined": (not failures) if solved else None, "refine_failure": failures[0] if failures else None,
                 "refine_time_s": [_round(t) for t in step_times], "executed_actions": executed,
-                "final_error_m": _round(goal_error(X_final, problem.X_goal)),
+                "executed_plans": None, "final_error_m": _round(goal_error(X_final, problem.X_goal)),
                 "rounds": max(len(out.rounds) - 1, 0)}
 
 

@@ -5,7 +5,9 @@
 Methods (`METHODS`, same signature, same `PlanResult`):
 - ``bilevel``        Level 1: Sigma_init, Sigma_goal from the Symbolic Model -> probabilistic symbolic
                      planning over N sampled domains -> verify candidates in decreasing frequency, return
-                     the first verified one. Level 2 (no verified candidate): continuous search.
+                     the first verified one. Level 2 (no verified candidate): continuous search. With
+                     our extensions (`PlanConfig.alternatives`, `PlanConfig.nonempty`).
+- ``bilevel_alg1``   the paper's Algorithm 1 exactly: `bilevel` with both extensions off.
 - ``probabilistic``  the most frequent plan of the probabilistic symbolic planner, not verified
                      (its verification error is reported).
 - ``deterministic``  the plan in the most-frequent-effect domain (baseline), not verified.
@@ -223,6 +225,14 @@ def plan_bilevel(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig())
     return _timed("bilevel", body)
 
 
+def plan_bilevel_alg1(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig()) -> PlanResult:
+    """The paper's Algorithm 1 exactly: ranked symbolic plans verified alone (no look-alike
+    alternatives) and the empty plan allowed whenever Sigma_init = Sigma_goal."""
+    result = plan_bilevel(models, X_init, X_goal, replace(cfg, alternatives=0, nonempty=False))
+    result.method = "bilevel_alg1"
+    return result
+
+
 def _symbolic_only(method: str, probabilistic: bool):
     def run(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig()) -> PlanResult:
         def body(result: PlanResult) -> PlanResult:
@@ -249,8 +259,9 @@ def plan_cfs(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig()) -> 
 
 
 Planner = Callable[[Models, np.ndarray, np.ndarray, PlanConfig], PlanResult]
-METHODS: dict[str, Planner] = {"bilevel": plan_bilevel, "probabilistic": plan_probabilistic,
-                               "deterministic": plan_deterministic, "cfs": plan_cfs}
+METHODS: dict[str, Planner] = {"bilevel": plan_bilevel, "bilevel_alg1": plan_bilevel_alg1,
+                               "probabilistic": plan_probabilistic, "deterministic": plan_deterministic,
+                               "cfs": plan_cfs}
 
 
 def plan(method: str, models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig()) -> PlanResult:
@@ -330,5 +341,5 @@ def replan_rounds(k: int | None, default: int = 4) -> int:
 
 
 __all__: Sequence[str] = ["Candidate", "ClosedLoopResult", "METHODS", "PlanConfig", "PlanResult", "Planner",
-                          "plan", "plan_bilevel", "plan_cfs", "plan_closed_loop", "plan_deterministic",
+                          "plan", "plan_bilevel", "plan_bilevel_alg1", "plan_cfs", "plan_closed_loop", "plan_deterministic",
                           "plan_probabilistic", "replan_rounds"]

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 
-from tamp.bilevel import PlanConfig, PlanResult, plan, plan_closed_loop, replan_rounds
+from tamp.bilevel import METHODS, PlanConfig, PlanResult, plan, plan_closed_loop, replan_rounds
 from tamp.search import SearchConfig
 from tamp.verify import goal_error
 
@@ -182,8 +182,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--problem", type=Path, required=True, help="problem file (JSON: X_init, X_goal, k, seed)")
     p.add_argument("--models", type=Path, required=True,
                    help="models directory: symbolic.pt, dynamics.pt and the learned domain in domain/")
-    p.add_argument("--method", choices=("bilevel", "probabilistic", "deterministic", "cfs"), default="bilevel",
-                   help="planner (default bilevel: verified symbolic plan, else continuous search)")
+    p.add_argument("--method", choices=tuple(METHODS), default="bilevel",
+                   help="planner (default bilevel: verified symbolic plan, else continuous search; "
+                   "bilevel_alg1: the paper's Algorithm 1 without our Level-1 extensions)")
     p.add_argument("--replan", action="store_true",
                    help="closed loop: execute the first action, observe, replan (up to k - 1 rounds)")
     p.add_argument("--rounds", type=int, default=None, help="replanning rounds (default: k - 1 of the problem)")
@@ -192,8 +193,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    "physics (full), or not at all")
     p.add_argument("--replay", type=Path, default=None, metavar="OUT.html", help="write a Meshcat HTML replay")
     p.add_argument("--n-domains", type=int, default=100, help="N sampled symbolic domains (default 100)")
-    p.add_argument("--backend", choices=("python", "fd", "fd-naive"), default="python",
-                   help="symbolic planner backend (default python)")
+    p.add_argument("--symbolic-backend", "--backend", dest="backend", choices=("python", "fd", "fd-naive"),
+                   default="python", help="symbolic planner: python (in-process search, default), fd (Fast "
+                   "Downward, as in the paper) or fd-naive (one Fast Downward driver call per sampled domain)")
     p.add_argument("--max-expansions", type=int, default=5000, help="continuous search node limit (default 5000)")
     p.add_argument("--time-limit", type=float, default=30.0, help="continuous search time limit, s (default 30)")
 

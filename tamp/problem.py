@@ -10,8 +10,10 @@ A problem file is one JSON object (a problem set is one such object per line, JS
 same objects in the same order (types must agree). `k` (optional, positive integer) is the number of
 actions that generated the goal; closed-loop replanning uses up to k - 1 rounds. `seed` (optional,
 integer) seeds the sampled symbolic domains. `name` (optional string) names the problem within a set,
-`actions` (optional) are the actions that generated the goal. Errors name the file and the field.
-`random_problem(n, k, seed)` makes one from a random scene and k random actions in the fast world.
+`actions` (optional) are the actions that generated the goal. Generated problems also say how they
+were made: `protocol` ("strict" or "paper", see `PROTOCOLS`), `moved` (how many of the k actions
+moved a block) and `run` (which of several problem sets of one file). Errors name the file and the
+field. `random_problem(n, k, seed)` makes one from a random scene and k random actions in the fast world.
 """
 from __future__ import annotations
 
@@ -28,6 +30,11 @@ if TYPE_CHECKING:
     from tamp.world import World
 
 MOVED_M = 0.01  # metres: a goal-generating action counts when some block moved at least this far
+# How the k goal-generating actions are drawn (uniformly among the 9 n^2 actions of the scene):
+#   strict  an action that fails or moves no block by MOVED_M is redrawn, so every one of the k is real
+#   paper   every drawn action is kept whatever its outcome, as the paper's authors do
+#           (sym_learning scripts/test.py; about half of them move nothing in our world)
+PROTOCOLS = ("strict", "paper")
 
 
 @dataclass(frozen=True)
@@ -38,6 +45,9 @@ class Problem:
     seed: int = 0
     name: str | None = None  # unique within a problem set
     actions: tuple[tuple[int, int, int, int], ...] = ()  # the actions that generated X_goal, if known
+    protocol: str | None = None  # how the actions were drawn (PROTOCOLS), if generated
+    moved: int | None = None  # how many of the k actions moved a block by MOVED_M, if known
+    run: int | None = None  # which problem set of a file with several runs (0, 1, ...)
 
     @property
     def n(self) -> int:
@@ -52,6 +62,9 @@ class Problem:
             d = {"name": self.name, **d}
         if self.actions:
             d["actions"] = [list(a) for a in self.actions]
+        for key in ("protocol", "moved", "run"):
+            if getattr(self, key) is not None:
+                d[key] = getattr(self, key)
         return d
 
 
@@ -75,6 +88,9 @@ def _state(data: dict, field: str, where: str) -> np.ndarray:
     return X
 
 
+FIELDS = ("X_init", "X_goal", "k", "seed", "name", "actions", "protocol", "moved", "run")
+
+
 def problem_from_dict(data: object, where: str = "problem") -> Problem:
     """Check a parsed problem object; ValueError naming `where` and the field."""
     if not isinstance(data, dict):
@@ -91,9 +107,9 @@ def problem_from_dict(data: object, where: str = "problem") -> Problem:
     seed = data.get("seed", 0)
     if not isinstance(seed, int) or isinstance(seed, bool):
         raise ValueError(f"{where}: field 'seed' must be an integer, got {seed!r}")
-    unknown = sorted(set(data) - {"X_init", "X_goal", "k", "seed", "name", "actions"})
+    unknown = sorted(set(data) - set(FIELDS))
     if unknown:
-        raise ValueError(f"{where}: unknown field '{unknown[0]}' (expected X_init, X_goal, k, seed, name, actions)")
+        raise ValueError(f"{where}: unknown field '{unknown[0]}' (expected {', '.join(FIELDS)})")
     name = data.get("name")
     if name is not None and not isinstance(name, str):
         raise ValueError(f"{where}: field 'name' must be a string, got {name!r}")
@@ -104,7 +120,16 @@ def problem_from_dict(data: object, where: str = "problem") -> Problem:
             and 0 <= a[0] < n and 0 <= a[2] < n and a[1] in (-1, 0, 1) and a[3] in (-1, 0, 1) for a in actions):
         raise ValueError(f"{where}: field 'actions' must be a list of [pick, grasp_offset, place, release_offset] "
                          f"with objects in 0..{n - 1} and offsets in -1, 0, 1")
-    return Problem(X_init, X_goal, k, seed, name, tuple(tuple(a) for a in actions))
+    protocol = data.get("protocol")
+    if protocol is not None and protocol not in PROTOCOLS:
+        raise ValueError(f"{where}: field 'protocol' must be one of {', '.join(PROTOCOLS)}, got {protocol!r}")
+    moved, run = data.get("moved"), data.get("run")
+    for field_name, value in (("moved", moved), ("run", run)):
+        if value is not None and (not isinstance(value, int) or isinstance(value, bool) or value < 0):
+            raise ValueError(f"{where}: field '{field_name}' must be a non-negative integer, got {value!r}")
+    if moved is not None and k is not None and moved > k:
+        raise ValueError(f"{where}: field 'moved' is {moved}, more than the k = {k} actions")
+    return Problem(X_init, X_goal, k, seed, name, tuple(tuple(a) for a in actions), protocol, moved, run)
 
 
 def load_problem(path: str | Path) -> Problem:
@@ -117,35 +142,39 @@ def save_problem(path: str | Path, problem: Problem) -> None:
 
 
 def random_problem(n: int, k: int, seed: int, world: "World | None" = None, name: str | None = None,
-                   max_tries: int = 200) -> Problem:
-    """A random scene of n blocks and the goal after k random actions that moved something.
+                   max_tries: int = 200, protocol: str = "strict") -> Problem:
+    """A random scene of n blocks and the goal after k random actions (see `PROTOCOLS`).
 
     Everything depends on `seed` alone (the scene, the drawn actions and their simulated outcomes in
-    the fast world), so any one problem of a set can be regenerated on its own. Actions that fail or
-    move no block by `MOVED_M` are redrawn, so k counts real steps; `seed` also seeds the sampled
-    symbolic domains when the problem is planned.
+    the fast world), so any one problem of a set can be regenerated on its own. Under the `strict`
+    protocol actions that fail or move no block by `MOVED_M` are redrawn (at most `max_tries` draws,
+    else RuntimeError), so k counts real steps; under `paper` the first k draws are kept whatever
+    they do. `seed` also seeds the sampled symbolic domains when the problem is planned.
     """
-    import numpy as np
-
     from tamp.structs import WorldConfig
     from tamp.world import World
 
     if n < 1 or k < 1:
         raise ValueError(f"a random problem needs n >= 1 objects and k >= 1 actions, got n={n}, k={k}")
+    if protocol not in PROTOCOLS:
+        raise ValueError(f"protocol must be one of {', '.join(PROTOCOLS)}, got {protocol!r}")
     world = world or World(WorldConfig())
     X_init = world.reset(n_objects=n, seed=seed)
     rng = np.random.default_rng([seed, 1])  # the actions' stream, apart from the scene's
-    actions: list[tuple[int, int, int, int]] = []
-    for _ in range(max_tries):
-        if len(actions) == k:
+    kept: list[tuple[int, int, int, int]] = []
+    moved = 0
+    for _ in range(max_tries if protocol == "strict" else k):
+        if len(kept) == k:
             break
         X = world.X
         candidates = world.actions()
         action = tuple(int(v) for v in candidates[rng.integers(len(candidates))])
         X_next, info = world.step(action)
-        if info.status == "ok" and np.max(np.linalg.norm(X_next[:, :3] - X[:, :3], axis=1)) >= MOVED_M:
-            actions.append(action)
-    if len(actions) < k:
-        raise RuntimeError(f"seed {seed}: only {len(actions)} of {k} random actions changed the scene "
+        changed = info.status == "ok" and np.max(np.linalg.norm(X_next[:, :3] - X[:, :3], axis=1)) >= MOVED_M
+        if changed or protocol == "paper":
+            kept.append(action)
+            moved += int(changed)
+    if len(kept) < k:
+        raise RuntimeError(f"seed {seed}: only {len(kept)} of {k} random actions changed the scene "
                            f"in {max_tries} draws")
-    return Problem(X_init, world.X, k, seed, name, tuple(actions))
+    return Problem(X_init, world.X, k, seed, name, tuple(kept), protocol, moved)

@@ -13,6 +13,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
@@ -25,7 +26,8 @@ from tamp.problem import Problem  # noqa: E402
 from tamp.verify import goal_error  # noqa: E402
 
 SET = dict(ns=(2,), ks=(1, 2, 3), per_cell=1, seed=0)
-METHODS = ("deterministic", "probabilistic", "cfs", "bilevel", "bilevel_replan")
+METHODS = ("deterministic", "probabilistic", "probabilistic_oracle", "cfs", "bilevel", "bilevel_alg1",
+           "bilevel_replan")
 CONFIG = EvalConfig(search_max_expansions=300, progress=False)
 
 
@@ -76,11 +78,11 @@ def test_a_stuck_scene_is_replaced_by_the_next_seed_of_its_problem(monkeypatch):
 
     real, tried = ep.random_problem, []
 
-    def stuck_first(n, k, seed, world=None, name=None):
+    def stuck_first(n, k, seed, world=None, name=None, **kwargs):
         tried.append(seed)
         if len(tried) == 1:
             raise RuntimeError("stuck")
-        return real(n, k, seed, world=world, name=name)
+        return real(n, k, seed, world=world, name=name, **kwargs)
 
     monkeypatch.setattr(ep, "random_problem", stuck_first)
     (problem,) = ep.generate_problems(ns=(2,), ks=(1,), per_cell=1, seed=5, progress=False)
@@ -89,6 +91,37 @@ def test_a_stuck_scene_is_replaced_by_the_next_seed_of_its_problem(monkeypatch):
     monkeypatch.setattr(ep, "random_problem", lambda *a, **kw: (_ for _ in ()).throw(RuntimeError("stuck")))
     with pytest.raises(RuntimeError, match="n2-k1-000: no scene out of 10"):
         ep.generate_problems(ns=(2,), ks=(1,), per_cell=1, seed=5, progress=False)
+
+
+def test_the_paper_protocol_keeps_actions_that_move_nothing():
+    """`paper`: the first k drawn actions whatever they do (replayed, they give the goal and move
+    exactly `moved` times); `strict` redraws until every one moves a block."""
+    from tamp import World, WorldConfig
+    from tamp.problem import MOVED_M
+
+    args = dict(ns=(2,), ks=(1, 3), per_cell=3, seed=2, progress=False)
+    paper = generate_problems(**args, protocol="paper")
+    strict = generate_problems(**args)
+    world = World(WorldConfig())
+    for p, s in zip(paper, strict):
+        assert (p.protocol, s.protocol, s.moved, p.name, p.seed) == ("paper", "strict", s.k, s.name, s.seed)
+        assert np.array_equal(p.X_init, s.X_init) and len(p.actions) == p.k  # same scene, k actions kept
+        X, moved = world.reset(X=p.X_init), 0
+        for a in p.actions:
+            X_next, _ = world.step(a)
+            moved += np.max(np.linalg.norm(X_next[:, :3] - X[:, :3], axis=1)) >= MOVED_M
+            X = X_next
+        assert moved == p.moved and goal_error(X, p.X_goal) < 1e-3
+    assert sum(p.moved for p in paper) < sum(p.k for p in paper)  # no-op actions were kept
+    assert any(p.k == 1 and p.moved == 0 and goal_error(p.X_init, p.X_goal) < MOVED_M for p in paper)
+
+
+def test_several_runs_are_the_sets_of_consecutive_seeds():
+    runs = generate_problems(ns=(2,), ks=(1,), per_cell=2, seed=4, runs=2, progress=False, protocol="paper")
+    assert [(p.name, p.run) for p in runs] == [("r0-n2-k1-000", 0), ("r0-n2-k1-001", 0), ("r1-n2-k1-000", 1),
+                                               ("r1-n2-k1-001", 1)]
+    single = generate_problems(ns=(2,), ks=(1,), per_cell=2, seed=5, progress=False, protocol="paper")
+    assert [p.seed for p in runs[2:]] == [p.seed for p in single] and single[0].run is None
 
 
 @pytest.mark.parametrize("edit, message", [
@@ -122,6 +155,12 @@ def test_rows_follow_the_schema_and_their_outcomes_agree(serial, problems_file):
         assert r["planning_time_s"] > 0 and 0 <= r["level1_time_s"] <= r["planning_time_s"]
         assert len(r["candidates"]) <= 20
         assert (r["rounds"] is None) == (r["method"] != "bilevel_replan")
+        assert (r["run"], r["protocol"], r["moved"]) == ((0, "strict", p.k) if p.actions else (0, None, None))
+        assert r["symbolic_backend"] == (None if r["method"] == "cfs" else "python")
+        if r["method"] == "bilevel_replan":
+            assert r["executed_plans"] is None
+        elif r["method"] != "probabilistic_oracle":
+            assert r["executed_plans"] == int(r["solved"])
         if not r["solved"]:
             assert r["outcome"] == "no_plan" and r["plan"] is None and r["refined"] is None
             assert r["executed_actions"] == 0 and r["predicted_error_m"] is None
@@ -143,6 +182,70 @@ def test_rows_follow_the_schema_and_their_outcomes_agree(serial, problems_file):
     assert all(not r["solved"] for r in rows if r["problem"] == "n2-unreachable" and r["method"] != "bilevel_replan")
     assert [r["level"] for r in rows if r["method"] == "cfs" and r["solved"]] == [2] * sum(
         r["solved"] for r in rows if r["method"] == "cfs")
+
+
+def test_the_oracle_succeeds_iff_one_executed_plan_succeeds(serial):
+    """probabilistic_oracle executes the ranked plans, top first, and stops at the first success."""
+    rows = {(r["problem"], r["method"]): r for r in read_rows(serial)}
+    problems = sorted({p for p, _ in rows})
+    tried_more = 0
+    for p in problems:
+        top, oracle = rows[p, "probabilistic"], rows[p, "probabilistic_oracle"]
+        assert oracle["solved"] == top["solved"] and oracle["candidates"] == top["candidates"]
+        if not top["solved"]:
+            assert oracle["executed_plans"] == 0 and not oracle["success"]
+            continue
+        ranked = [c for c in oracle["candidates"] if c["alternative_of"] is None]
+        assert 1 <= oracle["executed_plans"] <= min(len(ranked), CONFIG.oracle_max_plans)
+        if top["success"]:  # the top plan is tried first, in the same reseeded world
+            assert oracle["success"] and oracle["executed_plans"] == 1 and oracle["plan"] == top["plan"]
+        elif oracle["success"]:  # a later plan reached the goal: it is the one reported
+            assert oracle["executed_plans"] > 1 and oracle["plan"] != top["plan"]
+            tried_more += 1
+        else:  # every plan was tried (up to the cap) and none reached the goal
+            assert oracle["executed_plans"] == min(len(ranked), CONFIG.oracle_max_plans)
+            tried_more += oracle["executed_plans"] > 1
+    assert tried_more >= 1  # the set exercises the oracle beyond the top plan
+
+
+def test_the_oracle_counts_success_iff_some_plan_reaches_the_goal(monkeypatch):
+    """Three ranked plans of which only the last reaches the goal: success after three executions;
+    with a cap of two plans, failure after two."""
+    from tamp.bilevel import Candidate, PlanResult
+    from evaluation.run import Evaluator
+    import evaluation.run as er
+
+    problem = Problem(np.zeros((2, 5)), np.ones((2, 5)), k=1, seed=0, name="p")
+    ranked = [Candidate(((0, 0, 1, 0),), 5, 0.5), Candidate(((0, 1, 1, 0),), 3, 0.3),
+              Candidate(((1, 0, 0, 0),), 2, 0.2)]
+    executed = []
+
+    def fake_plan(method, models, X_init, X_goal, cfg):
+        result = PlanResult(method, [ranked[0].actions[0]], level=1, candidates=list(ranked))
+        result.timings["total"], result.predicted_error = 0.01, 0.2
+        return result
+
+    def fake_execute(self, problem, actions):
+        executed.append(actions)
+        good = actions == ranked[2].actions
+        return {"refined": True, "refine_failure": None, "refine_time_s": [0.1], "executed_actions": 1,
+                "final_error_m": 0.0 if good else 0.3}
+
+    import tamp.bilevel
+
+    monkeypatch.setattr(tamp.bilevel, "plan", fake_plan)
+    monkeypatch.setattr(Evaluator, "_execute", fake_execute)
+    monkeypatch.setattr(Evaluator, "warm_up", lambda self, models, problem: None)
+    for cap, success, tried in ((20, True, 3), (2, False, 2)):
+        executed.clear()
+        evaluator = Evaluator({"probabilistic_oracle": None, "probabilistic": None},
+                              er.EvalConfig(progress=False, oracle_max_plans=cap))
+        row = evaluator.run(problem, "probabilistic_oracle")
+        assert (row["success"], row["executed_plans"], len(executed)) == (success, tried, tried)
+        assert row["plan"] == [list(a) for a in executed[-1]]
+        executed.clear()
+        top = evaluator.run(problem, "probabilistic")  # the unverified planner executes its top plan only
+        assert not top["success"] and top["executed_plans"] == 1 and [tuple(map(tuple, e)) for e in executed] == [ranked[0].actions]
 
 
 def test_an_evaluation_killed_midway_resumes_without_redoing_or_losing_rows(serial, problems_file, tmp_path):

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -95,6 +96,28 @@ def test_same_symbols_but_goal_elsewhere_needs_a_nonempty_plan():
     paper = plan("bilevel", models(domain), X, goal, PlanConfig(n_domains=20, **PAPER))
     assert paper.candidates[0].actions == () and paper.candidates[0].verified is False
     assert paper.level == 2 and paper.plan == [(0, -1, 0, 1)]
+
+
+def test_bilevel_alg1_never_returns_an_alternative_or_a_forced_nonempty_plan(domain):
+    def summary(result):
+        return result.plan, result.level, [(c.actions, c.verified, c.alternative_of) for c in result.candidates]
+
+    # where `bilevel` takes an alternative through the same symbols, Algorithm 1 verifies the ranked
+    # plans alone and takes the second ranked plan
+    alg1 = plan("bilevel_alg1", models(domain), X_INIT, A_ON_B, PlanConfig(n_domains=100, seed=0))
+    assert alg1.method == "bilevel_alg1" and all(c.alternative_of is None for c in alg1.candidates)
+    assert alg1.level == 1 and alg1.plan == [(0, 0, 1, 0)] and alg1.candidates[1].count < alg1.candidates[0].count
+    # where `bilevel` forces a non-empty symbolic plan, Algorithm 1 tries the empty one and falls through
+    shift = two_block_domain(shift=True)
+    X = np.array([[0.6, 0.0, 0.025, 0, 1], [0.75, -0.2, 0.025, 1, 0]])
+    goal = X.copy()
+    goal[0, 1] = 0.15
+    alg1_shift = plan("bilevel_alg1", models(shift), X, goal, PlanConfig(n_domains=20))
+    assert [c.actions for c in alg1_shift.candidates] == [()] and alg1_shift.level == 2
+    # whatever the configuration says, it is `bilevel` with both extensions off
+    for m, x, g, cfg in ((models(domain), X_INIT, A_ON_B, PlanConfig(n_domains=100, seed=0)),
+                         (models(shift), X, goal, PlanConfig(n_domains=20))):
+        assert summary(plan("bilevel_alg1", m, x, g, cfg)) == summary(plan("bilevel", m, x, g, replace(cfg, **PAPER)))
 
 
 def test_symbolic_failure_falls_through_to_continuous_search(domain):
