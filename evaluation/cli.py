@@ -173,7 +173,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         "domains, generate the problem set, evaluate every method in the Drake world and write "
         "OUT/results/report.md. Stages that finished are skipped when the command is run again, so an "
         "interrupted run resumes. --scale quick fits in an hour on 2 cores; --scale paper is the "
-        "paper's size (160k samples, 4000 epochs, 100 problems per cell) for bigger machines or Ray.",
+        "paper's size (160k samples, 4000 epochs, 100 problems per cell) for bigger machines or Ray. "
+        "With --models DIR only the problems, the evaluation and the report are made, for DIR's models "
+        "(e.g. `--models tamp/pretrained --protocol paper --runs 3`: the paper's protocol, three runs).",
     )
     p.add_argument("--scale", choices=("quick", "paper"), default="quick", help="sizes (default quick)")
     p.add_argument("--out", type=Path, required=True, help="output directory (new, or the one to resume)")
@@ -183,6 +185,15 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="collection and evaluation on a local process pool (default) or Ray")
     p.add_argument("--fidelity", choices=("fast", "full"), default="fast",
                    help="execute the plans in the fast world (default) or with the arm under physics")
+    p.add_argument("--protocol", choices=PROTOCOLS, default="strict",
+                   help="problem sets: strict (every random action moves something, default) or paper (actions "
+                   "kept whatever their outcome, as the paper's authors do)")
+    p.add_argument("--runs", type=positive_int, default=1,
+                   help="problem sets of consecutive seeds, reported as mean ± std over runs (default 1; the paper: 10)")
+    p.add_argument("--models", type=Path, default=None,
+                   help="evaluate this models directory (e.g. tamp/pretrained) instead of collecting and training")
+    p.add_argument("--symbolic-backend", choices=SYMBOLIC_BACKENDS, default="python",
+                   help="symbolic planner: python (in-process search, default) or fd (Fast Downward, as in the paper)")
     p.set_defaults(func=cmd_reproduce)
 
 
@@ -190,6 +201,8 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     """Every stage of the paper's experiments, resumable."""
     from evaluation.reproduce import reproduce
 
-    report = reproduce(args.out, args.scale, workers=args.workers, backend=args.backend, fidelity=args.fidelity)
+    report = reproduce(args.out, args.scale, workers=args.workers, backend=args.backend, fidelity=args.fidelity,
+                       protocol=args.protocol, runs=args.runs, models=args.models,
+                       symbolic_backend=args.symbolic_backend)
     print(f"report written to {report}")
     return 0

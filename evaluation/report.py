@@ -22,19 +22,27 @@ from typing import Any, Callable, Iterable, Sequence
 from . import paper, plots
 from .stats import IDENTICAL, confusion, mean_std, median, paired_ttest, percentile, rate_pct
 
-METHOD_ORDER = ("deterministic", "probabilistic", "cfs", "bilevel", "bilevel_replan", "symbolic_sigmoid",
-                "cfs_gumbel")
+METHOD_ORDER = ("deterministic", "probabilistic", "probabilistic_oracle", "cfs", "bilevel", "bilevel_alg1",
+                "bilevel_replan", "symbolic_sigmoid", "cfs_gumbel")
 METHOD_INFO = {
     "deterministic": "deterministic symbolic planner, Gumbel-Sigmoid Symbolic Model (baseline)",
     "probabilistic": "probabilistic symbolic planner, top plan of N sampled domains, unverified",
+    "probabilistic_oracle": "ORACLE, the paper's measure: the N sampled domains' plans executed, most frequent "
+                            "first, until one reaches the goal (no planner can choose so without the simulator)",
     "cfs": "continuous forward search, Sigmoid Dynamics Model",
-    "bilevel": "Algorithm 1: verified probabilistic plan (Level 1), else continuous search (Level 2)",
+    "bilevel": "Algorithm 1 with our Level-1 extensions (look-alike alternatives, non-empty plans), else "
+               "continuous search (Level 2)",
+    "bilevel_alg1": "the paper's Algorithm 1 exactly: verified probabilistic plan (Level 1), else continuous "
+                    "search (Level 2)",
     "bilevel_replan": "bilevel in closed loop, up to k - 1 replanning rounds",
     "symbolic_sigmoid": "deterministic symbolic planner, Sigmoid Symbolic Model and its domain (Fig. 4)",
     "cfs_gumbel": "continuous forward search, Gumbel-Sigmoid Dynamics Model (Fig. 4)",
 }
 OUTCOMES = ("success", "no_plan", "kinematic_failure", "refinement_failure", "wrong_plan")
 STAGES = ("ik", "motion", "grasp")
+BACKEND_INFO = {"python": "our in-process search (`python`)", "fd": "Fast Downward (`fd`, as in the paper)"}
+PROTOCOL_INFO = {"strict": "`strict` (every one of the k random actions moved a block)",
+                 "paper": "`paper` (the k random actions kept whatever their outcome, as the paper's authors do)"}
 TAUS_CM = tuple(range(1, 16))  # the verifier sweep (the paper's Fig. 6)
 DASH = "—"
 
@@ -99,8 +107,9 @@ def load_rows(path: Path) -> list[dict]:
     """The result rows of `path` (JSONL); a ValueError names the file and line of any malformed row.
 
     Fields used: problem, n, k, method, solved, success, outcome, planning_time_s (required);
-    level, predicted_error_m, refined, refine_failure, refine_time_s, executed_actions, rounds,
-    eps_m, tau_verify_m, fidelity (may be null or absent). A last line cut short by an interrupted
+    level, plan, predicted_error_m, refined, refine_failure, refine_time_s, executed_actions,
+    executed_plans, rounds, eps_m, tau_verify_m, fidelity, run, protocol, moved, symbolic_backend
+    (may be null or absent; a row without `run` belongs to run 0). A last line cut short by an interrupted
     evaluation (no newline, not JSON) is left out, as the runner does when it resumes.
     """
     return _read_rows(Path(path))[0]
@@ -150,7 +159,7 @@ def _check_row(path: Path, i: int, row: dict) -> None:
                               ("outcome", (str,), "a string"), ("planning_time_s", _NUMBER, "a number")):
         _check(path, i, row, name, types, False, what)
     for name in ("level", "predicted_error_m", "executed_actions", "rounds", "eps_m", "tau_verify_m",
-                 "level1_time_s", "final_error_m"):
+                 "level1_time_s", "final_error_m", "run", "moved", "executed_plans"):
         _check(path, i, row, name, _NUMBER, True, "a number or null")
     _check(path, i, row, "refined", (bool,), True, "true, false or null")
     _check(path, i, row, "refine_failure", (dict,), True, "an object or null")
@@ -197,12 +206,32 @@ class Results:
     notes: list[str] = field(default_factory=list)  # said under Setup (e.g. an incomplete last line)
     by_method: dict[str, dict[str, dict]] = field(init=False)
     cells: dict[str, tuple[int, int]] = field(init=False)  # problem -> (n, k)
+    run_of: dict[str, int] = field(init=False)  # problem -> run (0 without one)
 
     def __post_init__(self) -> None:
-        self.by_method, self.cells = {}, {}
+        self.by_method, self.cells, self.run_of = {}, {}, {}
         for r in self.rows:
             self.by_method.setdefault(r["method"], {})[r["problem"]] = r
             self.cells[r["problem"]] = (r["n"], r["k"])
+            self.run_of[r["problem"]] = r.get("run") or 0
+
+    @property
+    def runs(self) -> list[int]:
+        return sorted(set(self.run_of.values()))
+
+    def distinct(self, name: str, methods: Sequence[str] | None = None) -> list[str]:
+        """The distinct non-null values of a row field (of `methods`' rows), as strings."""
+        return sorted({str(r[name]) for r in self.rows if r.get(name) is not None
+                       and (methods is None or r["method"] in methods)})
+
+    def per_run(self, rows: Sequence[dict], value: Callable[[list[dict]], float | None]
+                ) -> tuple[float | None, float | None] | None:
+        """Mean ± sample std over runs of `value` of each run's rows; None with fewer than two runs."""
+        if len(self.runs) < 2:
+            return None
+        groups = [[r for r in rows if self.run_of[r["problem"]] == run] for run in self.runs]
+        values = [value(g) for g in groups if g]
+        return mean_std([v for v in values if v is not None])
 
     @property
     def methods(self) -> list[str]:
@@ -246,16 +275,46 @@ def _by_k(res: Results, ks: Sequence[int] | None = None, all_label: str = "all"
         [(all_label, lambda n_, k_, ks=tuple(ks): k_ in ks)]
 
 
+def _success(rows: Sequence[dict]) -> float | None:
+    return rate_pct([r["success"] for r in rows])
+
+
 def compare_success(res: Results, a: str, b: str, groups) -> list[dict]:
-    """Per group: paired problems, success (%) of a and b on them, paired t-test p on 0/1 success."""
+    """Per group: paired problems, success (%) of a and b on them, paired t-test p on 0/1 success;
+    with several runs also each method's mean ± std over runs (keys "<method> runs")."""
     out = []
     for label, keep in groups:
         pairs = res.paired(a, b, keep)
         sa = [ra["success"] for ra, _ in pairs]
         sb = [rb["success"] for _, rb in pairs]
-        out.append({"group": label, "problems": len(pairs), a: rate_pct(sa), b: rate_pct(sb),
-                    "p": paired_ttest(sa, sb)})
+        entry = {"group": label, "problems": len(pairs), a: rate_pct(sa), b: rate_pct(sb), "p": paired_ttest(sa, sb)}
+        if len(res.runs) > 1:
+            entry[f"{a} runs"] = res.per_run([x for x, _ in pairs], _success)
+            entry[f"{b} runs"] = res.per_run([y for _, y in pairs], _success)
+        out.append(entry)
     return out
+
+
+def _runs_note(res: Results) -> str:
+    """What "runs" columns mean, or '' for a single run."""
+    if len(res.runs) < 2:
+        return ""
+    return (f" Columns marked 'runs': mean ± sample std over the {len(res.runs)} runs (problem sets of different "
+            "seeds) of each run's figure, as the paper reports; the other columns pool every run.")
+
+
+def _backend_note(res: Results, methods: Sequence[str]) -> str:
+    backends = res.distinct("symbolic_backend", methods)
+    if not backends:
+        return ""
+    return " Symbolic planner: " + ", ".join(BACKEND_INFO.get(b, f"`{b}`") for b in backends) + "."
+
+
+def _protocol_note(res: Results) -> str:
+    protocols = res.distinct("protocol")
+    if not protocols:
+        return " Problem protocol unknown (rows without `protocol`)."
+    return " Problems: " + ", ".join(PROTOCOL_INFO.get(p, f"`{p}`") for p in protocols) + " protocol."
 
 
 # --- the sections --------------------------------------------------------------------------------
@@ -287,11 +346,28 @@ def _short(value: Any) -> str:
     return text[:12] + "…" if len(text) == 64 and all(c in "0123456789abcdef" for c in text) else text
 
 
+def _moved(res: Results) -> dict[tuple[int, int], tuple[int, int, int]]:
+    """(n, k) -> (actions that moved a block, all k actions, problems with no moving action), over the
+    problems whose rows say `moved`; empty if none do."""
+    seen: dict[str, int] = {}
+    for r in res.rows:
+        if r.get("moved") is not None:
+            seen[r["problem"]] = r["moved"]
+    out: dict[tuple[int, int], tuple[int, int, int]] = {}
+    for p, m in seen.items():
+        n, k = res.cells[p]
+        a, b, c = out.get((n, k), (0, 0, 0))
+        out[n, k] = (a + m, b + k, c + (m == 0))
+    return out
+
+
 def section_setup(res: Results, figures: Path) -> Section:
     eps, tau = res.common("eps_m"), res.common("tau_verify_m")
     distinct = {f: sorted({str(r.get(f)) for r in res.rows if r.get(f) is not None})
                 for f in ("fidelity", "eps_m", "tau_verify_m")}
-    items = [("rows", str(len(res.rows))), ("problems", str(len(res.cells))),
+    items = [("rows", str(len(res.rows))), ("problems", str(len(res.cells))), ("runs", str(len(res.runs))),
+             ("protocol", ", ".join(res.distinct("protocol")) or DASH),
+             ("symbolic backend", ", ".join(res.distinct("symbolic_backend")) or DASH),
              ("methods", ", ".join(res.methods)), ("fidelity", ", ".join(distinct["fidelity"]) or DASH),
              ("eps (cm)", ", ".join(f"{float(e) * 100:g}" for e in distinct["eps_m"]) or DASH),
              ("tau_verify (cm)", ", ".join(f"{float(t) * 100:g}" for t in distinct["tau_verify_m"]) or DASH)]
@@ -304,9 +380,24 @@ def section_setup(res: Results, figures: Path) -> Section:
             for n in res.ns]
     grid.append(["all"] + [str(sum(counts.get((n, k), 0) for n in res.ns)) for k in res.ks] + [str(len(res.cells))])
     lines += ["Problems per (n, k):", ""] + md_table(["n"] + [f"k={k}" for k in res.ks] + ["all"], grid)
+    moved = _moved(res)
+    if moved:
+        def cell(keep) -> str:
+            m, total, still = (sum(v[i] for (n, k), v in moved.items() if keep(n, k)) for i in range(3))
+            return f"{m}/{total} ({still})" if total else DASH
+        mgrid = [[str(n)] + [cell(lambda n_, k_, n=n, k=k: (n_, k_) == (n, k)) for k in res.ks] +
+                 [cell(lambda n_, k_, n=n: n_ == n)] for n in res.ns]
+        mgrid.append(["all"] + [cell(lambda n_, k_, k=k: k_ == k) for k in res.ks] + [cell(lambda n, k: True)])
+        lines += ["Goal-generating actions that moved a block, of all k actions of the cell's problems, and in "
+                  "parentheses the problems whose goal is their initial scene (no action moved anything):", ""]
+        lines += md_table(["n"] + [f"k={k}" for k in res.ks] + ["all"], mgrid)
     per_method = [[f"`{m}`", str(len(res.by_method[m])), METHOD_INFO.get(m, "")] for m in res.methods]
     lines += md_table(["method", "rows", "what"], per_method)
     data = {"rows": len(res.rows), "notes": res.notes, "problems": len(res.cells), "methods": res.methods,
+            "runs": res.runs, "protocols": res.distinct("protocol"),
+            "symbolic_backends": res.distinct("symbolic_backend"),
+            "moved": {f"{n},{k}": {"moved": v[0], "actions": v[1], "goal_is_init": v[2]}
+                      for (n, k), v in sorted(moved.items())},
             "distinct": distinct, "eps_m": eps, "tau_verify_m": tau, "meta": res.meta,
             "problems_per_cell": {f"{n},{k}": c for (n, k), c in sorted(counts.items())},
             "rows_per_method": {m: len(res.by_method[m]) for m in res.methods}}
@@ -372,18 +463,54 @@ def section_table2(res: Results, figures: Path) -> Section:
     if not res.has("deterministic", "probabilistic"):
         return _skipped("table2", title, "No `deterministic` and `probabilistic` rows together: Table II skipped.")
     table = compare_success(res, "deterministic", "probabilistic", _by_k(res))
+    oracle = res.has("probabilistic_oracle")
+    runs = len(res.runs) > 1
+    moved = _moved(res)
     rows = []
-    for t in table:
+    for t, (_, keep) in zip(table, _by_k(res)):
         pk = paper.TABLE2_SUCCESS_PCT.get(int(t["group"])) if t["group"] != "all" else None
-        rows.append([t["group"], str(t["problems"]), fmt_pct(t["deterministic"]),
-                     _paper_pm(pk["deterministic"]) if pk else DASH, fmt_pct(t["probabilistic"]),
-                     _paper_pm(pk["probabilistic"]) if pk else DASH, fmt_p(t["p"]),
-                     fmt_paper_p(paper.TABLE2_P) if t["group"] == "all" else DASH])
-    lines = md_table(["k", "problems", "deterministic (%)", "paper deterministic (%)", "probabilistic (%)",
-                      "paper probabilistic (%)", "p", "paper p"], rows)
-    lines += ["Ours: one run, all n pooled (problems both were run on). Paper: mean ± std over ten runs, "
-              "averaged over n.", ""]
-    return Section("table2", title, lines, {"groups": table, "paper": paper.TABLE2_SUCCESS_PCT})
+        row = [t["group"], str(t["problems"])]
+        if moved:
+            m, total, still = (sum(v[i] for (n, k), v in moved.items() if keep(n, k)) for i in range(3))
+            row += [f"{m}/{total}", str(still)]
+        row += [fmt_pct(t["deterministic"])] + ([fmt_pm(t["deterministic runs"], 1)] if runs else []) + \
+            [_paper_pm(pk["deterministic"]) if pk else DASH, fmt_pct(t["probabilistic"])] + \
+            ([fmt_pm(t["probabilistic runs"], 1)] if runs else [])
+        if oracle:
+            o = res.select("probabilistic_oracle", keep)
+            t["probabilistic_oracle"] = _success(o)
+            t["probabilistic_oracle runs"] = res.per_run(o, _success)
+            t["oracle_plans_mean"] = mean_std([r["executed_plans"] for r in o if r.get("executed_plans")])[0]
+            row += [fmt_pct(t["probabilistic_oracle"])] + ([fmt_pm(t["probabilistic_oracle runs"], 1)] if runs else [])
+        row += [_paper_pm(pk["probabilistic"]) if pk else DASH]
+        if oracle:
+            row += [fmt_ratio(t["oracle_plans_mean"])]
+        row += [fmt_p(t["p"]), fmt_paper_p(paper.TABLE2_P) if t["group"] == "all" else DASH]
+        rows.append(row)
+    header = ["k", "problems"] + (["moved actions", "goal = init"] if moved else []) + ["deterministic (%)"] + \
+        (["deterministic runs (%)"] if runs else []) + ["paper deterministic (%)", "probabilistic (%)"] + \
+        (["probabilistic runs (%)"] if runs else []) + \
+        (["oracle (%)"] + (["oracle runs (%)"] if runs else []) if oracle else []) + ["paper probabilistic (%)"] + \
+        (["oracle plans executed (mean)"] if oracle else []) + ["p", "paper p"]
+    lines = md_table(header, rows)
+    cap = (res.meta or {}).get("config", {}).get("oracle_max_plans")
+    lines += ["Ours: all n pooled (problems both planners were run on); p on deterministic vs probabilistic. "
+              "Paper: mean ± std over ten runs, averaged over n." + _runs_note(res) + _protocol_note(res) +
+              _backend_note(res, ("deterministic", "probabilistic", "probabilistic_oracle")), ""]
+    if moved:
+        lines += ["moved actions: goal-generating actions that moved a block, of all k per problem; goal = init: "
+                  "problems where none did, so that the empty plan solves them.", ""]
+    if oracle:
+        lines += ["`oracle` is the paper's \"probabilistic\" measure, an EXECUTION ORACLE: the plans of the N "
+                  "sampled domains are executed, most frequent first, until one reaches the goal"
+                  + (f" (at most {cap} per problem)" if cap else "") + "; no planner could choose among its plans "
+                  "this way without the simulator. Our `probabilistic` column executes the top plan only. Compare "
+                  "the paper's probabilistic column with `oracle`, its deterministic column with ours.", ""]
+    else:
+        lines += ["No `probabilistic_oracle` rows: the paper's probabilistic column is an execution oracle (any of "
+                  "the sampled domains' plans reaching the goal), ours executes the top plan only.", ""]
+    return Section("table2", title, lines, {"groups": table, "paper": paper.TABLE2_SUCCESS_PCT,
+                                            "oracle_max_plans": cap})
 
 
 def _verifier_rows(res: Results) -> tuple[list[dict], int]:
@@ -411,7 +538,29 @@ def section_verifier(res: Results, figures: Path) -> Section:
     lines += md_table(["n", "plans", "TP", "FP", "TN", "FN", "verified: success (%)", "unverified: failure (%)",
                        "accuracy", "F1"], rows)
     lines += ["TP verified and succeeded, FP verified and failed, TN unverified and failed, FN unverified and "
-              "succeeded. Ours pooled over k; the paper's accuracy and F1 are means over its test scenarios.", ""]
+              "succeeded. Ours pooled over k; the paper's accuracy and F1 are means over its test scenarios." +
+              _protocol_note(res) + _backend_note(res, ("probabilistic",)), ""]
+    kinds = [("non-empty plans", [r for r in planned if r.get("plan")]),
+             ("empty plans", [r for r in planned if r.get("plan") == []]), ("all plans", planned)]
+    split, srows = {}, []
+    for label, rs in kinds:
+        c = confusion([r["predicted_error_m"] for r in rs], [r["success"] for r in rs], tau)
+        split[label] = {"confusion": c.to_dict()}
+        row = [label, str(c.total), str(c.tp), str(c.fp), str(c.tn), str(c.fn), fmt_pct(c.verified_success_pct),
+               fmt_pct(c.unverified_failure_pct), fmt_ratio(c.accuracy), fmt_ratio(c.f1)]
+        if len(res.runs) > 1:
+            def score(rows, name):
+                return getattr(confusion([r["predicted_error_m"] for r in rows], [r["success"] for r in rows], tau),
+                               name)
+            split[label]["accuracy runs"] = res.per_run(rs, lambda g: score(g, "accuracy"))
+            split[label]["f1 runs"] = res.per_run(rs, lambda g: score(g, "f1"))
+            row += [fmt_pm(split[label]["accuracy runs"], 2), fmt_pm(split[label]["f1 runs"], 2)]
+        srows.append(row)
+    lines += ["Empty plans (the initial symbols already equal the goal's) are judged by the distance of X_init "
+              "itself to the goal, so they are easy cases either way; the same counts without them and for them "
+              "alone:", ""]
+    lines += md_table(["plans", "count", "TP", "FP", "TN", "FN", "verified: success (%)", "unverified: failure (%)",
+                       "accuracy", "F1"] + (["accuracy runs", "F1 runs"] if len(res.runs) > 1 else []), srows)
     sweep = {g: {"accuracy": [], "f1": []} for g, _ in groups}
     for tau_cm in TAUS_CM:
         for g, rs in groups:
@@ -428,7 +577,7 @@ def section_verifier(res: Results, figures: Path) -> Section:
     f2 = plots.confusion_bars(figures / "verifier_confusion.png", labels, list(conf.values()), tau * 100)
     lines += [f"![Fig. 6]({f1.parent.name}/{f1.name}) ![Fig. 7]({f2.parent.name}/{f2.name})", ""]
     data = {"tau_m": tau, "plans": len(planned), "left_out_no_plan": left_out,
-            "confusion": {g: c.to_dict() for g, c in conf.items()}, "paper": pv,
+            "confusion": {g: c.to_dict() for g, c in conf.items()}, "by_plan_kind": split, "paper": pv,
             "sweep": {"tau_cm": list(TAUS_CM), "groups": sweep}}
     return Section("verifier", title, lines, data)
 
@@ -498,7 +647,7 @@ def section_table3(res: Results, figures: Path) -> Section:
     title = "7. Table III: planning time, bilevel vs continuous forward search"
     if not res.has("bilevel", "cfs"):
         return _skipped("table3", title, "No `bilevel` and `cfs` rows together: Table III skipped.")
-    rows, groups = [], []
+    rows, groups, runs = [], [], len(res.runs) > 1
     for label, keep in _by_n(res):
         pairs = res.paired("bilevel", "cfs", keep)
         tb, tc = _times(pairs)
@@ -508,15 +657,24 @@ def section_table3(res: Results, figures: Path) -> Section:
         ps = paper.TABLE3_SPEEDUP.get(int(label)) if label != "all" else None
         g = {"group": label, "problems": len(pairs), "bilevel_s": mb, "bilevel_median_s": median(tb), "cfs_s": mc,
              "cfs_median_s": median(tc), "speedup": speedup, "p": paired_ttest(tb, tc)}
+        run_cols = []
+        if runs:
+            def mean_time(rows):
+                return mean_std([r["planning_time_s"] for r in rows])[0]
+            g["bilevel runs"] = res.per_run([a for a, _ in pairs], mean_time)
+            g["cfs runs"] = res.per_run([b for _, b in pairs], mean_time)
+            run_cols = [fmt_pm(g["bilevel runs"]), fmt_pm(g["cfs runs"])]
         groups.append(g)
         rows.append([label, str(len(pairs)), fmt_pm(mb), fmt_s(g["bilevel_median_s"]), fmt_pm(mc),
-                     fmt_s(g["cfs_median_s"]), fmt_ratio(speedup), fmt_p(g["p"]),
-                     _paper_pm(p3["bilevel"]) if p3 else DASH, _paper_pm(p3["cfs"]) if p3 else DASH,
+                     fmt_s(g["cfs_median_s"]), fmt_ratio(speedup), fmt_p(g["p"])] + run_cols +
+                    [_paper_pm(p3["bilevel"]) if p3 else DASH, _paper_pm(p3["cfs"]) if p3 else DASH,
                      fmt_ratio(ps) if ps else DASH])
     lines = ["Planning time (s) of every problem both were run on, solved or not (the planner call alone); "
-             "mean ± std, median; speedup = mean `cfs` / mean `bilevel`; p on paired times.", ""]
+             "mean ± std over problems, median; speedup = mean `cfs` / mean `bilevel`; p on paired times." +
+             (" Columns marked 'runs': mean ± std over runs of each run's mean time." if runs else ""), ""]
     lines += md_table(["n", "problems", "`bilevel` (s)", "`bilevel` median (s)", "`cfs` (s)", "`cfs` median (s)",
-                       "speedup", "p", "paper bilevel (s)", "paper cfs (s)", "paper speedup"], rows)
+                       "speedup", "p"] + (["`bilevel` runs (s)", "`cfs` runs (s)"] if runs else []) +
+                      ["paper bilevel (s)", "paper cfs (s)", "paper speedup"], rows)
     split_rows, split = [], []
     for subset, want in (("Level 1", True), ("rest", False)):
         for label, keep in _by_n(res):
@@ -572,14 +730,17 @@ def section_replanning(res: Results, figures: Path) -> Section:
         t["rounds_mean"] = mean_std(rounds)[0]
         t["gain_points"] = None if t["bilevel"] is None else t["bilevel_replan"] - t["bilevel"]
         pk = paper.REPLAN_SUCCESS.get(int(t["group"])) if t["group"].isdigit() else None
+        runs = [fmt_pm(t["bilevel runs"], 1), fmt_pm(t["bilevel_replan runs"], 1)] if "bilevel runs" in t else []
         rows.append([t["group"], str(t["problems"]), fmt_pct(t["bilevel"]), fmt_pct(t["bilevel_replan"]),
-                     fmt_pct(t["gain_points"]), fmt_p(t["p"]), fmt_ratio(t["rounds_mean"]),
-                     _paper_pm(pk["bilevel"], 1, 100) if pk else DASH,
+                     fmt_pct(t["gain_points"]), fmt_p(t["p"]), fmt_ratio(t["rounds_mean"])] + runs +
+                    [_paper_pm(pk["bilevel"], 1, 100) if pk else DASH,
                      _paper_pm(pk["bilevel_replan"], 1, 100) if pk else DASH])
     lines = md_table(["k", "problems", "`bilevel` (%)", "`bilevel_replan` (%)", "gain (points)", "p",
-                      "rounds (mean)", "paper w/o (%)", "paper w (%)"], rows)
+                      "rounds (mean)"] + (["`bilevel` runs (%)", "`bilevel_replan` runs (%)"]
+                                          if len(res.runs) > 1 else []) + ["paper w/o (%)", "paper w (%)"], rows)
     lines += ["Paper: success fractions of its Table IV as percent, mean ± std over ten runs, averaged over n; "
-              "it gives no p-values.", ""]
+              "it gives no p-values." + _runs_note(res) + _protocol_note(res) +
+              _backend_note(res, ("bilevel", "bilevel_replan")), ""]
     return Section("replanning", title, lines, {"groups": table, "paper": paper.REPLAN_SUCCESS})
 
 
@@ -611,6 +772,45 @@ def section_refinement(res: Results, figures: Path) -> Section:
     return Section("refinement", title, lines, data)
 
 
+def section_level1(res: Results, figures: Path) -> Section:
+    title = "10. Level 1: the paper's Algorithm 1 and our extensions"
+    if not res.has("bilevel", "bilevel_alg1"):
+        return _skipped("level1", title, "No `bilevel` and `bilevel_alg1` rows together: the Level-1 extensions "
+                                         "are not compared.")
+    table = compare_success(res, "bilevel_alg1", "bilevel", _by_n(res))
+    rows = []
+    for t, (_, keep) in zip(table, _by_n(res)):
+        pairs = res.paired("bilevel_alg1", "bilevel", keep)
+        for m, side in (("bilevel_alg1", 0), ("bilevel", 1)):
+            rs = [pair[side] for pair in pairs]
+            t[f"{m} level1_pct"] = rate_pct([r.get("level") == 1 for r in rs])
+            t[f"{m} level1_success_pct"] = rate_pct([r.get("level") == 1 and r["success"] for r in rs])
+            t[f"{m} level1_time_s"] = mean_std([r.get("level1_time_s") or 0.0 for r in rs])[0]
+            t[f"{m} time_s"] = mean_std([r["planning_time_s"] for r in rs])[0]
+            if len(res.runs) > 1:
+                t[f"{m} level1 runs"] = res.per_run(rs, lambda g: rate_pct([r.get("level") == 1 for r in g]))
+        rows.append([t["group"], str(t["problems"]), fmt_pct(t["bilevel_alg1"]), fmt_pct(t["bilevel"]), fmt_p(t["p"]),
+                     fmt_pct(t["bilevel_alg1 level1_pct"]), fmt_pct(t["bilevel level1_pct"]),
+                     fmt_pct(t["bilevel_alg1 level1_success_pct"]), fmt_pct(t["bilevel level1_success_pct"]),
+                     fmt_s(t["bilevel_alg1 time_s"]), fmt_s(t["bilevel time_s"])] +
+                    ([fmt_pm(t["bilevel_alg1 level1 runs"], 1), fmt_pm(t["bilevel level1 runs"], 1)]
+                     if len(res.runs) > 1 else []))
+    rows.append(["paper", DASH, DASH, DASH, DASH, f"≈{paper.LEVEL1_SHARE_PCT:.0f}", DASH, DASH, DASH, DASH, DASH] +
+                ([DASH, DASH] if len(res.runs) > 1 else []))
+    lines = ["`bilevel_alg1` is the paper's Algorithm 1 exactly; `bilevel` adds look-alike alternatives (plans "
+             "through the same symbolic states, verified in one rollout after each ranked plan) and asks for a "
+             "non-empty symbolic plan when X_init is not within tau of the goal although the symbols agree. "
+             "Level 1 (%): problems whose plan came from a verified symbolic plan; Level-1 success (%): those that "
+             "also reached the goal; times are mean planning time (s). p on paired 0/1 success." +
+             _runs_note(res) + _protocol_note(res) + _backend_note(res, ("bilevel", "bilevel_alg1")), ""]
+    lines += md_table(["n", "problems", "`bilevel_alg1` (%)", "`bilevel` (%)", "p", "`bilevel_alg1` Level 1 (%)",
+                       "`bilevel` Level 1 (%)", "`bilevel_alg1` Level-1 success (%)", "`bilevel` Level-1 success (%)",
+                       "`bilevel_alg1` time (s)", "`bilevel` time (s)"] +
+                      (["`bilevel_alg1` Level 1 runs (%)", "`bilevel` Level 1 runs (%)"] if len(res.runs) > 1 else []),
+                      rows)
+    return Section("level1", title, lines, {"groups": table, "paper_level1_share_pct": paper.LEVEL1_SHARE_PCT})
+
+
 # --- the report ----------------------------------------------------------------------------------
 def _json_safe(x: Any) -> Any:
     if isinstance(x, float) and not math.isfinite(x):
@@ -635,7 +835,7 @@ def build_report(res: Results, figures: Path, ablation: dict | None = None,
     sections = [section_setup(res, figures), section_table1(ablation, ablation_source),
                 section_dual_model(res, figures), section_table2(res, figures), section_verifier(res, figures),
                 section_success(res, figures), section_table3(res, figures), section_replanning(res, figures),
-                section_refinement(res, figures)]
+                section_refinement(res, figures), section_level1(res, figures)]
     lines = ["# Evaluation report", "",
              f"From `{source}` ({len(res.rows)} rows, {len(res.cells)} problems). Ours next to the paper's "
              "numbers (Dogangun et al., quoted as printed). Success in % of problems (one decimal), times in "

@@ -14,7 +14,10 @@ Layout of the output directory:
     OUT/stages.json           finished stages with their wall time; a rerun skips them
 
 Every stage resumes: collection re-collects only missing shards, training continues from the last
-checkpoint, the evaluation recomputes only missing rows. The Symbolic Model is smaller than the
+checkpoint, the evaluation recomputes only missing rows. With `models=DIR` (for example the bundled
+`tamp/pretrained`) the collection, training and domain stages are skipped and DIR's models are
+evaluated. `protocol` and `runs` choose the problem sets (`evaluation.problems`): `runs` sets of
+consecutive seeds in one file, reported as mean ± std over runs. The Symbolic Model is smaller than the
 Dynamics Model (d_z 1, K 1 against 8, 4) and its operators mention only the objects a transition
 involves: with the paper's 4000 training epochs out of reach, wider Gumbel bottlenecks give noisy
 bits and tens of thousands of operators (see symbolic/README.md). Each Fig. 4 variant changes the
@@ -77,6 +80,10 @@ SCALES: dict[str, Scale] = {
 }
 
 
+# reproduce() options that define a run beside the scale, and their defaults
+DEFAULT_OPTIONS: dict[str, Any] = {"protocol": "strict", "runs": 1, "models": None, "symbolic_backend": "python"}
+
+
 def _say(message: str) -> None:
     print(f"[{time.strftime('%H:%M:%S')}] {message}", flush=True)
 
@@ -84,9 +91,10 @@ def _say(message: str) -> None:
 class Stages:
     """OUT/stages.json: which stages finished, and how long they took (seconds)."""
 
-    def __init__(self, out: Path, scale_name: str, scale: Scale) -> None:
+    def __init__(self, out: Path, scale_name: str, scale: Scale, **options: Any) -> None:
         self.path = out / "stages.json"
         setup = {"scale": scale_name, "config": json.loads(json.dumps(asdict(scale)))}
+        setup.update({k: v for k, v in options.items() if v != DEFAULT_OPTIONS[k]})  # older OUTs stay resumable
         if self.path.is_file():
             self.state = json.loads(self.path.read_text())
             if self.state.get("setup") != setup:
@@ -136,19 +144,36 @@ def _ablation_job(data: str, out: str, scale: Scale) -> dict:
 
 # --- the pipeline ----------------------------------------------------------------------------------
 def reproduce(out: str | Path, scale_name: str = "quick", workers: int | None = None, backend: str = "local",
-              fidelity: str = "fast") -> Path:
-    """Run (or resume) every stage; returns the path of report.md."""
+              fidelity: str = "fast", protocol: str = "strict", runs: int = 1, models: str | Path | None = None,
+              symbolic_backend: str = "python") -> Path:
+    """Run (or resume) every stage; returns the path of report.md. `models`: evaluate this models
+    directory instead of collecting and training (stages collect, train and domains skipped)."""
     from tamp.collect import available_cpus
+    from tamp.problem import PROTOCOLS
 
     if scale_name not in SCALES:
         raise ValueError(f"unknown scale {scale_name!r}; choose one of {', '.join(SCALES)}")
+    if protocol not in PROTOCOLS:
+        raise ValueError(f"--protocol must be one of {', '.join(PROTOCOLS)}, got {protocol!r}")
+    if runs < 1:
+        raise ValueError(f"--runs must be a positive integer, got {runs}")
+    if models is not None:
+        models = Path(models).resolve()
+        if not models.is_dir():
+            raise FileNotFoundError(f"no models directory at {models} (--models: symbolic.pt, dynamics.pt, domain/)")
     scale, out = SCALES[scale_name], Path(out)
     out.mkdir(parents=True, exist_ok=True)
     workers = workers or available_cpus()
-    stages = Stages(out, scale_name, scale)
-    data, models = out / "data", out / "models"
+    stages = Stages(out, scale_name, scale, protocol=protocol, runs=runs,
+                    models=None if models is None else str(models), symbolic_backend=symbolic_backend)
+    data = out / "data"
     t_all = time.perf_counter()
-    _say(f"reproduce --scale {scale_name} into {out} with {workers} worker(s)")
+    _say(f"reproduce --scale {scale_name} into {out} with {workers} worker(s)"
+         + ("" if models is None else f", evaluating the models of {models}"))
+    if models is not None:
+        return _evaluate_stages(out, stages, scale, models, workers, backend, fidelity, protocol, runs,
+                                symbolic_backend, t_all)
+    models = out / "models"
 
     if not stages.done("collect"):
         from tamp.collect import CollectConfig, collect
@@ -182,13 +207,22 @@ def reproduce(out: str | Path, scale_name: str = "quick", workers: int | None = 
             _say(f"domain: {report['n_operators']} operators from {model} -> {models / domain}")
         stages.finish("domains", time.perf_counter() - t, results=results)
 
+    return _evaluate_stages(out, stages, scale, models, workers, backend, fidelity, protocol, runs, symbolic_backend,
+                            t_all)
+
+
+def _evaluate_stages(out: Path, stages: Stages, scale: Scale, models: Path, workers: int, backend: str,
+                     fidelity: str, protocol: str, runs: int, symbolic_backend: str, t_all: float) -> Path:
+    """The problem set, the evaluation of every method and the report."""
     problems = out / "problems.jsonl"
     if not stages.done("problems"):
         from evaluation.problems import generate_problems, write_problems
 
-        _say(f"problems: {scale.per_cell} per (n, k), n in {scale.objects}, k in {scale.actions}")
+        _say(f"problems: {scale.per_cell} per (n, k), n in {scale.objects}, k in {scale.actions}, {protocol} "
+             f"protocol, {runs} run(s)")
         t = time.perf_counter()
-        write_problems(problems, generate_problems(scale.objects, scale.actions, scale.per_cell, seed=scale.seed))
+        write_problems(problems, generate_problems(scale.objects, scale.actions, scale.per_cell, seed=scale.seed,
+                                                   protocol=protocol, runs=runs, workers=workers))
         stages.finish("problems", time.perf_counter() - t)
 
     results_dir = out / "results"
@@ -198,12 +232,14 @@ def reproduce(out: str | Path, scale_name: str = "quick", workers: int | None = 
         _say(f"evaluate every method on {problems} ({fidelity} world)")
         t = time.perf_counter()
         evaluate(models, problems, results_dir, config=EvalConfig(
-            fidelity=fidelity, workers=workers, backend=backend, search_time_limit=scale.search_time_limit_s))
+            fidelity=fidelity, workers=workers, backend=backend, search_time_limit=scale.search_time_limit_s,
+            symbolic_backend=symbolic_backend))
         stages.finish("evaluate", time.perf_counter() - t)
 
     from evaluation.report import write_report
 
-    report_path = write_report(results_dir, ablation=out / "ablation" / "ablation.json")
+    ablation = out / "ablation" / "ablation.json"
+    report_path = write_report(results_dir, ablation=ablation if ablation.is_file() else None)
     stages.finish("report", 0.0)
     _say(f"done in {(time.perf_counter() - t_all) / 60:.1f} min (this call); report: {report_path}")
     return report_path

@@ -160,8 +160,9 @@ def run_plan(problem_path: Path, models_dir: Path, options: PlanOptions) -> int:
     if n_max is not None and problem.n > n_max:
         raise ValueError(f"{problem_path}: {problem.n} objects, but the models were trained for at most {n_max}")
     k = "?" if problem.k is None else problem.k
+    symbolic = "" if options.method == "cfs" else f"; symbolic planner {options.backend}"
     print(f"problem {problem_path}: {problem.n} objects, k = {k}, seed {problem.seed}; initial error "
-          f"{goal_error(problem.X_init, problem.X_goal) * 100:.1f} cm")
+          f"{goal_error(problem.X_init, problem.X_goal) * 100:.1f} cm{symbolic}")
     timeline = None
     if options.replay is not None:
         from tamp.replay import Timeline

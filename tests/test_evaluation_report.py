@@ -13,19 +13,22 @@ from scipy.stats import ttest_rel
 
 from evaluation.report import write_report
 
-METHODS = ("deterministic", "probabilistic", "cfs", "bilevel", "bilevel_replan", "symbolic_sigmoid", "cfs_gumbel")
+METHODS = ("deterministic", "probabilistic", "probabilistic_oracle", "cfs", "bilevel", "bilevel_alg1", "bilevel_replan",
+           "symbolic_sigmoid", "cfs_gumbel")
 OUTCOMES = ("success", "no_plan", "kinematic_failure", "refinement_failure", "wrong_plan")
 
 
 # --- synthetic rows ------------------------------------------------------------------------------
 def make_rows(methods=METHODS, per_cell=4, seed=3):
-    """Rows of the runner's schema with plans, no plans, refinement failures and wrong plans."""
+    """Rows of the runner's schema with plans, no plans, empty plans, refinement failures and wrong
+    plans; problems i of a cell belong to run i % 2 (paper protocol, a random count of moving actions)."""
     rng = random.Random(seed)
     rows = []
     for n in (2, 3, 4):
         for k in (1, 2, 3, 4, 5):
             for i in range(per_cell):
                 name = f"n{n}-k{k}-{i:03d}"
+                moved = rng.randint(0, k)
                 for m in methods:
                     solved = rng.random() < 0.8
                     failure = None
@@ -36,10 +39,14 @@ def make_rows(methods=METHODS, per_cell=4, seed=3):
                     success = solved and failure is None and final < 0.05
                     outcome = ("no_plan" if not solved else "success" if success else "wrong_plan" if not failure
                                else "kinematic_failure" if failure["stage"] == "ik" else "refinement_failure")
+                    empty = solved and m == "probabilistic" and k == 1 and i % 2 == 0
                     rows.append({
-                        "problem": name, "n": n, "k": k, "method": m, "solved": solved,
+                        "problem": name, "n": n, "k": k, "run": i % 2, "protocol": "paper", "moved": moved,
+                        "method": m, "solved": solved,
                         "level": rng.choice([1, 2]) if solved and m.startswith("bilevel") else None,
-                        "plan": [[0, 0, 1, 0]] * k if solved else None,
+                        "plan": ([] if empty else [[0, 0, 1, 0]] * k) if solved else None,
+                        "executed_plans": rng.randint(1, 5) if solved and m == "probabilistic_oracle" else int(solved),
+                        "symbolic_backend": None if m.startswith("cfs") else "fd",
                         "planning_time_s": rng.uniform(0.001, 2.0), "level1_time_s": 0.004,
                         "predicted_error_m": rng.uniform(0.0, 0.16) if solved else None,
                         "candidates": [], "refined": None if not solved else failure is None,
@@ -156,6 +163,16 @@ class Rows:
     def of(self, m, keep=lambda r: True):
         return [r for r in self.by[m].values() if keep(r)]
 
+    def cell(self, problem):
+        r = next(r for r in self.rows if r["problem"] == problem)
+        return r["n"], r["k"]
+
+
+def runs_pm(cell, rows, value, digits):
+    """The cell is mean ± std over runs 0 and 1 of value(rows of the run), runs without rows left out."""
+    groups = [[r for r in rows if r["run"] == run] for run in (0, 1)]
+    close_pm(cell, [value(g) for g in groups if g], digits)
+
 
 def group_keep(label, field):
     if label.startswith("all"):
@@ -203,7 +220,15 @@ def test_setup_and_table1(full_report):
             want = len({r["problem"] for r in data.rows
                         if (row["n"] == "all" or r["n"] == int(row["n"])) and r["k"] == k})
             assert int(row[f"k={k}"]) == want
-    assert {r["method"]: int(r["rows"]) for r in s["1"]["tables"][2]} == {f"`{m}`": len(data.by[m]) for m in METHODS}
+    assert items["runs"] == "2" and items["protocol"] == "paper" and items["symbolic backend"] == "fd"
+    moved = {r["problem"]: r["moved"] for r in data.rows}
+    for row in s["1"]["tables"][2]:  # actions that moved / all actions (problems whose goal is the initial scene)
+        for col in [f"k={k}" for k in range(1, 6)] + ["all"]:
+            ps = [p for p in moved if (row["n"] == "all" or data.cell(p)[0] == int(row["n"]))
+                  and (col == "all" or data.cell(p)[1] == int(col[2:]))]
+            assert row[col] == f"{sum(moved[p] for p in ps)}/{sum(data.cell(p)[1] for p in ps)} " \
+                               f"({sum(moved[p] == 0 for p in ps)})"
+    assert {r["method"]: int(r["rows"]) for r in s["1"]["tables"][3]} == {f"`{m}`": len(data.by[m]) for m in METHODS}
     assert len(data.by["cfs_gumbel"]) == 45 and len(data.by["symbolic_sigmoid"]) == 55
     t1 = {r["activation"]: r for r in s["2"]["tables"][0]}
     for act in ABLATION["activations"].values():
@@ -223,6 +248,21 @@ def test_dual_model_and_table2(full_report):
     (t2,) = s["4"]["tables"]
     check_comparison(t2, data, "deterministic", "probabilistic", "deterministic (%)", "probabilistic (%)", "k")
     assert t2[0]["p"] == "identical"  # k = 1: the same plans by construction
+    for row in t2:
+        keep = group_keep(row["k"], "k")
+        pairs = data.pairs("deterministic", "probabilistic", keep)
+        success = lambda rs: pct([r["success"] for r in rs])  # noqa: E731
+        runs_pm(row["deterministic runs (%)"], [a for a, _ in pairs], success, 1)
+        runs_pm(row["probabilistic runs (%)"], [b for _, b in pairs], success, 1)
+        oracle = data.of("probabilistic_oracle", keep)
+        close(row["oracle (%)"], success(oracle), 1)
+        runs_pm(row["oracle runs (%)"], oracle, success, 1)
+        close(row["oracle plans executed (mean)"], np.mean([r["executed_plans"] for r in oracle if r["solved"]]), 2)
+        first = {r["problem"]: r for r in data.rows}
+        assert row["moved actions"] == f"{sum(r['moved'] for r in first.values() if keep(r))}/" \
+                                      f"{sum(r['k'] for r in first.values() if keep(r))}"
+    assert any("EXECUTION ORACLE" in t for t in s["4"]["text"])
+    assert any("Fast Downward" in t and "`paper`" in t for t in s["4"]["text"])
     assert t2[0]["paper deterministic (%)"] == "62.40 ± 3.86" and t2[4]["paper probabilistic (%)"] == "28.93 ± 5.56"
     assert t2[-1]["paper p"] == "< 0.0001"
 
@@ -233,7 +273,7 @@ def test_verifier_confusion_and_sweep(full_report):
     plans = [r for r in prob if r["solved"]]
     note = f"{len(plans)} plans, {len(prob) - len(plans)} rows without a plan left out"
     assert any(note in t for t in s["5"]["text"])
-    conf, sweep = s["5"]["tables"]
+    conf, kinds, sweep = s["5"]["tables"]
 
     def counts(rs, tau):
         v = [r["predicted_error_m"] < tau for r in rs]
@@ -254,6 +294,14 @@ def test_verifier_confusion_and_sweep(full_report):
         close(row["unverified: failure (%)"], 100 * tn / (tn + fn), 1)
         close(row["accuracy"], (tp + tn) / len(rs), 2)
         close(row["F1"], 2 * tp / (2 * tp + fp + fn), 2)
+    for row in kinds:  # empty plans apart
+        rs = [r for r in plans if {"non-empty plans": bool(r["plan"]), "empty plans": r["plan"] == [],
+                                   "all plans": True}[row["plans"]]]
+        tp, fp, tn, fn = counts(rs, 0.07)
+        assert (int(row["count"]), int(row["TP"]), int(row["FP"]), int(row["TN"]), int(row["FN"])) == \
+            (len(rs), tp, fp, tn, fn)
+        runs_pm(row["accuracy runs"], rs, lambda g: sum(counts(g, 0.07)[i] for i in (0, 2)) / len(g), 2)
+    assert int(kinds[1]["count"]) == sum(r["plan"] == [] for r in plans) > 0
     assert [int(r["tau (cm)"]) for r in sweep] == list(range(1, 16))
     for row in sweep:
         tau = int(row["tau (cm)"]) / 100
@@ -301,6 +349,9 @@ def test_planning_time_table3(full_report):
         close(row["`cfs` median (s)"], np.median(tc), 3)
         close(row["speedup"], np.mean(tc) / np.mean(tb), 2)
         check_p(row["p"], tb, tc)
+        mean_time = lambda rs: np.mean([r["planning_time_s"] for r in rs])  # noqa: E731
+        runs_pm(row["`bilevel` runs (s)"], [a for a, _ in pairs], mean_time, 3)
+        runs_pm(row["`cfs` runs (s)"], [b for _, b in pairs], mean_time, 3)
     assert [r["paper bilevel (s)"] for r in times] == ["0.83 ± 0.15", "2.63 ± 0.79", "4.75 ± 3.10", "—"]
     assert [r["paper speedup"] for r in times] == ["1.16", "1.21", "1.81", "—"]
     for row in split:
@@ -327,6 +378,7 @@ def test_replanning_and_refinement(full_report):
         pairs = data.pairs("bilevel", "bilevel_replan", group_keep(row["k"], "k"))
         close(row["gain (points)"], pct([b["success"] for _, b in pairs]) - pct([a["success"] for a, _ in pairs]), 1)
         close(row["rounds (mean)"], np.mean([b["rounds"] for _, b in pairs]), 2)
+        runs_pm(row["`bilevel_replan` runs (%)"], [b for _, b in pairs], lambda g: pct([r["success"] for r in g]), 1)
     assert rp[0]["paper w/o (%)"] == "82.0 ± 3.0" and rp[3]["paper w (%)"] == "72.0 ± 5.0"
     (ref,) = s["9"]["tables"]
     for row in ref:
@@ -342,6 +394,21 @@ def test_replanning_and_refinement(full_report):
         close(row["refine time median (s)"], np.median(times), 3)
         close(row["refine time p90 (s)"], np.percentile(times, 90), 3)
         close(row["executed actions (mean)"], np.mean([r["executed_actions"] for r in plans]), 2)
+
+
+def test_level1_algorithm1_against_our_extensions(full_report):
+    _, data, s = full_report
+    (t,) = s["10"]["tables"]
+    check_comparison(t, data, "bilevel_alg1", "bilevel", "`bilevel_alg1` (%)", "`bilevel` (%)", "n")
+    for row in t[:-1]:
+        pairs = data.pairs("bilevel_alg1", "bilevel", group_keep(row["n"], "n"))
+        for m, side in (("bilevel_alg1", 0), ("bilevel", 1)):
+            rs = [pair[side] for pair in pairs]
+            close(row[f"`{m}` Level 1 (%)"], pct([r["level"] == 1 for r in rs]), 1)
+            close(row[f"`{m}` Level-1 success (%)"], pct([r["level"] == 1 and r["success"] for r in rs]), 1)
+            close(row[f"`{m}` time (s)"], np.mean([r["planning_time_s"] for r in rs]), 3)
+            runs_pm(row[f"`{m}` Level 1 runs (%)"], rs, lambda g: pct([r["level"] == 1 for r in g]), 1)
+    assert t[-1]["n"] == "paper" and t[-1]["`bilevel_alg1` Level 1 (%)"] == "≈60"
 
 
 def test_figures_and_json(full_report):
@@ -367,7 +434,7 @@ def test_missing_sections_are_one_line_notes(tmp_path):
     assert "No meta.json" in md
     assert {r["method"] for r in s["6"]["tables"][-1]} == {"`deterministic`", "`cfs`"}
     skipped = json.loads((tmp_path / "report.json").read_text())["skipped"]
-    assert skipped == ["table1", "dual_model", "table2", "verifier", "table3", "replanning"]
+    assert skipped == ["table1", "dual_model", "table2", "verifier", "table3", "replanning", "level1"]
     assert (tmp_path / "figures" / "success.png").stat().st_size > 0
 
 

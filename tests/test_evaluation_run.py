@@ -291,6 +291,23 @@ def test_two_workers_give_the_same_rows_as_one(serial, problems_file, tmp_path):
     assert _by_key(rows) == _by_key(read_rows(serial))
 
 
+def test_fast_downward_plans_like_the_in_process_search(serial, problems_file, tmp_path):
+    """--symbolic-backend fd: recorded in meta.json and the rows, and the symbolic planners reach the
+    same success on every problem as with the in-process search (both find shortest plans)."""
+    (tmp_path / "models").mkdir()
+    config = EvalConfig(search_max_expansions=300, progress=False, symbolic_backend="fd")
+    rows = read_rows(evaluate(tmp_path / "models", problems_file, tmp_path / "results", config=config,
+                              methods=["deterministic", "probabilistic"], models=stub_models()))
+    assert json.loads((tmp_path / "results" / "meta.json").read_text())["config"]["symbolic_backend"] == "fd"
+    python = {(r["problem"], r["method"]): r for r in read_rows(serial)}
+    assert len(rows) == 8
+    for r in rows:
+        assert r["symbolic_backend"] == "fd"
+        other = python[r["problem"], r["method"]]
+        assert (r["solved"], r["success"], len(r["plan"] or [])) == \
+            (other["solved"], other["success"], len(other["plan"] or []))
+
+
 def test_a_results_directory_refuses_other_inputs(serial, problems_file, tmp_path):
     other = tmp_path / "other.jsonl"
     write_problems(other, read_problems(problems_file)[:2])
@@ -374,3 +391,31 @@ def test_cli_names_a_missing_variant_and_a_bad_method(problems_file, tmp_path, c
                      str(tmp_path / "out"), "--methods", methods]) == 2
         err = capsys.readouterr().err.strip()
         assert err.count("\n") == 0 and message in err
+
+
+def test_reproduce_evaluates_given_models_under_the_paper_protocol_over_runs(models_dir, tmp_path, monkeypatch):
+    """`tamp reproduce --models DIR --protocol paper --runs 2`: no collection or training, two problem
+    sets of consecutive seeds kept whatever their actions did, a report with mean ± std over runs;
+    a second call resumes and computes nothing."""
+    import evaluation.reproduce as rep
+    from tamp.cli import main
+
+    monkeypatch.setitem(rep.SCALES, "quick", rep.Scale(samples=0, epochs=0, train_time_limit_s=None, ablation_runs=0,
+                                                       ablation_epochs=0, per_cell=1, search_time_limit_s=5.0,
+                                                       objects=(2,), actions=(1, 2)))
+    out = tmp_path / "repro"
+    args = ["reproduce", "--out", str(out), "--models", str(models_dir), "--protocol", "paper", "--runs", "2",
+            "--workers", "1"]
+    assert main(args) == 0
+    problems = read_problems(out / "problems.jsonl")
+    assert [(p.name, p.protocol, p.run) for p in problems] == [
+        ("r0-n2-k1-000", "paper", 0), ("r0-n2-k2-000", "paper", 0), ("r1-n2-k1-000", "paper", 1),
+        ("r1-n2-k2-000", "paper", 1)]
+    stages = json.loads((out / "stages.json").read_text())
+    assert set(stages["finished"]) == {"problems", "evaluate", "report"} and not (out / "data").exists()
+    assert stages["setup"]["protocol"] == "paper" and stages["setup"]["runs"] == 2
+    report = (out / "results" / "report.md").read_text()
+    assert "| runs | 2 |" in report and "| protocol | paper |" in report and "oracle runs (%)" in report
+    rows = (out / "results" / "rows.jsonl").read_bytes()
+    assert main(args) == 0 and (out / "results" / "rows.jsonl").read_bytes() == rows
+    assert main(args[:-4] + ["--runs", "3", "--workers", "1"]) == 2  # other settings in the same OUT: refused

@@ -97,6 +97,22 @@ def test_cli_plans_without_execution(models_dir, tmp_path, capsys):
     assert "missing model file(s)" in capsys.readouterr().err
 
 
+def test_cli_plans_with_fast_downward_and_algorithm_1(models_dir, tmp_path, capsys):
+    path = _problem_reachable_by_the_model(models_dir, tmp_path)
+    lengths = {}
+    for backend in ("python", "fd"):
+        assert main(["plan", "--problem", str(path), "--models", str(models_dir), "--method", "deterministic",
+                     "--symbolic-backend", backend, "--execute", "none"]) == 0
+        out = capsys.readouterr().out
+        assert f"symbolic planner {backend}" in out
+        lengths[backend] = out.split("deterministic: plan of ")[1].split(" ")[0]
+    assert lengths["python"] == lengths["fd"]  # both search for a shortest plan
+    assert main(["plan", "--problem", str(path), "--models", str(models_dir), "--method", "bilevel_alg1",
+                 "--execute", "none"]) == 0
+    out = capsys.readouterr().out
+    assert "bilevel_alg1: plan of" in out and "same symbols as plan" not in out  # no look-alike alternatives
+
+
 def test_cli_executes_and_writes_the_replay(models_dir, tmp_path, capsys):
     path = _problem_reachable_by_the_model(models_dir, tmp_path)
     replay = tmp_path / "out.html"
