@@ -3,9 +3,10 @@
 All poses are of the tcp frame G (drake_models/gripper.sdf) in the world W: top-down, +z_G pointing
 down, the jaws closing along x_G and y_G along the block's own y axis, so a 5 x 25 cm bar is held
 across its 5 cm width. The grasp point is p_pick + grasp_offset * 7.5 cm along the picked block's
-y axis, the target point p_place + release_offset * 7.5 cm along the place block's y axis, and the
-gripper keeps the block where it held it: the block ends at target - (grasp point - block centre),
-rotated with the gripper.
+offset axis, the target point p_place + release_offset * 7.5 cm along the place block's offset axis
+(`Scene.offset_axis_xy`: a bar's long axis, a cube's horizontal axis nearest world +y, both signed
+toward +y, so that an action means the same for the same X), and the gripper keeps the block where
+it held it: the block ends at target - (grasp point - block centre), rotated with the gripper.
 """
 from __future__ import annotations
 
@@ -14,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 from pydrake.math import RigidTransform, RotationMatrix
 
-from tamp.structs import BLOCK_SIZES, OFFSET_STEP, PickPlace, WorldConfig
+from tamp.structs import BLOCK_SIZES, LARGE, OFFSET_STEP, PickPlace, WorldConfig
 
 JAW_OPENING = 0.08  # metres between the open jaws' inner faces
 _GRASP_TOLERANCE = 0.005  # metres: the grasp point may lie this far outside a block and still hold it
@@ -60,9 +61,21 @@ class Scene:
         y = self.X_WB[i].rotation().matrix()[:, 1]
         return float(np.arctan2(y[1], y[0]) - np.pi / 2)
 
-    def y_axis_xy(self, i: int) -> np.ndarray:
-        yaw = self.yaw(i)
-        return np.array([-np.sin(yaw), np.cos(yaw)])
+    def offset_axis_xy(self, i: int) -> np.ndarray:
+        """Unit vector on the table along which grasp and release offsets of block i move.
+
+        A block's own axes have an arbitrary sign after physics (a block released at the other
+        jaw heading turns by 180 degrees) and the state X holds no yaw, so the axis is chosen from
+        what X says: the long axis of a bar, for a cube the horizontal block axis nearest world
+        +y, always signed toward world +y (toward +x when it lies across y). For an axis-aligned
+        block it is world +y, as in the paper's world.
+        """
+        R = self.X_WB[i].rotation().matrix()
+        axes = [R[:2, 1]] if self.types[i] == LARGE else [R[:2, 0], R[:2, 1]]
+        axes = [a / np.linalg.norm(a) for a in axes if np.linalg.norm(a) > 1e-6] or [np.array([0.0, 1.0])]
+        axis = max(axes, key=lambda a: abs(a[1]))
+        flip = axis[1] < -1e-9 or (abs(axis[1]) <= 1e-9 and axis[0] < 0)
+        return -axis if flip else axis
 
     def contains(self, i: int, p_W: np.ndarray, tolerance: float = 0.0) -> bool:
         p_B = self.X_WB[i].inverse() @ p_W
@@ -115,7 +128,7 @@ def grasp_pose(scene: Scene, action: PickPlace, config: WorldConfig) -> RigidTra
     """Tcp pose that closes the jaws around the picked block at its grasp offset."""
     i = action.pick
     c = scene.X_WB[i].translation()
-    p = np.r_[c[:2] + action.grasp_offset * OFFSET_STEP * scene.y_axis_xy(i), scene.top(i) - config.grasp_depth]
+    p = np.r_[c[:2] + action.grasp_offset * OFFSET_STEP * scene.offset_axis_xy(i), scene.top(i) - config.grasp_depth]
     return topdown(p, scene.yaw(i))
 
 
@@ -140,7 +153,7 @@ def pick_place_waypoints(scene: Scene, action: PickPlace, grasped: int, config: 
     below = X_WGrasp.translation()[2] - min(scene.bottom(c) for c in carried)
     j = action.place
     cj = scene.X_WB[j].translation()
-    target_xy = cj[:2] + action.release_offset * OFFSET_STEP * scene.y_axis_xy(j)
+    target_xy = cj[:2] + action.release_offset * OFFSET_STEP * scene.offset_axis_xy(j)
     support = scene.bottom(j) if j == action.pick else scene.top(j)
     place_z = support + config.release_clearance + below
     # Of the two equivalent jaw headings at the target, keep the one nearer the grasp heading.

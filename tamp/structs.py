@@ -16,14 +16,14 @@ SMALL, LARGE = 0, 1
 TYPE_NAMES = ("small", "large")
 # Box sizes along the block's own x, y, z (metres).
 BLOCK_SIZES = {SMALL: (0.05, 0.05, 0.05), LARGE: (0.05, 0.25, 0.05)}
-OFFSET_STEP = 0.075  # metres along the block's y axis per unit of grasp or release offset
+OFFSET_STEP = 0.075  # metres per unit of offset, along tamp.skill.Scene.offset_axis_xy
 OFFSETS = (-1, 0, 1)
 
 
 class PickPlace(NamedTuple):
     """Pick object `pick` at `grasp_offset` and release it on object `place` at `release_offset`.
 
-    Offsets are in {-1, 0, +1} and scale OFFSET_STEP along the object's y axis.
+    Offsets are in {-1, 0, +1} and scale OFFSET_STEP along the object's offset axis (y signed toward +y).
     `place == pick` places the object where it was, shifted by the offsets.
     """
 

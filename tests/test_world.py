@@ -6,6 +6,7 @@ from tamp import PickPlace, World, WorldConfig
 from tamp.kinematics import Q_LOWER, Q_UPPER, tcp_pose
 from tamp.motion import MotionPlanner
 from tamp.plants import X_FlangeTcp, build_motion_scene
+from tamp import structs
 from tamp.structs import BLOCK_SIZES
 
 SMALL, LARGE = [1.0, 0.0], [0.0, 1.0]
@@ -47,6 +48,34 @@ def test_pick_and_place_on_itself_shifts_along_y(world):
     X2, info = world.step(PickPlace(1, 1, 1, 0))
     assert info.status == "ok"
     np.testing.assert_allclose(X2[1, :3] - X1[1, :3], [0.0, -0.075, 0.0], atol=0.01)
+
+
+@pytest.mark.parametrize("yaw, block", [(0.0, "small"), (np.pi, "small"), (np.pi / 2, "small"), (-np.pi / 2, "small"),
+                                        (0.0, "large"), (np.pi, "large"), (0.05 + np.pi, "large")])
+def test_offsets_move_toward_world_y_whatever_the_sign_of_the_block_axes(yaw, block):
+    """The state has no yaw, so an offset must mean the same for the same X: +1 is +7.5 cm along
+    world +y for a cube turned by any multiple of 90 degrees and for a bar turned by 180 degrees."""
+    from pydrake.math import RigidTransform, RotationMatrix
+
+    from tamp.skill import Scene, grasp_pose
+
+    t = structs.SMALL if block == "small" else structs.LARGE
+    scene_ = Scene(np.array([t]), [RigidTransform(RotationMatrix.MakeZRotation(yaw), [0.6, 0.1, 0.025])])
+    axis = scene_.offset_axis_xy(0)
+    assert axis[1] > 0.99
+    p = grasp_pose(scene_, PickPlace(0, 1, 0, 0), WorldConfig()).translation()
+    np.testing.assert_allclose(p[:2], [0.6 + 0.075 * axis[0], 0.1 + 0.075 * axis[1]], atol=1e-9)
+    assert abs(p[1] - 0.175) < 0.075 * (1 - np.cos(0.05)) + 1e-9
+
+
+def test_a_bar_across_y_offsets_toward_world_x():
+    from pydrake.math import RigidTransform, RotationMatrix
+
+    from tamp.skill import Scene
+
+    for yaw in (np.pi / 2, -np.pi / 2):
+        bar = Scene(np.array([structs.LARGE]), [RigidTransform(RotationMatrix.MakeZRotation(yaw), [0.6, 0.0, 0.025])])
+        np.testing.assert_allclose(bar.offset_axis_xy(0), [1.0, 0.0], atol=1e-9)
 
 
 def test_grasp_beside_a_cube_grasps_nothing(world):
