@@ -24,7 +24,8 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from tamp.problem import PROTOCOLS, Problem, problem_from_dict, random_problem
+from tamp.problem import PROTOCOLS, Problem, random_problem
+from tamp.problem import read_problem_set as read_problems  # noqa: F401 (the set reader, here by its old name)
 
 
 MAX_ATTEMPTS = 10  # scenes drawn per problem before giving up (see `generate_problems`)
@@ -125,34 +126,6 @@ def write_problems(path: str | Path, problems: Sequence[Problem]) -> Path:
         seen.add(p.name)
     text = "".join(json.dumps(p.to_dict()) + "\n" for p in problems)
     return atomic_write_text(path, text)
-
-
-def read_problems(path: str | Path) -> list[Problem]:
-    """Read a problem set; errors name the file, the line and the field. Names must be unique."""
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"no problem set at {path}")
-    problems: list[Problem] = []
-    first_line: dict[str, int] = {}
-    for number, line in enumerate(path.read_text().splitlines(), start=1):
-        if not line.strip():
-            continue
-        where = f"{path} line {number}"
-        try:
-            data = json.loads(line)
-        except json.JSONDecodeError as error:
-            raise ValueError(f"{where}: not valid JSON ({error})") from None
-        problem = problem_from_dict(data, where)
-        if problem.name is None:
-            raise ValueError(f"{where}: missing field 'name' (every problem of a set is named)")
-        if problem.name in first_line:
-            raise ValueError(f"{where}: duplicate problem name {problem.name!r} (also on line "
-                             f"{first_line[problem.name]})")
-        first_line[problem.name] = number
-        problems.append(problem)
-    if not problems:
-        raise ValueError(f"{path}: no problems in the file")
-    return problems
 
 
 def atomic_write_text(path: str | Path, text: str) -> Path:

@@ -184,6 +184,18 @@ def _read_json(path: Path, what: str) -> dict:
     return data
 
 
+def _read_symbols(path: Path) -> list[dict]:
+    """OUT/symbols.json (`learned.interpret.BitReport.to_dict` per bit); a ValueError names the file."""
+    try:
+        data = json.loads(path.read_text())
+    except json.JSONDecodeError as error:
+        raise ValueError(f"{path}: not valid JSON ({error.msg}, line {error.lineno})") from None
+    keys = {"name", "rate", "count", "best", "agreement", "negated", "phi"}
+    if not isinstance(data, list) or not all(isinstance(b, dict) and keys <= set(b) for b in data):
+        raise ValueError(f"{path}: expected a list of bits with fields {', '.join(sorted(keys))}")
+    return data
+
+
 def load_ablation(path: Path) -> dict:
     """The JSON of `tamp ablate-activations` (`learned.ablation`); a ValueError names the file and field."""
     data = _read_json(path, "the output of `tamp ablate-activations`")
@@ -811,6 +823,24 @@ def section_level1(res: Results, figures: Path) -> Section:
     return Section("level1", title, lines, {"groups": table, "paper_level1_share_pct": paper.LEVEL1_SHARE_PCT})
 
 
+def section_symbols(symbols: list[dict] | None, source: Path) -> Section:
+    title = "11. Learned symbols"
+    if symbols is None:
+        return _skipped("symbols", title, f"No {source.name} beside the rows (written by `tamp evaluate` when a method "
+                                          "plans with the Symbolic Model): the symbols are not described.")
+    rows = []
+    for b in symbols:
+        f = b["best"]
+        rows.append([b["name"], str(b["count"]), f"{b['rate']:.3f}", ("not " if b["negated"][f] else "") + f,
+                     fmt_pct(100 * b["agreement"][f]), f"{b['phi'][f]:+.2f}"])
+    lines = ["Each learned bit on the problem set's initial and goal scenes (`tamp symbols`): how often it is 1 and "
+             "the geometric fact it agrees with best (by |phi|, the Matthews correlation; agreement is the share of "
+             "objects or ordered pairs where the bit equals the fact, or its negation with 'not'). u: unary bits, "
+             "r: relations r(i, j) with i != j, r(i,i): the self relation, read as a unary bit.", ""]
+    lines += md_table(["bit", "read on", "rate", "best fact", "agreement (%)", "phi"], rows)
+    return Section("symbols", title, lines, {"bits": symbols})
+
+
 # --- the report ----------------------------------------------------------------------------------
 def _json_safe(x: Any) -> Any:
     if isinstance(x, float) and not math.isfinite(x):
@@ -829,13 +859,15 @@ def _write_atomic(path: Path, text: str) -> None:
 
 
 def build_report(res: Results, figures: Path, ablation: dict | None = None,
-                 ablation_source: Path = Path("ablation.json"), source: str = "rows.jsonl") -> tuple[str, dict]:
+                 ablation_source: Path = Path("ablation.json"), source: str = "rows.jsonl",
+                 symbols: list[dict] | None = None, symbols_source: Path = Path("symbols.json")) -> tuple[str, dict]:
     """The Markdown report and its numbers (a JSON-ready dict); writes the PNGs into `figures`."""
     figures.mkdir(parents=True, exist_ok=True)
     sections = [section_setup(res, figures), section_table1(ablation, ablation_source),
                 section_dual_model(res, figures), section_table2(res, figures), section_verifier(res, figures),
                 section_success(res, figures), section_table3(res, figures), section_replanning(res, figures),
-                section_refinement(res, figures), section_level1(res, figures)]
+                section_refinement(res, figures), section_level1(res, figures),
+                section_symbols(symbols, symbols_source)]
     lines = ["# Evaluation report", "",
              f"From `{source}` ({len(res.rows)} rows, {len(res.cells)} problems). Ours next to the paper's "
              "numbers (Dogangun et al., quoted as printed). Success in % of problems (one decimal), times in "
@@ -864,8 +896,10 @@ def write_report(results_dir: Path, ablation: Path | None = None) -> Path:
         raise ValueError(f"{ablation}: no such ablation file")
     ablation_path = Path(ablation) if ablation is not None else results_dir / "ablation.json"
     ablation_data = load_ablation(ablation_path) if ablation_path.is_file() else None
+    symbols_path = results_dir / "symbols.json"
+    symbols = _read_symbols(symbols_path) if symbols_path.is_file() else None
     md, numbers = build_report(Results(rows, meta, notes), results_dir / "figures", ablation_data, ablation_path,
-                               str(rows_path))
+                               str(rows_path), symbols, symbols_path)
     out = results_dir / "report.md"
     _write_atomic(results_dir / "report.json", json.dumps(numbers, indent=1, ensure_ascii=False) + "\n")
     _write_atomic(out, md)

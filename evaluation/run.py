@@ -7,7 +7,8 @@ the refined trajectory under physics. `bilevel_replan` runs in closed loop inste
 action in a World of the chosen fidelity, replanning from each observed state, up to k - 1 rounds.
 One JSON row per pair is appended (whole line, flushed) to OUT/rows.jsonl as it finishes; see
 ROW_KEYS and `row_outcome` for the fields. OUT/meta.json records the models, the problem set, the
-configuration and the package versions.
+configuration and the package versions; OUT/symbols.json what the Symbolic Model's bits mean on
+the set's scenes (`learned.interpret`).
 
 `probabilistic_oracle` rows (the paper's measure, an execution oracle): the ranked plans of the
 probabilistic planner are refined and executed from X_init one after the other, most frequent
@@ -51,7 +52,7 @@ from tamp.collect import package_versions
 from tamp.problem import Problem
 from tamp.verify import EPS_SUCCESS, TAU_VERIFY, goal_error
 
-ROWS_NAME, META_NAME, LOCK_NAME = "rows.jsonl", "meta.json", ".evaluate.lock"
+ROWS_NAME, META_NAME, LOCK_NAME, SYMBOLS_NAME = "rows.jsonl", "meta.json", ".evaluate.lock", "symbols.json"
 FORMAT = "tamp-evaluation/1"
 ROW_KEYS = ("problem", "n", "k", "run", "protocol", "moved", "method", "solved", "level", "plan", "planning_time_s",
             "level1_time_s", "predicted_error_m", "candidates", "refined", "refine_failure", "refine_time_s",
@@ -460,6 +461,28 @@ def _lock(out: Path):
     return f
 
 
+def _write_symbols(out: Path, problems: Sequence[Problem], models_dir: Path, methods: Sequence[str],
+                   models: dict | None) -> None:
+    """OUT/symbols.json: what the Symbolic Model's bits mean on the set's scenes (`learned.interpret`),
+    for the report; nothing when no method plans with the default Symbolic Model."""
+    users = [m for m in methods if METHODS[m].symbolic and METHODS[m].models == "default"]
+    if not users:
+        return
+    from learned.interpret import interpret_symbols
+
+    if models is not None:
+        symbolic = getattr(models[users[0]], "symbolic", None)
+    else:
+        import learned
+        from tamp.models import SYMBOLIC_FILE
+
+        symbolic = learned.load_model(models_dir / SYMBOLIC_FILE)
+    if symbolic is None:
+        return
+    report = interpret_symbols(symbolic.symbols, [X for p in problems for X in (p.X_init, p.X_goal)])
+    atomic_write_text(out / SYMBOLS_NAME, json.dumps([b.to_dict() for b in report], indent=1) + "\n")
+
+
 def evaluate(models_dir: str | Path, problems_path: str | Path, out_dir: str | Path,
              methods: Sequence[str] | None = None, config: EvalConfig = EvalConfig(),
              models: dict | None = None) -> Path:
@@ -494,6 +517,7 @@ def evaluate(models_dir: str | Path, problems_path: str | Path, out_dir: str | P
             tqdm.write(f"warning: dropping the incomplete last line of {rows_path} (from an interrupted run); "
                        "that row is computed again", file=sys.stderr)
             os.truncate(rows_path, end)
+        _write_symbols(out, problems, models_dir, methods, models)
         done = {(r["problem"], r["method"]) for r in rows}
         if len(done) < len(rows):
             raise ValueError(f"{rows_path} holds a (problem, method) row twice; the file was edited")

@@ -24,7 +24,8 @@ only after execution) keeps the inverse exact at planning time::
     X'[:, :3] = X[:, :3] + e + onehot(pick) * (arm_x, arm_y, 0)
 
 Failed grasps stay learnable because ``arm_xy`` is part of the pick object's action encoding
-(see ``encode_actions``); an object carried along without being the pick object (e.g. the
+(see ``encode_actions``; the Symbolic Model goes without it and learns from the transitions that
+moved the picked block, `moved_picks`); an object carried along without being the pick object (e.g. the
 gripper reaches a block lying on top of the pick object) receives the arm motion through the
 relational aggregation from the pick object's encoding.
 """
@@ -52,6 +53,19 @@ def as_action_array(actions: np.ndarray | Sequence[Sequence[int]]) -> np.ndarray
     if a.ndim != 2 or a.shape[1] != 4:
         raise ValueError(f"actions must have shape (B, 4), got {a.shape}")
     return a
+
+
+MOVED_M = 0.01
+"""Metres: a transition moved its picked block when the block's position changed at least this much."""
+
+
+def moved_picks(X: np.ndarray, X_next: np.ndarray, action: np.ndarray) -> np.ndarray:
+    """(S,) bool: transitions whose picked block moved by at least MOVED_M (the rest grasped
+    nothing or were blocked: 53-67 % of random actions). The paper's authors drop the transitions
+    whose picked block was not lifted before learning symbols."""
+    rows = np.arange(len(action))
+    pick = np.asarray(action)[:, 0]
+    return np.linalg.norm(X_next[rows, pick, :3] - X[rows, pick, :3], axis=-1) >= MOVED_M
 
 
 def check_actions(actions: np.ndarray, n: int | np.ndarray) -> None:
@@ -93,12 +107,15 @@ def effect_targets(X: torch.Tensor, X_next: torch.Tensor, action: torch.Tensor,
     return e * mask.unsqueeze(-1).to(e.dtype)
 
 
-def encode_actions(X: torch.Tensor, action: torch.Tensor, arm_scale_m: float | torch.Tensor = 1.0
-                   ) -> torch.Tensor:
+def encode_actions(X: torch.Tensor, action: torch.Tensor, arm_scale_m: float | torch.Tensor = 1.0,
+                   arm: bool = True) -> torch.Tensor:
     """Per-object action encoding (B, N, ACTION_ENC_DIM).
 
     For each object: [is_pick, grasp-offset one-hot (if pick), is_place, release-offset one-hot
-    (if place), arm_xy / arm_scale_m (if pick)]. Permuting objects permutes the rows.
+    (if place), arm_xy / arm_scale_m (if pick)]. Permuting objects permutes the rows. With
+    ``arm=False`` the arm_xy columns are zero: the encoding is then purely symbolic (which objects,
+    which offsets), so whatever the decoder needs about positions must pass through the bottleneck
+    (the Symbolic Model; the paper's network gets no continuous displacement either).
     """
     B, N, _ = X.shape
     dev, dt = X.device, X.dtype
@@ -107,11 +124,11 @@ def encode_actions(X: torch.Tensor, action: torch.Tensor, arm_scale_m: float | t
     is_place = (idx[None] == action[:, 2:3]).to(dt)
     grasp = torch.nn.functional.one_hot(action[:, 1] + 1, 3).to(dt)     # (B, 3)
     release = torch.nn.functional.one_hot(action[:, 3] + 1, 3).to(dt)
-    arm = arm_displacement(X, action) / arm_scale_m                      # (B, 2)
+    arm_xy = arm_displacement(X, action) / arm_scale_m if arm else X.new_zeros(B, 2)  # (B, 2)
     return torch.cat([
         is_pick[..., None],
         is_pick[..., None] * grasp[:, None],
         is_place[..., None],
         is_place[..., None] * release[:, None],
-        is_pick[..., None] * arm[:, None],
+        is_pick[..., None] * arm_xy[:, None],
     ], dim=-1)

@@ -41,6 +41,7 @@ class ModelConfig:
     layers: int = 2              # hidden layers per MLP
     activation: str = "sigmoid"  # one of ACTIVATIONS
     temperature: float = 1.0     # Gumbel-Sigmoid temperature
+    arm_input: bool = True       # arm_xy in the action encoding (False: symbols carry the geometry)
 
     def __post_init__(self):
         if self.activation not in ACTIVATIONS:
@@ -145,7 +146,7 @@ class EffectModel(nn.Module):
                r: torch.Tensor) -> torch.Tensor:
         """Effects (B, N, 3) in metres from the symbols and the action (see ``forward``)."""
         B, N, _ = X.shape
-        a = encode_actions(X, action, self.arm_scale)
+        a = encode_actions(X, action, self.arm_scale, arm=self.config.arm_input)
         z = self.object_mlp(torch.cat([u.expand(B, -1, -1), a], dim=-1))
         h = (r.expand(B, -1, -1, -1) @ z[:, None]).transpose(1, 2).reshape(B, N, -1)
         return self.decoder(h) * self.effect_scale * mask.to(X.dtype)[..., None]

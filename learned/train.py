@@ -23,7 +23,7 @@ from tqdm.auto import tqdm
 
 from .checkpoint import model_from_payload, read_checkpoint, save_checkpoint
 from .dataset import Transitions, load_transitions
-from .effects import arm_displacement, effect_targets
+from .effects import arm_displacement, effect_targets, moved_picks
 from .model import EffectModel, ModelConfig
 
 
@@ -110,8 +110,8 @@ def train_model(data: "str | Path | Transitions", config: ModelConfig | None = N
                 val_data: Transitions | None = None, batch_size: int = 128, lr: float = 1e-4,
                 val_fraction: float = 0.1, seed: int = 0, max_steps: int | None = None,
                 resume: bool = False, threads: int | None = None, progress: bool = True,
-                target_val_cm: float | None = None, time_limit_s: float | None = None
-                ) -> TrainResult:
+                target_val_cm: float | None = None, time_limit_s: float | None = None,
+                only_moved: bool = False) -> TrainResult:
     """Train an EffectModel on a dataset directory or in-memory Transitions.
 
     Validation data is ``val_data`` if given, else a seeded ``val_fraction`` split of ``data``.
@@ -120,11 +120,19 @@ def train_model(data: "str | Path | Transitions", config: ModelConfig | None = N
     (``last_path(out_path)``). ``resume=True`` continues from the latest state up to ``epochs``.
     Training also stops after the epoch in which the validation error reaches ``target_val_cm``
     or the wall time of this call exceeds ``time_limit_s``; history records carry ``elapsed_s``.
+    ``only_moved`` keeps the transitions that moved their picked block (`effects.moved_picks`),
+    in training and validation alike: what the Symbolic Model learns its symbols from.
     """
     if threads:
         torch.set_num_threads(threads)
     if not isinstance(data, Transitions):
         data = load_transitions(data)
+    if only_moved:
+        data = data.subset(np.flatnonzero(moved_picks(data.X, data.X_next, data.action)))
+        if val_data is not None:
+            val_data = val_data.subset(np.flatnonzero(moved_picks(val_data.X, val_data.X_next, val_data.action)))
+        if len(data) == 0:
+            raise ValueError("no transition moved its picked block: nothing to train on with only_moved")
     if val_data is None:
         train_idx, val_idx = split_indices(len(data), (val_fraction,), seed)
         data, val_data = data.subset(train_idx), data.subset(val_idx)
@@ -134,7 +142,7 @@ def train_model(data: "str | Path | Transitions", config: ModelConfig | None = N
     if data.n_max > config.n_max:
         raise ValueError(f"dataset n_max {data.n_max} exceeds model n_max {config.n_max}")
     options = {"batch_size": batch_size, "lr": lr, "val_fraction": val_fraction, "seed": seed,
-               "num_train": len(data), "num_val": len(val_data)}
+               "num_train": len(data), "num_val": len(val_data), **({"only_moved": True} if only_moved else {})}
     tr, va = prepare(data), prepare(val_data)
 
     torch.manual_seed(seed)

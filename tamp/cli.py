@@ -145,11 +145,11 @@ def cmd_train(args: argparse.Namespace) -> int:
     from learned import ModelConfig, train_model
 
     sizes = {k: v for k, v in (("d_z", args.d_z), ("heads", args.heads)) if v is not None}
-    config = ModelConfig(activation=args.bottleneck, **sizes)
+    config = ModelConfig(activation=args.bottleneck, arm_input=not args.no_arm_input, **sizes)
     result = train_model(args.data, config, epochs=args.epochs,
                          out_path=args.out, batch_size=args.batch_size, lr=args.lr,
                          val_fraction=args.val_fraction, seed=args.seed, threads=args.threads,
-                         resume=args.resume)
+                         resume=args.resume, only_moved=args.only_moved)
     print(f"best validation effect error {result.best_val_cm:.2f} cm (epoch {result.best_epoch}) -> {result.out_path}")
     return 0
 
@@ -163,6 +163,45 @@ def cmd_ablate(args: argparse.Namespace) -> int:
     print(format_ablation_markdown(result))
     print(f"written to {args.out_dir}/ablation.md and ablation.json")
     return 0
+
+
+def cmd_symbols(args: argparse.Namespace) -> int:
+    """What each learned bit of a Symbolic Model means, on held-out scenes."""
+    from learned import load_model
+    from learned.interpret import format_symbols_markdown, interpret_symbols, write_symbols_png
+
+    model = load_model(args.model)
+    scenes = symbol_scenes(args.problems, args.data, args.max_scenes, args.seed)
+    report = interpret_symbols(model.symbols, scenes)
+    print(f"{args.model}: d_z = {model.config.d_z} unary bit(s), K = {model.config.heads} relation(s), read on "
+          f"{len(scenes)} scenes of {args.problems or args.data}")
+    print(format_symbols_markdown(report))
+    if args.json is not None:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps([b.to_dict() for b in report], indent=1) + "\n")
+        print(f"written {args.json}")
+    if args.png is not None:
+        write_symbols_png(report, args.png)
+        print(f"written {args.png}")
+    return 0
+
+
+def symbol_scenes(problems: Path | None, data: Path | None, max_scenes: int, seed: int = 0) -> list[np.ndarray]:
+    """Scenes to read symbols on: X_init and X_goal of a problem set, or (at most `max_scenes`,
+    drawn with `seed`) the states of a dataset's transitions."""
+    if (problems is None) == (data is None):
+        raise ValueError("give exactly one of --problems (a problem set) or --data (a dataset directory)")
+    if problems is not None:
+        from tamp.problem import read_problem_set
+
+        return [X for p in read_problem_set(problems) for X in (p.X_init, p.X_goal)][:max_scenes]
+    from learned import load_transitions
+
+    t = load_transitions(data)
+    if len(t) == 0:
+        raise ValueError(f"{data}: the dataset holds no transitions")
+    pick = np.random.default_rng(seed).permutation(len(t))[:max_scenes]
+    return [t.X[i, :int(t.n[i])] for i in sorted(pick)]
 
 
 def cmd_domain(args: argparse.Namespace) -> int:
@@ -293,6 +332,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--threads", type=positive_int, default=1, help="torch threads (default 1)")
     p.add_argument("--resume", action="store_true", help="continue from <out>.last.pt")
+    p.add_argument("--no-arm-input", action="store_true",
+                   help="leave the arm's pick-to-place displacement out of the action encoding, so that "
+                   "positions reach the decoder only through the symbols (the Symbolic Model)")
+    p.add_argument("--only-moved", action="store_true",
+                   help="train on the transitions that moved the picked block (as the paper's authors do for "
+                   "the Symbolic Model; grasps of nothing and blocked motions left out)")
     p.set_defaults(func=cmd_train)
 
     p = sub.add_parser(
@@ -327,6 +372,25 @@ def build_parser() -> argparse.ArgumentParser:
                    "those whose symbols change) rather than every object in the scene: far fewer operators")
     p.add_argument("--seed", type=int, default=0)
     p.set_defaults(func=cmd_domain)
+
+    p = sub.add_parser(
+        "symbols",
+        help="what each learned bit of a Symbolic Model means: its rate and agreement with geometric facts",
+        description="Read the Symbolic Model's unary bits, relations r_k(i, j) (i != j) and self relations "
+        "r_k(i, i) on held-out scenes (the initial and goal scenes of a problem set, or states of a "
+        "dataset) and compare each with facts a reader understands: block type, elevated, on another "
+        "block, carrying one, left/right along y, near, on top of, vertical order. Prints a table "
+        "(agreement in %, the better of the fact and its negation, and the Matthews correlation phi, "
+        "which does not reward agreeing with a rare fact by being always 0); --png draws it.",
+    )
+    p.add_argument("--model", type=Path, required=True, help="Symbolic Model checkpoint")
+    p.add_argument("--problems", type=Path, default=None, help="problem set (tamp problems --out): its scenes")
+    p.add_argument("--data", type=Path, default=None, help="or a dataset directory: states of its transitions")
+    p.add_argument("--max-scenes", type=positive_int, default=5000, help="scenes read at most (default 5000)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the scenes drawn from --data (default 0)")
+    p.add_argument("--png", type=Path, default=None, help="write the table as a heat map (PNG)")
+    p.add_argument("--json", type=Path, default=None, help="write every figure as JSON")
+    p.set_defaults(func=cmd_symbols)
 
     p = sub.add_parser(
         "plan",

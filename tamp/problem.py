@@ -141,6 +141,34 @@ def save_problem(path: str | Path, problem: Problem) -> None:
     Path(path).write_text(json.dumps(problem.to_dict()) + "\n")
 
 
+def read_problem_set(path: str | Path) -> list[Problem]:
+    """Read a problem set; errors name the file, the line and the field. Names must be unique."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"no problem set at {path}")
+    problems: list[Problem] = []
+    first_line: dict[str, int] = {}
+    for number, line in enumerate(path.read_text().splitlines(), start=1):
+        if not line.strip():
+            continue
+        where = f"{path} line {number}"
+        try:
+            data = json.loads(line)
+        except json.JSONDecodeError as error:
+            raise ValueError(f"{where}: not valid JSON ({error})") from None
+        problem = problem_from_dict(data, where)
+        if problem.name is None:
+            raise ValueError(f"{where}: missing field 'name' (every problem of a set is named)")
+        if problem.name in first_line:
+            raise ValueError(f"{where}: duplicate problem name {problem.name!r} (also on line "
+                             f"{first_line[problem.name]})")
+        first_line[problem.name] = number
+        problems.append(problem)
+    if not problems:
+        raise ValueError(f"{path}: no problems in the file")
+    return problems
+
+
 def random_problem(n: int, k: int, seed: int, world: "World | None" = None, name: str | None = None,
                    max_tries: int = 200, protocol: str = "strict") -> Problem:
     """A random scene of n blocks and the goal after k random actions (see `PROTOCOLS`).

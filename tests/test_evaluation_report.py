@@ -12,6 +12,7 @@ import pytest
 from scipy.stats import ttest_rel
 
 from evaluation.report import write_report
+from learned.interpret import interpret_symbols
 
 METHODS = ("deterministic", "probabilistic", "probabilistic_oracle", "cfs", "bilevel", "bilevel_alg1", "bilevel_replan",
            "symbolic_sigmoid", "cfs_gumbel")
@@ -81,6 +82,18 @@ ABLATION = {"source": "data/", "runs": 2, "epochs": 15, "num_test": 400, "num_tr
                             "tanh": {"label": "Tanh", "mean_cm": 2.5, "std_cm": 0.2},
                             "none": {"label": "No activation", "mean_cm": 2.4, "std_cm": 0.05},
                             "sigmoid": {"label": "Sigmoid", "mean_cm": 2.104, "std_cm": 0.011}}}
+
+
+# two scenes: a cube on a bar and a cube beside it; another with three blocks on the table
+SCENES = [np.array([[0.6, 0.0, 0.025, 0, 1], [0.6, 0.05, 0.075, 1, 0], [0.75, 0.2, 0.025, 1, 0]]),
+          np.array([[0.5, -0.1, 0.025, 1, 0], [0.7, 0.1, 0.025, 0, 1], [0.8, 0.3, 0.025, 1, 0]])]
+
+
+def toy_symbols(X):
+    """A Symbolic Model whose unary bit is 'elevated' and whose relation is 'i on j'."""
+    from learned.interpret import relation_facts
+
+    return (X[:, 2:3] > 0.04).astype(np.uint8), relation_facts(X)["i on j"][None].astype(np.uint8)
 
 
 # --- reading the report back ---------------------------------------------------------------------
@@ -205,6 +218,7 @@ def full_report(tmp_path_factory):
                                                "config": {"fidelity": "fast", "n_domains": 100}}))
     ablation = out / "abl.json"
     ablation.write_text(json.dumps(ABLATION))
+    (out / "symbols.json").write_text(json.dumps([b.to_dict() for b in interpret_symbols(toy_symbols, SCENES)]))
     md_path = write_report(out, ablation=ablation)
     return out, Rows(rows), parse(md_path.read_text())
 
@@ -411,6 +425,16 @@ def test_level1_algorithm1_against_our_extensions(full_report):
     assert t[-1]["n"] == "paper" and t[-1]["`bilevel_alg1` Level 1 (%)"] == "≈60"
 
 
+def test_learned_symbols_section(full_report):
+    _, _, s = full_report
+    (t,) = s["11"]["tables"]
+    rows = {r["bit"]: r for r in t}
+    assert set(rows) == {"u0", "r0", "r0(i,i)"}
+    assert rows["u0"]["best fact"] == "elevated (z > 4 cm)" and rows["u0"]["agreement (%)"] == "100.0"
+    assert rows["u0"]["read on"] == "6" and rows["u0"]["rate"] == "0.167" and rows["u0"]["phi"] == "+1.00"
+    assert rows["r0"]["best fact"] == "i on j" and rows["r0"]["read on"] == "12" and rows["r0"]["rate"] == "0.083"
+
+
 def test_figures_and_json(full_report):
     out, data, s = full_report
     for name in ("dual_model", "verifier_tau", "verifier_confusion", "success", "planning_time"):
@@ -434,7 +458,7 @@ def test_missing_sections_are_one_line_notes(tmp_path):
     assert "No meta.json" in md
     assert {r["method"] for r in s["6"]["tables"][-1]} == {"`deterministic`", "`cfs`"}
     skipped = json.loads((tmp_path / "report.json").read_text())["skipped"]
-    assert skipped == ["table1", "dual_model", "table2", "verifier", "table3", "replanning", "level1"]
+    assert skipped == ["table1", "dual_model", "table2", "verifier", "table3", "replanning", "level1", "symbols"]
     assert (tmp_path / "figures" / "success.png").stat().st_size > 0
 
 

@@ -179,6 +179,10 @@ def test_rows_follow_the_schema_and_their_outcomes_agree(serial, problems_file):
                 assert r["executed_actions"] == len(r["plan"])
     outcomes = {r["outcome"] for r in rows}
     assert {"success", "no_plan", "wrong_plan"} <= outcomes  # the set exercises the branches
+    # what the Symbolic Model's bits mean on the set's scenes: the stub's bit is 'on the table'
+    bits = {b["name"]: b for b in json.loads((serial.parent / "symbols.json").read_text())}
+    assert set(bits) == {"u0", "r0", "r0(i,i)"} and bits["u0"]["count"] == 2 * 2 * len(problems)
+    assert bits["u0"]["best"] == "elevated (z > 4 cm)" and bits["u0"]["negated"]["elevated (z > 4 cm)"]
     assert all(not r["solved"] for r in rows if r["problem"] == "n2-unreachable" and r["method"] != "bilevel_replan")
     assert [r["level"] for r in rows if r["method"] == "cfs" and r["solved"]] == [2] * sum(
         r["solved"] for r in rows if r["method"] == "cfs")

@@ -65,3 +65,45 @@ def test_resume_continues_exactly(tmp_path):
     with pytest.raises(ValueError, match="different config"):
         train_model(data, ModelConfig(hidden=16, d_msg=8, d_z=5, heads=2), 6, tmp_path / "b.pt",
                     resume=True, **kw)
+
+
+def test_the_symbolic_model_can_go_without_the_arm_displacement():
+    """arm_input=False: the decoder never sees arm_xy (its scale changes nothing), with it it does."""
+    from learned import EffectModel
+
+    data = generate(50, seed=3)
+    X, A, M = (torch.as_tensor(data.X).float(), torch.as_tensor(data.action).long(),
+               torch.as_tensor(data.mask))
+    for arm_input in (False, True):
+        torch.manual_seed(0)
+        model = EffectModel(ModelConfig(**SMALL, arm_input=arm_input)).eval()
+        outputs = []
+        for scale in (1e-3, 1e3):
+            model.arm_scale.fill_(scale)
+            outputs.append(model(X, A, M))
+        assert torch.equal(*outputs) == (not arm_input)
+    assert load_model_roundtrip(ModelConfig(**SMALL, arm_input=False)).config.arm_input is False
+
+
+def load_model_roundtrip(config):
+    import tempfile
+    from pathlib import Path
+
+    from learned import EffectModel, save_checkpoint
+
+    with tempfile.TemporaryDirectory() as d:
+        save_checkpoint(Path(d) / "m.pt", EffectModel(config))
+        return load_model(Path(d) / "m.pt")
+
+
+def test_only_moved_trains_on_the_transitions_that_moved_the_picked_block(tmp_path):
+    from learned.effects import moved_picks
+
+    data = generate(600, seed=4)
+    moved = moved_picks(data.X, data.X_next, data.action)
+    assert 0 < moved.sum() < len(data)  # the synthetic data grasps nothing now and then
+    res = train_model(data, ModelConfig(**SMALL), epochs=1, out_path=tmp_path / "m.pt", max_steps=2,
+                      seed=0, progress=False, only_moved=True)
+    options = torch.load(tmp_path / "m.pt", weights_only=True)["train"]["options"]
+    assert options["only_moved"] and options["num_train"] + options["num_val"] == moved.sum()
+    assert res.best_epoch == 0

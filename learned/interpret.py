@@ -1,0 +1,177 @@
+"""What a Symbolic Model's bits mean: each learned unary bit and relation against geometric facts.
+
+    report = interpret_symbols(model.symbols, scenes)      # scenes: (n, 5) states, held out
+    print(format_symbols_markdown(report))
+
+For every unary bit u_b(i) and relation r_k(i, j) (i != j; the self relation r_k(i, i) is read as a
+unary bit) the report gives its rate (how often it is 1) and its agreement with each fact a reader
+understands: block type, resting on another block, carrying one, left / right along y, near, on top
+of, vertical order. Agreement is the share of objects (pairs) where the bit equals the fact, or its
+negation (polarity "not"), whichever is higher; phi (the Matthews correlation) is given beside it,
+because a rare fact agrees with an almost-always-0 bit without meaning anything. The facts are
+computed from X alone (upright blocks, sizes of `effects.TYPE_NAMES`), so any scene source works:
+the scenes of a problem set (never trained on) or of a dataset.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable, Sequence
+
+import numpy as np
+
+BLOCK_HALF_XY = np.array([[0.025, 0.025], [0.025, 0.125]])  # small cube, large bar (along y): half sizes, metres
+HEIGHT_M = 0.05  # every block is 5 cm tall
+ON_TOLERANCE_M = 0.015  # z gap and footprint slack for "on top of"
+NEAR_M = 0.10  # centre distance on the table for "near"
+
+
+def _type(X: np.ndarray) -> np.ndarray:
+    return np.argmax(X[..., 3:5], axis=-1)
+
+
+def _on(X: np.ndarray) -> np.ndarray:
+    """(n, n) bool: i rests directly on j (i above j by one block height, centre over j's top)."""
+    half = BLOCK_HALF_XY[_type(X)]
+    d = X[:, None, :3] - X[None, :, :3]
+    over = np.all(np.abs(d[..., :2]) <= half[None, :, :] + ON_TOLERANCE_M, axis=-1)
+    return over & (np.abs(d[..., 2] - HEIGHT_M) <= ON_TOLERANCE_M) & ~np.eye(len(X), dtype=bool)
+
+
+def unary_facts(X: np.ndarray) -> dict[str, np.ndarray]:
+    """Facts about each object of one scene X (n, 5): name -> (n,) bool."""
+    on = _on(X)
+    return {"large (type)": _type(X) == 1,
+            "elevated (z > 4 cm)": X[:, 2] > 0.04,
+            "on another block": on.any(axis=1),
+            "carries a block": on.any(axis=0),
+            "left half (y > 0)": X[:, 1] > 0.0,
+            "far half (x > 0.7 m)": X[:, 0] > 0.7}
+
+
+def relation_facts(X: np.ndarray) -> dict[str, np.ndarray]:
+    """Facts about each ordered pair (i, j) of one scene: name -> (n, n) bool (the diagonal unused)."""
+    on = _on(X)
+    z, y, x = X[:, 2], X[:, 1], X[:, 0]
+    dist = np.linalg.norm(X[:, None, :2] - X[None, :, :2], axis=-1)
+    t = _type(X)
+    return {"i on j": on, "j on i": on.T,
+            "z_i > z_j (i higher)": z[:, None] > z[None, :] + 0.02,
+            "z_i <= z_j (vertical order)": z[:, None] <= z[None, :] + 0.02,
+            "y_i < y_j": y[:, None] < y[None, :], "x_i < x_j": x[:, None] < x[None, :],
+            "near (< 10 cm)": dist < NEAR_M, "same type": t[:, None] == t[None, :],
+            "i large": np.broadcast_to(t[:, None] == 1, on.shape), "j large": np.broadcast_to(t[None, :] == 1, on.shape)}
+
+
+@dataclass
+class BitReport:
+    """One learned bit against every fact of its kind."""
+
+    name: str  # "u0", "r1", "r1(i,i)"
+    rate: float  # share of objects (pairs) where the bit is 1
+    count: int  # objects (pairs) it was read on
+    agreement: dict[str, float]  # fact -> best agreement over both polarities
+    negated: dict[str, bool]  # fact -> the best polarity is "not fact"
+    phi: dict[str, float]  # fact -> Matthews correlation (signed)
+
+    @property
+    def best(self) -> str:
+        return max(self.agreement, key=lambda f: (abs(self.phi[f]), self.agreement[f]))
+
+    def to_dict(self) -> dict:
+        return {"name": self.name, "rate": self.rate, "count": self.count, "best": self.best,
+                "agreement": self.agreement, "negated": self.negated, "phi": self.phi}
+
+
+def _phi(a: np.ndarray, b: np.ndarray) -> float:
+    a, b = a.astype(float), b.astype(float)
+    if a.std() == 0 or b.std() == 0:
+        return 0.0
+    return float(np.corrcoef(a, b)[0, 1])
+
+
+def _bit_report(name: str, bits: np.ndarray, facts: dict[str, np.ndarray]) -> BitReport:
+    agreement, negated, phi = {}, {}, {}
+    for f, v in facts.items():
+        same = float(np.mean(bits == v))
+        agreement[f], negated[f] = max(same, 1 - same), same < 0.5
+        phi[f] = _phi(bits, v)
+    return BitReport(name, float(np.mean(bits)), int(bits.size), agreement, negated, phi)
+
+
+def interpret_symbols(symbols: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
+                      scenes: Sequence[np.ndarray]) -> list[BitReport]:
+    """Every unary bit, every relation (i != j) and every self relation r_k(i, i) of `symbols`
+    (a Symbolic Model's `symbols(X) -> (unary (n, d_z), relations (K, n, n))`) on `scenes`."""
+    if not len(scenes):
+        raise ValueError("no scenes to read the symbols on")
+    unary_bits, unary_f, rel_bits, rel_f, self_bits = [], {}, [], {}, []
+    for X in scenes:
+        X = np.asarray(X, dtype=float)
+        u, r = symbols(X)
+        off = ~np.eye(len(X), dtype=bool)
+        unary_bits.append(np.asarray(u, dtype=bool))
+        rel_bits.append(np.asarray(r, dtype=bool)[:, off])
+        self_bits.append(np.asarray(r, dtype=bool)[:, ~off])
+        for name, v in unary_facts(X).items():
+            unary_f.setdefault(name, []).append(v)
+        for name, v in relation_facts(X).items():
+            rel_f.setdefault(name, []).append(v[off])
+    U = np.concatenate(unary_bits)  # (objects, d_z)
+    R = np.concatenate(rel_bits, axis=1)  # (K, pairs)
+    S = np.concatenate(self_bits, axis=1)  # (K, objects)
+    uf = {k: np.concatenate(v) for k, v in unary_f.items()}
+    rf = {k: np.concatenate(v) for k, v in rel_f.items()}
+    out = [_bit_report(f"u{b}", U[:, b], uf) for b in range(U.shape[1])]
+    out += [_bit_report(f"r{k}", R[k], rf) for k in range(R.shape[0])]
+    out += [_bit_report(f"r{k}(i,i)", S[k], uf) for k in range(S.shape[0])]
+    return out
+
+
+def format_symbols_markdown(report: Sequence[BitReport]) -> str:
+    """One line per bit: its rate and the fact it agrees with best (by |phi|), then every fact."""
+    lines = ["| bit | read on | rate | best fact | agreement | phi |", "|---|---|---|---|---|---|"]
+    for b in report:
+        f = b.best
+        lines.append(f"| {b.name} | {b.count} | {b.rate:.3f} | {'not ' if b.negated[f] else ''}{f} | "
+                     f"{b.agreement[f] * 100:.1f} % | {b.phi[f]:+.2f} |")
+    lines += ["", "Agreement with every fact (%, 'not' where the negation agrees better; phi in parentheses):", ""]
+    for kind in ("u", "r"):
+        rows = [b for b in report if b.name.startswith(kind) and "(i,i)" not in b.name] + \
+            ([b for b in report if "(i,i)" in b.name] if kind == "u" else [])
+        if not rows:
+            continue
+        facts = list(rows[0].agreement)
+        lines += ["| bit | " + " | ".join(facts) + " |", "|---|" + "---|" * len(facts)]
+        for b in rows:
+            cells = [f"{'not ' if b.negated[f] else ''}{b.agreement[f] * 100:.0f} ({b.phi[f]:+.2f})" for f in facts]
+            lines.append(f"| {b.name} | " + " | ".join(cells) + " |")
+        lines.append("")
+    return "\n".join(lines).rstrip() + "\n"
+
+
+def write_symbols_png(report: Sequence[BitReport], path) -> None:
+    """A heat map of |phi| (bits x facts), one panel for unary bits and one for relations."""
+    from pathlib import Path
+
+    from matplotlib.figure import Figure
+
+    groups = [("unary bits and self relations", [b for b in report if b.name.startswith("u") or "(i,i)" in b.name]),
+              ("relations (i != j)", [b for b in report if b.name.startswith("r") and "(i,i)" not in b.name])]
+    groups = [(t, g) for t, g in groups if g]
+    fig = Figure(figsize=(11, 1.6 + 0.45 * sum(len(g) for _, g in groups) + 1.6 * len(groups)), layout="constrained")
+    for k, (title, bits) in enumerate(groups):
+        ax = fig.add_subplot(len(groups), 1, k + 1)
+        facts = list(bits[0].phi)
+        M = np.array([[b.phi[f] for f in facts] for b in bits])
+        im = ax.imshow(np.abs(M), vmin=0, vmax=1, cmap="viridis", aspect="auto")
+        ax.set_xticks(range(len(facts)), facts, rotation=25, ha="right", fontsize=8)
+        ax.set_yticks(range(len(bits)), [f"{b.name} (rate {b.rate:.2f})" for b in bits], fontsize=8)
+        for (i, j), v in np.ndenumerate(M):
+            ax.text(j, i, f"{v:+.2f}", ha="center", va="center", fontsize=7, color="white" if abs(v) < 0.6 else "black")
+        ax.set_title(f"|phi| of learned {title} with geometric facts", fontsize=9)
+        fig.colorbar(im, ax=ax, fraction=0.02, pad=0.01)
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp")
+    fig.savefig(tmp, format="png", dpi=110, bbox_inches="tight")
+    tmp.replace(path)
