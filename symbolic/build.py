@@ -9,7 +9,7 @@ import numpy as np
 
 from symbolic.atoms import check_bits
 from symbolic.dataset import make_dataset, restrict_to_involved, split_dataset
-from symbolic.operators import coverage, learn_operators, load_operators, save_operators, stats
+from symbolic.operators import coverage, filter_operators, learn_operators, load_operators, save_operators, stats
 from symbolic.pddl import write_domains
 from symbolic.sampling import write_sampled_domains
 from symbolic.structs import OperatorSet, SymbolicDataset, SymbolicProblem
@@ -17,7 +17,7 @@ from symbolic.structs import OperatorSet, SymbolicDataset, SymbolicProblem
 
 def build_domain(unary_pre, rel_pre, actions, unary_post, rel_post, n_per_transition, out_dir,
                  holdout: float | SymbolicDataset = 0.1, seed: int = 0, min_prob: float = 0.0,
-                 sampled_domains: int = 0, involved_only: bool = False) -> dict:
+                 sampled_domains: int = 0, involved_only: bool = False, min_count: int = 0) -> dict:
     """Learn operators from symbolic transitions and write the domain files.
 
     Inputs: padded bit arrays unary (T, n_max, d_z), relations (T, K, n_max, n_max), actions (T, 4),
@@ -27,6 +27,7 @@ def build_domain(unary_pre, rel_pre, actions, unary_post, rel_post, n_per_transi
     PDDL domains in sampled/ (sampled.json has their multiplicities). Returns the statistics dict.
     With `involved_only`, operators mention only the objects a transition involves (picked, target,
     and those whose bits change; see `restrict_to_involved`) instead of every object in the scene.
+    `min_count` and `min_prob` drop rare operators and rare effects (`filter_operators`).
     """
     data = make_dataset(unary_pre, rel_pre, actions, unary_post, rel_post, n_per_transition)
     if involved_only:
@@ -37,20 +38,25 @@ def build_domain(unary_pre, rel_pre, actions, unary_post, rel_post, n_per_transi
         train, held = data, holdout
     else:
         train, held = split_dataset(data, float(holdout), seed)
-    ops = learn_operators(train)
+    learned = learn_operators(train)
+    ops = filter_operators(learned, min_count, min_prob)
+    if len(ops) == 0:
+        raise ValueError(f"no operator was seen {min_count} times or more: lower min_count")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    paths = write_domains(ops, out, min_prob)
+    paths = write_domains(ops, out)
     save_operators(ops, out / "operators.json")
     report = stats(ops)
     report["train_transitions"] = len(train)
     report["involved_only"] = involved_only
+    report["filters"] = {"min_count": min_count, "min_prob": min_prob, "operators_learned": len(learned),
+                         "operators_kept": len(ops)}
     report["coverage_train"] = coverage(ops, train)
     report["coverage_holdout"] = coverage(ops, held) if held is not None and len(held) else None
     report["files"] = {k: p.name for k, p in paths.items()} | {"operators": "operators.json"}
     report["ppddl_bytes"] = paths["ppddl"].stat().st_size
     if sampled_domains > 0:
-        written = write_sampled_domains(ops, out / "sampled", sampled_domains, seed, min_prob)
+        written = write_sampled_domains(ops, out / "sampled", sampled_domains, seed)
         report["sampled_domains"] = {"n": sampled_domains, "distinct": len(written)}
     (out / "stats.json").write_text(json.dumps(report, indent=1))
     return report

@@ -23,6 +23,7 @@ from __future__ import annotations
 import itertools
 import json
 from collections import Counter, defaultdict
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -137,6 +138,22 @@ def learn_operators(data: SymbolicDataset) -> OperatorSet:
             release=release, pre_unary=pre_u, pre_rel=pre_r,
             effects=tuple(e for e, _ in ranked), counts=tuple(c for _, c in ranked)))
     return OperatorSet(operators, data.n_unary, data.n_relations)
+
+
+def filter_operators(ops: OperatorSet, min_count: int = 0, min_prob: float = 0.0) -> OperatorSet:
+    """The operators seen at least `min_count` times, each without the effects of empirical
+    probability below `min_prob` (the rest renormalised, i.e. their counts kept). The paper's
+    authors keep operators seen more than 50 times and effects with p >= 0.1: rare pre-states and
+    rare outcomes are mostly symbol noise, and each one is a way for a plan to go wrong."""
+    if min_count < 0 or not 0.0 <= min_prob <= 1.0:
+        raise ValueError(f"min_count must be >= 0 and min_prob in [0, 1], got {min_count}, {min_prob}")
+    kept = []
+    for op in ops.operators:
+        if op.count < min_count:
+            continue
+        keep = [i for i, p in enumerate(op.probabilities) if p >= min_prob] or [0]
+        kept.append(replace(op, effects=tuple(op.effects[i] for i in keep), counts=tuple(op.counts[i] for i in keep)))
+    return OperatorSet(kept, ops.n_unary, ops.n_relations)
 
 
 def operator_key(op: Operator) -> GroupKey:

@@ -209,7 +209,8 @@ def cmd_domain(args: argparse.Namespace) -> int:
     from tamp.domain import learn_domain
 
     report = learn_domain(args.model, args.data, args.out, holdout=args.holdout, seed=args.seed,
-                          sampled_domains=args.sampled, involved_only=args.involved_only)
+                          sampled_domains=args.sampled, involved_only=args.involved_only,
+                          min_count=args.min_count, min_prob=args.min_prob)
     held = report.get("coverage_holdout") or {}
     print(f"{report['n_operators']} operators from {report['transitions']} transitions -> {args.out}")
     for key in ("effects_per_operator", "coverage_train"):
@@ -370,6 +371,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--involved-only", action="store_true",
                    help="operators mention only the objects a transition involves (picked, target, and "
                    "those whose symbols change) rather than every object in the scene: far fewer operators")
+    p.add_argument("--min-count", type=int, default=0, metavar="N",
+                   help="keep operators seen at least N times (default 0: all; the paper's authors: 51)")
+    p.add_argument("--min-prob", type=float, default=0.0, metavar="P",
+                   help="drop effects of probability below P and renormalise (default 0; the paper's authors: 0.1)")
     p.add_argument("--seed", type=int, default=0)
     p.set_defaults(func=cmd_domain)
 

@@ -13,7 +13,7 @@ import numpy as np
 
 def learn_domain(model_path: str | Path, data_dir: str | Path, out_dir: str | Path, holdout: float = 0.1,
                  seed: int = 0, sampled_domains: int = 0, skip_corrupt: bool = True,
-                 involved_only: bool = False) -> dict:
+                 involved_only: bool = False, min_count: int = 0, min_prob: float = 0.0) -> dict:
     """Write the learned domain of `model_path` on the transitions in `data_dir`; returns stats."""
     import learned
     import symbolic
@@ -31,7 +31,7 @@ def learn_domain(model_path: str | Path, data_dir: str | Path, out_dir: str | Pa
     u_post, r_post = model.symbols_batch(data.X_next, data.mask)
     report = symbolic.build_domain(u_pre, r_pre, np.asarray(data.action), u_post, r_post, np.asarray(data.n),
                                    out_dir, holdout=holdout, seed=seed, sampled_domains=sampled_domains,
-                                   involved_only=involved_only)
+                                   involved_only=involved_only, min_count=min_count, min_prob=min_prob)
     report["model"] = str(model_path)
     report["data"] = str(data_dir)
     report["transitions"] = int(len(data))

@@ -12,7 +12,7 @@ from symbolic import blocksworld as bw
 from symbolic.atoms import pack_state, state_atoms, unpack_state
 from symbolic.build import build_domain, load_domain
 from symbolic.dataset import make_dataset
-from symbolic.operators import coverage, from_json, learn_operators, stats, to_json
+from symbolic.operators import coverage, filter_operators, from_json, learn_operators, stats, to_json
 from symbolic.structs import Effect
 
 # Two blocks, d_z = 1 (u0 = clear), K = 1 (r0(a, b) = a on b). The three scenes:
@@ -120,6 +120,25 @@ def _relabel(data, seed):
             arr[t, :, :n, :n] = arr[t][:, perm][:, :, perm]
         d.actions[t, 0], d.actions[t, 2] = inv[d.actions[t, 0]], inv[d.actions[t, 2]]
     return d
+
+
+def test_rare_operators_and_rare_effects_are_filtered():
+    data = _known_dataset()
+    more = learn_operators(data.subset(np.r_[np.arange(len(data)), np.arange(40)]))  # some seen more often
+    counts = sorted({op.count for op in more.operators})
+    kept = filter_operators(more, min_count=counts[-1])
+    assert len(counts) > 1 and 0 < len(kept) < len(more) and all(op.count >= counts[-1] for op in kept.operators)
+    ops = learn_operators(data)
+    # stacking succeeds 3 times in 4 at offset 0: a threshold above 0.25 drops the no-op outcome
+    sure = filter_operators(ops, min_prob=0.3)
+    assert len(sure) == len(ops) and all(len(op.effects) == 1 for op in sure.operators)
+    stack = [op for op in sure.operators if not op.same and op.pre_unary.tolist() == [[1], [1]] and op.grasp == 0]
+    assert stack and all(op.effects == (STACK,) and op.probabilities.tolist() == [1.0] for op in stack)
+    assert len(filter_operators(ops, min_prob=0.2)) == len(ops) and \
+        sum(len(op.effects) for op in filter_operators(ops, min_prob=0.2).operators) == \
+        sum(len(op.effects) for op in ops.operators)
+    with pytest.raises(ValueError, match="min_prob"):
+        filter_operators(ops, min_prob=1.5)
 
 
 def test_lifting_is_invariant_to_object_identities():
