@@ -202,25 +202,26 @@ class SymbolicPlanner:
         return PlannerResult(out.status, [task.step(g) for g in out.plan], out.message, seconds,
                              ground=list(out.plan), states=states)
 
-    def alternatives(self, n: int, actions: tuple[Action, ...], states: tuple[int, ...] | None,
-                     limit: int = 64) -> list[tuple[Action, ...]]:
-        """Other plans through the same symbolic `states` as `actions` (a RankedPlan's), at most `limit`.
-
-        At each step, every ground action applicable in that state one of whose learned effects
-        leads to the next state. The symbols cannot tell these plans apart (typically the grasp and
-        release offsets, or which of two symbolically alike blocks is used), but their continuous
-        outcomes differ, so verification may accept one of them when `plan` itself fails.
-        """
-        if states is None or not actions or limit < 1:
-            return []
+    def skeleton_options(self, n: int, states: tuple[int, ...]) -> list[list[Action]]:
+        """Per step of a plan through the symbolic `states` (a RankedPlan's), every ground action
+        applicable in that state one of whose learned effects leads to the next state: the plan's
+        skeleton, with the choices the symbols cannot tell apart (typically the grasp and release
+        offsets, or which of two symbolically alike blocks is used)."""
         task = self.ground(n)
         options = []
         for s, t in zip(states[:-1], states[1:]):
             gs, _ = task.applicable(s)
-            acts = dict.fromkeys(task.action(g) for g in gs if any(s ^ f == t for f in task.flips[g]))
-            options.append(list(acts))
+            options.append(list(dict.fromkeys(task.action(g) for g in gs if any(s ^ f == t for f in task.flips[g]))))
+        return options
+
+    def alternatives(self, n: int, actions: tuple[Action, ...], states: tuple[int, ...] | None,
+                     limit: int = 64) -> list[tuple[Action, ...]]:
+        """Other plans through the same symbolic `states` as `actions`, at most `limit`, in the
+        order of `itertools.product` over `skeleton_options` (the last step varies fastest)."""
+        if states is None or not actions or limit < 1:
+            return []
         out = []
-        for combo in itertools.product(*options):
+        for combo in itertools.product(*self.skeleton_options(n, states)):
             if combo != tuple(actions):
                 out.append(combo)
                 if len(out) == limit:

@@ -31,7 +31,8 @@ import numpy as np
 from tamp.models import Models
 from tamp.search import SearchConfig, SearchResult, continuous_search
 from tamp.structs import PickPlace
-from tamp.verify import EPS_SUCCESS, TAU_VERIFY, Verification, at_goal, goal_error, verify, verify_many
+from tamp.verify import (EPS_SUCCESS, TAU_VERIFY, Verification, at_goal, goal_error, refine_skeleton, verify,
+                         verify_many)
 
 
 @dataclass(frozen=True)
@@ -47,7 +48,8 @@ class PlanConfig:
     verify_all: bool = False  # verify every candidate (default: stop at the first verified one, Alg. 1)
     # Beyond the paper, bilevel only (0 and False give its Algorithm 1 exactly; the unverified
     # baselines never use them: without verification they would pick among look-alike plans blindly):
-    alternatives: int = 64  # per symbolic plan, plans through the same symbolic states, verified after it
+    alternatives: int = 64  # per symbolic plan, plans through the same symbolic states (the best of a
+    #                         beam search of this width over the skeleton, `verify.refine_skeleton`), verified after it
     alternatives_total: int = 256  # per problem; later symbolic plans are verified alone
     nonempty: bool = True  # X_init not within tau of X_goal: the symbolic plan needs >= 1 action
     search: SearchConfig = SearchConfig()
@@ -180,21 +182,22 @@ def _timed(method: str, body: Callable[[PlanResult], PlanResult]) -> PlanResult:
 # --- the methods ------------------------------------------------------------------------------
 def _verify_group(models: Models, X_init, X_goal, index: int, candidate: Candidate, cfg: PlanConfig,
                   limit: int) -> tuple[list[Candidate], Verification | None]:
-    """Verify a ranked symbolic plan and its alternatives (plans through the same symbolic states) in
-    one shared rollout; returns them and the chosen verification: the plan itself if verified, else
-    the verified alternative with the smallest predicted error (the symbols cannot rank them)."""
+    """Verify a ranked symbolic plan and its alternatives (plans through the same symbolic states, the
+    best of a beam search over its skeleton) in one shared rollout; returns them and the chosen
+    verification: of the verified ones, the smallest predicted error (the symbols cannot rank plans
+    through the same symbolic states; the Dynamics Model can)."""
     group = [candidate]
-    if limit > 0 and candidate.states is not None:
+    if limit > 0 and candidate.states is not None and candidate.actions:
         planner = models.symbolic_planner(cfg.backend, cfg.symbolic_time_limit)
+        options = planner.skeleton_options(len(X_init), candidate.states)
+        plans = refine_skeleton(models.require_dynamics(), X_init, X_goal, options, limit + 1)
         group += [Candidate(alt, candidate.count, candidate.probability, alternative_of=index)
-                  for alt in planner.alternatives(len(X_init), candidate.actions, candidate.states, limit)]
+                  for alt in plans if alt != candidate.actions][:limit]
     checks = verify_many(models.require_dynamics(), X_init, X_goal, [c.actions for c in group], cfg.tau_verify)
     for c, v in zip(group, checks):
         c.error, c.verified = v.error, v.verified
     passed = [v for v in checks if v.verified]
-    if not passed:
-        return group, None
-    return group, checks[0] if checks[0].verified else min(passed, key=lambda v: v.error)
+    return group, min(passed, key=lambda v: v.error) if passed else None
 
 
 def plan_bilevel(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig()) -> PlanResult:

@@ -210,7 +210,7 @@ def cmd_domain(args: argparse.Namespace) -> int:
 
     report = learn_domain(args.model, args.data, args.out, holdout=args.holdout, seed=args.seed,
                           sampled_domains=args.sampled, involved_only=args.involved_only,
-                          min_count=args.min_count, min_prob=args.min_prob)
+                          min_count=args.min_count, min_prob=args.min_prob, only_moved=args.only_moved)
     held = report.get("coverage_holdout") or {}
     print(f"{report['n_operators']} operators from {report['transitions']} transitions -> {args.out}")
     for key in ("effects_per_operator", "coverage_train"):
@@ -371,6 +371,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--involved-only", action="store_true",
                    help="operators mention only the objects a transition involves (picked, target, and "
                    "those whose symbols change) rather than every object in the scene: far fewer operators")
+    p.add_argument("--only-moved", action="store_true",
+                   help="learn from the transitions that moved their picked block (failed grasps and blocked "
+                   "motions left out, as the paper's authors do)")
     p.add_argument("--min-count", type=int, default=0, metavar="N",
                    help="keep operators seen at least N times (default 0: all; the paper's authors: 51)")
     p.add_argument("--min-prob", type=float, default=0.0, metavar="P",
@@ -476,9 +479,12 @@ def main(argv: list[str] | None = None) -> int:
 
 def entry() -> None:
     """Console-script entry point."""
-    code = main()
-    sys.stdout.flush()
-    sys.stderr.flush()
+    try:
+        code = main()
+        sys.stdout.flush()
+        sys.stderr.flush()
+    except BrokenPipeError:  # the reader of stdout went away (`tamp ... | head`): nothing more to say
+        code = 0
     # OMPL's nanobind bindings print "leaked instances" warnings at interpreter exit; nothing is
     # left to clean up here, so leave without running the interpreter's teardown.
     os._exit(code)

@@ -13,8 +13,11 @@ import numpy as np
 
 def learn_domain(model_path: str | Path, data_dir: str | Path, out_dir: str | Path, holdout: float = 0.1,
                  seed: int = 0, sampled_domains: int = 0, skip_corrupt: bool = True,
-                 involved_only: bool = False, min_count: int = 0, min_prob: float = 0.0) -> dict:
-    """Write the learned domain of `model_path` on the transitions in `data_dir`; returns stats."""
+                 involved_only: bool = False, min_count: int = 0, min_prob: float = 0.0,
+                 only_moved: bool = False) -> dict:
+    """Write the learned domain of `model_path` on the transitions in `data_dir`; returns stats.
+    `only_moved`: learn from the transitions that moved their picked block alone (as the paper's
+    authors do), so that failed grasps and blocked motions are not among the operators' outcomes."""
     import learned
     import symbolic
 
@@ -22,8 +25,11 @@ def learn_domain(model_path: str | Path, data_dir: str | Path, out_dir: str | Pa
         raise ValueError(f"holdout must be in [0, 1), got {holdout}")
     model = learned.load_model(model_path)
     data = learned.load_transitions(data_dir, skip_corrupt=skip_corrupt)
+    if only_moved:
+        data = data.subset(np.flatnonzero(learned.moved_picks(data.X, data.X_next, data.action)))
     if len(data) == 0:
-        raise ValueError(f"{data_dir}: the dataset holds no transitions")
+        raise ValueError(f"{data_dir}: the dataset holds no transitions" + (" that moved their picked block"
+                                                                          if only_moved else ""))
     if data.X.shape[1] > model.config.n_max:
         raise ValueError(f"{data_dir}: scenes of up to {data.X.shape[1]} objects, but the model takes "
                          f"at most {model.config.n_max}")
@@ -35,4 +41,5 @@ def learn_domain(model_path: str | Path, data_dir: str | Path, out_dir: str | Pa
     report["model"] = str(model_path)
     report["data"] = str(data_dir)
     report["transitions"] = int(len(data))
+    report["only_moved"] = only_moved
     return report

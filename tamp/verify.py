@@ -118,6 +118,43 @@ def verify_many(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarray, pl
     return out
 
 
+def refine_skeleton(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarray,
+                    options: Sequence[Sequence], width: int) -> list[tuple]:
+    """Concrete plans for a symbolic skeleton, best first: a beam search with the Dynamics Model.
+
+    `options[t]` are the actions that can take step t of the skeleton (every action that leads
+    from its symbolic state to the next: `SymbolicPlanner.skeleton_options`). Step by step, every
+    kept partial plan is extended by every option (one batched forward pass per step) and the
+    `width` best are kept: by the sum of per-object distances to the goal (the continuous
+    search's heuristic) after an intermediate step, by the largest per-object distance (the
+    verification measure) after the last; plans that predict the same state (to 1 mm) count once.
+    Which offsets and which of several symbolically alike objects a plan uses decides where the
+    blocks end, and symbols of a few bits cannot say; the Dynamics Model can.
+    """
+    X_init, X_goal = np.asarray(X_init, dtype=float), np.asarray(X_goal, dtype=float)
+    beam: list[tuple[tuple, np.ndarray]] = [((), X_init)]
+    for t, step in enumerate(options):
+        step = [tuple(int(v) for v in a) for a in step]
+        if not step or width < 1:
+            return []
+        plans = [plan + (a,) for plan, _ in beam for a in step]
+        Xs = np.repeat(np.stack([X for _, X in beam]), len(step), axis=0)
+        effects = predict_many(model, Xs, np.asarray([p[-1] for p in plans], dtype=np.int64))
+        Xs = Xs.copy()
+        Xs[:, :, :3] += effects
+        dist = np.linalg.norm(Xs[:, :, :3] - X_goal[None, :, :3], axis=-1)
+        score = dist.max(axis=1) if t == len(options) - 1 else dist.sum(axis=1)
+        beam, seen = [], set()
+        for b in np.argsort(score, kind="stable"):
+            key = np.round(Xs[b, :, :3] * 1000).astype(np.int64).tobytes()
+            if key not in seen:
+                seen.add(key)
+                beam.append((plans[b], Xs[b]))
+                if len(beam) == width:
+                    break
+    return [plan for plan, _ in beam]
+
+
 def verify(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarray, actions: Sequence,
            tau: float = TAU_VERIFY) -> Verification:
     """Roll `actions` out from X_init with the Dynamics Model and compare with X_goal."""

@@ -82,6 +82,25 @@ def test_an_alternative_through_the_same_symbols_is_verified_before_the_next_ran
     assert goal_error(execute(X_INIT, result.plan), A_ON_B) < 0.05
 
 
+def test_refine_skeleton_finds_the_concrete_actions_the_symbols_cannot_tell_apart():
+    from tamp.verify import refine_skeleton
+
+    stub = StubModel()
+    # one step "put 0 on 1" with every grasp and release offset: only (0, 0, 1, 0) lands centred
+    options = [[(0, g, 1, r) for g in (-1, 0, 1) for r in (-1, 0, 1)]]
+    plans = refine_skeleton(stub, X_INIT, A_ON_B, options, width=4)
+    assert plans[0] == ((0, 0, 1, 0),) and len(plans) == 4 and len(set(plans)) == 4
+    errors = [goal_error(execute(X_INIT, p), A_ON_B) for p in plans]
+    assert errors == sorted(errors) and errors[0] < 1e-9  # best first, by the verification measure
+    # two steps: first any move of 1 along its own y (shift), then 0 on 1; the goal has 1 shifted
+    goal = A_ON_B.copy()
+    goal[:, 1] += 0.075
+    options = [[(1, g, 1, r) for g in (-1, 0, 1) for r in (-1, 0, 1)], options[0]]
+    best = refine_skeleton(stub, X_INIT, goal, options, width=3)[0]
+    assert goal_error(execute(X_INIT, best), goal) < 1e-9
+    assert refine_skeleton(stub, X_INIT, goal, [[], options[1]], width=3) == []  # a step nothing can take
+
+
 def test_same_symbols_but_goal_elsewhere_needs_a_nonempty_plan():
     # a large bar shifted 15 cm along y: the same symbols before and after. The empty plan cannot
     # verify (X_init is 15 cm from the goal), so Level 1 asks for at least one action and finds the
