@@ -74,7 +74,7 @@ class Scale:
 
 
 SCALES: dict[str, Scale] = {
-    "quick": Scale(samples=40_000, epochs=250, train_time_limit_s=600.0, ablation_runs=2, ablation_epochs=15,
+    "quick": Scale(samples=40_000, epochs=250, train_time_limit_s=None, ablation_runs=2, ablation_epochs=15,
                    per_cell=10, search_time_limit_s=10.0),
     "paper": Scale(samples=160_000, epochs=4000, train_time_limit_s=None, ablation_runs=10, ablation_epochs=4000,
                    per_cell=100, search_time_limit_s=60.0),
@@ -186,8 +186,9 @@ def reproduce(out: str | Path, scale_name: str = "quick", workers: int | None = 
         stages.finish("collect", time.perf_counter() - t, samples=report.samples)
 
     if not stages.done("train"):
-        _say(f"train: {len(scale.models)} models ({scale.epochs} epochs each, at most "
-             f"{scale.train_time_limit_s or 'unlimited'} s) and the Table I ablation, {workers} at a time")
+        limit = "no time limit" if scale.train_time_limit_s is None else f"at most {scale.train_time_limit_s} s"
+        _say(f"train: {len(scale.models)} models ({scale.epochs} epochs each, {limit}) and the Table I ablation, "
+             f"{workers} at a time")
         t = time.perf_counter()
         results = []
         with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
