@@ -51,6 +51,13 @@ class Models:
                                                                  time_limit=time_limit)
         return self.planners[backend, time_limit]
 
+    @property
+    def n_max(self) -> int | None:
+        """The most objects the loaded networks take (None for models without a config, e.g. stubs)."""
+        limits = [getattr(getattr(m, "config", None), "n_max", None) for m in (self.dynamics, self.symbolic)]
+        limits = [n for n in limits if n is not None]
+        return min(limits) if limits else None
+
     def require_dynamics(self) -> DynamicsModel:
         if self.dynamics is None:
             raise ValueError(f"this method needs the Dynamics Model ({DYNAMICS_FILE} in the models directory)")
