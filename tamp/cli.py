@@ -367,7 +367,7 @@ def build_parser() -> argparse.ArgumentParser:
         "dataset depends on the parameters only (not on --workers or --backend); running the same "
         "command again after an interruption finishes it, re-collecting missing or corrupt shards.",
     )
-    p.add_argument("--samples", type=positive_int, required=True, help="number of transitions")
+    p.add_argument("--samples", type=int, required=True, help="number of transitions")
     p.add_argument("--objects", type=_object_counts, default=(2, 3, 4),
                    help="object counts drawn uniformly per scene, e.g. 2,3,4 (default)")
     p.add_argument("--out", type=Path, required=True, help="dataset directory (new, or the one to resume)")
@@ -378,9 +378,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--address", default=None,
                    help="with --backend ray: join this Ray cluster (e.g. auto or HOST:6379) instead of starting one")
     p.add_argument("--seed", type=int, default=0, help="dataset seed (default 0)")
-    p.add_argument("--actions-per-scene", type=positive_int, default=10, metavar="M",
+    p.add_argument("--actions-per-scene", type=int, default=10, metavar="M",
                    help="chained random actions per scene (default 10)")
-    p.add_argument("--scenes-per-shard", type=positive_int, default=20, metavar="K",
+    p.add_argument("--scenes-per-shard", type=int, default=20, metavar="K",
                    help="scenes per shard file, the unit of resumption (default 20)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_collect)

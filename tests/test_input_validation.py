@@ -218,7 +218,6 @@ def test_unwritable_outputs_are_refused_before_the_work(tmp_path, capsys):
     (["plan", "--problem", "p", "--models", "m", "--n-domains", "0"], "--n-domains"),
     (["domain", "--model", "m", "--data", "d", "--out", "o", "--sampled", "-1"], "--sampled"),
     (["domain", "--model", "m", "--data", "d", "--out", "o", "--min-prob", "2"], "--min-prob"),
-    (["collect", "--samples", "0", "--out", "o"], "--samples"),
     (["evaluate", "--models", "m", "--problems", "p", "--out", "o", "--time-limit", "inf"], "--time-limit"),
 ])
 def test_numeric_flags_are_range_checked_naming_the_flag(capsys, argv, flag):
