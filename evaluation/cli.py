@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from pathlib import Path
 
@@ -29,7 +30,7 @@ def _positive_float(text: str) -> float:
         value = float(text)
     except ValueError:
         value = 0.0
-    if not value > 0:
+    if not (math.isfinite(value) and value > 0):
         raise argparse.ArgumentTypeError(f"expected a positive number of seconds, got {text!r}")
     return value
 
@@ -37,7 +38,9 @@ def _positive_float(text: str) -> float:
 def cmd_problems(args: argparse.Namespace) -> int:
     """Generate a problem set (JSONL) of random Drake scenes and goals."""
     from evaluation.problems import generate_problems, write_problems
+    from tamp.cli import check_output_file
 
+    check_output_file(args.out, "--out")
     problems = generate_problems(args.objects, args.actions, args.per_cell, args.seed, progress=not args.quiet,
                                  protocol=args.protocol, runs=args.runs, workers=args.workers)
     path = write_problems(args.out, problems)

@@ -39,6 +39,7 @@ METHOD_INFO = {
     "cfs_gumbel": "continuous forward search, Gumbel-Sigmoid Dynamics Model (Fig. 4)",
 }
 OUTCOMES = ("success", "no_plan", "kinematic_failure", "refinement_failure", "wrong_plan")
+ERROR_OUTCOME = "error"  # a (problem, method) that raised (evaluation.run): listed, left out of the tables
 STAGES = ("ik", "motion", "grasp")
 BACKEND_INFO = {"python": "our in-process search (`python`)", "fd": "Fast Downward (`fd`, as in the paper)"}
 PROTOCOL_INFO = {"strict": "`strict` (every one of the k random actions moved a block)",
@@ -164,8 +165,8 @@ def _check_row(path: Path, i: int, row: dict) -> None:
     _check(path, i, row, "refined", (bool,), True, "true, false or null")
     _check(path, i, row, "refine_failure", (dict,), True, "an object or null")
     _check(path, i, row, "refine_time_s", (list,), True, "a list of seconds or null")
-    if row["outcome"] not in OUTCOMES:
-        raise ValueError(f"{path}, line {i}: field 'outcome' must be one of {', '.join(OUTCOMES)}, "
+    if row["outcome"] not in OUTCOMES + (ERROR_OUTCOME,):
+        raise ValueError(f"{path}, line {i}: field 'outcome' must be one of {', '.join(OUTCOMES + (ERROR_OUTCOME,))}, "
                          f"got {row['outcome']!r}")
     if isinstance(row.get("refine_failure"), dict) and row["refine_failure"].get("stage") not in STAGES:
         raise ValueError(f"{path}, line {i}: field 'refine_failure.stage' must be one of "
@@ -890,6 +891,12 @@ def write_report(results_dir: Path, ablation: Path | None = None) -> Path:
     rows, dropped = _read_rows(rows_path)
     notes = [] if dropped is None else [f"Line {dropped} of {rows_path} is incomplete (an interrupted evaluation) "
                                         "and was left out."]
+    errors = [r for r in rows if r["outcome"] == ERROR_OUTCOME]
+    rows = [r for r in rows if r["outcome"] != ERROR_OUTCOME]
+    notes += [f"Problem `{r['problem']}` with method `{r['method']}` raised an error and is left out of every "
+              f"table: {r.get('error', 'no message')}" for r in errors]
+    if not rows:
+        raise ValueError(f"{rows_path}: every row is an error row ({len(errors)}); nothing to report")
     meta_path = results_dir / "meta.json"
     meta = _read_json(meta_path, "the evaluation's meta.json") if meta_path.is_file() else None
     if ablation is not None and not Path(ablation).is_file():

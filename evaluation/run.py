@@ -38,6 +38,7 @@ import os
 import sys
 import threading
 import time
+import traceback
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
@@ -60,6 +61,7 @@ ROW_KEYS = ("problem", "n", "k", "run", "protocol", "moved", "method", "solved",
             "eps_m", "tau_verify_m", "symbolic_backend")
 TIMING_KEYS = ("planning_time_s", "level1_time_s", "refine_time_s")  # the only fields that vary between runs
 OUTCOMES = ("success", "no_plan", "kinematic_failure", "refinement_failure", "wrong_plan")
+ERROR_OUTCOME = "error"  # a pair that raised (see Evaluator.error_row); not one of OUTCOMES
 MAX_CANDIDATES = 20
 # meta.json fields that define the rows: a results directory is resumed only if all of them match
 DEFINING_KEYS = ("models_dir", "model_files", "problems", "problems_sha256", "config")
@@ -180,10 +182,6 @@ class Evaluator:
         key = (id(models), problem.n)
         if key in self._warm:
             return
-        n_max = getattr(getattr(models.dynamics, "config", None), "n_max", None)
-        if n_max is not None and problem.n > n_max:
-            raise ValueError(f"problem {problem.name}: {problem.n} objects, but the models were trained for "
-                             f"at most {n_max}")
         cfg = self.config.plan_config(problem.seed)
         if models.symbolic is not None and models.domain is not None:
             models.symbolic_planner(cfg.backend, cfg.symbolic_time_limit).ground(problem.n)
@@ -193,15 +191,14 @@ class Evaluator:
         self._warm.add(key)
 
     def run(self, problem: Problem, method_name: str) -> dict:
-        """The result row of one method on one problem (keys ROW_KEYS)."""
+        """The result row of one method on one problem (keys ROW_KEYS; an error row if it raised)."""
         method, models = METHODS[method_name], self.models[method_name]
-        self.warm_up(models, problem)
         try:
+            self.warm_up(models, problem)
             body = self._closed_loop if method.closed_loop else self._open_loop
             fields = body(problem, method, models)
-        except Exception as error:  # name the pair; the rows written so far stay and a rerun resumes
-            raise RuntimeError(f"problem {problem.name}, method {method_name}: {type(error).__name__}: "
-                               f"{error}") from error
+        except Exception as error:  # one pair's failure must not end the run: an error row with the traceback
+            return self.error_row(problem, method_name, error)
         c = self.config
         row = {"problem": problem.name, "n": problem.n, "k": problem.k, "run": problem.run or 0,
                "protocol": problem.protocol, "moved": problem.moved, "method": method_name, **fields,
@@ -210,6 +207,22 @@ class Evaluator:
         row["outcome"] = row_outcome(row["solved"], row["refine_failure"], row["final_error_m"], c.eps)
         row["success"] = row["outcome"] == "success"
         return {k: row[k] for k in ROW_KEYS}
+
+    def error_row(self, problem: Problem, method_name: str, error: BaseException) -> dict:
+        """The row of a pair that raised: outcome "error", the message in `error`, the traceback in
+        `traceback`; the report lists it and leaves it out of the statistics."""
+        c = self.config
+        row = {"problem": problem.name, "n": problem.n, "k": problem.k, "run": problem.run or 0,
+               "protocol": problem.protocol, "moved": problem.moved, "method": method_name, "solved": False,
+               "level": None, "plan": None, "planning_time_s": 0.0, "level1_time_s": None,
+               "predicted_error_m": None, "candidates": [], "refined": None, "refine_failure": None,
+               "refine_time_s": [], "executed_actions": 0, "executed_plans": None, "final_error_m": None,
+               "success": False, "outcome": "error", "rounds": None, "fidelity": c.fidelity, "eps_m": c.eps,
+               "tau_verify_m": c.tau_verify, "symbolic_backend": c.symbolic_backend if METHODS[method_name].symbolic else None}
+        row = {k: row[k] for k in ROW_KEYS}
+        row["error"] = f"{type(error).__name__}: {error}"
+        row["traceback"] = "".join(traceback.format_exception(type(error), error, error.__traceback__))
+        return row
 
     def _open_loop(self, problem: Problem, method: Method, models) -> dict:
         from tamp.bilevel import plan
@@ -493,7 +506,12 @@ def evaluate(models_dir: str | Path, problems_path: str | Path, out_dir: str | P
     """
     from tqdm import tqdm
 
+    from tamp.cli import check_output_dir
+
+    # Every input is checked before anything is written: the output folder, the problems (each scene,
+    # by tamp.validate), the models (loaded once here) and every problem's size against them.
     models_dir, problems_path, out = Path(models_dir).resolve(), Path(problems_path).resolve(), Path(out_dir)
+    check_output_dir(out, "--out")
     if models is None:
         methods = resolve_methods(models_dir, methods)
     else:
@@ -502,6 +520,15 @@ def evaluate(models_dir: str | Path, problems_path: str | Path, out_dir: str | P
         if missing:
             raise ValueError(f"no models given for method {missing[0]}")
     problems = read_problems(problems_path)
+    loaded = models if models is not None else load_method_models(models_dir, methods)
+    for method in methods:
+        n_max = getattr(loaded[method], "n_max", None)
+        too_big = [p for p in problems if n_max is not None and p.n > n_max]
+        if too_big:
+            raise ValueError(f"{problems_path}: problem {too_big[0].name} has {too_big[0].n} objects, but the models "
+                             f"of method {method} were trained for at most {n_max}")
+    if models is None and config.workers == 1 and config.backend == "local":
+        models = loaded  # one process: the models just loaded serve the run
     started = datetime.now(timezone.utc).isoformat(timespec="seconds")
     meta = {"format": FORMAT, "models_dir": str(models_dir), "model_files": _model_files(models_dir),
             "problems": str(problems_path), "problems_sha256": _sha256(problems_path), "n_problems": len(problems),
@@ -528,6 +555,10 @@ def evaluate(models_dir: str | Path, problems_path: str | Path, out_dir: str | P
                                              unit="row", disable=not config.progress, file=sys.stderr) as bar:
             if tasks:
                 for row in run(tasks, str(models_dir), methods, models, config):
+                    if row["outcome"] == ERROR_OUTCOME:
+                        tqdm.write(f"warning: problem {row['problem']}, method {row['method']}: {row['error']}; "
+                                   f"recorded as an error row (traceback in {rows_path}), the run goes on",
+                                   file=sys.stderr)
                     f.write(json.dumps(row) + "\n")
                     f.flush()
                     bar.update()
@@ -541,5 +572,5 @@ def strip_timings(row: dict) -> dict:
     return {k: v for k, v in row.items() if k not in TIMING_KEYS}
 
 
-__all__ = ["EvalConfig", "Evaluator", "OUTCOMES", "ROW_KEYS", "evaluate", "read_rows", "row_outcome",
+__all__ = ["ERROR_OUTCOME", "EvalConfig", "Evaluator", "OUTCOMES", "ROW_KEYS", "evaluate", "read_rows", "row_outcome",
            "strip_timings"]

@@ -40,7 +40,8 @@ def read_checkpoint(path: str | Path) -> dict[str, Any]:
     except FileNotFoundError:
         raise
     except Exception as e:  # torch raises many types for corrupt / foreign files
-        raise ValueError(f"{path}: not a readable checkpoint ({type(e).__name__}: {e})") from e
+        first = (str(e).strip().splitlines() or [""])[0]  # torch's messages run over many lines
+        raise ValueError(f"{path}: not a readable checkpoint ({type(e).__name__}: {first})") from e
     if not isinstance(payload, dict) or payload.get("format") != CKPT_FORMAT:
         fmt = payload.get("format") if isinstance(payload, dict) else type(payload).__name__
         raise ValueError(f"{path}: not an effect-model checkpoint (format {fmt!r}, "

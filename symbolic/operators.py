@@ -221,6 +221,8 @@ def to_json(ops: OperatorSet) -> dict:
 
 
 def from_json(doc: dict) -> OperatorSet:
+    if not isinstance(doc, dict):
+        raise ValueError(f"not an operators file (expected a JSON object, got {type(doc).__name__})")
     if doc.get("format") != FORMAT:
         raise ValueError(f"not an operators file (format={doc.get('format')!r})")
     if doc.get("version") != VERSION:
@@ -243,4 +245,15 @@ def save_operators(ops: OperatorSet, path: str | Path) -> None:
 
 
 def load_operators(path: str | Path) -> OperatorSet:
-    return from_json(json.loads(Path(path).read_text()))
+    """Operators of an operators.json; a missing, truncated or malformed file is a ValueError naming it."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"no operators file at {path}")
+    try:
+        return from_json(json.loads(path.read_text()))
+    except json.JSONDecodeError as error:
+        raise ValueError(f"{path}: not valid JSON ({error}); the file is damaged or truncated") from None
+    except ValueError as error:
+        raise ValueError(f"{path}: {error}") from None
+    except (KeyError, TypeError, AttributeError) as error:  # a field missing or of the wrong shape
+        raise ValueError(f"{path}: not a valid operators file ({type(error).__name__}: {error})") from None

@@ -31,6 +31,7 @@ import numpy as np
 from tamp.models import Models
 from tamp.search import SearchConfig, SearchResult, continuous_search
 from tamp.structs import PickPlace
+from tamp.validate import check_problem
 from tamp.verify import (EPS_SUCCESS, TAU_VERIFY, Verification, at_goal, goal_error, refine_skeleton, verify,
                          verify_many)
 
@@ -274,6 +275,8 @@ def plan(method: str, models: Models, X_init, X_goal, cfg: PlanConfig = PlanConf
     X_init, X_goal = np.asarray(X_init, dtype=float), np.asarray(X_goal, dtype=float)
     if X_init.shape != X_goal.shape or X_init.ndim != 2 or X_init.shape[1] != 5:
         raise ValueError(f"X_init and X_goal must both be (n, 5), got {X_init.shape} and {X_goal.shape}")
+    # an observed X_init may hold tilted blocks: checked as any scene, not as one placed upright
+    check_problem(X_init, X_goal, where="plan()", n_max=getattr(models, "n_max", None), init_upright=False)
     return METHODS[method](models, X_init, X_goal, cfg)
 
 

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
 from pathlib import Path
@@ -25,6 +26,87 @@ def positive_int(text: str) -> int:
     return value
 
 
+def non_negative_int(text: str) -> int:
+    """argparse type: an integer >= 0."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {value}")
+    return value
+
+
+def positive_float(text: str) -> float:
+    """argparse type: a finite number > 0 (nan and inf refused)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}") from None
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"expected a finite number > 0, got {text!r}")
+    return value
+
+
+def fraction(text: str) -> float:
+    """argparse type: a number in [0, 1)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number in [0, 1), got {text!r}") from None
+    if not 0.0 <= value < 1.0:
+        raise argparse.ArgumentTypeError(f"expected a number in [0, 1), got {text!r}")
+    return value
+
+
+def probability(text: str) -> float:
+    """argparse type: a number in [0, 1]."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number in [0, 1], got {text!r}") from None
+    if not 0.0 <= value <= 1.0:
+        raise argparse.ArgumentTypeError(f"expected a number in [0, 1], got {text!r}")
+    return value
+
+
+def _writable_folder(folder: Path, flag: str, target: Path) -> None:
+    """The nearest existing folder of `folder` (itself or an ancestor) must be a writable folder."""
+    existing = folder
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    if not existing.is_dir():
+        raise ValueError(f"{flag} {target}: {existing} is not a folder")
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise ValueError(f"{flag} {target}: {existing} is not writable")
+
+
+def check_output_file(path: str | Path, flag: str = "--out") -> Path:
+    """Check before any work that the output file `path` can be written (not a folder, its folder
+    writable); missing parent folders are created. ValueError naming the flag otherwise."""
+    path = Path(path)
+    if path.is_dir():
+        raise ValueError(f"{flag} {path}: is a folder; give a file path")
+    if path.exists() and not os.access(path, os.W_OK):
+        raise ValueError(f"{flag} {path}: the file is not writable")
+    _writable_folder(path.parent, flag, path)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        raise ValueError(f"{flag} {path}: cannot create its folder ({error.strerror})") from None
+    return path
+
+
+def check_output_dir(path: str | Path, flag: str = "--out") -> Path:
+    """Check before any work that the output folder `path` is a folder or can be made one, writable;
+    nothing is created. ValueError naming the flag otherwise."""
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise ValueError(f"{flag} {path}: exists and is not a folder")
+    _writable_folder(path, flag, path)
+    return path
+
+
 def _html_path(text: str) -> Path:
     path = Path(text)
     if path.suffix.lower() not in (".html", ".htm"):
@@ -37,6 +119,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     from tamp import World, WorldConfig
     from tamp.replay import Timeline
 
+    if args.replay:
+        check_output_file(args.replay, "--replay")
     world = World(WorldConfig(), seed=args.seed)
     if args.replay:
         world.timeline = Timeline()
@@ -81,6 +165,7 @@ def cmd_view(args: argparse.Namespace) -> int:
     from tamp.replay import Timeline
 
     X, plan = load_plan_file(args.plan)
+    check_output_file(args.out, "--out")
     refined = refine(plan, X)
     for k, step in enumerate(refined.steps):
         print(f"action {k} {tuple(step.action)}: refined in {step.refine_time * 1e3:.0f} ms, "
@@ -116,6 +201,7 @@ def cmd_collect(args: argparse.Namespace) -> int:
     """Random-exploration transitions (X, a, X') into a sharded dataset directory; resumable."""
     from tamp.collect import CollectConfig, collect
 
+    check_output_dir(args.out, "--out")
     cfg = CollectConfig(samples=args.samples, objects=args.objects, seed=args.seed,
                         actions_per_scene=args.actions_per_scene, scenes_per_shard=args.scenes_per_shard)
     report = collect(args.out, cfg, workers=args.workers, backend=args.backend, address=args.address,
@@ -133,6 +219,7 @@ def cmd_dataset_stats(args: argparse.Namespace) -> int:
     """Counts, failure reasons, effect magnitudes and outcome classes of a dataset."""
     from tamp.dataset_stats import dataset_stats
 
+    check_output_file(args.png if args.png is not None else args.directory / "stats.png", "--png")
     stats = dataset_stats(args.directory, png=args.png)
     print(stats.table())
     if stats.png is not None:
@@ -143,7 +230,12 @@ def cmd_dataset_stats(args: argparse.Namespace) -> int:
 def cmd_train(args: argparse.Namespace) -> int:
     """Train a Symbolic (gumbel_sigmoid) or Dynamics (sigmoid) Model on a dataset."""
     from learned import ModelConfig, train_model
+    from learned.train import last_path
 
+    check_output_file(args.out, "--out")
+    if args.resume and not last_path(Path(args.out)).is_file():
+        raise ValueError(f"--resume: no training state at {last_path(Path(args.out))} to continue from "
+                         "(leave out --resume to start a new training)")
     sizes = {k: v for k, v in (("d_z", args.d_z), ("heads", args.heads)) if v is not None}
     config = ModelConfig(activation=args.bottleneck, arm_input=not args.no_arm_input, **sizes)
     result = train_model(args.data, config, epochs=args.epochs,
@@ -158,6 +250,7 @@ def cmd_ablate(args: argparse.Namespace) -> int:
     """Table I of the paper: effect error per bottleneck activation over several seeds."""
     from learned import ablate_activations, format_ablation_markdown
 
+    check_output_dir(args.out_dir, "--out-dir")
     result = ablate_activations(args.data, runs=args.runs, epochs=args.epochs, out_dir=args.out_dir,
                                 seed=args.seed, threads=args.threads)
     print(format_ablation_markdown(result))
@@ -170,6 +263,9 @@ def cmd_symbols(args: argparse.Namespace) -> int:
     from learned import load_model
     from learned.interpret import format_symbols_markdown, interpret_symbols, write_symbols_png
 
+    for path, flag in ((args.json, "--json"), (args.png, "--png")):
+        if path is not None:
+            check_output_file(path, flag)
     model = load_model(args.model)
     scenes = symbol_scenes(args.problems, args.data, args.max_scenes, args.seed)
     report = interpret_symbols(model.symbols, scenes)
@@ -208,9 +304,11 @@ def cmd_domain(args: argparse.Namespace) -> int:
     """Symbols from the Symbolic Model -> learned PDDL / PPDDL domain and its statistics."""
     from tamp.domain import learn_domain
 
+    check_output_dir(args.out, "--out")
     report = learn_domain(args.model, args.data, args.out, holdout=args.holdout, seed=args.seed,
                           sampled_domains=args.sampled, involved_only=args.involved_only,
-                          min_count=args.min_count, min_prob=args.min_prob, only_moved=args.only_moved)
+                          min_count=args.min_count, min_prob=args.min_prob, only_moved=args.only_moved,
+                          any_bottleneck=args.any_bottleneck)
     held = report.get("coverage_holdout") or {}
     print(f"{report['n_operators']} operators from {report['transitions']} transitions -> {args.out}")
     for key in ("effects_per_operator", "coverage_train"):
@@ -231,6 +329,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     """A random problem planned, refined, executed under physics, summarised and replayed."""
     from tamp.demo import DemoConfig, run_demo
 
+    check_output_file(args.replay, "--replay")
     cfg = DemoConfig(seed=args.seed, objects=args.objects, actions=args.actions, models=args.models,
                      fidelity=args.fidelity, replay=args.replay, candidates=args.candidates,
                      replan=not args.open_loop)
@@ -328,8 +427,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--heads", type=positive_int, default=None,
                    help="relation types = attention heads (default: learned.ModelConfig's)")
     p.add_argument("--batch-size", type=positive_int, default=128)
-    p.add_argument("--lr", type=float, default=1e-4)
-    p.add_argument("--val-fraction", type=float, default=0.1)
+    p.add_argument("--lr", type=positive_float, default=1e-4, help="learning rate (default 1e-4)")
+    p.add_argument("--val-fraction", type=fraction, default=0.1, help="validation fraction, in [0, 1) (default 0.1)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--threads", type=positive_int, default=1, help="torch threads (default 1)")
     p.add_argument("--resume", action="store_true", help="continue from <out>.last.pt")
@@ -366,18 +465,20 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--model", required=True, help="Symbolic Model checkpoint (tamp train --bottleneck gumbel_sigmoid)")
     p.add_argument("--data", required=True, help="dataset directory")
     p.add_argument("--out", required=True, help="output directory")
-    p.add_argument("--holdout", type=float, default=0.1, help="fraction of transitions held out for coverage")
-    p.add_argument("--sampled", type=int, default=0, metavar="N", help="also write N sampled PDDL domains")
+    p.add_argument("--holdout", type=fraction, default=0.1, help="fraction of transitions held out for coverage")
+    p.add_argument("--sampled", type=non_negative_int, default=0, metavar="N", help="also write N sampled PDDL domains")
     p.add_argument("--involved-only", action="store_true",
                    help="operators mention only the objects a transition involves (picked, target, and "
                    "those whose symbols change) rather than every object in the scene: far fewer operators")
     p.add_argument("--only-moved", action="store_true",
                    help="learn from the transitions that moved their picked block (failed grasps and blocked "
                    "motions left out, as the paper's authors do)")
-    p.add_argument("--min-count", type=int, default=0, metavar="N",
+    p.add_argument("--min-count", type=non_negative_int, default=0, metavar="N",
                    help="keep operators seen at least N times (default 0: all; the paper's authors: 51)")
-    p.add_argument("--min-prob", type=float, default=0.0, metavar="P",
+    p.add_argument("--min-prob", type=probability, default=0.0, metavar="P",
                    help="drop effects of probability below P and renormalise (default 0; the paper's authors: 0.1)")
+    p.add_argument("--any-bottleneck", action="store_true",
+                   help="accept a --model that is not a Symbolic Model (e.g. the Fig. 4 Sigmoid variant)")
     p.add_argument("--seed", type=int, default=0)
     p.set_defaults(func=cmd_domain)
 
@@ -442,7 +543,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--open-loop", action="store_true",
                    help="execute one plan to its end (the paper's Algorithm 1) instead of the closed loop "
                    "that executes the first action, observes the scene and replans, up to k - 1 rounds")
-    p.add_argument("--candidates", type=int, default=0, metavar="N",
+    p.add_argument("--candidates", type=non_negative_int, default=0, metavar="N",
                    help="also execute the first N symbolic candidates that failed verification and write "
                    "a replay of each (OUT.candidateI.html, I their number in the candidate list)")
     p.set_defaults(func=cmd_demo)

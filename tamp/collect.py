@@ -36,8 +36,8 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from tamp.structs import STATUSES, WorldConfig
+from tamp.validate import MAX_OBJECTS
 
-MAX_OBJECTS = 6  # as tamp.world.MAX_OBJECTS (not imported: the parent need not load Drake)
 STATUS_CODES = {name: code for code, name in enumerate(STATUSES)}
 LOCK_NAME = ".collect.lock"
 # meta.json fields that define the data: a directory is resumed only if all of them match.

@@ -14,16 +14,21 @@ import numpy as np
 def learn_domain(model_path: str | Path, data_dir: str | Path, out_dir: str | Path, holdout: float = 0.1,
                  seed: int = 0, sampled_domains: int = 0, skip_corrupt: bool = True,
                  involved_only: bool = False, min_count: int = 0, min_prob: float = 0.0,
-                 only_moved: bool = False) -> dict:
+                 only_moved: bool = False, any_bottleneck: bool = False) -> dict:
     """Write the learned domain of `model_path` on the transitions in `data_dir`; returns stats.
     `only_moved`: learn from the transitions that moved their picked block alone (as the paper's
-    authors do), so that failed grasps and blocked motions are not among the operators' outcomes."""
+    authors do), so that failed grasps and blocked motions are not among the operators' outcomes.
+    `any_bottleneck`: accept a model that is not a Symbolic Model (the Fig. 4 Sigmoid variant)."""
     import learned
     import symbolic
 
     if not 0.0 <= holdout < 1.0:
         raise ValueError(f"holdout must be in [0, 1), got {holdout}")
+    from tamp.models import require_kind
+
     model = learned.load_model(model_path)
+    if not any_bottleneck:
+        require_kind(model, "symbolic", model_path)
     data = learned.load_transitions(data_dir, skip_corrupt=skip_corrupt)
     if only_moved:
         data = data.subset(np.flatnonzero(learned.moved_picks(data.X, data.X_next, data.action)))

@@ -51,10 +51,32 @@ class Models:
                                                                  time_limit=time_limit)
         return self.planners[backend, time_limit]
 
+    @property
+    def n_max(self) -> int | None:
+        """The most objects the loaded networks take (None for models without a config, e.g. stubs)."""
+        limits = [getattr(getattr(m, "config", None), "n_max", None) for m in (self.dynamics, self.symbolic)]
+        limits = [n for n in limits if n is not None]
+        return min(limits) if limits else None
+
     def require_dynamics(self) -> DynamicsModel:
         if self.dynamics is None:
             raise ValueError(f"this method needs the Dynamics Model ({DYNAMICS_FILE} in the models directory)")
         return self.dynamics
+
+
+def require_kind(model, kind: str, path: str | Path) -> None:
+    """Refuse a network of the other kind: a Symbolic Model has the binary gumbel_sigmoid bottleneck
+    (`tamp train --bottleneck gumbel_sigmoid`), a Dynamics Model any other (the default sigmoid). The
+    Fig. 4 variants, which swap them on purpose, are loaded without this check (evaluation.methods)."""
+    activation = getattr(getattr(model, "config", None), "activation", None)
+    if activation is None:  # not a trained network (a stub): nothing to check
+        return
+    if kind == "symbolic" and activation != "gumbel_sigmoid":
+        raise ValueError(f"{path}: a Dynamics Model ({activation} bottleneck), but a Symbolic Model is needed "
+                         "(tamp train --bottleneck gumbel_sigmoid)")
+    if kind == "dynamics" and activation == "gumbel_sigmoid":
+        raise ValueError(f"{path}: a Symbolic Model (gumbel_sigmoid bottleneck), but a Dynamics Model is needed "
+                         "(tamp train --bottleneck sigmoid)")
 
 
 def load_models(directory: str | Path, need_symbolic: bool = True) -> Models:
@@ -76,8 +98,10 @@ def load_models(directory: str | Path, need_symbolic: bool = True) -> Models:
     if missing:
         raise FileNotFoundError(f"missing model file(s): {', '.join(missing)}")
     models = Models(learned.load_model(paths["dynamics"]))
+    require_kind(models.dynamics, "dynamics", paths["dynamics"])
     if need_symbolic:
         models.symbolic = learned.load_model(paths["symbolic"])
+        require_kind(models.symbolic, "symbolic", paths["symbolic"])
         models.domain = symbolic.load_domain(directory / DOMAIN_DIR)
         cfg = models.symbolic.config
         if (cfg.d_z, cfg.heads) != (models.domain.n_unary, models.domain.n_relations):

@@ -14,6 +14,7 @@ from pathlib import Path
 
 from tamp.bilevel import METHODS, PlanConfig, PlanResult, plan, plan_closed_loop, replan_rounds
 from tamp.search import SearchConfig
+from tamp.validate import check_problem
 from tamp.verify import goal_error
 
 LEVELS = {1: "level 1 (verified symbolic plan)", 2: "level 2 (continuous search)"}
@@ -153,12 +154,14 @@ def run_plan(problem_path: Path, models_dir: Path, options: PlanOptions) -> int:
         raise ValueError("--replan executes actions and observes the world; it needs --execute fast or full")
     if options.replay is not None and options.execute == "none":
         raise ValueError("--replay needs an execution (--execute fast or full)")
+    if options.replay is not None:
+        from tamp.cli import check_output_file
+
+        check_output_file(options.replay, "--replay")
     models = load_models(models_dir, need_symbolic=options.method != "cfs")
     cfg = PlanConfig(n_domains=options.n_domains, seed=problem.seed, backend=options.backend,
                      search=SearchConfig(max_expansions=options.max_expansions, time_limit=options.time_limit))
-    n_max = getattr(getattr(models.dynamics, "config", None), "n_max", None)
-    if n_max is not None and problem.n > n_max:
-        raise ValueError(f"{problem_path}: {problem.n} objects, but the models were trained for at most {n_max}")
+    check_problem(problem.X_init, problem.X_goal, str(problem_path), n_max=models.n_max)  # the models' limit
     k = "?" if problem.k is None else problem.k
     symbolic = "" if options.method == "cfs" else f"; symbolic planner {options.backend}"
     print(f"problem {problem_path}: {problem.n} objects, k = {k}, seed {problem.seed}; initial error "
@@ -180,6 +183,8 @@ def run_plan(problem_path: Path, models_dir: Path, options: PlanOptions) -> int:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    from tamp.cli import non_negative_int, positive_float, positive_int
+
     p.add_argument("--problem", type=Path, required=True, help="problem file (JSON: X_init, X_goal, k, seed)")
     p.add_argument("--models", type=Path, required=True,
                    help="models directory: symbolic.pt, dynamics.pt and the learned domain in domain/")
@@ -188,17 +193,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    "bilevel_alg1: the paper's Algorithm 1 without our Level-1 extensions)")
     p.add_argument("--replan", action="store_true",
                    help="closed loop: execute the first action, observe, replan (up to k - 1 rounds)")
-    p.add_argument("--rounds", type=int, default=None, help="replanning rounds (default: k - 1 of the problem)")
+    p.add_argument("--rounds", type=non_negative_int, default=None, help="replanning rounds (default: k - 1 of the problem)")
     p.add_argument("--execute", choices=("none", "fast", "full"), default="fast",
                    help="refine and execute the plan in the fast world (default) or with the arm under "
                    "physics (full), or not at all")
     p.add_argument("--replay", type=Path, default=None, metavar="OUT.html", help="write a Meshcat HTML replay")
-    p.add_argument("--n-domains", type=int, default=100, help="N sampled symbolic domains (default 100)")
+    p.add_argument("--n-domains", type=positive_int, default=100, help="N sampled symbolic domains (default 100)")
     p.add_argument("--symbolic-backend", "--backend", dest="backend", choices=("python", "fd", "fd-naive"),
                    default="python", help="symbolic planner: python (in-process search, default), fd (Fast "
                    "Downward, as in the paper) or fd-naive (one Fast Downward driver call per sampled domain)")
-    p.add_argument("--max-expansions", type=int, default=5000, help="continuous search node limit (default 5000)")
-    p.add_argument("--time-limit", type=float, default=30.0, help="continuous search time limit, s (default 30)")
+    p.add_argument("--max-expansions", type=positive_int, default=5000, help="continuous search node limit (default 5000)")
+    p.add_argument("--time-limit", type=positive_float, default=30.0, help="continuous search time limit, s (default 30)")
 
 
 def options_from_args(args: argparse.Namespace) -> PlanOptions:

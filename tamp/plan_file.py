@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from tamp.structs import PickPlace
+from tamp.validate import check_scene
 
 
 def read_json_file(path: str | Path, kind: str):
@@ -42,6 +43,7 @@ def load_plan_file(path: str | Path) -> tuple[np.ndarray, list[PickPlace]]:
         raise ValueError(f"{path}: field '{key}' must be a list of [x, y, z, small, large] rows") from None
     if X.ndim != 2 or X.shape[1] != 5:
         raise ValueError(f"{path}: field '{key}' must have rows of 5 numbers, got shape {X.shape}")
+    check_scene(X, where=str(path), field=key, upright=True)  # the scene is placed as given
     if "actions" not in data:
         raise ValueError(f"{path}: missing field 'actions' (a list of [pick, grasp_offset, place, release_offset])")
     actions = data["actions"]

@@ -13,7 +13,7 @@ integer) seeds the sampled symbolic domains. `name` (optional string) names the 
 `actions` (optional) are the actions that generated the goal. Generated problems also say how they
 were made: `protocol` ("strict" or "paper", see `PROTOCOLS`), `moved` (how many of the k actions
 moved a block) and `run` (which of several problem sets of one file). Errors name the file and the
-field. `random_problem(n, k, seed)` makes one from a random scene and k random actions in the fast world.
+field; the scenes are checked by `tamp.validate.check_problem` (reach, resting, no overlap). `random_problem(n, k, seed)` makes one from a random scene and k random actions in the fast world.
 """
 from __future__ import annotations
 
@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from tamp.plan_file import read_json_file
+from tamp.validate import check_problem
 
 if TYPE_CHECKING:
     from tamp.world import World
@@ -129,6 +130,7 @@ def problem_from_dict(data: object, where: str = "problem") -> Problem:
             raise ValueError(f"{where}: field '{field_name}' must be a non-negative integer, got {value!r}")
     if moved is not None and k is not None and moved > k:
         raise ValueError(f"{where}: field 'moved' is {moved}, more than the k = {k} actions")
+    check_problem(X_init, X_goal, where)
     return Problem(X_init, X_goal, k, seed, name, tuple(tuple(a) for a in actions), protocol, moved, run)
 
 

@@ -17,6 +17,7 @@ import numpy as np
 from tamp.skill import Scene
 from tamp.structs import PickPlace, WorldConfig
 from tamp.trajectory import RefinedPlan, RefinementFailure, concatenate, refined_action
+from tamp.validate import check_scene
 from tamp.world import World, validate_action
 
 FAILURE_STAGES = {  # StepInfo.status of a failed action -> refinement stage
@@ -42,6 +43,8 @@ def refine(
     if world is None:
         world = World(dataclasses.replace(config or WorldConfig(), fidelity="fast", simplify_paths=True))
     if scene is None:
+        # the scene the world can hold; a block out of reach is the IK failure of the action picking it
+        check_scene(X_init, where="refine()", field="X_init", upright=True, within_reach=False)
         world.reset(X=X_init)
     else:
         world.set_scene(scene, world.q if q_start is None else q_start)

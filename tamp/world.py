@@ -24,11 +24,9 @@ from tamp.plants import X_FlangeTcp, build_motion_scene, build_physics_scene
 from tamp.replay import Timeline
 from tamp.skill import Scene, Waypoints, grasp_pose, held_block, pick_place_waypoints, topdown
 from tamp.structs import BLOCK_SIZES, LARGE, OFFSETS, SMALL, PickPlace, StepInfo, WorldConfig
+from tamp.validate import MAX_OBJECTS, check_scene
 
-MAX_OBJECTS = 6
 MOTIONS = ("approach", "descend", "liftoff", "lift", "transfer", "lower", "retreat")
-TABLE_X, TABLE_Y = (-0.5, 1.9), (-1.2, 1.2)  # table top extent (drake_models/table.sdf), metres
-BASE_CLEARANCE = 0.15  # metres: no block centre this close to the arm's base axis
 
 
 class World:
@@ -337,22 +335,9 @@ def _parse_X(X) -> tuple[np.ndarray, np.ndarray]:
     onehot = X[:, 3:]
     if not np.all((onehot == 0) | (onehot == 1)) or not np.all(onehot.sum(axis=1) == 1):
         raise ValueError(f"X[:, 3:5] must be a one-hot type (small, large) per object, got {onehot.tolist()}")
+    check_scene(X, where="X", upright=True, within_reach=False)  # placed upright, axis-aligned
     types = onehot.argmax(axis=1).astype(int)
     positions = X[:, :3].copy()
-    for i in range(len(X)):
-        x, y = positions[i, :2]
-        if not (TABLE_X[0] <= x <= TABLE_X[1] and TABLE_Y[0] <= y <= TABLE_Y[1]):
-            raise ValueError(f"object {i} at ({x:.3f}, {y:.3f}) m is off the table "
-                             f"(x in {TABLE_X}, y in {TABLE_Y})")
-        if np.hypot(x, y) < BASE_CLEARANCE:
-            raise ValueError(f"object {i} at ({x:.3f}, {y:.3f}) m is inside the robot's base")
-        if positions[i, 2] < BLOCK_SIZES[int(types[i])][2] / 2 - 0.01:
-            raise ValueError(f"object {i} at z = {positions[i, 2]:.3f} m would be inside the table")
-        for j in range(i):
-            overlap = np.array(BLOCK_SIZES[int(types[i])]) / 2 + np.array(BLOCK_SIZES[int(types[j])]) / 2 \
-                - np.abs(positions[i] - positions[j])
-            if np.all(overlap > 0.01):
-                raise ValueError(f"objects {j} and {i} overlap by more than 1 cm")
     return types, positions
 
 

@@ -39,11 +39,14 @@ def stub_models() -> dict[str, Models]:
 
 @pytest.fixture(scope="module")
 def problems_file(tmp_path_factory) -> Path:
-    """Three random Drake problems (n = 2, k = 1, 2, 3) and one nothing can solve (a block in the air)."""
+    """Three random Drake problems (n = 2, k = 1, 2, 3) and one nothing can solve (the bar stood on its
+    end: a scene the world can hold, but no pick-place puts it there)."""
     problems = generate_problems(**SET, progress=False)
     X = problems[0].X_init
     G = X.copy()
-    G[0, 2] = 0.3
+    bar = int(np.argmax(X[:, 4]))
+    assert X[bar, 4] == 1
+    G[bar, 2] = 0.125  # half its length above the table
     problems.append(Problem(X, G, k=1, seed=3, name="n2-unreachable"))
     return write_problems(tmp_path_factory.mktemp("problems") / "problems.jsonl", problems)
 
