@@ -930,7 +930,9 @@ def build_report(res: Results, figures: Path, ablation: dict | None = None,
                 section_dual_model(res, figures), section_table2(res, figures), section_verifier(res, figures),
                 section_success(res, figures), section_table3(res, figures), section_replanning(res, figures),
                 section_refinement(res, figures), section_level1(res, figures),
-                section_symbols(symbols, symbols_source), section_feasibility(res, figures)]
+                section_symbols(symbols, symbols_source)]
+    if any(res.has(a, b) for a, b in FEASIBILITY_PAIRS):  # only when run before and after (`*_nofeas`)
+        sections.append(section_feasibility(res, figures))
     lines = ["# Evaluation report", "",
              f"From `{source}` ({len(res.rows)} rows, {len(res.cells)} problems). Ours next to the paper's "
              "numbers (Dogangun et al., quoted as printed). Success in % of problems (one decimal), times in "
