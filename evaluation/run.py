@@ -260,8 +260,9 @@ class Evaluator:
         from tamp.bilevel import plan
 
         kinematics = self.checker(problem) if method.feasibility else None
+        extra = {} if kinematics is None else {"kinematics": kinematics}
         result = plan(method.planner, models, problem.X_init, problem.X_goal,
-                      self.config.plan_config(problem.seed, method.feasibility), kinematics=kinematics)
+                      self.config.plan_config(problem.seed, method.feasibility), **extra)
         fields = {**_feasibility_fields([result]), "solved": result.solved, "level": result.level, "plan": _actions(result.plan),
                   "planning_time_s": _round(result.timings["total"]), "level1_time_s": _round(_level1_time(result)),
                   "predicted_error_m": _round(result.predicted_error), "candidates": _candidates(result),
