@@ -797,7 +797,7 @@ def section_feasibility(res: Results, figures: Path) -> Section:
                         "loop (e.g. `cfs` and `cfs_nofeas`).")
     lines = ["Each method with the kinematic check and refinement in the planning loop (after) and without "
              "(before, `*_nofeas`), on the same problems. Refined = the returned plan refined completely "
-             "(% of plans); p from paired t-tests on 0/1 success and on planning times.", ""]
+             "(% of plans); p from a paired t-test on 0/1 success.", ""]
     srows, trows, crows, data = [], [], [], {}
     for a, b in pairs:
         both = res.paired(a, b)
