@@ -15,6 +15,11 @@ Each method is a `tamp.bilevel` planner, a model variant and open or closed loop
     symbolic_sigmoid      deterministic symbolic planner, Sigmoid Symbolic Model and its own domain (Fig. 4)
     cfs_gumbel            continuous forward search, Gumbel-Sigmoid Dynamics Model (Fig. 4)
 
+`cfs`, `bilevel` and `bilevel_replan` plan with kinematics in the loop (tamp.feasibility: actions
+checked on the predicted states, plans refined before they are returned); `cfs_nofeas`,
+`bilevel_nofeas` and `bilevel_replan_nofeas` are the same planners without it (before / after on the
+same problems: `tamp evaluate --methods cfs,cfs_nofeas,...`). The symbolic baselines never use it.
+
 The default model set is the models directory (symbolic.pt, dynamics.pt, domain/); the last two
 methods use optional variants in DIR/variants/: symbolic_sigmoid.pt with domain_sigmoid/, and
 dynamics_gumbel.pt. The symbolic_sigmoid set keeps DIR/dynamics.pt to report its plans'
@@ -40,6 +45,7 @@ class Method:
     models: str  # model set: "default" | "symbolic_sigmoid" | "dynamics_gumbel"
     closed_loop: bool = False
     oracle: bool = False  # execute the ranked plans until one succeeds (the authors' measure)
+    feasibility: bool = False  # kinematic check and refinement in the planning loop (tamp.feasibility)
 
     @property
     def symbolic(self) -> bool:
@@ -51,13 +57,17 @@ METHODS: dict[str, Method] = {m.name: m for m in (
     Method("deterministic", "deterministic", "default"),
     Method("probabilistic", "probabilistic", "default"),
     Method("probabilistic_oracle", "probabilistic", "default", oracle=True),
-    Method("cfs", "cfs", "default"),
-    Method("bilevel", "bilevel", "default"),
+    Method("cfs", "cfs", "default", feasibility=True),
+    Method("bilevel", "bilevel", "default", feasibility=True),
     Method("bilevel_alg1", "bilevel_alg1", "default"),
-    Method("bilevel_replan", "bilevel", "default", closed_loop=True),
+    Method("bilevel_replan", "bilevel", "default", closed_loop=True, feasibility=True),
     Method("symbolic_sigmoid", "deterministic", "symbolic_sigmoid"),
     Method("cfs_gumbel", "cfs", "dynamics_gumbel"),
+    Method("cfs_nofeas", "cfs", "default"),
+    Method("bilevel_nofeas", "bilevel", "default"),
+    Method("bilevel_replan_nofeas", "bilevel", "default", closed_loop=True),
 )}
+FEASIBILITY_PAIRS = (("cfs", "cfs_nofeas"), ("bilevel", "bilevel_nofeas"), ("bilevel_replan", "bilevel_replan_nofeas"))
 DEFAULT_METHODS = ("deterministic", "probabilistic", "probabilistic_oracle", "cfs", "bilevel", "bilevel_alg1",
                    "bilevel_replan")
 VARIANT_METHODS = ("symbolic_sigmoid", "cfs_gumbel")

@@ -23,7 +23,9 @@ from . import paper, plots
 from .stats import IDENTICAL, confusion, mean_std, median, paired_ttest, percentile, rate_pct
 
 METHOD_ORDER = ("deterministic", "probabilistic", "probabilistic_oracle", "cfs", "bilevel", "bilevel_alg1",
-                "bilevel_replan", "symbolic_sigmoid", "cfs_gumbel")
+                "bilevel_replan", "symbolic_sigmoid", "cfs_gumbel", "cfs_nofeas", "bilevel_nofeas",
+                "bilevel_replan_nofeas")
+FEASIBILITY_PAIRS = (("cfs", "cfs_nofeas"), ("bilevel", "bilevel_nofeas"), ("bilevel_replan", "bilevel_replan_nofeas"))
 METHOD_INFO = {
     "deterministic": "deterministic symbolic planner, Gumbel-Sigmoid Symbolic Model (baseline)",
     "probabilistic": "probabilistic symbolic planner, top plan of N sampled domains, unverified",
@@ -37,6 +39,9 @@ METHOD_INFO = {
     "bilevel_replan": "bilevel in closed loop, up to k - 1 replanning rounds",
     "symbolic_sigmoid": "deterministic symbolic planner, Sigmoid Symbolic Model and its domain (Fig. 4)",
     "cfs_gumbel": "continuous forward search, Gumbel-Sigmoid Dynamics Model (Fig. 4)",
+    "cfs_nofeas": "`cfs` without kinematics in the planning loop (no feasibility check, no refinement)",
+    "bilevel_nofeas": "`bilevel` without kinematics in the planning loop",
+    "bilevel_replan_nofeas": "`bilevel_replan` without kinematics in the planning loop",
 }
 OUTCOMES = ("success", "no_plan", "kinematic_failure", "refinement_failure", "wrong_plan")
 ERROR_OUTCOME = "error"  # a (problem, method) that raised (evaluation.run): listed, left out of the tables
@@ -785,6 +790,64 @@ def section_refinement(res: Results, figures: Path) -> Section:
     return Section("refinement", title, lines, data)
 
 
+def section_feasibility(res: Results, figures: Path) -> Section:
+    title = "12. Kinematics in the planning loop: before and after"
+    pairs = [(a, b) for a, b in FEASIBILITY_PAIRS if res.has(a, b)]
+    if not pairs:
+        return _skipped("feasibility", title, "No method was run both with and without kinematics in the planning "
+                        "loop (e.g. `cfs` and `cfs_nofeas`).")
+    lines = ["Each method with the kinematic check and refinement in the planning loop (after) and without "
+             "(before, `*_nofeas`), on the same problems. Refined = the returned plan refined completely "
+             "(% of plans); p from a paired t-test on 0/1 success.", ""]
+    srows, trows, crows, data = [], [], [], {}
+    for a, b in pairs:
+        both = res.paired(a, b)
+        plans = {m: [r for r in (ra if m == a else rb for ra, rb in both) if r.get("refined") is not None]
+                 for m in (a, b)}
+        sa, sb = [ra["success"] for ra, _ in both], [rb["success"] for _, rb in both]
+        entry = {"problems": len(both), "refined_pct": {m: rate_pct([r["refined"] for r in plans[m]]) for m in (a, b)},
+                 "success_pct": {a: rate_pct(sa), b: rate_pct(sb)}, "p": paired_ttest(sa, sb), "time": {}}
+        srows.append([f"`{a}`", str(len(both)), fmt_pct(entry["refined_pct"][b]), fmt_pct(entry["refined_pct"][a]),
+                      fmt_pct(entry["success_pct"][b]), fmt_pct(entry["success_pct"][a]),
+                      fmt_ratio(None if sa == [] else (rate_pct(sa) or 0) - (rate_pct(sb) or 0), 1), fmt_p(entry["p"])])
+        for label, keep in _by_n(res):
+            pn = res.paired(a, b, keep)
+            ta, tb = [ra["planning_time_s"] for ra, _ in pn], [rb["planning_time_s"] for _, rb in pn]
+            entry["time"][label] = {"mean_before_s": mean_std(tb)[0], "mean_after_s": mean_std(ta)[0],
+                                    "median_before_s": median(tb), "median_after_s": median(ta)}
+            t = entry["time"][label]
+            trows.append([f"`{a}`", label, str(len(pn)), fmt_s(t["mean_before_s"]), fmt_s(t["mean_after_s"]),
+                          fmt_s(t["median_before_s"]), fmt_s(t["median_after_s"])])
+        after = [ra for ra, _ in both]
+        check = sum(r.get("feasibility_time_s") or 0.0 for r in after)
+        search = sum(r.get("search_time_s") or 0.0 for r in after)
+        refine = sum(r.get("plan_refine_time_s") or 0.0 for r in after)
+        rejected: Counter = Counter()
+        for r in after:
+            for level, counts in ((r.get("feasibility") or {}).get("rejected") or {}).items():
+                for reason, c in counts.items():
+                    rejected[f"{level}: {reason}"] += c
+        refinements = sum((r.get("feasibility") or {}).get("refinements", 0) for r in after)
+        failed = sum((r.get("feasibility") or {}).get("refinement_failures", 0) for r in after)
+        entry.update({"check_time_s": check, "search_time_s": search, "plan_refine_time_s": refine,
+                      "check_over_search": check / search if search else None, "rejected": dict(rejected),
+                      "refinements": refinements, "refinement_failures": failed})
+        crows.append([f"`{a}`", fmt_s(check), fmt_s(search), fmt_pct(100 * check / search if search else None),
+                      fmt_s(refine), f"{refinements} ({failed} failed)",
+                      ", ".join(f"{k} {v}" for k, v in sorted(rejected.items())) or DASH])
+        data[a] = entry
+    lines += md_table(["method", "problems", "refined before (%)", "refined after (%)", "success before (%)",
+                       "success after (%)", "gain (points)", "p"], srows)
+    lines += ["Planning time (s) per n, before and after:", ""]
+    lines += md_table(["method", "n", "problems", "mean before", "mean after", "median before", "median after"], trows)
+    lines += ["Cost and rejections (after), summed over problems: check time is the kinematic check alone "
+              "(inside the search for Level 2), search time the continuous search's (check included), "
+              "refinement the full refinements the planner ran before returning a plan.", ""]
+    lines += md_table(["method", "check (s)", "search (s)", "check / search (%)", "refinement (s)",
+                       "refinements", "rejected (level: reason count)"], crows)
+    return Section("feasibility", title, lines, data)
+
+
 def section_level1(res: Results, figures: Path) -> Section:
     title = "10. Level 1: the paper's Algorithm 1 and our extensions"
     if not res.has("bilevel", "bilevel_alg1"):
@@ -869,6 +932,8 @@ def build_report(res: Results, figures: Path, ablation: dict | None = None,
                 section_success(res, figures), section_table3(res, figures), section_replanning(res, figures),
                 section_refinement(res, figures), section_level1(res, figures),
                 section_symbols(symbols, symbols_source)]
+    if any(res.has(a, b) for a, b in FEASIBILITY_PAIRS):  # only when run before and after (`*_nofeas`)
+        sections.append(section_feasibility(res, figures))
     lines = ["# Evaluation report", "",
              f"From `{source}` ({len(res.rows)} rows, {len(res.cells)} problems). Ours next to the paper's "
              "numbers (Dogangun et al., quoted as printed). Success in % of problems (one decimal), times in "

@@ -58,8 +58,11 @@ FORMAT = "tamp-evaluation/1"
 ROW_KEYS = ("problem", "n", "k", "run", "protocol", "moved", "method", "solved", "level", "plan", "planning_time_s",
             "level1_time_s", "predicted_error_m", "candidates", "refined", "refine_failure", "refine_time_s",
             "executed_actions", "executed_plans", "final_error_m", "success", "outcome", "rounds", "fidelity",
-            "eps_m", "tau_verify_m", "symbolic_backend")
-TIMING_KEYS = ("planning_time_s", "level1_time_s", "refine_time_s")  # the only fields that vary between runs
+            "eps_m", "tau_verify_m", "symbolic_backend", "feasibility", "search_time_s", "feasibility_time_s",
+            "plan_refine_time_s")
+# the only fields that vary between runs
+TIMING_KEYS = ("planning_time_s", "level1_time_s", "refine_time_s", "search_time_s", "feasibility_time_s",
+               "plan_refine_time_s")
 OUTCOMES = ("success", "no_plan", "kinematic_failure", "refinement_failure", "wrong_plan")
 ERROR_OUTCOME = "error"  # a pair that raised (see Evaluator.error_row); not one of OUTCOMES
 MAX_CANDIDATES = 20
@@ -113,10 +116,11 @@ class EvalConfig:
                 "level1_time_budget_s": self.level1_time_budget, "symbolic_backend": self.symbolic_backend,
                 "oracle_max_plans": self.oracle_max_plans}
 
-    def plan_config(self, seed: int) -> PlanConfig:
+    def plan_config(self, seed: int, feasibility: bool = True) -> PlanConfig:
         from tamp.search import SearchConfig
 
         return PlanConfig(n_domains=self.n_domains, seed=seed, tau_verify=self.tau_verify, eps=self.eps,
+                          feasibility=feasibility,
                           backend=self.symbolic_backend,
                           level1_expansions=self.level1_expansions, level1_time_budget=self.level1_time_budget,
                           search=SearchConfig(max_expansions=self.search_max_expansions,
@@ -152,6 +156,27 @@ def _candidates(result) -> list[dict]:
             for c in result.candidates[:MAX_CANDIDATES]]
 
 
+def _feasibility_fields(results: list) -> dict:
+    """Row fields of kinematics in the planning loop, summed over planning calls (closed loop: rounds):
+    rejections per level and reason, refinements tried and failed, check, search and refinement time."""
+    used = [r for r in results if r.rejected is not None]
+    fields = {"feasibility": None, "search_time_s": _round(sum(r.timings.get("search", 0.0) for r in results)),
+              "feasibility_time_s": None, "plan_refine_time_s": None}
+    if not used:
+        return fields
+    rejected: dict[str, dict[str, int]] = {}
+    for r in used:
+        for level, counts in r.rejected_dict().items():
+            for reason, c in counts.items():
+                rejected.setdefault(level, {})[reason] = rejected.get(level, {}).get(reason, 0) + c
+    refinements = [x for r in used for x in r.refinements]
+    fields["feasibility"] = {"rejected": rejected, "refinements": len(refinements),
+                             "refinement_failures": sum(x["failed_action"] is not None for x in refinements)}
+    fields["feasibility_time_s"] = _round(sum(r.timings.get("feasibility", 0.0) for r in used))
+    fields["plan_refine_time_s"] = _round(sum(r.timings.get("refine", 0.0) for r in used))
+    return fields
+
+
 def _failure(index: int, stage: str, where: str, reason: str) -> dict:
     return {"action": int(index), "stage": stage, "where": where, "reason": reason}
 
@@ -163,6 +188,26 @@ class Evaluator:
         self.models, self.config = models, config
         self._warm: set[tuple[int, int]] = set()
         self._worlds: dict[str, Any] = {}
+        self._checker = None
+        self._warm_layouts: set[tuple[int, ...]] = set()
+
+    def checker(self, problem: Problem):
+        """This worker's kinematic feasibility checker (its own fast world), having observed the scene
+        of problem.X_init as refinement starts it; the first scene of each layout (block types) pays
+        the checker's one-off collision-model builds before any planner is timed."""
+        if self._checker is None:
+            from tamp.feasibility import FeasibilityChecker
+
+            self._checker = FeasibilityChecker()
+        checker = self._checker
+        checker.reset(problem.X_init)
+        layout = tuple(int(t) for t in checker.scene.types)
+        if layout not in self._warm_layouts:
+            from tamp.search import all_actions
+
+            checker.check(problem.X_init, all_actions(problem.n))
+            self._warm_layouts.add(layout)
+        return checker
 
     def world(self, fidelity: str):
         """This worker's World of a fidelity (paths simplified: they are executed), reseeded as a new
@@ -219,7 +264,7 @@ class Evaluator:
                "refine_time_s": [], "executed_actions": 0, "executed_plans": None, "final_error_m": None,
                "success": False, "outcome": "error", "rounds": None, "fidelity": c.fidelity, "eps_m": c.eps,
                "tau_verify_m": c.tau_verify, "symbolic_backend": c.symbolic_backend if METHODS[method_name].symbolic else None}
-        row = {k: row[k] for k in ROW_KEYS}
+        row = {k: row.get(k) for k in ROW_KEYS}  # fields an error row cannot have are None
         row["error"] = f"{type(error).__name__}: {error}"
         row["traceback"] = "".join(traceback.format_exception(type(error), error, error.__traceback__))
         return row
@@ -227,8 +272,11 @@ class Evaluator:
     def _open_loop(self, problem: Problem, method: Method, models) -> dict:
         from tamp.bilevel import plan
 
-        result = plan(method.planner, models, problem.X_init, problem.X_goal, self.config.plan_config(problem.seed))
-        fields = {"solved": result.solved, "level": result.level, "plan": _actions(result.plan),
+        kinematics = self.checker(problem) if method.feasibility else None
+        extra = {} if kinematics is None else {"kinematics": kinematics}
+        result = plan(method.planner, models, problem.X_init, problem.X_goal,
+                      self.config.plan_config(problem.seed, method.feasibility), **extra)
+        fields = {**_feasibility_fields([result]), "solved": result.solved, "level": result.level, "plan": _actions(result.plan),
                   "planning_time_s": _round(result.timings["total"]), "level1_time_s": _round(_level1_time(result)),
                   "predicted_error_m": _round(result.predicted_error), "candidates": _candidates(result),
                   "refined": None, "refine_failure": None, "refine_time_s": [], "executed_actions": 0,
@@ -272,8 +320,11 @@ class Evaluator:
         from tamp.bilevel import plan_closed_loop, replan_rounds
         from tamp.refine import FAILURE_STAGES, failed_at
 
+        kinematics = self.checker(problem) if method.feasibility else None
         world = self.world(self.config.fidelity)
         X0 = world.reset(X=problem.X_init)
+        if kinematics is not None:
+            kinematics.observe(world.scene, world.q)
         failures: list[dict] = []
         step_times: list[float] = []
 
@@ -281,18 +332,20 @@ class Evaluator:
             t = time.perf_counter()
             X, info = world.step(action)
             step_times.append(time.perf_counter() - t)
+            if kinematics is not None:
+                kinematics.observe(world.scene, world.q)
             if info.status != "ok" and not failures:
                 failures.append(_failure(len(step_times) - 1, FAILURE_STAGES.get(info.status, "motion"), failed_at(info),
                                          info.reason))
             return X
 
         out = plan_closed_loop(method.planner, models, X0, problem.X_goal, step, replan_rounds(problem.k),
-                               self.config.plan_config(problem.seed))
+                               self.config.plan_config(problem.seed, method.feasibility), kinematics=kinematics)
         first = out.rounds[0] if out.rounds else None
         solved = first is None or first.solved  # no round: the initial state already met the goal
         executed = len(out.executed)
         X_final = out.X_final if executed else problem.X_init
-        return {"solved": solved, "level": None if first is None else first.level,
+        return {**_feasibility_fields(out.rounds), "solved": solved, "level": None if first is None else first.level,
                 "plan": _actions(out.executed) if solved else None,
                 "planning_time_s": _round(sum(r.timings["total"] for r in out.rounds)),
                 "level1_time_s": _round(sum(_level1_time(r) for r in out.rounds)),

@@ -23,14 +23,15 @@ being replaced, and it needs no rollback of the world, which a real robot cannot
 from __future__ import annotations
 
 import time
+from collections import Counter
 from dataclasses import dataclass, field, replace
 from typing import Callable, Sequence
 
 import numpy as np
 
 from tamp.models import Models
-from tamp.search import SearchConfig, SearchResult, continuous_search
-from tamp.structs import PickPlace
+from tamp.search import SearchConfig, SearchResult, continuous_search, state_key
+from tamp.structs import Infeasible, KinematicFeasibility, PickPlace, RefinementOutcome
 from tamp.validate import check_problem
 from tamp.verify import (EPS_SUCCESS, TAU_VERIFY, Verification, at_goal, goal_error, refine_skeleton, verify,
                          verify_many)
@@ -53,6 +54,9 @@ class PlanConfig:
     #                         beam search of this width over the skeleton, `verify.refine_skeleton`), verified after it
     alternatives_total: int = 256  # per problem; later symbolic plans are verified alone
     nonempty: bool = True  # X_init not within tau of X_goal: the symbolic plan needs >= 1 action
+    # Kinematics in the planning loop (cfs, bilevel; needs a `kinematics` object passed to `plan`):
+    feasibility: bool = True  # check actions on the predicted states, refine a plan before returning it
+    max_refinements: int = 4  # full refinements per planning call (Level-1 candidates and Level-2 plans)
     search: SearchConfig = SearchConfig()
 
 
@@ -81,10 +85,21 @@ class PlanResult:
     reasons: list[str] = field(default_factory=list)  # why each level did not produce the plan
     symbolic_stats: dict = field(default_factory=dict)  # domains, unique plans, planner outcomes
     predicted_error: float | None = None  # metres: max per-object distance, predicted final state to goal
+    # Kinematic feasibility: per level (1, 2), how many candidate plans (Level 1) or successors
+    # (Level 2) the check or full refinement rejected, by reason; None when it was off
+    rejected: dict[int, Counter] | None = None
+    refinements: list[dict] = field(default_factory=list)  # level, plan, outcome of each full refinement
 
     @property
     def solved(self) -> bool:
         return self.plan is not None
+
+    def rejected_dict(self) -> dict | None:
+        """`rejected` with string keys (JSON): {"level 1": {"no_grasp": 3, ...}, "level 2": {...}}."""
+        if self.rejected is None:
+            return None
+        return {f"level {lvl}": {r.value if isinstance(r, Infeasible) else str(r): int(c) for r, c in sorted(
+            counts.items(), key=lambda rc: str(rc[0]))} for lvl, counts in sorted(self.rejected.items())}
 
     def to_dict(self) -> dict:
         return {"method": self.method, "solved": self.solved, "level": self.level,
@@ -98,7 +113,8 @@ class PlanResult:
                     k: getattr(self.search, k) for k in ("status", "reason", "expanded", "generated",
                                                          "duplicates", "predict_calls", "time")},
                 "timings": {k: round(v, 6) for k, v in self.timings.items()},
-                "reasons": list(self.reasons), "symbolic": self.symbolic_stats}
+                "reasons": list(self.reasons), "symbolic": self.symbolic_stats,
+                "rejected": self.rejected_dict(), "refinements": list(self.refinements)}
 
 
 # --- the levels -------------------------------------------------------------------------------
@@ -161,12 +177,92 @@ def _take(result: PlanResult, actions, level: int, predicted: np.ndarray, X_goal
     return result
 
 
-def _level2(models: Models, X_init, X_goal, cfg: PlanConfig, result: PlanResult) -> PlanResult:
+class _Feasibility:
+    """The kinematic check and refinement of one planning call: results cached per (state, action),
+    rejections counted per level and reason, time and refinement budget tracked."""
+
+    def __init__(self, kinematics: KinematicFeasibility, cfg: PlanConfig, result: PlanResult) -> None:
+        self.kinematics, self.cfg, self.result = kinematics, cfg, result
+        self.resolution = cfg.search.resolution
+        self.cache: dict[tuple[bytes, tuple], Infeasible | None] = {}
+        self.pruned: set[tuple[bytes, tuple]] = set()  # (state key, action) that failed refinement
+        result.rejected = {1: Counter(), 2: Counter()}
+        result.timings.setdefault("feasibility", 0.0)
+        result.timings.setdefault("refine", 0.0)
+
+    def action(self, X: np.ndarray, action) -> Infeasible | None:
+        """The check of one action in the predicted state X (cached)."""
+        action = tuple(int(v) for v in action)
+        key = (state_key(X, self.resolution), action)
+        if key in self.pruned:
+            return self.cache.get(key) or Infeasible.REFINE_MOTION
+        if key not in self.cache:
+            t = time.perf_counter()
+            self.cache[key] = self.kinematics.check(X, np.asarray([action], dtype=np.int64))[0]
+            self.result.timings["feasibility"] += time.perf_counter() - t
+        return self.cache[key]
+
+    def plan(self, trajectory: np.ndarray, actions) -> Infeasible | None:
+        """The first reason an action of the plan fails on its predicted state, or None."""
+        for X, a in zip(trajectory, actions):
+            reason = self.action(X, a)
+            if reason is not None:
+                return reason
+        return None
+
+    @property
+    def refinements_left(self) -> int:
+        return self.cfg.max_refinements - len(self.result.refinements)
+
+    def refine(self, level: int, trajectory: np.ndarray, actions) -> RefinementOutcome:
+        """Full refinement; a failure prunes its (predicted state, action) for the rest of the call."""
+        t = time.perf_counter()
+        outcome = self.kinematics.refine([tuple(int(v) for v in a) for a in actions])
+        self.result.timings["refine"] += time.perf_counter() - t
+        self.result.refinements.append({"level": level, "plan": [list(map(int, a)) for a in actions],
+                                        "failed_action": outcome.action_index,
+                                        "reason": None if outcome.reason is None else outcome.reason.value,
+                                        "message": outcome.message})
+        if not outcome.success:
+            k = outcome.action_index
+            key = (state_key(trajectory[k], self.resolution), tuple(int(v) for v in actions[k]))
+            self.pruned.add(key)
+            self.cache[key] = outcome.reason
+            self.result.rejected[level][outcome.reason] += 1
+        return outcome
+
+
+def _level2(models: Models, X_init, X_goal, cfg: PlanConfig, result: PlanResult,
+            feas: _Feasibility | None = None) -> PlanResult:
+    """Continuous search; with `feas`, infeasible successors are pruned and a found plan is refined,
+    searching again without the failing (state, action) while the refinement budget lasts."""
     t = time.perf_counter()
+    refine_before = result.timings.get("refine", 0.0)
     search_cfg = replace(cfg.search, eps=cfg.eps)
-    out = continuous_search(models.require_dynamics(), X_init, X_goal, search_cfg)
-    result.search = out
-    result.timings["search"] = time.perf_counter() - t
+    check = None if feas is None else feas.action
+    while True:
+        out = continuous_search(models.require_dynamics(), X_init, X_goal, search_cfg, check,
+                                frozenset() if feas is None else feas.pruned)
+        if feas is not None:
+            result.rejected[2].update(out.rejected)
+            if result.search is not None:  # a search again after a refinement failure: count all
+                for name in ("expanded", "generated", "duplicates", "predict_calls"):
+                    setattr(out, name, getattr(out, name) + getattr(result.search, name))
+        result.search = out
+        if not out.solved or feas is None or not out.plan:
+            break
+        if feas.refinements_left <= 0:
+            result.reasons.append(f"level 2: refinement budget ({cfg.max_refinements}) used up; the plan found "
+                                  "was not refined")
+            result.search.status, result.search.reason = "refinement_budget", "refinement budget used up"
+            break
+        outcome = feas.refine(2, out.trajectory, out.plan)
+        if outcome.success:
+            break
+        result.reasons.append(f"level 2: the plan found did not refine (action {outcome.action_index}: "
+                              f"{outcome.message}); searching again without that (state, action)")
+    # search time: the searches with their checks, not the refinements between them
+    result.timings["search"] = time.perf_counter() - t - (result.timings.get("refine", 0.0) - refine_before)
     if out.solved:
         return _take(result, out.plan, 2, out.trajectory, X_goal)
     result.reasons.append(f"level 2: {out.reason}")
@@ -182,11 +278,11 @@ def _timed(method: str, body: Callable[[PlanResult], PlanResult]) -> PlanResult:
 
 # --- the methods ------------------------------------------------------------------------------
 def _verify_group(models: Models, X_init, X_goal, index: int, candidate: Candidate, cfg: PlanConfig,
-                  limit: int) -> tuple[list[Candidate], Verification | None]:
+                  limit: int) -> tuple[list[Candidate], list[Verification]]:
     """Verify a ranked symbolic plan and its alternatives (plans through the same symbolic states, the
-    best of a beam search over its skeleton) in one shared rollout; returns them and the chosen
-    verification: of the verified ones, the smallest predicted error (the symbols cannot rank plans
-    through the same symbolic states; the Dynamics Model can)."""
+    best of a beam search over its skeleton) in one shared rollout; returns them and their verified
+    plans, smallest predicted error first (the symbols cannot rank plans through the same symbolic
+    states; the Dynamics Model can)."""
     group = [candidate]
     if limit > 0 and candidate.states is not None and candidate.actions:
         planner = models.symbolic_planner(cfg.backend, cfg.symbolic_time_limit)
@@ -197,48 +293,82 @@ def _verify_group(models: Models, X_init, X_goal, index: int, candidate: Candida
     checks = verify_many(models.require_dynamics(), X_init, X_goal, [c.actions for c in group], cfg.tau_verify)
     for c, v in zip(group, checks):
         c.error, c.verified = v.error, v.verified
-    passed = [v for v in checks if v.verified]
-    return group, min(passed, key=lambda v: v.error) if passed else None
+    return group, sorted((v for v in checks if v.verified), key=lambda v: v.error)
 
 
-def plan_bilevel(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig()) -> PlanResult:
-    """Algorithm 1: verified probabilistic symbolic plan, else continuous search."""
+def _feasible_choice(verified: list[Verification], feas: _Feasibility | None) -> Verification | None:
+    """The first verified plan (smallest error first) that passes the kinematic check on its predicted
+    states and then refines; without `feas`, the first verified plan."""
+    if feas is None:
+        return verified[0] if verified else None
+    for v in verified:
+        reason = feas.plan(v.trajectory, v.actions)
+        if reason is not None:
+            feas.result.rejected[1][reason] += 1
+            continue
+        if not v.actions:
+            return v
+        if feas.refinements_left <= 0:
+            return None
+        if feas.refine(1, v.trajectory, v.actions).success:
+            return v
+    return None
+
+
+def plan_bilevel(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig(),
+                 kinematics: KinematicFeasibility | None = None) -> PlanResult:
+    """Algorithm 1: verified probabilistic symbolic plan, else continuous search. With `kinematics`
+    (and cfg.feasibility) a verified plan must also pass the kinematic check on its predicted states
+    and refine, else the next one is tried; Level 2 then prunes infeasible successors and the
+    (state, action) pairs that failed refinement."""
     def body(result: PlanResult) -> PlanResult:
+        feas = _Feasibility(kinematics, cfg, result) if kinematics is not None and cfg.feasibility else None
         ranked = _level1_plans(models, X_init, X_goal, cfg, result)
-        t, chosen, checked = time.perf_counter(), None, []
+        t, chosen, checked, any_verified = time.perf_counter(), None, [], False
         for i, c in enumerate(ranked):  # decreasing frequency
             left = cfg.alternatives_total - sum(c.alternative_of is not None for c in checked)
-            group, v = _verify_group(models, X_init, X_goal, i, c, cfg, min(cfg.alternatives, left))
+            group, verified = _verify_group(models, X_init, X_goal, i, c, cfg, min(cfg.alternatives, left))
             checked += group
-            if v is not None and chosen is None:
-                chosen = v
-                if not cfg.verify_all:
+            any_verified = any_verified or bool(verified)
+            if chosen is None:
+                chosen = _feasible_choice(verified, feas)
+                if chosen is not None and not cfg.verify_all:
                     break
+            if feas is not None and feas.refinements_left <= 0 and chosen is None:
+                result.reasons.append(f"level 1: refinement budget ({cfg.max_refinements}) used up")
+                break
         result.candidates = checked + ranked[sum(c.alternative_of is None for c in checked):]  # + unchecked
         if ranked:
-            result.timings["verify"] = time.perf_counter() - t
+            result.timings["verify"] = time.perf_counter() - t - (
+                0.0 if feas is None else result.timings["feasibility"] + result.timings["refine"])
         if chosen is not None:
             return _take(result, chosen.actions, 1, chosen.trajectory, X_goal)
         if ranked:
             best = min(c.error for c in checked if c.error is not None)
             alts = sum(c.alternative_of is not None for c in checked)
-            result.reasons.append(f"level 1: none of the {len(ranked)} symbolic plans verified"
-                                  + (f" (nor {alts} alternatives through the same symbols)" if alts else "")
-                                  + f" (best predicted error {best * 100:.1f} cm, tau {cfg.tau_verify * 100:g} cm)")
-        return _level2(models, X_init, X_goal, cfg, result)
+            if any_verified and feas is not None:
+                result.reasons.append(f"level 1: no verified plan was kinematically feasible "
+                                      f"(rejected: {result.rejected_dict()['level 1']})")
+            else:
+                result.reasons.append(f"level 1: none of the {len(ranked)} symbolic plans verified"
+                                      + (f" (nor {alts} alternatives through the same symbols)" if alts else "")
+                                      + f" (best predicted error {best * 100:.1f} cm, tau {cfg.tau_verify * 100:g} cm)")
+        return _level2(models, X_init, X_goal, cfg, result, feas)
     return _timed("bilevel", body)
 
 
-def plan_bilevel_alg1(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig()) -> PlanResult:
+def plan_bilevel_alg1(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig(),
+                      kinematics: KinematicFeasibility | None = None) -> PlanResult:
     """The paper's Algorithm 1 exactly: ranked symbolic plans verified alone (no look-alike
     alternatives) and the empty plan allowed whenever Sigma_init = Sigma_goal."""
-    result = plan_bilevel(models, X_init, X_goal, replace(cfg, alternatives=0, nonempty=False))
+    result = plan_bilevel(models, X_init, X_goal, replace(cfg, alternatives=0, nonempty=False, feasibility=False))
     result.method = "bilevel_alg1"
     return result
 
 
 def _symbolic_only(method: str, probabilistic: bool):
-    def run(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig()) -> PlanResult:
+    def run(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig(),
+            kinematics: KinematicFeasibility | None = None) -> PlanResult:
         def body(result: PlanResult) -> PlanResult:
             result.candidates = _level1_plans(models, X_init, X_goal, replace(cfg, nonempty=False), result,
                                           probabilistic)
@@ -249,7 +379,7 @@ def _symbolic_only(method: str, probabilistic: bool):
             result.timings["verify"] = time.perf_counter() - t
             return _take(result, v.actions, 1, v.trajectory, X_goal)
         return _timed(method, body)
-    run.__doc__ = f"The {method} symbolic planner alone (top plan, unverified)."
+    run.__doc__ = f"The {method} symbolic planner alone (top plan, unverified; `kinematics` is ignored)."
     return run
 
 
@@ -257,19 +387,27 @@ plan_probabilistic = _symbolic_only("probabilistic", True)
 plan_deterministic = _symbolic_only("deterministic", False)
 
 
-def plan_cfs(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig()) -> PlanResult:
-    """Continuous forward search alone."""
-    return _timed("cfs", lambda result: _level2(models, X_init, X_goal, cfg, result))
+def plan_cfs(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig(),
+             kinematics: KinematicFeasibility | None = None) -> PlanResult:
+    """Continuous forward search alone; with `kinematics` (and cfg.feasibility) infeasible successors
+    are pruned and the plan is refined before it is returned."""
+    def body(result: PlanResult) -> PlanResult:
+        feas = _Feasibility(kinematics, cfg, result) if kinematics is not None and cfg.feasibility else None
+        return _level2(models, X_init, X_goal, cfg, result, feas)
+    return _timed("cfs", body)
 
 
-Planner = Callable[[Models, np.ndarray, np.ndarray, PlanConfig], PlanResult]
+Planner = Callable[..., PlanResult]  # (models, X_init, X_goal, cfg, kinematics=None) -> PlanResult
 METHODS: dict[str, Planner] = {"bilevel": plan_bilevel, "bilevel_alg1": plan_bilevel_alg1,
                                "probabilistic": plan_probabilistic, "deterministic": plan_deterministic,
                                "cfs": plan_cfs}
 
 
-def plan(method: str, models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig()) -> PlanResult:
-    """Run one of METHODS on (X_init, X_goal), both (n, 5) arrays."""
+def plan(method: str, models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig(),
+         kinematics: KinematicFeasibility | None = None) -> PlanResult:
+    """Run one of METHODS on (X_init, X_goal), both (n, 5) arrays. `kinematics` (e.g. a
+    tamp.feasibility.FeasibilityChecker that observed the scene of X_init) puts kinematic feasibility
+    into the planning loop of `cfs` and `bilevel` (unless cfg.feasibility is False)."""
     if method not in METHODS:
         raise ValueError(f"unknown planning method {method!r}; choose one of {', '.join(METHODS)}")
     X_init, X_goal = np.asarray(X_init, dtype=float), np.asarray(X_goal, dtype=float)
@@ -277,7 +415,7 @@ def plan(method: str, models: Models, X_init, X_goal, cfg: PlanConfig = PlanConf
         raise ValueError(f"X_init and X_goal must both be (n, 5), got {X_init.shape} and {X_goal.shape}")
     # an observed X_init may hold tilted blocks: checked as any scene, not as one placed upright
     check_problem(X_init, X_goal, where="plan()", n_max=getattr(models, "n_max", None), init_upright=False)
-    return METHODS[method](models, X_init, X_goal, cfg)
+    return METHODS[method](models, X_init, X_goal, cfg, kinematics=kinematics)
 
 
 # --- closed loop ------------------------------------------------------------------------------
@@ -308,12 +446,15 @@ def plan_closed_loop(method: str, models: Models, X_init, X_goal,
                      step: Callable[[PickPlace], np.ndarray], rounds: int,
                      cfg: PlanConfig = PlanConfig(),
                      on_round: Callable[[int, PlanResult], None] | None = None,
-                     planner: Callable[..., PlanResult] | None = None) -> ClosedLoopResult:
+                     planner: Callable[..., PlanResult] | None = None,
+                     kinematics: KinematicFeasibility | None = None) -> ClosedLoopResult:
     """Plan, execute the first action, observe, replan (at most `rounds` times); see the module doc.
 
     `step(action)` executes one action in the real (simulated) world and returns the observed (n, 5)
     state; `on_round(r, result)` is called after each planning call, before anything is executed.
     `planner` (default `plan`, same signature) lets a caller reuse a plan it already has.
+    `kinematics` is passed to every planning call; `step` must let it observe the new scene
+    (`FeasibilityChecker.observe`), since only the simulator knows the blocks' orientations.
     """
     X_goal = np.asarray(X_goal, dtype=float)
     out = ClosedLoopResult([], [], [np.asarray(X_init, dtype=float)], X_goal, cfg.eps)
@@ -322,7 +463,8 @@ def plan_closed_loop(method: str, models: Models, X_init, X_goal,
         if at_goal(X, X_goal, cfg.eps):
             out.reason = "the observed state is within eps of the goal"
             break
-        result = (planner or plan)(method, models, X, X_goal, cfg)
+        extra = {} if kinematics is None else {"kinematics": kinematics}
+        result = (planner or plan)(method, models, X, X_goal, cfg, **extra)
         out.rounds.append(result)
         if on_round is not None:
             on_round(r, result)

@@ -6,6 +6,8 @@ solutions by joint distance alone can flip the elbow or wrist between waypoints.
 """
 from __future__ import annotations
 
+from typing import Callable
+
 import numpy as np
 import ur_analytic_ik
 from pydrake.math import RigidTransform, RotationMatrix
@@ -42,33 +44,54 @@ def on_branch(q: np.ndarray) -> bool:
     return bool(np.sin(q[2]) > 0.0 and np.sin(q[4]) < 0.0)
 
 
-def _wrap_near(q: np.ndarray, q_ref: np.ndarray) -> np.ndarray | None:
-    """q shifted per joint by multiples of 2 pi to be nearest q_ref, or None outside the limits."""
+def _wrap_near(q: np.ndarray, q_ref: np.ndarray) -> np.ndarray:
+    """Rows of q (m, 6) shifted per joint by multiples of 2 pi to be nearest q_ref, then into the
+    limits where a shift of 2 pi allows; rows still outside the limits are NaN."""
     q = q_ref + (q - q_ref + np.pi) % (2 * np.pi) - np.pi
-    for i in range(6):
-        if q[i] > Q_UPPER[i]:
-            q[i] -= 2 * np.pi
-        if q[i] < Q_LOWER[i]:
-            q[i] += 2 * np.pi
-    if np.any(q < Q_LOWER - 1e-9) or np.any(q > Q_UPPER + 1e-9):
-        return None
+    q = np.where(q > Q_UPPER, q - 2 * np.pi, q)
+    q = np.where(q < Q_LOWER, q + 2 * np.pi, q)
+    outside = np.any((q < Q_LOWER - 1e-9) | (q > Q_UPPER + 1e-9), axis=1)
+    q[outside] = np.nan
     return q
 
 
 def analytic_ik(X_WTcp: RigidTransform, q_ref: np.ndarray) -> np.ndarray | None:
-    """The on-branch closed-form solution nearest q_ref, or None when there is none."""
-    solutions = ur_analytic_ik.ur10e.inverse_kinematics(flange_pose_in_base(X_WTcp))
-    best, best_dist = None, np.inf
-    for q in solutions:
-        if not np.all(np.isfinite(q)) or not on_branch(q):
-            continue
-        q = _wrap_near(np.asarray(q, dtype=float), q_ref)
+    """The on-branch closed-form solution nearest q_ref, or None when there is none (all eight
+    solutions filtered at once: this runs inside the planners' feasibility check)."""
+    solutions = np.asarray(ur_analytic_ik.ur10e.inverse_kinematics(flange_pose_in_base(X_WTcp)), dtype=float)
+    if solutions.size == 0:
+        return None
+    solutions = solutions.reshape(-1, 6)
+    keep = np.all(np.isfinite(solutions), axis=1) & (np.sin(solutions[:, 2]) > 0.0) & (np.sin(solutions[:, 4]) < 0.0)
+    if not keep.any():
+        return None
+    q_ref = np.asarray(q_ref, dtype=float)
+    q = _wrap_near(solutions[keep], q_ref)
+    dist = np.linalg.norm(q - q_ref, axis=1)
+    if np.all(np.isnan(dist)):
+        return None
+    return q[int(np.nanargmin(dist))]
+
+
+def solve_chain(
+    waypoints: list[tuple[str, RigidTransform]],
+    q_start: np.ndarray,
+    fallback: Callable[[RigidTransform, np.ndarray], np.ndarray | None] | None = None,
+) -> tuple[dict[str, np.ndarray], str | None]:
+    """Joint configurations of tcp poses solved in order, each on the branch and nearest the one
+    before (the first nearest q_start); `fallback(X_WTcp, q_ref)` (e.g. numerical IK) is tried when
+    the closed form has no solution. Returns (configurations found, name of the first pose without
+    a solution or None). Shared by the skill (`World.step`) and the feasibility check."""
+    qs: dict[str, np.ndarray] = {}
+    q_prev = q_start
+    for name, X_WTcp in waypoints:
+        q = analytic_ik(X_WTcp, q_prev)
+        if q is None and fallback is not None:
+            q = fallback(X_WTcp, q_prev)
         if q is None:
-            continue
-        dist = float(np.linalg.norm(q - q_ref))
-        if dist < best_dist:
-            best, best_dist = q, dist
-    return best
+            return qs, name
+        qs[name] = q_prev = q
+    return qs, None
 
 
 def drake_ik(

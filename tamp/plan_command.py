@@ -31,6 +31,7 @@ class PlanOptions:
     backend: str = "python"
     max_expansions: int = 5000
     time_limit: float = 30.0  # seconds for the continuous search
+    feasibility: bool = True  # kinematic check and refinement in the planning loop (cfs, bilevel)
 
 
 def fmt_action(a) -> str:
@@ -72,12 +73,33 @@ def print_result(result: PlanResult, tau: float, indent: str = "") -> None:
         print(f"{p}  action {k}: {fmt_action(a)}")
     for reason in result.reasons if not result.solved else []:
         print(f"{p}  {reason}")
-    stages = ("symbols", "symbolic", "verify", "search", "total")
+    if result.rejected is not None:
+        for level, counts in result.rejected_dict().items():
+            what = "candidate plans" if level == "level 1" else "successors"
+            text = ", ".join(f"{reason} {count}" for reason, count in counts.items()) or "none"
+            print(f"{p}  kinematic feasibility, {level}: {what} rejected: {text}")
+        for x in result.refinements:
+            outcome = "refined" if x["failed_action"] is None else \
+                f"failed at action {x['failed_action']} ({x['reason']}: {x['message']})"
+            print(f"{p}  full refinement of a level-{x['level']} plan of {len(x['plan'])} action(s): {outcome}")
+    stages = ("symbols", "symbolic", "verify", "search", "feasibility", "refine", "total")
     print(f"{p}  timings: " + ", ".join(f"{k} {_ms(result.timings[k])}" for k in stages if k in result.timings))
 
 
+def _checker(options: PlanOptions):
+    """The kinematic feasibility checker for the planner (None when it is off or unused)."""
+    if not options.feasibility or options.method not in ("cfs", "bilevel"):
+        return None
+    from tamp.feasibility import FeasibilityChecker
+
+    return FeasibilityChecker()
+
+
 def _open_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timeline) -> int:
-    result = plan(options.method, models, problem.X_init, problem.X_goal, cfg)
+    kinematics = _checker(options)
+    if kinematics is not None:
+        kinematics.reset(problem.X_init)
+    result = plan(options.method, models, problem.X_init, problem.X_goal, cfg, kinematics=kinematics)
     print_result(result, cfg.tau_verify)
     if not result.solved:
         return 1
@@ -117,10 +139,15 @@ def _closed_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timelin
     world.timeline = timeline
     X0 = world.reset(X=problem.X_init)
     infos = []
+    kinematics = _checker(options)
+    if kinematics is not None:
+        kinematics.observe(world.scene, world.q)
 
     def step(action):
         X, info = world.step(action)
         infos.append(info)
+        if kinematics is not None:
+            kinematics.observe(world.scene, world.q)
         print(f"  executed {fmt_action(action)}: {info.status}{': ' + info.reason if info.reason else ''}; "
               f"now {goal_error(X, problem.X_goal) * 100:.1f} cm from the goal")
         return X
@@ -132,7 +159,8 @@ def _closed_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timelin
         print(f"round {r}:")
         print_result(result, cfg.tau_verify, indent="  ")
 
-    out = plan_closed_loop(options.method, models, X0, problem.X_goal, step, rounds, cfg, on_round=show)
+    out = plan_closed_loop(options.method, models, X0, problem.X_goal, step, rounds, cfg, on_round=show,
+                           kinematics=kinematics)
     print(f"closed loop ended: {out.reason}")
     print(f"execution ({options.execute}): {len(out.executed)} action(s), final error {out.error * 100:.1f} cm "
           f"(max over objects) -> {'success' if out.success else 'failure'} (eps {cfg.eps * 100:g} cm)")
@@ -160,6 +188,7 @@ def run_plan(problem_path: Path, models_dir: Path, options: PlanOptions) -> int:
         check_output_file(options.replay, "--replay")
     models = load_models(models_dir, need_symbolic=options.method != "cfs")
     cfg = PlanConfig(n_domains=options.n_domains, seed=problem.seed, backend=options.backend,
+                     feasibility=options.feasibility,
                      search=SearchConfig(max_expansions=options.max_expansions, time_limit=options.time_limit))
     check_problem(problem.X_init, problem.X_goal, str(problem_path), n_max=models.n_max)  # the models' limit
     k = "?" if problem.k is None else problem.k
@@ -204,12 +233,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    "Downward, as in the paper) or fd-naive (one Fast Downward driver call per sampled domain)")
     p.add_argument("--max-expansions", type=positive_int, default=5000, help="continuous search node limit (default 5000)")
     p.add_argument("--time-limit", type=positive_float, default=30.0, help="continuous search time limit, s (default 30)")
+    p.add_argument("--no-feasibility", dest="feasibility", action="store_false",
+                   help="cfs and bilevel without kinematics in the planning loop (no feasibility check of actions "
+                   "on the predicted states, no refinement before a plan is returned)")
 
 
 def options_from_args(args: argparse.Namespace) -> PlanOptions:
     if args.replay is not None and args.replay.suffix.lower() not in (".html", ".htm"):
         raise ValueError(f"the replay is an HTML file; give a path ending in .html, got {args.replay}")
     return PlanOptions(args.method, args.execute, args.replan, args.rounds, args.replay, args.n_domains,
-                       args.backend, args.max_expansions, args.time_limit)
+                       args.backend, args.max_expansions, args.time_limit, args.feasibility)
 
 

@@ -20,7 +20,9 @@ from __future__ import annotations
 
 import heapq
 import time
-from dataclasses import dataclass
+from collections import Counter
+from dataclasses import dataclass, field
+from typing import Callable, Hashable
 
 import numpy as np
 
@@ -56,10 +58,17 @@ class SearchResult:
     predict_calls: int = 0
     best_error: float = float("inf")  # metres: smallest max-object goal distance among generated states
     time: float = 0.0  # seconds
+    rejected: Counter = field(default_factory=Counter)  # reason -> successors the feasibility check pruned
+    pruned: int = 0  # successors left out as (state, action) pairs known to fail refinement
+
 
     @property
     def solved(self) -> bool:
         return self.status == "solved"
+
+
+# feasible(X, action) -> None if the action is feasible in the predicted scene X, else why not (a reason)
+FeasibilityFn = Callable[[np.ndarray, tuple[int, int, int, int]], Hashable | None]
 
 
 def goal_oriented_actions(X: np.ndarray, X_goal: np.ndarray, misplaced: float = EPS_SUCCESS,
@@ -96,9 +105,21 @@ def predict_positions(model: DynamicsModel, X: np.ndarray, actions: np.ndarray, 
     return X[None, :, :3] + np.array(e).reshape(len(actions), len(X), 3), len(actions)
 
 
+def state_key(P: np.ndarray, resolution: float) -> bytes:
+    """Duplicate-detection key of positions P (n, 3): the grid cell of every coordinate."""
+    return np.round(np.asarray(P)[:, :3] / resolution).astype(np.int64).tobytes()
+
+
 def continuous_search(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarray,
-                      config: SearchConfig = SearchConfig()) -> SearchResult:
-    """Weighted A* from X_init to X_goal with the Dynamics Model as the transition."""
+                      config: SearchConfig = SearchConfig(), feasible: FeasibilityFn | None = None,
+                      pruned: set[tuple[bytes, tuple]] = frozenset()) -> SearchResult:
+    """Weighted A* from X_init to X_goal with the Dynamics Model as the transition.
+
+    `feasible` (optional, e.g. the kinematic check of tamp.feasibility) prunes successors whose action
+    is infeasible in its parent's predicted state. It is called lazily, when a successor is expanded
+    or reaches the goal, so only the edges the search actually follows are checked (a few per
+    expansion instead of every generated successor). `pruned` holds (state_key(X), action) pairs left
+    out altogether (e.g. known to fail refinement)."""
     t0 = time.perf_counter()
     X_init, X_goal = np.asarray(X_init, dtype=float), np.asarray(X_goal, dtype=float)
     if X_init.shape != X_goal.shape or X_init.ndim != 2 or X_init.shape[1] != 5:
@@ -110,7 +131,17 @@ def continuous_search(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarr
         return np.concatenate([P, types], axis=1)
 
     def key(P: np.ndarray) -> bytes:
-        return np.round(P / config.resolution).astype(np.int64).tobytes()
+        return state_key(P, config.resolution)
+
+    def infeasible(index: int) -> bool:
+        """Whether the action into node `index` fails the check in its parent's state (counted)."""
+        _, parent, action, _ = nodes[index]
+        if feasible is None or action is None:
+            return False
+        reason = feasible(full(nodes[parent][0]), action)
+        if reason is not None:
+            out.rejected[reason] += 1
+        return reason is not None
 
     def keys_of(Ps: np.ndarray) -> list[bytes]:
         """key() of each of the (B, n, 3) states, in one vectorized rounding."""
@@ -152,6 +183,9 @@ def continuous_search(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarr
         P, _, _, g = nodes[index]
         if best_g.get(key(P), -1) < g or g >= config.max_depth:
             continue  # reached again with fewer actions since it was pushed / too deep
+        if infeasible(index):
+            del best_g[key(P)]  # the state may still be reached by a feasible action
+            continue
         out.expanded += 1
         actions = goal_oriented_actions(full(P), X_goal, config.misplaced, config.eps) if config.prune else every
         if len(actions) == 0:
@@ -164,13 +198,20 @@ def continuous_search(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarr
         h = (dist.sum(axis=1) / config.h_unit).tolist()
         reached = np.all(dist < config.eps, axis=1).tolist()
         keys = keys_of(succ)
+        here = key(P) if pruned else b""
         for b, action in enumerate(actions.tolist()):
             k = keys[b]
             if best_g.get(k, config.max_depth + 1) <= g + 1:
                 out.duplicates += 1
                 continue
-            best_g[k] = g + 1
+            if pruned and (here, tuple(action)) in pruned:
+                out.pruned += 1
+                continue
             nodes.append((succ[b], index, tuple(action), g + 1))
+            if reached[b] and infeasible(len(nodes) - 1):
+                nodes.pop()
+                continue
+            best_g[k] = g + 1
             if reached[b]:
                 return finish("solved", f"solved: {g + 1} actions after {out.expanded} expansions",
                               len(nodes) - 1)

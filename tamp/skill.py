@@ -132,6 +132,14 @@ def grasp_pose(scene: Scene, action: PickPlace, config: WorldConfig) -> RigidTra
     return topdown(p, scene.yaw(i))
 
 
+def approach_poses(scene: Scene, action: PickPlace, config: WorldConfig) -> list[tuple[str, RigidTransform]]:
+    """The first two tcp poses of the action, known before anything is grasped: jaws open over the
+    grasp point (pre-grasp), then down to it (grasp). The same poses as in `pick_place_waypoints`."""
+    X_WGrasp = grasp_pose(scene, action, config)
+    return [("pregrasp", _raised_to(X_WGrasp, X_WGrasp.translation()[2] + config.approach_height)),
+            ("grasp", X_WGrasp)]
+
+
 def held_block(scene: Scene, X_WG: RigidTransform) -> int:
     """The block the closing jaws hold at X_WG (-1 if none): the grasp point lies inside it and
     its width across the jaws fits the opening."""
@@ -168,9 +176,10 @@ def pick_place_waypoints(scene: Scene, action: PickPlace, grasped: int, config: 
     carry_z = max(X_WGrasp.translation()[2] + config.approach_height,
                   place_z + config.approach_height,
                   tallest + config.carry_clearance + below)
-    up = lambda X, z: RigidTransform(X.rotation(), np.r_[X.translation()[:2], z])  # noqa: E731
+    up = _raised_to
+    (_, X_WPregrasp), _ = approach_poses(scene, action, config)
     return Waypoints(
-        pregrasp=up(X_WGrasp, X_WGrasp.translation()[2] + config.approach_height),
+        pregrasp=X_WPregrasp,
         grasp=X_WGrasp,
         liftoff=up(X_WGrasp, X_WGrasp.translation()[2] + config.lift_off),
         lift=up(X_WGrasp, carry_z),
@@ -180,6 +189,11 @@ def pick_place_waypoints(scene: Scene, action: PickPlace, grasped: int, config: 
         carried=carried,
         X_GC=X_GC,
     )
+
+
+def _raised_to(X: RigidTransform, z: float) -> RigidTransform:
+    """X moved vertically to height z (metres), orientation kept."""
+    return RigidTransform(X.rotation(), np.r_[X.translation()[:2], z])
 
 
 def _wrap(a: float) -> float:

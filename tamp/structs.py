@@ -7,7 +7,8 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
-from typing import NamedTuple
+from enum import Enum
+from typing import NamedTuple, Protocol, Sequence
 
 import numpy as np
 
@@ -125,3 +126,40 @@ class StepInfo:
 
 # Outcome codes, stable across versions (datasets store the integer).
 STATUSES = ("ok", "ik_failure", "motion_failure", "nothing_grasped")
+
+
+class Infeasible(str, Enum):
+    """Why an action was found infeasible: by the cheap check on a predicted scene (the first three)
+    or by full refinement (IK, motion planning, grasp, from tamp.refine)."""
+
+    NO_GRASP = "no_grasp"  # the grasp point does not lie on the picked block (jaws close on nothing or another)
+    IK = "ik"  # a waypoint has no closed-form IK solution on the skill's branch
+    COLLISION = "collision"  # a waypoint configuration collides with another block or the table
+    REFINE_IK = "refine_ik"
+    REFINE_MOTION = "refine_motion"
+    REFINE_GRASP = "refine_grasp"
+
+
+@dataclass(frozen=True)
+class RefinementOutcome:
+    """Result of fully refining a plan: None fields when every action refined."""
+
+    action_index: int | None = None  # first action that failed
+    reason: Infeasible | None = None
+    message: str = ""
+
+    @property
+    def success(self) -> bool:
+        return self.action_index is None
+
+
+class KinematicFeasibility(Protocol):
+    """What the planners need from the simulator side (tamp.feasibility.FeasibilityChecker): a cheap
+    check of actions in a predicted scene and full refinement of a plan from the observed scene.
+    The planner modules see only this protocol and so stay free of Drake."""
+
+    def check(self, X: np.ndarray, actions: np.ndarray) -> list[Infeasible | None]:
+        """Per action (B, 4) in the predicted scene X (n, 5): None if feasible, else why not."""
+
+    def refine(self, actions: Sequence[Sequence[int]]) -> RefinementOutcome:
+        """Fully refine the plan (IK, OMPL motions, grasps) from the observed scene."""

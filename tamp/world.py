@@ -17,12 +17,12 @@ from typing import Iterable
 import numpy as np
 from pydrake.math import RigidTransform
 
-from tamp.kinematics import Q_HOME, analytic_ik, drake_ik
+from tamp.kinematics import Q_HOME, drake_ik, solve_chain
 from tamp.motion import MotionPlanner
 from tamp.physics import BlockPhysics
 from tamp.plants import X_FlangeTcp, build_motion_scene, build_physics_scene
 from tamp.replay import Timeline
-from tamp.skill import Scene, Waypoints, grasp_pose, held_block, pick_place_waypoints, topdown
+from tamp.skill import Scene, Waypoints, approach_poses, held_block, pick_place_waypoints, topdown
 from tamp.structs import BLOCK_SIZES, LARGE, OFFSETS, SMALL, PickPlace, StepInfo, WorldConfig
 from tamp.validate import MAX_OBJECTS, check_scene
 
@@ -77,8 +77,11 @@ class World:
             self.timeline.start(self.scene, self.q)
         return self.scene.X()
 
-    def set_scene(self, scene: Scene, q: np.ndarray) -> None:
-        """Continue from an exact simulator state (block poses with orientation, arm joints)."""
+    def set_scene(self, scene: Scene, q: np.ndarray, motion_seed: int | None = None) -> None:
+        """Continue from an exact simulator state (block poses with orientation, arm joints); with
+        `motion_seed` the motion plans from here depend on that seed alone, as after `reset(seed=...)`."""
+        if motion_seed is not None:
+            self._motion_seed, self._steps = int(motion_seed), 0
         if self.timeline is not None:
             self.timeline.start(scene, q)
         self.scene = Scene(np.array(scene.types), list(scene.X_WB))
@@ -108,6 +111,10 @@ class World:
                                    cfg.settle_angular_speed, cfg.settle_window, cfg.settle_max_time)
             self._layouts[key] = (planner, physics)
         return self._layouts[key]
+
+    def motion_planner(self, types: np.ndarray) -> MotionPlanner:
+        """The cached motion planner (collision checker) of a scene layout (block types)."""
+        return self._layout(types)[0]
 
     def actions(self) -> list[PickPlace]:
         """All 9 n^2 pick-place actions of the current scene."""
@@ -140,8 +147,8 @@ class World:
         planner.set_block_poses(scene.X_WB)
 
         # Approach: jaws open over the grasp point, then down to it.
-        X_grasp = grasp_pose(scene, action, self.config)
-        approach = [("pregrasp", _raised(X_grasp, self.config.approach_height)), ("grasp", X_grasp)]
+        approach = approach_poses(scene, action, self.config)
+        X_grasp = dict(approach)["grasp"]
         qs = self._solve_ik(approach, info)
         if qs is None:
             return self._unchanged(info, t_start)
@@ -249,26 +256,20 @@ class World:
 
     def _solve_ik(self, waypoints, info: StepInfo, q_start=None, skip=(), known=None) -> dict | None:
         t0 = time.perf_counter()
-        qs = dict(known or {})
-        q_prev = self.q if q_start is None else q_start
         planner, _ = self._layout(self.scene.types)
-        ok = True
-        for name, X in waypoints:
-            if name in skip:
-                continue
-            q = analytic_ik(X, q_prev)
-            if q is None:
-                q = self._numerical_ik(planner, X, q_prev)
-            info.ik_success[name] = q is not None
-            if q is None:
-                p = X.translation()
-                info.status = "ik_failure"
-                info.reason = f"no IK solution for the {name} pose at ({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) m"
-                ok = False
-                break
-            qs[name] = q_prev = q
+        todo = [(name, X) for name, X in waypoints if name not in skip]
+        found, failed = solve_chain(todo, self.q if q_start is None else q_start,
+                                    lambda X, q_ref: self._numerical_ik(planner, X, q_ref))
+        qs = {**(known or {}), **found}
+        for name in found:
+            info.ik_success[name] = True
+        if failed is not None:
+            info.ik_success[failed] = False
+            p = dict(todo)[failed].translation()
+            info.status = "ik_failure"
+            info.reason = f"no IK solution for the {failed} pose at ({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) m"
         info.timings["ik"] = info.timings.get("ik", 0.0) + time.perf_counter() - t0
-        return qs if ok else None
+        return qs if failed is None else None
 
     @staticmethod
     def _numerical_ik(planner: MotionPlanner, X_WTcp: RigidTransform, q_seed: np.ndarray):
@@ -298,10 +299,6 @@ class World:
             info.timings["motion"] = info.timings.get("motion", 0.0) + time.perf_counter() - t_motion
         info.timings["total"] = time.perf_counter() - t_start
         return self.scene.X(), info
-
-
-def _raised(X: RigidTransform, dz: float) -> RigidTransform:
-    return RigidTransform(X.rotation(), X.translation() + [0.0, 0.0, dz])
 
 
 def validate_action(action, n: int) -> PickPlace:

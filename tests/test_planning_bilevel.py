@@ -165,10 +165,13 @@ def test_unsolvable_problem_ends_within_limits_with_reasons_from_both_levels(dom
     assert result.search.status == "node_limit" and result.search.expanded == 300
     assert len(result.reasons) == 2
     assert result.reasons[0].startswith("level 1:") and result.reasons[1].startswith("level 2: node limit")
-    # a time limit ends it too
+    # a time limit ends it too (four blocks: a search space the stub world does not exhaust in 0.3 s)
+    X4 = np.array([[0.6, 0.0, 0.025, 1, 0], [0.7, 0.1, 0.025, 1, 0], [0.8, -0.2, 0.025, 1, 0], [0.5, 0.3, 0.025, 0, 1]])
+    goal4 = X4.copy()
+    goal4[0, :2] = (1.0, 0.5)
     cfg = PlanConfig(n_domains=20, search=SearchConfig(max_expansions=10**9, time_limit=0.3))
     t0 = time.perf_counter()
-    result = plan("cfs", models(domain), X_INIT, goal, cfg)
+    result = plan("cfs", models(domain), X4, goal4, cfg)
     assert time.perf_counter() - t0 < 2.0 and result.search.status == "time_limit"
     assert result.reasons == [f"level 2: {result.search.reason}"]
 
@@ -242,3 +245,68 @@ def test_the_symbolic_search_prefers_the_operator_more_likely_to_give_the_needed
             plans[objective] = steps_to_actions(domain, out.plan, 2)
         assert plans["likely"] == [likely]
         assert plans["shortest"] == [(0, 0, 1, 0)]
+
+
+class StubKinematics:
+    """The planner's view of kinematic feasibility (tamp.structs.KinematicFeasibility), scripted:
+    `infeasible` actions fail the cheap check, plans starting with `unrefinable` fail refinement."""
+
+    def __init__(self, infeasible=(), unrefinable=()):
+        self.infeasible, self.unrefinable = set(infeasible), set(unrefinable)
+        self.refined: list[list[tuple]] = []
+
+    def check(self, X, actions):
+        from tamp.structs import Infeasible
+
+        return [Infeasible.NO_GRASP if tuple(map(int, a)) in self.infeasible else None
+                for a in np.asarray(actions).reshape(-1, 4)]
+
+    def refine(self, actions):
+        from tamp.structs import Infeasible, RefinementOutcome
+
+        actions = [tuple(map(int, a)) for a in actions]
+        self.refined.append(actions)
+        if actions and actions[0] in self.unrefinable:
+            return RefinementOutcome(0, Infeasible.REFINE_MOTION, "motion [lift]: blocked")
+        return RefinementOutcome()
+
+
+LOOSE = PlanConfig(n_domains=100, seed=0, tau_verify=0.1, **PAPER)  # both ranked plans verify (9 cm, 0 cm)
+
+
+def test_a_refinement_failure_of_the_first_level1_candidate_returns_the_second(domain):
+    from tamp.structs import Infeasible
+
+    first = plan("bilevel", models(domain), X_INIT, A_ON_B, LOOSE)
+    assert first.level == 1 and first.plan == [(0, 0, 1, 1)]  # without kinematics: the most frequent plan
+    kin = StubKinematics(unrefinable={(0, 0, 1, 1)})
+    result = plan("bilevel", models(domain), X_INIT, A_ON_B, LOOSE, kinematics=kin)
+    assert result.level == 1 and result.plan == [(0, 0, 1, 0)]
+    assert kin.refined == [[(0, 0, 1, 1)], [(0, 0, 1, 0)]]  # the second is refined before it is returned
+    assert result.rejected[1][Infeasible.REFINE_MOTION] == 1
+    assert [r["failed_action"] for r in result.refinements] == [0, None]
+    assert result.to_dict()["rejected"] == {"level 1": {"refine_motion": 1}, "level 2": {}}
+    # the switch: feasibility off, the kinematics are not consulted
+    off = plan("bilevel", models(domain), X_INIT, A_ON_B, replace(LOOSE, feasibility=False), kinematics=kin)
+    assert off.plan == [(0, 0, 1, 1)] and off.rejected is None and len(kin.refined) == 2
+
+
+def test_a_level1_candidate_failing_the_check_is_not_refined_and_the_next_is_returned(domain):
+    from tamp.structs import Infeasible
+
+    kin = StubKinematics(infeasible={(0, 0, 1, 1)})
+    result = plan("bilevel", models(domain), X_INIT, A_ON_B, LOOSE, kinematics=kin)
+    assert result.plan == [(0, 0, 1, 0)] and kin.refined == [[(0, 0, 1, 0)]]
+    assert result.rejected[1] == {Infeasible.NO_GRASP: 1}
+
+
+def test_refinement_failures_send_the_planner_to_level2_with_the_failing_pair_pruned(domain):
+    # every plan starting with the direct action fails refinement: Level 1 has nothing left, Level 2
+    # must find a plan that starts otherwise
+    kin = StubKinematics(unrefinable={(0, 0, 1, 0), (0, 0, 1, 1)})
+    result = plan("bilevel", models(domain), X_INIT, A_ON_B, replace(PlanConfig(seed=0), max_refinements=6),
+                  kinematics=kin)
+    assert result.solved and result.level == 2 and result.plan[0] not in kin.unrefinable
+    assert result.refinements[0]["level"] == 1 and result.refinements[0]["plan"] == [[0, 0, 1, 0]]
+    assert result.refinements[-1]["failed_action"] is None and kin.refined[-1] == [tuple(a) for a in result.plan]
+    assert goal_error(execute(X_INIT, result.plan), A_ON_B) < 0.05

@@ -82,3 +82,26 @@ def test_depth_limit_and_exhaustion_are_reported():
     assert continuous_search(StubModel(), X, X).plan == []
     with pytest.raises(ValueError, match="must both be"):
         continuous_search(StubModel(), X, X[:2])
+
+
+def test_a_search_that_must_avoid_an_infeasible_action_finds_another_plan():
+    G = goal_after([(1, 0, 2, 0)])  # cube 1 onto cube 2: one action away
+    assert continuous_search(StubModel(), X, G).plan == [(1, 0, 2, 0)]
+
+    def feasible(X_pred, action):  # the kinematic check says the direct action is infeasible
+        return "collision" if tuple(action) == (1, 0, 2, 0) else None
+
+    out = continuous_search(StubModel(), X, G, feasible=feasible)
+    assert out.solved and (1, 0, 2, 0) not in out.plan
+    assert out.rejected["collision"] >= 1
+    assert goal_error(rollout(StubModel(), X, out.plan)[-1], G) < out_eps()
+    # a (state, action) pair known to fail refinement is never generated
+    from tamp.search import state_key
+
+    pruned = {(state_key(X, SearchConfig().resolution), (1, 0, 2, 0))}
+    again = continuous_search(StubModel(), X, G, pruned=pruned)
+    assert again.solved and again.plan[0] != (1, 0, 2, 0) and again.pruned >= 1
+
+
+def out_eps() -> float:
+    return SearchConfig().eps

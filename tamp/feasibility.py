@@ -1,0 +1,171 @@
+"""Kinematic feasibility of pick-place actions in a predicted scene, for the planners.
+
+A predicted state X (n, 5) holds positions only; the check rebuilds a scene from them with each
+block's orientation carried over from the last observed scene (the state has no yaw), and then asks,
+with the skill's own geometry (`tamp.skill`) and IK (`tamp.kinematics.solve_chain`, closed form on the
+skill's branch, no numerical fallback):
+
+1. grasp contact: does the grasp point lie on the picked block (`skill.held_block`)?
+2. IK: does every waypoint (pre-grasp ... retreat) have a solution on the branch?
+3. collision: is every waypoint configuration free of the other blocks and the table (Drake's
+   collision checker of the `fast` world, one per scene layout, block poses set per query), with the
+   carried blocks attached while they are carried?
+
+No physics is simulated and no motion is planned: what happens after release stays the Dynamics
+Model's prediction. `FeasibilityChecker.refine` is the full refinement (`tamp.refine`: IK, OMPL
+motions, grasps) of a plan from the observed scene, which the planners run before returning a plan.
+The planners see this class only through `tamp.structs.KinematicFeasibility`.
+"""
+from __future__ import annotations
+
+import dataclasses
+import time
+from typing import Sequence
+
+import numpy as np
+from pydrake.math import RigidTransform
+
+from tamp.kinematics import Q_HOME, solve_chain
+from tamp.motion import MotionPlanner
+from tamp.plants import X_FlangeTcp, build_motion_scene
+from tamp.skill import Scene, approach_poses, held_block, pick_place_waypoints
+from tamp.structs import BLOCK_SIZES, Infeasible, PickPlace, RefinementOutcome, WorldConfig
+from tamp.world import World
+
+# Collision set-up of each waypoint configuration, as `World.step` plans the motions through it.
+WITH_ALL_BLOCKS = ("pregrasp", "grasp")  # jaws open around the picked block
+CARRYING = ("liftoff", "lift", "preplace", "place")  # carried blocks attached to the gripper
+AFTER_RELEASE = ("retreat",)  # carried blocks released below the jaws: not obstacles
+MAX_CARRY_PLANNERS = 48  # collision checkers kept with carried blocks attached (a few grasps repeat)
+REFINE_REASONS = {"ik": Infeasible.REFINE_IK, "motion": Infeasible.REFINE_MOTION, "grasp": Infeasible.REFINE_GRASP}
+
+
+class FeasibilityChecker:
+    """Cheap per-action check on predicted scenes, and full refinement, for one observed scene at a time.
+
+    Call `reset(X_init)` (blocks upright, settled, as `tamp.refine.refine(plan, X_init)` starts) or
+    `observe(scene, q)` (an exact simulator state, e.g. in closed loop) before planning from it.
+    """
+
+    def __init__(self, world: World | None = None, config: WorldConfig | None = None) -> None:
+        """`world`: a `fast` World whose Drake plants are reused (ideally with simplify_paths=True,
+        the world refinement uses); by default one is made from `config`."""
+        if world is None:
+            world = World(dataclasses.replace(config or WorldConfig(), fidelity="fast", simplify_paths=True))
+        if world.config.fidelity != "fast":
+            raise ValueError("FeasibilityChecker needs a fast World")
+        self.world = world
+        self.config = world.config
+        self.scene: Scene | None = None
+        self.q = Q_HOME.copy()
+        self._X_init: np.ndarray | None = None  # set by reset(): refine from X_init as tamp.refine does
+        self.num_checks = 0
+        self.check_time_s = 0.0
+        # Attaching a shape to Drake's checker costs ~0.5 ms, more than the check itself, and the
+        # same grasp (carried blocks' poses in the gripper) recurs across predicted scenes: one
+        # checker per (layout, grasp) keeps its shapes attached.
+        self._carry_planners: dict[tuple, MotionPlanner] = {}
+
+    # --- the observed scene ----------------------------------------------------------------------
+    def reset(self, X_init: np.ndarray) -> Scene:
+        """Observe the scene `tamp.refine.refine(plan, X_init)` starts from (same seed: same motions)."""
+        self.world.rng = np.random.default_rng(0)
+        self.world.reset(X=X_init)
+        self.scene, self.q = self.world.scene, self.world.q.copy()
+        self._X_init = np.array(X_init, dtype=float)
+        return self.scene
+
+    def observe(self, scene: Scene, q: np.ndarray | None = None) -> None:
+        """Plan from an exact simulator state (block poses with orientation, arm joints)."""
+        self.scene = Scene(np.array(scene.types), list(scene.X_WB))
+        self.q = Q_HOME.copy() if q is None else np.array(q, dtype=float)
+        self._X_init = None
+
+    def predicted_scene(self, X: np.ndarray) -> Scene:
+        """Positions from X, orientations carried over from the observed scene."""
+        if self.scene is None:
+            raise RuntimeError("call FeasibilityChecker.reset() or observe() before checking actions")
+        X = np.asarray(X, dtype=float)
+        if len(X) != self.scene.n:
+            raise ValueError(f"X has {len(X)} objects, the observed scene {self.scene.n}")
+        return Scene(self.scene.types, [RigidTransform(X_WB.rotation(), p) for X_WB, p in zip(self.scene.X_WB, X[:, :3])])
+
+    # --- the cheap check ---------------------------------------------------------------------------
+    def check(self, X: np.ndarray, actions) -> list[Infeasible | None]:
+        """Per action (B, 4) in the predicted scene X (n, 5): None if feasible, else the first reason."""
+        t0 = time.perf_counter()
+        scene = self.predicted_scene(X)
+        out = [self.check_scene(scene, PickPlace(*(int(v) for v in a))) for a in np.asarray(actions).reshape(-1, 4)]
+        self.num_checks += len(out)
+        self.check_time_s += time.perf_counter() - t0
+        return out
+
+    def check_scene(self, scene: Scene, action: PickPlace) -> Infeasible | None:
+        """The check of one action in an exact scene (cheapest stage first)."""
+        cfg = self.config
+        approach = approach_poses(scene, action, cfg)
+        if held_block(scene, dict(approach)["grasp"]) != action.pick:
+            return Infeasible.NO_GRASP
+        wp = pick_place_waypoints(scene, action, action.pick, cfg)
+        named = wp.named()
+        qs, failed = solve_chain(named, Q_HOME)
+        if failed is not None:
+            return Infeasible.IK
+        planner = self.world.motion_planner(scene.types)
+        planner.detach()
+        planner.set_block_poses(scene.X_WB)
+        if not all(planner.is_valid(qs[name]) for name in WITH_ALL_BLOCKS):
+            return Infeasible.COLLISION
+        planner.set_block_poses(scene.X_WB, parked=tuple(wp.carried))
+        if not all(planner.is_valid(qs[name]) for name in AFTER_RELEASE):
+            return Infeasible.COLLISION
+        shapes = [(BLOCK_SIZES[int(scene.types[c])], X_FlangeTcp @ X) for c, X in zip(wp.carried, wp.X_GC)]
+        if len(shapes) > 1:  # a stack: its shape varies with the predicted scene, attach it for this check
+            planner.attach(shapes)
+            try:
+                return None if all(planner.is_valid(qs[name]) for name in CARRYING) else Infeasible.COLLISION
+            finally:
+                planner.detach()
+        carrying = self._carry_planner(scene.types, shapes)
+        carrying.set_block_poses(scene.X_WB, parked=tuple(wp.carried))
+        return None if all(carrying.is_valid(qs[name]) for name in CARRYING) else Infeasible.COLLISION
+
+    def _carry_planner(self, types: np.ndarray, shapes: list[tuple[tuple, RigidTransform]]) -> MotionPlanner:
+        """A collision checker of a layout (block types) with `shapes` attached to the gripper, kept:
+        one grasped block's pose in the gripper takes a few values only (offset -1, 0, +1)."""
+        key = (tuple(int(t) for t in types),
+               tuple((size, (np.round(X.GetAsMatrix34(), 3) + 0.0).tobytes()) for size, X in shapes))  # + 0.0: no -0.0
+        planner = self._carry_planners.pop(key, None)
+        if planner is None:
+            if len(self._carry_planners) >= MAX_CARRY_PLANNERS:
+                self._carry_planners.pop(next(iter(self._carry_planners)))  # least recently used
+            cfg = self.config
+            planner = MotionPlanner(build_motion_scene(types, cfg.padding), cfg.joint_step, cfg.padding)
+            planner.attach(shapes)
+        self._carry_planners[key] = planner
+        return planner
+
+    # --- full refinement ---------------------------------------------------------------------------
+    def refine(self, actions: Sequence[Sequence[int]]) -> RefinementOutcome:
+        """Refine the plan (tamp.refine: IK, OMPL motions, grasps) from the observed scene."""
+        from tamp.refine import refine
+
+        if self.scene is None:
+            raise RuntimeError("call FeasibilityChecker.reset() or observe() before refining a plan")
+        plan = [PickPlace(*(int(v) for v in a)) for a in actions]
+        if not plan:
+            return RefinementOutcome()
+        if self._X_init is not None:
+            self.world.rng = np.random.default_rng(0)
+            refined = refine(plan, self._X_init, world=self.world)
+        else:
+            self.world.set_scene(self.scene, self.q, motion_seed=0)
+            refined = refine(plan, world=self.world, scene=self.scene, q_start=self.q)
+        f = refined.failure
+        if f is None:
+            return RefinementOutcome()
+        return RefinementOutcome(f.action_index, REFINE_REASONS.get(f.stage, Infeasible.REFINE_MOTION),
+                                 f"{f.stage} [{f.where}]: {f.reason}")
+
+
+__all__ = ["FeasibilityChecker"]

@@ -1,0 +1,54 @@
+"""The kinematic feasibility check on predicted scenes (Drake): grasp contact, IK, waypoint collisions,
+and its agreement with the skill on the cases it must catch."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tamp.feasibility import FeasibilityChecker
+from tamp.structs import Infeasible, PickPlace
+
+CUBE, BAR = [1, 0], [0, 1]
+
+
+@pytest.fixture(scope="module")
+def checker():
+    return FeasibilityChecker()
+
+
+def test_an_action_whose_grasp_point_misses_its_block_is_rejected(checker):
+    X = np.array([[0.6, -0.1, 0.025, *CUBE], [0.7, 0.15, 0.025, *BAR]])
+    checker.reset(X)
+    # a cube picked 7.5 cm off its centre: the jaws close on nothing
+    assert checker.check(X, [(0, 1, 1, 0), (0, -1, 1, 0)]) == [Infeasible.NO_GRASP] * 2
+    # the same cube at its centre, and the bar at either end, are held
+    assert checker.check(X, [(0, 0, 1, 0), (1, 1, 0, 0), (1, -1, 1, 1)]) == [None] * 3
+    # the skill agrees: the jaws close on nothing and nothing changes
+    X_after, info = checker.world.step(PickPlace(0, 1, 1, 0))
+    assert info.status == "nothing_grasped"
+
+
+def test_the_check_uses_the_predicted_positions_not_the_observed_ones(checker):
+    X = np.array([[0.6, -0.1, 0.025, *CUBE], [0.7, 0.15, 0.025, *BAR]])
+    checker.reset(X)
+    predicted = X.copy()
+    predicted[0, :3] = [0.7, 0.15, 0.075]  # the Dynamics Model says: the cube is now on the bar's centre
+    # picking the bar at its centre would close the jaws around the cube on top: the gripper collides
+    assert checker.check(predicted, [(1, 0, 0, 0)]) == [Infeasible.COLLISION]
+    assert checker.check(X, [(1, 0, 0, 0)]) == [None]
+    # the cube on top is held (its grasp point lies on it)
+    assert checker.check(predicted, [(0, 0, 1, 1)]) == [None]
+
+
+def test_a_target_out_of_reach_fails_ik(checker):
+    X = np.array([[0.6, 0.0, 0.025, *CUBE], [1.75, 0.0, 0.025, *CUBE]])
+    checker.reset(X)
+    assert checker.check(X, [(0, 0, 1, 0)]) == [Infeasible.IK]
+
+
+def test_refine_reports_the_failing_action(checker):
+    X = np.array([[0.6, -0.1, 0.025, *CUBE], [0.7, 0.15, 0.025, *BAR]])
+    checker.reset(X)
+    assert checker.refine([(0, 0, 1, 0)]).success
+    out = checker.refine([(1, 0, 1, 1), (0, 1, 1, 0)])  # the second picks the cube 7.5 cm off: nothing
+    assert (out.action_index, out.reason) in ((1, Infeasible.REFINE_GRASP), (1, Infeasible.REFINE_MOTION))
