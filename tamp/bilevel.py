@@ -217,7 +217,7 @@ class _Feasibility:
     def refine(self, level: int, trajectory: np.ndarray, actions) -> RefinementOutcome:
         """Full refinement; a failure prunes its (predicted state, action) for the rest of the call."""
         t = time.perf_counter()
-        outcome = self.kinematics.refine([tuple(int(v) for v in a) for a in actions])
+        outcome = self.kinematics.refine([tuple(int(v) for v in a) for a in actions], trajectory)
         self.result.timings["refine"] += time.perf_counter() - t
         self.result.refinements.append({"level": level, "plan": [list(map(int, a)) for a in actions],
                                         "failed_action": outcome.action_index,

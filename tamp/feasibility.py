@@ -12,8 +12,9 @@ skill's branch, no numerical fallback):
    carried blocks attached while they are carried?
 
 No physics is simulated and no motion is planned: what happens after release stays the Dynamics
-Model's prediction. `FeasibilityChecker.refine` is the full refinement (`tamp.refine`: IK, OMPL
-motions, grasps) of a plan from the observed scene, which the planners run before returning a plan.
+Model's prediction. `FeasibilityChecker.refine` is the full refinement (IK, OMPL motions, grasps) of a
+plan, which the planners run before returning it: each action's motions are planned in the scene the
+Dynamics Model predicts before it, again without physics.
 The planners see this class only through `tamp.structs.KinematicFeasibility`.
 """
 from __future__ import annotations
@@ -28,6 +29,7 @@ from pydrake.math import RigidTransform
 from tamp.kinematics import Q_HOME, solve_chain
 from tamp.motion import MotionPlanner
 from tamp.plants import X_FlangeTcp, build_motion_scene
+from tamp.refine import FAILURE_STAGES, failed_at
 from tamp.skill import Scene, approach_poses, held_block, pick_place_waypoints
 from tamp.structs import BLOCK_SIZES, Infeasible, PickPlace, RefinementOutcome, WorldConfig
 from tamp.world import World
@@ -58,7 +60,6 @@ class FeasibilityChecker:
         self.config = world.config
         self.scene: Scene | None = None
         self.q = Q_HOME.copy()
-        self._X_init: np.ndarray | None = None  # set by reset(): refine from X_init as tamp.refine does
         self.num_checks = 0
         self.check_time_s = 0.0
         # Attaching a shape to Drake's checker costs ~0.5 ms, more than the check itself, and the
@@ -68,18 +69,16 @@ class FeasibilityChecker:
 
     # --- the observed scene ----------------------------------------------------------------------
     def reset(self, X_init: np.ndarray) -> Scene:
-        """Observe the scene `tamp.refine.refine(plan, X_init)` starts from (same seed: same motions)."""
+        """Observe the scene X_init places upright, as `tamp.refine.refine(plan, X_init)` starts."""
         self.world.rng = np.random.default_rng(0)
         self.world.reset(X=X_init)
         self.scene, self.q = self.world.scene, self.world.q.copy()
-        self._X_init = np.array(X_init, dtype=float)
         return self.scene
 
     def observe(self, scene: Scene, q: np.ndarray | None = None) -> None:
         """Plan from an exact simulator state (block poses with orientation, arm joints)."""
         self.scene = Scene(np.array(scene.types), list(scene.X_WB))
         self.q = Q_HOME.copy() if q is None else np.array(q, dtype=float)
-        self._X_init = None
 
     def predicted_scene(self, X: np.ndarray) -> Scene:
         """Positions from X, orientations carried over from the observed scene."""
@@ -146,26 +145,34 @@ class FeasibilityChecker:
         return planner
 
     # --- full refinement ---------------------------------------------------------------------------
-    def refine(self, actions: Sequence[Sequence[int]]) -> RefinementOutcome:
-        """Refine the plan (tamp.refine: IK, OMPL motions, grasps) from the observed scene."""
-        from tamp.refine import refine
+    def refine(self, actions: Sequence[Sequence[int]], trajectory: np.ndarray | None = None) -> RefinementOutcome:
+        """Full refinement of a plan: IK, OMPL motions (the skill's, with the carried blocks attached)
+        and grasps, action by action, without physics.
 
+        With `trajectory` ((len(actions) + 1, n, 5), the Dynamics Model's predicted states along the
+        plan), action k's motions are planned in the scene predicted before it (orientations carried
+        over from the observation; action 0 in the observed scene), from the arm configuration the
+        previous action's retreat ends in: what happens after a release stays the prediction.
+        Without it, each action is planned in the scene the previous one leaves with its released
+        blocks where the gripper let them go. The simulator decides what really happens only when
+        the plan is executed."""
         if self.scene is None:
             raise RuntimeError("call FeasibilityChecker.reset() or observe() before refining a plan")
         plan = [PickPlace(*(int(v) for v in a)) for a in actions]
-        if not plan:
-            return RefinementOutcome()
-        if self._X_init is not None:
-            self.world.rng = np.random.default_rng(0)
-            refined = refine(plan, self._X_init, world=self.world)
-        else:
-            self.world.set_scene(self.scene, self.q, motion_seed=0)
-            refined = refine(plan, world=self.world, scene=self.scene, q_start=self.q)
-        f = refined.failure
-        if f is None:
-            return RefinementOutcome()
-        return RefinementOutcome(f.action_index, REFINE_REASONS.get(f.stage, Infeasible.REFINE_MOTION),
-                                 f"{f.stage} [{f.where}]: {f.reason}")
+        if trajectory is not None and len(trajectory) < len(plan):
+            raise ValueError(f"a trajectory of {len(trajectory)} states for {len(plan)} actions")
+        scene, q = self.scene, self.q
+        for k, action in enumerate(plan):
+            if k > 0 and trajectory is not None:
+                scene = self.predicted_scene(trajectory[k])
+            self.world.set_scene(scene, q, motion_seed=k)
+            _, info = self.world.step(action, settle=False)
+            if info.status != "ok" or not info.motion_success.get("retreat", False):
+                stage = FAILURE_STAGES.get(info.status, "motion")
+                reason = info.reason or "the retreat after release was blocked"
+                return RefinementOutcome(k, REFINE_REASONS[stage], f"{stage} [{failed_at(info)}]: {reason}")
+            scene, q = self.world.scene, self.world.q
+        return RefinementOutcome()
 
 
 __all__ = ["FeasibilityChecker"]

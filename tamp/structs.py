@@ -161,5 +161,6 @@ class KinematicFeasibility(Protocol):
     def check(self, X: np.ndarray, actions: np.ndarray) -> list[Infeasible | None]:
         """Per action (B, 4) in the predicted scene X (n, 5): None if feasible, else why not."""
 
-    def refine(self, actions: Sequence[Sequence[int]]) -> RefinementOutcome:
-        """Fully refine the plan (IK, OMPL motions, grasps) from the observed scene."""
+    def refine(self, actions: Sequence[Sequence[int]], trajectory: np.ndarray | None = None) -> RefinementOutcome:
+        """Fully refine the plan (IK, OMPL motions, grasps) from the observed scene, each action in
+        the scene `trajectory` (the predicted states along the plan) gives before it; no physics."""

@@ -131,11 +131,18 @@ class World:
         return self.scene
 
     # --- the skill ---------------------------------------------------------------------------
-    def step(self, action: PickPlace | Iterable[int]) -> tuple[np.ndarray, StepInfo]:
-        """Plan and execute one pick-place; returns the next state X and what happened."""
+    def step(self, action: PickPlace | Iterable[int], settle: bool = True) -> tuple[np.ndarray, StepInfo]:
+        """Plan and execute one pick-place; returns the next state X and what happened.
+
+        `settle=False` (the fast world only) plans the same motions but simulates no physics: the
+        released blocks stay where the gripper let them go, and the retreat is planned from there.
+        The planners' refinement uses it, so that what happens after a release stays the Dynamics
+        Model's prediction."""
         scene = self._require_scene()
         action = validate_action(action, scene.n)
         if self._planner is not None:
+            if not settle:
+                raise ValueError("settle=False plans without physics; it needs the fast world")
             return self._step_full(action)
         self._steps += 1
         if self.timeline is not None:
@@ -192,14 +199,17 @@ class World:
         if self.timeline is not None:
             self.timeline.add_motions([paths[m] for m in ("approach", "descend")], scene.X_WB, None)
             self.timeline.add_motions([paths[m] for m in ("liftoff", "lift", "transfer", "lower")], scene.X_WB, (wp.carried, wp.X_GC))
-        t_physics = time.perf_counter()
-        record = [] if self.timeline is not None else None
-        settled = physics.settle(X_release, record)
-        info.timings["physics"] = time.perf_counter() - t_physics
-        info.settle_time, info.settled = settled.time, settled.settled
-        if self.timeline is not None:
-            self.timeline.add_physics(record, qs["place"])
-        self.scene = Scene(scene.types, settled.X_WB)
+        if settle:
+            t_physics = time.perf_counter()
+            record = [] if self.timeline is not None else None
+            settled = physics.settle(X_release, record)
+            info.timings["physics"] = time.perf_counter() - t_physics
+            info.settle_time, info.settled = settled.time, settled.settled
+            if self.timeline is not None:
+                self.timeline.add_physics(record, qs["place"])
+            self.scene = Scene(scene.types, settled.X_WB)
+        else:
+            self.scene = Scene(scene.types, X_release)
 
         # Retreat straight up with open jaws. The jaws opened around the released blocks, and any
         # block that moved while settling may lean on them: those are not obstacles to lifting away.

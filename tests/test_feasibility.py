@@ -52,3 +52,17 @@ def test_refine_reports_the_failing_action(checker):
     assert checker.refine([(0, 0, 1, 0)]).success
     out = checker.refine([(1, 0, 1, 1), (0, 1, 1, 0)])  # the second picks the cube 7.5 cm off: nothing
     assert (out.action_index, out.reason) in ((1, Infeasible.REFINE_GRASP), (1, Infeasible.REFINE_MOTION))
+
+
+def test_refinement_plans_each_action_in_the_predicted_scene_without_physics(checker):
+    # After the first action the Dynamics Model predicts the cube out of the arm's reach: the second
+    # action, which picks it, must fail its IK there, whatever the simulator would have done.
+    X = np.array([[0.6, -0.1, 0.025, *CUBE], [0.7, 0.15, 0.025, *BAR]])
+    checker.reset(X)
+    after = X.copy()
+    after[0, :3] = (1.75, 0.0, 0.025)
+    trajectory = np.stack([X, after, after])
+    plan = [(0, 0, 1, 0), (0, 0, 1, 1)]
+    assert checker.refine(plan[:1], trajectory[:2]).success
+    out = checker.refine(plan, trajectory)
+    assert (out.action_index, out.reason) == (1, Infeasible.REFINE_IK)

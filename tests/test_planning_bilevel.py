@@ -261,7 +261,7 @@ class StubKinematics:
         return [Infeasible.NO_GRASP if tuple(map(int, a)) in self.infeasible else None
                 for a in np.asarray(actions).reshape(-1, 4)]
 
-    def refine(self, actions):
+    def refine(self, actions, trajectory=None):
         from tamp.structs import Infeasible, RefinementOutcome
 
         actions = [tuple(map(int, a)) for a in actions]
