@@ -27,8 +27,7 @@ import numpy as np
 from pydrake.math import RigidTransform
 
 from tamp.kinematics import Q_HOME, solve_chain
-from tamp.motion import MotionPlanner
-from tamp.plants import X_FlangeTcp, build_motion_scene
+from tamp.plants import X_FlangeTcp
 from tamp.refine import FAILURE_STAGES, failed_at
 from tamp.skill import Scene, approach_poses, held_block, pick_place_waypoints
 from tamp.structs import BLOCK_SIZES, Infeasible, PickPlace, RefinementOutcome, WorldConfig
@@ -38,7 +37,6 @@ from tamp.world import World
 WITH_ALL_BLOCKS = ("pregrasp", "grasp")  # jaws open around the picked block
 CARRYING = ("liftoff", "lift", "preplace", "place")  # carried blocks attached to the gripper
 AFTER_RELEASE = ("retreat",)  # carried blocks released below the jaws: not obstacles
-MAX_CARRY_PLANNERS = 48  # collision checkers kept with carried blocks attached (a few grasps repeat)
 REFINE_REASONS = {"ik": Infeasible.REFINE_IK, "motion": Infeasible.REFINE_MOTION, "grasp": Infeasible.REFINE_GRASP}
 
 
@@ -62,10 +60,6 @@ class FeasibilityChecker:
         self.q = Q_HOME.copy()
         self.num_checks = 0
         self.check_time_s = 0.0
-        # Attaching a shape to Drake's checker costs ~0.5 ms, more than the check itself, and the
-        # same grasp (carried blocks' poses in the gripper) recurs across predicted scenes: one
-        # checker per (layout, grasp) keeps its shapes attached.
-        self._carry_planners: dict[tuple, MotionPlanner] = {}
 
     # --- the observed scene ----------------------------------------------------------------------
     def reset(self, X_init: np.ndarray) -> Scene:
@@ -118,31 +112,13 @@ class FeasibilityChecker:
         planner.set_block_poses(scene.X_WB, parked=tuple(wp.carried))
         if not all(planner.is_valid(qs[name]) for name in AFTER_RELEASE):
             return Infeasible.COLLISION
-        shapes = [(BLOCK_SIZES[int(scene.types[c])], X_FlangeTcp @ X) for c, X in zip(wp.carried, wp.X_GC)]
-        if len(shapes) > 1:  # a stack: its shape varies with the predicted scene, attach it for this check
-            planner.attach(shapes)
-            try:
-                return None if all(planner.is_valid(qs[name]) for name in CARRYING) else Infeasible.COLLISION
-            finally:
-                planner.detach()
-        carrying = self._carry_planner(scene.types, shapes)
-        carrying.set_block_poses(scene.X_WB, parked=tuple(wp.carried))
-        return None if all(carrying.is_valid(qs[name]) for name in CARRYING) else Infeasible.COLLISION
-
-    def _carry_planner(self, types: np.ndarray, shapes: list[tuple[tuple, RigidTransform]]) -> MotionPlanner:
-        """A collision checker of a layout (block types) with `shapes` attached to the gripper, kept:
-        one grasped block's pose in the gripper takes a few values only (offset -1, 0, +1)."""
-        key = (tuple(int(t) for t in types),
-               tuple((size, (np.round(X.GetAsMatrix34(), 3) + 0.0).tobytes()) for size, X in shapes))  # + 0.0: no -0.0
-        planner = self._carry_planners.pop(key, None)
-        if planner is None:
-            if len(self._carry_planners) >= MAX_CARRY_PLANNERS:
-                self._carry_planners.pop(next(iter(self._carry_planners)))  # least recently used
-            cfg = self.config
-            planner = MotionPlanner(build_motion_scene(types, cfg.padding), cfg.joint_step, cfg.padding)
-            planner.attach(shapes)
-        self._carry_planners[key] = planner
-        return planner
+        # The carried blocks attached to the gripper for the carrying waypoints: attaching costs about
+        # half a millisecond, building a checker per grasp ~150 ms (and predicted grasps rarely repeat).
+        planner.attach([(BLOCK_SIZES[int(scene.types[c])], X_FlangeTcp @ X) for c, X in zip(wp.carried, wp.X_GC)])
+        try:
+            return None if all(planner.is_valid(qs[name]) for name in CARRYING) else Infeasible.COLLISION
+        finally:
+            planner.detach()
 
     # --- full refinement ---------------------------------------------------------------------------
     def refine(self, actions: Sequence[Sequence[int]], trajectory: np.ndarray | None = None) -> RefinementOutcome:
