@@ -2,11 +2,10 @@
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 from pathlib import Path
 
-from tamp.cli import positive_int
+from tamp.cli import positive_float, positive_int
 from evaluation.methods import SYMBOLIC_BACKENDS
 from tamp.problem import PROTOCOLS
 
@@ -23,16 +22,6 @@ def _name_list(text: str) -> list[str]:
     if not names:
         raise argparse.ArgumentTypeError(f"expected method names like bilevel,cfs, got {text!r}")
     return names
-
-
-def _positive_float(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        value = 0.0
-    if not (math.isfinite(value) and value > 0):
-        raise argparse.ArgumentTypeError(f"expected a positive number of seconds, got {text!r}")
-    return value
 
 
 def cmd_problems(args: argparse.Namespace) -> int:
@@ -143,7 +132,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--workers", type=positive_int, default=1, help="worker processes or Ray actors (default 1)")
     p.add_argument("--backend", choices=("local", "ray"), default="local",
                    help="local process pool (default) or Ray actors")
-    p.add_argument("--time-limit", type=_positive_float, default=10.0,
+    p.add_argument("--time-limit", type=positive_float, default=10.0,
                    help="continuous search time limit per planning call, s (default 10)")
     p.add_argument("--max-expansions", type=positive_int, default=5000,
                    help="continuous search node limit per planning call (default 5000)")
