@@ -190,6 +190,11 @@ class _Feasibility:
         result.timings.setdefault("feasibility", 0.0)
         result.timings.setdefault("refine", 0.0)
 
+    @classmethod
+    def of(cls, kinematics: KinematicFeasibility | None, cfg: PlanConfig, result: PlanResult) -> "_Feasibility | None":
+        """The feasibility of a planning call, or None when it is off (no kinematics, or cfg.feasibility False)."""
+        return cls(kinematics, cfg, result) if kinematics is not None and cfg.feasibility else None
+
     def action(self, X: np.ndarray, action) -> Infeasible | None:
         """The check of one action in the predicted state X (cached)."""
         action = tuple(int(v) for v in action)
@@ -322,7 +327,7 @@ def plan_bilevel(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig(),
     and refine, else the next one is tried; Level 2 then prunes infeasible successors and the
     (state, action) pairs that failed refinement."""
     def body(result: PlanResult) -> PlanResult:
-        feas = _Feasibility(kinematics, cfg, result) if kinematics is not None and cfg.feasibility else None
+        feas = _Feasibility.of(kinematics, cfg, result)
         ranked = _level1_plans(models, X_init, X_goal, cfg, result)
         t, chosen, checked, any_verified = time.perf_counter(), None, [], False
         for i, c in enumerate(ranked):  # decreasing frequency
@@ -392,7 +397,7 @@ def plan_cfs(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig(),
     """Continuous forward search alone; with `kinematics` (and cfg.feasibility) infeasible successors
     are pruned and the plan is refined before it is returned."""
     def body(result: PlanResult) -> PlanResult:
-        feas = _Feasibility(kinematics, cfg, result) if kinematics is not None and cfg.feasibility else None
+        feas = _Feasibility.of(kinematics, cfg, result)
         return _level2(models, X_init, X_goal, cfg, result, feas)
     return _timed("cfs", body)
 

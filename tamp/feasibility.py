@@ -28,7 +28,7 @@ from pydrake.math import RigidTransform
 
 from tamp.kinematics import Q_HOME, solve_chain
 from tamp.plants import X_FlangeTcp
-from tamp.refine import FAILURE_STAGES, failed_at
+from tamp.refine import step_failure
 from tamp.skill import Scene, approach_poses, held_block, pick_place_waypoints
 from tamp.structs import BLOCK_SIZES, Infeasible, PickPlace, RefinementOutcome, WorldConfig
 from tamp.world import World
@@ -143,10 +143,10 @@ class FeasibilityChecker:
                 scene = self.predicted_scene(trajectory[k])
             self.world.set_scene(scene, q, motion_seed=k)
             _, info = self.world.step(action, settle=False)
-            if info.status != "ok" or not info.motion_success.get("retreat", False):
-                stage = FAILURE_STAGES.get(info.status, "motion")
-                reason = info.reason or "the retreat after release was blocked"
-                return RefinementOutcome(k, REFINE_REASONS[stage], f"{stage} [{failed_at(info)}]: {reason}")
+            failure = step_failure(info)
+            if failure is not None:
+                stage, where, reason = failure
+                return RefinementOutcome(k, REFINE_REASONS[stage], f"{stage} [{where}]: {reason}")
             scene, q = self.world.scene, self.world.q
         return RefinementOutcome()
 

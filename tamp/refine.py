@@ -57,10 +57,9 @@ def refine(
         t0 = time.perf_counter()
         X_before, q_before = world.X, world.q.copy()
         X_after, info = world.step(action)
-        if info.status != "ok" or not info.motion_success.get("retreat", False):
-            where = failed_at(info)
-            reason = info.reason or "the retreat after release was blocked"
-            result.failure = RefinementFailure(k, action, FAILURE_STAGES.get(info.status, "motion"), where, reason)
+        failure = step_failure(info)
+        if failure is not None:
+            result.failure = RefinementFailure(k, action, *failure)
             break
         step = refined_action(action, info, X_before, X_after, q_before)
         step.refine_time = time.perf_counter() - t0
@@ -69,6 +68,15 @@ def refine(
     if result.success and result.steps:
         result.trajectory, result.start_times = concatenate(result.steps)
     return result
+
+
+def step_failure(info) -> tuple[str, str, str] | None:
+    """(stage, where, reason) of an action that did not refine (its StepInfo), or None if it did:
+    every IK and motion found, the block grasped and the retreat after release free."""
+    if info.status == "ok" and info.motion_success.get("retreat", False):
+        return None
+    return (FAILURE_STAGES.get(info.status, "motion"), failed_at(info),
+            info.reason or "the retreat after release was blocked")
 
 
 def failed_at(info) -> str:
