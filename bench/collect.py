@@ -4,7 +4,7 @@
     .venv/bin/python bench/collect.py --samples 2000   # longer runs, steadier figures
 
 Each run collects the same dataset (same seed) into a fresh temporary directory with
-`tamp.collect.collect`; the two datasets are checked to be identical. Reported per run: wall-clock
+`tamp.app.collect.collect`; the two datasets are checked to be identical. Reported per run: wall-clock
 samples/s including start-up (worker processes, Drake imports, one Drake plant per block-type
 layout, built on first use: up to 28 for n in 2..4), and the steady rate over the second half of
 the samples. Target: >= 20 samples/s on 2 cores. Wall-clock figures depend on what else the
@@ -37,7 +37,7 @@ def main() -> None:
     args = parser.parse_args()
 
     from learned.dataset import load_transitions
-    from tamp.collect import CollectConfig, collect
+    from tamp.app.collect import CollectConfig, collect
 
     cfg = CollectConfig(samples=args.samples, objects=tuple(int(v) for v in args.objects.split(",")),
                         seed=args.seed)

@@ -4,9 +4,9 @@
 
 Random (scene, action) pairs: a random scene of 2-4 blocks, then 0-2 random actions executed in the
 `fast` world (so that stacks, shifted and turned blocks occur), then one uniformly random action of
-the 9 n^2. Each action is checked by `tamp.feasibility.FeasibilityChecker` on the scene (positions
+the 9 n^2. Each action is checked by `tamp.sim.feasibility.FeasibilityChecker` on the scene (positions
 from X, orientations from the observed scene, as in planning) and fully refined from the same scene twice: as the planners refine (`FeasibilityChecker.refine`: IK,
-OMPL motions, grasp, no physics) and as execution does (`tamp.refine`: the same, with physics after
+OMPL motions, grasp, no physics) and as execution does (`tamp.sim.refine`: the same, with physics after
 release for the retreat), the ground truth. A false accept is an action the check passes and refinement fails: the planner would
 return a plan that does not refine (target <= 2 % of pairs). A false reject is an action the check
 rejects and refinement carries out: a plan the planner misses. Baseline in the same run: full
@@ -25,11 +25,11 @@ import dataclasses  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from tamp import World, WorldConfig  # noqa: E402
-from tamp.feasibility import FeasibilityChecker  # noqa: E402
-from tamp.kinematics import Q_HOME  # noqa: E402
-from tamp.refine import refine  # noqa: E402
-from tamp.structs import PickPlace  # noqa: E402
+from tamp.sim import World, WorldConfig
+from tamp.sim.feasibility import FeasibilityChecker  # noqa: E402
+from tamp.sim.kinematics import Q_HOME  # noqa: E402
+from tamp.sim.refine import refine  # noqa: E402
+from tamp.planning.structs import PickPlace
 
 
 def main() -> None:

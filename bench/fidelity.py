@@ -19,7 +19,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from tamp import World, WorldConfig  # noqa: E402
+from tamp.sim import World, WorldConfig
 
 TOLERANCE = 0.01  # metres per object
 

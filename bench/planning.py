@@ -88,8 +88,8 @@ _DRAKE_WORLD = None
 
 def drake_executed_ok(X, G, plan) -> bool:
     """Execute the plan in the fast Drake world from X; success = every object within eps of G."""
-    from tamp import World, WorldConfig
-    from tamp.verify import at_goal
+    from tamp.sim import World, WorldConfig
+    from tamp.planning.verify import at_goal
 
     global _DRAKE_WORLD
     _DRAKE_WORLD = _DRAKE_WORLD or World(WorldConfig())
@@ -101,7 +101,7 @@ def drake_executed_ok(X, G, plan) -> bool:
 
 def executed_ok(X, G, plan) -> bool:
     from learned.synthetic import apply_action
-    from tamp.verify import at_goal
+    from tamp.planning.verify import at_goal
 
     for a in plan:
         X = apply_action(X, tuple(a))[0]
@@ -124,9 +124,9 @@ def main() -> int:
 
     import torch
     torch.set_num_threads(1)
-    from tamp.bilevel import PlanConfig, plan
-    from tamp.models import load_models
-    from tamp.search import SearchConfig, continuous_search
+    from tamp.planning.bilevel import PlanConfig, plan
+    from tamp.planning.models import load_models
+    from tamp.planning.search import SearchConfig, continuous_search
 
     directory = args.models or args.synthetic
     if directory is None or not (directory / "dynamics.pt").is_file():

@@ -19,9 +19,9 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from tamp import World, WorldConfig  # noqa: E402
-from tamp.execute import execute  # noqa: E402
-from tamp.refine import refine  # noqa: E402
+from tamp.sim import World, WorldConfig
+from tamp.sim.execute import execute  # noqa: E402
+from tamp.sim.refine import refine  # noqa: E402
 
 
 def main() -> None:

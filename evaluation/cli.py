@@ -5,9 +5,9 @@ import argparse
 import sys
 from pathlib import Path
 
-from tamp.cli import positive_float, positive_int
+from tamp.app.cli import positive_float, positive_int
 from evaluation.methods import SYMBOLIC_BACKENDS
-from tamp.problem import PROTOCOLS
+from tamp.app.problem import PROTOCOLS
 
 
 def _int_list(text: str) -> tuple[int, ...]:
@@ -27,7 +27,7 @@ def _name_list(text: str) -> list[str]:
 def cmd_problems(args: argparse.Namespace) -> int:
     """Generate a problem set (JSONL) of random Drake scenes and goals."""
     from evaluation.problems import generate_problems, write_problems
-    from tamp.cli import check_output_file
+    from tamp.app.cli import check_output_file
 
     check_output_file(args.out, "--out")
     problems = generate_problems(args.objects, args.actions, args.per_cell, args.seed, progress=not args.quiet,

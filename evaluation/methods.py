@@ -1,6 +1,6 @@
 """The methods compared by the evaluation, and the model sets they plan with.
 
-Each method is a `tamp.bilevel` planner, a model variant and open or closed loop:
+Each method is a `tamp.planning.bilevel` planner, a model variant and open or closed loop:
 
     deterministic         deterministic symbolic planner (baseline), Gumbel-Sigmoid Symbolic Model
     probabilistic         probabilistic symbolic planner, N sampled domains, top plan, unverified
@@ -15,7 +15,7 @@ Each method is a `tamp.bilevel` planner, a model variant and open or closed loop
     symbolic_sigmoid      deterministic symbolic planner, Sigmoid Symbolic Model and its own domain (Fig. 4)
     cfs_gumbel            continuous forward search, Gumbel-Sigmoid Dynamics Model (Fig. 4)
 
-`cfs`, `bilevel` and `bilevel_replan` plan with kinematics in the loop (tamp.feasibility: actions
+`cfs`, `bilevel` and `bilevel_replan` plan with kinematics in the loop (tamp.sim.feasibility: actions
 checked on the predicted states, plans refined before they are returned); `cfs_nofeas`,
 `bilevel_nofeas` and `bilevel_replan_nofeas` are the same planners without it (before / after on the
 same problems: `tamp evaluate --methods cfs,cfs_nofeas,...`). The symbolic baselines never use it.
@@ -31,21 +31,21 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
 
-from tamp.models import DOMAIN_DIR, DYNAMICS_FILE, SYMBOLIC_FILE, Models
+from tamp.planning.models import DOMAIN_DIR, DYNAMICS_FILE, SYMBOLIC_FILE, Models
 
 VARIANTS_DIR = "variants"
-SYMBOLIC_BACKENDS = ("python", "fd")  # in-process search, Fast Downward (tamp.bilevel.PlanConfig.backend)
+SYMBOLIC_BACKENDS = ("python", "fd")  # in-process search, Fast Downward (tamp.planning.bilevel.PlanConfig.backend)
 SYMBOLIC_SIGMOID, DOMAIN_SIGMOID, DYNAMICS_GUMBEL = "symbolic_sigmoid.pt", "domain_sigmoid", "dynamics_gumbel.pt"
 
 
 @dataclass(frozen=True)
 class Method:
     name: str
-    planner: str  # a tamp.bilevel.METHODS key
+    planner: str  # a tamp.planning.bilevel.METHODS key
     models: str  # model set: "default" | "symbolic_sigmoid" | "dynamics_gumbel"
     closed_loop: bool = False
     oracle: bool = False  # execute the ranked plans until one succeeds (the authors' measure)
-    feasibility: bool = False  # kinematic check and refinement in the planning loop (tamp.feasibility)
+    feasibility: bool = False  # kinematic check and refinement in the planning loop (tamp.sim.feasibility)
 
     @property
     def symbolic(self) -> bool:
@@ -127,7 +127,7 @@ def load_method_models(models_dir: str | Path, methods: Sequence[str]) -> dict[s
     sets: dict[str, Models] = {}
     needed = {METHODS[m].models for m in methods}
     if "default" in needed or "symbolic_sigmoid" in needed:
-        from tamp.models import load_models
+        from tamp.planning.models import load_models
 
         need_symbolic = any(METHODS[m].models == "default" and METHODS[m].symbolic for m in methods)
         sets["default"] = load_models(models_dir, need_symbolic=need_symbolic)

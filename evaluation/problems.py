@@ -1,8 +1,8 @@
 """Problem sets: random Drake scenes and goals after k random actions, stored as JSONL.
 
 Problem (n, k, i) of a set with seed s has its own scene seed, drawn from (s, n, k, i) alone
-(`scene_seed`); from it `tamp.problem.random_problem` makes the scene and the k random actions
-that give X_goal in the fast world. Two protocols (`tamp.problem.PROTOCOLS`): `strict` redraws
+(`scene_seed`); from it `tamp.app.problem.random_problem` makes the scene and the k random actions
+that give X_goal in the fast world. Two protocols (`tamp.app.problem.PROTOCOLS`): `strict` redraws
 actions that fail or move no block, with a cap, so k counts real steps (a scene that gets stuck is
 replaced by the next seed of that problem); `paper` keeps every drawn action whatever its outcome,
 as the paper's authors do, and records how many of the k moved something. Any one problem can
@@ -24,8 +24,8 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from tamp.problem import PROTOCOLS, Problem, random_problem
-from tamp.problem import read_problem_set as read_problems  # noqa: F401 (the set reader, here by its old name)
+from tamp.app.problem import PROTOCOLS, Problem, random_problem
+from tamp.app.problem import read_problem_set as read_problems  # noqa: F401 (the set reader, here by its old name)
 
 
 MAX_ATTEMPTS = 10  # scenes drawn per problem before giving up (see `generate_problems`)
@@ -67,7 +67,7 @@ _WORLD = None  # the World of a worker process
 def _cell_problem(cell: Cell) -> Problem:
     global _WORLD
     if _WORLD is None:
-        from tamp import World, WorldConfig
+        from tamp.sim import World, WorldConfig
 
         _WORLD = World(WorldConfig())
     n, k, i, seed, run, protocol = cell

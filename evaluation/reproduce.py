@@ -149,8 +149,8 @@ def reproduce(out: str | Path, scale_name: str = "quick", workers: int | None = 
               symbolic_backend: str = "python") -> Path:
     """Run (or resume) every stage; returns the path of report.md. `models`: evaluate this models
     directory instead of collecting and training (stages collect, train and domains skipped)."""
-    from tamp.collect import available_cpus
-    from tamp.problem import PROTOCOLS
+    from tamp.app.collect import available_cpus
+    from tamp.app.problem import PROTOCOLS
 
     if scale_name not in SCALES:
         raise ValueError(f"unknown scale {scale_name!r}; choose one of {', '.join(SCALES)}")
@@ -177,7 +177,7 @@ def reproduce(out: str | Path, scale_name: str = "quick", workers: int | None = 
     models = out / "models"
 
     if not stages.done("collect"):
-        from tamp.collect import CollectConfig, collect
+        from tamp.app.collect import CollectConfig, collect
 
         _say(f"collect: {scale.samples} random pick-place transitions, {','.join(map(str, scale.objects))} objects")
         t = time.perf_counter()
@@ -200,7 +200,7 @@ def reproduce(out: str | Path, scale_name: str = "quick", workers: int | None = 
         stages.finish("train", time.perf_counter() - t, results=results)
 
     if not stages.done("domains"):
-        from tamp.domain import learn_domain
+        from tamp.planning.domain import learn_domain
 
         t, results = time.perf_counter(), []
         for model, domain in scale.domains.items():

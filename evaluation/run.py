@@ -48,10 +48,10 @@ import numpy as np
 
 from evaluation.methods import METHODS, SYMBOLIC_BACKENDS, Method, load_method_models, required_files, resolve_methods
 from evaluation.problems import atomic_write_text, read_problems
-from tamp.bilevel import PlanConfig
-from tamp.collect import package_versions
-from tamp.problem import Problem
-from tamp.verify import EPS_SUCCESS, TAU_VERIFY, goal_error
+from tamp.planning.bilevel import PlanConfig
+from tamp.app.collect import package_versions
+from tamp.app.problem import Problem
+from tamp.planning.verify import EPS_SUCCESS, TAU_VERIFY, goal_error
 
 ROWS_NAME, META_NAME, LOCK_NAME, SYMBOLS_NAME = "rows.jsonl", "meta.json", ".evaluate.lock", "symbols.json"
 FORMAT = "tamp-evaluation/1"
@@ -117,7 +117,7 @@ class EvalConfig:
                 "oracle_max_plans": self.oracle_max_plans}
 
     def plan_config(self, seed: int, feasibility: bool = True) -> PlanConfig:
-        from tamp.search import SearchConfig
+        from tamp.planning.search import SearchConfig
 
         return PlanConfig(n_domains=self.n_domains, seed=seed, tau_verify=self.tau_verify, eps=self.eps,
                           feasibility=feasibility,
@@ -196,14 +196,14 @@ class Evaluator:
         of problem.X_init as refinement starts it; the first scene of each layout (block types) pays
         the checker's one-off collision-model builds before any planner is timed."""
         if self._checker is None:
-            from tamp.feasibility import FeasibilityChecker
+            from tamp.sim.feasibility import FeasibilityChecker
 
             self._checker = FeasibilityChecker()
         checker = self._checker
         checker.reset(problem.X_init)
         layout = tuple(int(t) for t in checker.scene.types)
         if layout not in self._warm_layouts:
-            from tamp.search import all_actions
+            from tamp.planning.search import all_actions
 
             checker.check(problem.X_init, all_actions(problem.n))
             self._warm_layouts.add(layout)
@@ -213,7 +213,7 @@ class Evaluator:
         """This worker's World of a fidelity (paths simplified: they are executed), reseeded as a new
         World(seed=0) would be, so that nothing depends on the rows computed before."""
         if fidelity not in self._worlds:
-            from tamp import World, WorldConfig
+            from tamp.sim import World, WorldConfig
 
             self._worlds[fidelity] = World(WorldConfig(fidelity=fidelity, simplify_paths=True))
         world = self._worlds[fidelity]
@@ -270,7 +270,7 @@ class Evaluator:
         return row
 
     def _open_loop(self, problem: Problem, method: Method, models) -> dict:
-        from tamp.bilevel import plan
+        from tamp.planning.bilevel import plan
 
         kinematics = self.checker(problem) if method.feasibility else None
         extra = {} if kinematics is None else {"kinematics": kinematics}
@@ -298,15 +298,15 @@ class Evaluator:
         if not actions:  # the planner says the initial state meets the goal: nothing to refine
             return {"refined": True, "refine_failure": None, "refine_time_s": [], "executed_actions": 0,
                     "final_error_m": _round(goal_error(problem.X_init, problem.X_goal))}
-        from tamp.refine import refine
-        from tamp.structs import PickPlace
+        from tamp.sim.refine import refine
+        from tamp.planning.structs import PickPlace
 
         world = self.world("fast")
         refined = refine([PickPlace(*a) for a in actions], problem.X_init, world=world)
         if self.config.fidelity == "fast":  # the scene after the refined actions (not a failed one's)
             X_final = refined.X_predicted
         else:
-            from tamp.execute import execute
+            from tamp.sim.execute import execute
 
             X_final = execute(refined, partial=True).X_final
         f = refined.failure
@@ -317,8 +317,8 @@ class Evaluator:
                 "final_error_m": _round(goal_error(X_final if executed else problem.X_init, problem.X_goal))}
 
     def _closed_loop(self, problem: Problem, method: Method, models) -> dict:
-        from tamp.bilevel import plan_closed_loop, replan_rounds
-        from tamp.refine import FAILURE_STAGES, failed_at
+        from tamp.planning.bilevel import plan_closed_loop, replan_rounds
+        from tamp.sim.refine import FAILURE_STAGES, failed_at
 
         kinematics = self.checker(problem) if method.feasibility else None
         world = self.world(self.config.fidelity)
@@ -413,7 +413,7 @@ def _run_local(tasks, models_dir, methods, models, config: EvalConfig) -> Iterat
 def _run_ray(tasks, models_dir, methods, models, config: EvalConfig) -> Iterator[dict]:
     import logging
 
-    from tamp.collect import import_ray
+    from tamp.app.collect import import_ray
 
     ray = import_ray()
     started_here = not ray.is_initialized()
@@ -540,7 +540,7 @@ def _write_symbols(out: Path, problems: Sequence[Problem], models_dir: Path, met
         symbolic = getattr(models[users[0]], "symbolic", None)
     else:
         import learned
-        from tamp.models import SYMBOLIC_FILE
+        from tamp.planning.models import SYMBOLIC_FILE
 
         symbolic = learned.load_model(models_dir / SYMBOLIC_FILE)
     if symbolic is None:
@@ -555,14 +555,14 @@ def evaluate(models_dir: str | Path, problems_path: str | Path, out_dir: str | P
     """Evaluate `methods` (default: evaluation.methods.default_methods) on every problem of the set.
 
     Appends the missing rows to OUT/rows.jsonl and returns its path. `models` (method name ->
-    tamp.models.Models) replaces loading them from `models_dir`, for tests with stub models.
+    tamp.planning.models.Models) replaces loading them from `models_dir`, for tests with stub models.
     """
     from tqdm import tqdm
 
-    from tamp.cli import check_output_dir
+    from tamp.app.cli import check_output_dir
 
     # Every input is checked before anything is written: the output folder, the problems (each scene,
-    # by tamp.validate), the models (loaded once here) and every problem's size against them.
+    # by tamp.planning.validate), the models (loaded once here) and every problem's size against them.
     models_dir, problems_path, out = Path(models_dir).resolve(), Path(problems_path).resolve(), Path(out_dir)
     check_output_dir(out, "--out")
     if models is None:

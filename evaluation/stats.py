@@ -97,7 +97,7 @@ class Confusion:
 
 
 def confusion(predicted_error_m: Sequence[float], success: Sequence[bool], tau_m: float) -> Confusion:
-    """Confusion matrix of `predicted error < tau_m` (verified, as `tamp.verify`) against execution success."""
+    """Confusion matrix of `predicted error < tau_m` (verified, as `tamp.planning.verify`) against execution success."""
     e = np.asarray(predicted_error_m, dtype=float)
     s = np.asarray(success, dtype=bool)
     v = e < tau_m

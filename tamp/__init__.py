@@ -1,11 +1,11 @@
-"""TAMP for a UR10e: the Drake block world, skills, motion, execution and the bilevel planner."""
-import logging
+"""TAMP for a UR10e, in three layers that import one way, app -> sim -> planning:
 
-import pydrake.common  # noqa: F401  (sets up the "drake" logger, which we then quieten)
+- `tamp.planning`: the bilevel planner, the continuous search, verification and the models'
+  planning interface; numpy and torch, no Drake.
+- `tamp.sim`: the Drake block world, the pick-place skill, kinematics, OMPL motions, refinement,
+  time-parameterized trajectories and execution under physics.
+- `tamp.app`: the `tamp` command line, the demo, data collection, problem files and the runners
+  that plan, refine and execute.
 
-logging.getLogger("drake").setLevel(logging.WARNING)  # keep Drake's INFO lines off the console
-
-from tamp.structs import PickPlace, StepInfo, WorldConfig
-from tamp.world import World
-
-__all__ = ["World", "WorldConfig", "PickPlace", "StepInfo"]
+Importing `tamp` alone loads none of them.
+"""

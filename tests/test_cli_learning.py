@@ -4,7 +4,7 @@ import json
 import pytest
 
 import learned
-from tamp.cli import BOTTLENECKS, main
+from tamp.app.cli import BOTTLENECKS, main
 
 
 def test_bottleneck_choices_match_the_model():

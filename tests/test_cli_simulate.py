@@ -3,7 +3,7 @@ import json
 
 import pytest
 
-from tamp.cli import main
+from tamp.app.cli import main
 
 
 def test_simulate_prints_one_line_per_action_and_writes_replay(tmp_path, capsys):

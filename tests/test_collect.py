@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 from learned.dataset import load_transitions, shard_paths
-from tamp.cli import main
-from tamp.collect import CollectConfig
-from tamp.dataset_stats import classify
+from tamp.app.cli import main
+from tamp.app.collect import CollectConfig
+from tamp.app.dataset_stats import classify
 
 # 58 samples = 15 scenes of 4 actions (the last one trimmed to 2) in 8 shards of 2 scenes.
 PARAMS = ["--samples", "58", "--objects", "2,3", "--actions-per-scene", "4", "--scenes-per-shard", "2",
@@ -87,7 +87,7 @@ def _children(pid: int) -> list[int]:
 
 def test_kill_9_mid_way_then_resume_equals_uninterrupted_run(reference, tmp_path, capsys):
     out = tmp_path / "killed"
-    proc = subprocess.Popen([sys.executable, "-m", "tamp.cli", *collect_cli(out, "--workers", "2")],
+    proc = subprocess.Popen([sys.executable, "-m", "tamp.app.cli", *collect_cli(out, "--workers", "2")],
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     deadline = time.monotonic() + 60
     while not (out.exists() and any(p.name.startswith("shard-") for p in out.iterdir())):
@@ -117,7 +117,7 @@ def test_kill_9_mid_way_then_resume_equals_uninterrupted_run(reference, tmp_path
 def test_ray_backend_gives_the_same_dataset(reference, tmp_path):
     pytest.importorskip("ray", reason="ray is not installed (optional extra: pip install ray)")
     out = tmp_path / "ray"
-    run = subprocess.run([sys.executable, "-m", "tamp.cli",
+    run = subprocess.run([sys.executable, "-m", "tamp.app.cli",
                           *collect_cli(out, "--backend", "ray", "--workers", "2")],
                          capture_output=True, text=True, timeout=180)
     assert run.returncode == 0, run.stderr

@@ -7,9 +7,9 @@ import re
 import numpy as np
 import pytest
 
-from tamp.cli import main
-from tamp.models import DOMAIN_DIR, DYNAMICS_FILE, SYMBOLIC_FILE, load_models, pretrained_dir
-from tamp.replay import Timeline
+from tamp.app.cli import main
+from tamp.planning.models import DOMAIN_DIR, DYNAMICS_FILE, SYMBOLIC_FILE, load_models, pretrained_dir
+from tamp.sim.replay import Timeline
 
 
 def _scene_paths(html_file) -> bytes:
@@ -21,8 +21,8 @@ def _scene_paths(html_file) -> bytes:
 def test_the_shipped_models_are_small_load_and_plan():
     import torch
 
-    from tamp.bilevel import PlanConfig, plan
-    from tamp.problem import random_problem
+    from tamp.planning.bilevel import PlanConfig, plan
+    from tamp.app.problem import random_problem
 
     torch.set_num_threads(1)
     directory = pretrained_dir()

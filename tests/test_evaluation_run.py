@@ -21,9 +21,9 @@ from planning_stubs import StubModel, two_block_domain  # noqa: E402
 
 from evaluation.problems import generate_problems, read_problems, write_problems  # noqa: E402
 from evaluation.run import OUTCOMES, ROW_KEYS, EvalConfig, evaluate, read_rows, strip_timings  # noqa: E402
-from tamp.models import Models  # noqa: E402
-from tamp.problem import Problem  # noqa: E402
-from tamp.verify import goal_error  # noqa: E402
+from tamp.planning.models import Models  # noqa: E402
+from tamp.app.problem import Problem  # noqa: E402
+from tamp.planning.verify import goal_error  # noqa: E402
 
 SET = dict(ns=(2,), ks=(1, 2, 3), per_cell=1, seed=0)
 METHODS = ("deterministic", "probabilistic", "probabilistic_oracle", "cfs", "bilevel", "bilevel_alg1",
@@ -99,8 +99,8 @@ def test_a_stuck_scene_is_replaced_by_the_next_seed_of_its_problem(monkeypatch):
 def test_the_paper_protocol_keeps_actions_that_move_nothing():
     """`paper`: the first k drawn actions whatever they do (replayed, they give the goal and move
     exactly `moved` times); `strict` redraws until every one moves a block."""
-    from tamp import World, WorldConfig
-    from tamp.problem import MOVED_M
+    from tamp.sim import World, WorldConfig
+    from tamp.app.problem import MOVED_M
 
     args = dict(ns=(2,), ks=(1, 3), per_cell=3, seed=2, progress=False)
     paper = generate_problems(**args, protocol="paper")
@@ -218,7 +218,7 @@ def test_the_oracle_succeeds_iff_one_executed_plan_succeeds(serial):
 def test_the_oracle_counts_success_iff_some_plan_reaches_the_goal(monkeypatch):
     """Three ranked plans of which only the last reaches the goal: success after three executions;
     with a cap of two plans, failure after two."""
-    from tamp.bilevel import Candidate, PlanResult
+    from tamp.planning.bilevel import Candidate, PlanResult
     from evaluation.run import Evaluator
     import evaluation.run as er
 
@@ -238,9 +238,9 @@ def test_the_oracle_counts_success_iff_some_plan_reaches_the_goal(monkeypatch):
         return {"refined": True, "refine_failure": None, "refine_time_s": [0.1], "executed_actions": 1,
                 "final_error_m": 0.0 if good else 0.3}
 
-    import tamp.bilevel
+    import tamp.planning.bilevel
 
-    monkeypatch.setattr(tamp.bilevel, "plan", fake_plan)
+    monkeypatch.setattr(tamp.planning.bilevel, "plan", fake_plan)
     monkeypatch.setattr(Evaluator, "_execute", fake_execute)
     monkeypatch.setattr(Evaluator, "warm_up", lambda self, models, problem: None)
     for cap, success, tried in ((20, True, 3), (2, False, 2)):
@@ -360,7 +360,7 @@ def test_cli_evaluates_with_model_files_and_keeps_the_rows_when_the_report_fails
                                                                                monkeypatch):
     from evaluation import cli
     from evaluation.methods import default_methods
-    from tamp.cli import main
+    from tamp.app.cli import main
 
     assert default_methods(models_dir) == list(METHODS) + ["symbolic_sigmoid", "cfs_gumbel"]
     problems = tmp_path / "p.jsonl"
@@ -386,7 +386,7 @@ def test_cli_evaluates_with_model_files_and_keeps_the_rows_when_the_report_fails
 
 
 def test_cli_names_a_missing_variant_and_a_bad_method(problems_file, tmp_path, capsys):
-    from tamp.cli import main
+    from tamp.app.cli import main
 
     models = tmp_path / "models"
     models.mkdir()
@@ -405,7 +405,7 @@ def test_reproduce_evaluates_given_models_under_the_paper_protocol_over_runs(mod
     sets of consecutive seeds kept whatever their actions did, a report with mean ± std over runs;
     a second call resumes and computes nothing."""
     import evaluation.reproduce as rep
-    from tamp.cli import main
+    from tamp.app.cli import main
 
     monkeypatch.setitem(rep.SCALES, "quick", rep.Scale(samples=0, epochs=0, train_time_limit_s=None, ablation_runs=0,
                                                        ablation_epochs=0, per_cell=1, search_time_limit_s=5.0,

@@ -1,6 +1,6 @@
 """Bad input is refused before the work (issue 18): one line, exit 2, never a traceback or a silent answer.
 
-One test per class: impossible scenes (tamp.validate), `tamp evaluate`'s inputs and its error rows,
+One test per class: impossible scenes (tamp.planning.validate), `tamp evaluate`'s inputs and its error rows,
 output paths, numeric flags and model kinds, damaged domain files. Fast: stub models, the bundled
 pretrained networks for loading, no training beyond one tiny epoch.
 """
@@ -17,10 +17,10 @@ import pytest
 sys.path.insert(0, str(Path(__file__).parent))
 from planning_stubs import StubModel, two_block_domain  # noqa: E402
 
-from tamp.cli import main  # noqa: E402
-from tamp.models import Models, pretrained_dir  # noqa: E402
-from tamp.problem import Problem, random_problem  # noqa: E402
-from tamp.validate import ARM_REACH_M, check_problem, check_scene  # noqa: E402
+from tamp.app.cli import main  # noqa: E402
+from tamp.planning.models import Models, pretrained_dir  # noqa: E402
+from tamp.app.problem import Problem, random_problem  # noqa: E402
+from tamp.planning.validate import ARM_REACH_M, check_problem, check_scene  # noqa: E402
 
 INIT = [[0.60, 0.15, 0.025, 1, 0], [0.70, -0.10, 0.025, 0, 1]]
 GOAL = [[0.70, -0.10, 0.075, 1, 0], [0.70, -0.10, 0.025, 0, 1]]
@@ -55,8 +55,8 @@ def test_impossible_scenes_are_refused_naming_the_file_field_and_row(tmp_path, c
 
 
 def test_the_python_api_checks_its_scenes():
-    from tamp.bilevel import plan
-    from tamp.refine import refine
+    from tamp.planning.bilevel import plan
+    from tamp.sim.refine import refine
 
     stub = StubModel()
     models = Models(stub, stub, two_block_domain())
@@ -92,8 +92,8 @@ def test_tilted_and_standing_blocks_after_physics_are_accepted():
 
 
 def test_arm_reach_matches_the_ik():
-    from tamp.kinematics import Q_HOME, analytic_ik
-    from tamp.skill import topdown
+    from tamp.sim.kinematics import Q_HOME, analytic_ik
+    from tamp.sim.skill import topdown
 
     for angle in (0.0, 0.7):
         direction = np.array([np.cos(angle), np.sin(angle)])

@@ -3,8 +3,8 @@ import numpy as np
 import pytest
 from pydrake.math import RigidTransform, RotationMatrix
 
-from tamp.kinematics import Q_HOME, Q_LOWER, Q_UPPER, analytic_ik, on_branch, tcp_pose
-from tamp.plants import build_motion_scene
+from tamp.sim.kinematics import Q_HOME, Q_LOWER, Q_UPPER, analytic_ik, on_branch, tcp_pose
+from tamp.sim.plants import build_motion_scene
 
 
 @pytest.fixture(scope="module")

@@ -41,8 +41,8 @@ def test_cli_prints_the_table_and_writes_png_and_json(tmp_path, capsys):
 
     from evaluation.problems import write_problems
     from learned import EffectModel, ModelConfig, save_checkpoint
-    from tamp.cli import main
-    from tamp.problem import Problem
+    from tamp.app.cli import main
+    from tamp.app.problem import Problem
 
     torch.manual_seed(0)
     save_checkpoint(tmp_path / "sym.pt", EffectModel(ModelConfig(d_z=2, heads=1, activation="gumbel_sigmoid")))

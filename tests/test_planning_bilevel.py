@@ -13,10 +13,10 @@ import pytest
 sys.path.insert(0, str(Path(__file__).parent))
 from planning_stubs import StubModel, two_block_domain, world_step  # noqa: E402
 
-from tamp.bilevel import PlanConfig, plan, plan_closed_loop  # noqa: E402
-from tamp.models import Models  # noqa: E402
-from tamp.search import SearchConfig  # noqa: E402
-from tamp.verify import goal_error, verify  # noqa: E402
+from tamp.planning.bilevel import PlanConfig, plan, plan_closed_loop  # noqa: E402
+from tamp.planning.models import Models  # noqa: E402
+from tamp.planning.search import SearchConfig  # noqa: E402
+from tamp.planning.verify import goal_error, verify  # noqa: E402
 
 X_INIT = np.array([[0.6, 0.0, 0.025, 1, 0], [0.7, 0.1, 0.025, 1, 0]])
 A_ON_B = np.array([[0.7, 0.1, 0.075, 1, 0], [0.7, 0.1, 0.025, 1, 0]])
@@ -83,7 +83,7 @@ def test_an_alternative_through_the_same_symbols_is_verified_before_the_next_ran
 
 
 def test_refine_skeleton_finds_the_concrete_actions_the_symbols_cannot_tell_apart():
-    from tamp.verify import refine_skeleton
+    from tamp.planning.verify import refine_skeleton
 
     stub = StubModel()
     # one step "put 0 on 1" with every grasp and release offset: only (0, 0, 1, 0) lands centred
@@ -198,7 +198,7 @@ def test_unknown_method_is_a_clear_error(domain):
 
 
 def test_verify_many_shares_prefixes_and_equals_verify_one_by_one():
-    from tamp.verify import verify_many
+    from tamp.planning.verify import verify_many
 
     plans = [[(0, 0, 1, 1), (1, 0, 0, 0)], [(0, 0, 1, 1), (1, 1, 0, 0)], [(0, 0, 1, 0)], []]
     stub = StubModel()
@@ -211,7 +211,7 @@ def test_verify_many_shares_prefixes_and_equals_verify_one_by_one():
 
 
 def test_verify_many_predicts_all_prefixes_of_one_length_in_one_pass_when_the_model_can():
-    from tamp.verify import verify_many
+    from tamp.planning.verify import verify_many
 
     class BatchedStub(StubModel):
         """predict_effects: many scenes, one action each (the learned models' batched call)."""
@@ -248,7 +248,7 @@ def test_the_symbolic_search_prefers_the_operator_more_likely_to_give_the_needed
 
 
 class StubKinematics:
-    """The planner's view of kinematic feasibility (tamp.structs.KinematicFeasibility), scripted:
+    """The planner's view of kinematic feasibility (tamp.planning.structs.KinematicFeasibility), scripted:
     `infeasible` actions fail the cheap check, plans starting with `unrefinable` fail refinement."""
 
     def __init__(self, infeasible=(), unrefinable=()):
@@ -256,13 +256,13 @@ class StubKinematics:
         self.refined: list[list[tuple]] = []
 
     def check(self, X, actions):
-        from tamp.structs import Infeasible
+        from tamp.planning.structs import Infeasible
 
         return [Infeasible.NO_GRASP if tuple(map(int, a)) in self.infeasible else None
                 for a in np.asarray(actions).reshape(-1, 4)]
 
     def refine(self, actions, trajectory=None):
-        from tamp.structs import Infeasible, RefinementOutcome
+        from tamp.planning.structs import Infeasible, RefinementOutcome
 
         actions = [tuple(map(int, a)) for a in actions]
         self.refined.append(actions)
@@ -275,7 +275,7 @@ LOOSE = PlanConfig(n_domains=100, seed=0, tau_verify=0.1, **PAPER)  # both ranke
 
 
 def test_a_refinement_failure_of_the_first_level1_candidate_returns_the_second(domain):
-    from tamp.structs import Infeasible
+    from tamp.planning.structs import Infeasible
 
     first = plan("bilevel", models(domain), X_INIT, A_ON_B, LOOSE)
     assert first.level == 1 and first.plan == [(0, 0, 1, 1)]  # without kinematics: the most frequent plan
@@ -292,7 +292,7 @@ def test_a_refinement_failure_of_the_first_level1_candidate_returns_the_second(d
 
 
 def test_a_level1_candidate_failing_the_check_is_not_refined_and_the_next_is_returned(domain):
-    from tamp.structs import Infeasible
+    from tamp.planning.structs import Infeasible
 
     kin = StubKinematics(infeasible={(0, 0, 1, 1)})
     result = plan("bilevel", models(domain), X_INIT, A_ON_B, LOOSE, kinematics=kin)

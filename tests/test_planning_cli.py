@@ -6,8 +6,8 @@ import json
 import numpy as np
 import pytest
 
-from tamp.cli import main
-from tamp.problem import Problem, load_problem, problem_from_dict, save_problem
+from tamp.app.cli import main
+from tamp.app.problem import Problem, load_problem, problem_from_dict, save_problem
 
 X = [[0.6, 0.15, 0.025, 1, 0], [0.7, -0.1, 0.025, 0, 1]]
 GOAL = [[0.7, -0.1, 0.075, 1, 0], [0.7, -0.1, 0.025, 0, 1]]
@@ -74,12 +74,12 @@ def models_dir(tmp_path_factory):
 
 
 def _problem_reachable_by_the_model(models_dir, tmp_path):
-    from tamp.models import load_models
-    from tamp.verify import rollout
+    from tamp.planning.models import load_models
+    from tamp.planning.verify import rollout
 
     model = load_models(models_dir).dynamics
     X_init = np.array([[0.6, 0.15, 0.025, 1, 0], [0.7, -0.1, 0.025, 1, 0]])
-    # (0, 0, 1, 1): the untrained network's prediction is a scene that passes tamp.validate (for
+    # (0, 0, 1, 1): the untrained network's prediction is a scene that passes tamp.planning.validate (for
     # (0, 0, 1, 0) it puts both blocks in one place, which `tamp plan` refuses)
     X_goal = rollout(model, X_init, [(0, 0, 1, 1)])[-1]
     path = tmp_path / "p.json"

@@ -11,8 +11,8 @@ import pytest
 sys.path.insert(0, str(Path(__file__).parent))
 from planning_stubs import StubModel, world_step  # noqa: E402
 
-from tamp.search import SearchConfig, continuous_search, goal_oriented_actions  # noqa: E402
-from tamp.verify import goal_error, rollout  # noqa: E402
+from tamp.planning.search import SearchConfig, continuous_search, goal_oriented_actions  # noqa: E402
+from tamp.planning.verify import goal_error, rollout  # noqa: E402
 
 # three blocks: a large bar 0 and small cubes 1, 2
 X = np.array([[0.55, -0.15, 0.025, 0, 1], [0.7, 0.1, 0.025, 1, 0], [0.8, -0.2, 0.025, 1, 0]])
@@ -96,7 +96,7 @@ def test_a_search_that_must_avoid_an_infeasible_action_finds_another_plan():
     assert out.rejected["collision"] >= 1
     assert goal_error(rollout(StubModel(), X, out.plan)[-1], G) < out_eps()
     # a (state, action) pair known to fail refinement is never generated
-    from tamp.search import state_key
+    from tamp.planning.search import state_key
 
     pruned = {(state_key(X, SearchConfig().resolution), (1, 0, 2, 0))}
     again = continuous_search(StubModel(), X, G, pruned=pruned)

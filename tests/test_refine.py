@@ -3,15 +3,16 @@ import numpy as np
 import pytest
 from pydrake.math import RigidTransform
 
-from tamp import PickPlace, World, WorldConfig
-from tamp.execute import execute
-from tamp.kinematics import Q_LOWER, Q_UPPER, V_MAX, tcp_pose
-from tamp.motion import MotionPlanner
-from tamp.plants import X_FlangeTcp, build_motion_scene
-from tamp.refine import refine
-from tamp.skill import Scene
-from tamp.structs import BLOCK_SIZES
-from tamp.trajectory import A_MAX, segment_profile
+from tamp.planning.structs import PickPlace
+from tamp.sim import World, WorldConfig
+from tamp.sim.execute import execute
+from tamp.sim.kinematics import Q_LOWER, Q_UPPER, V_MAX, tcp_pose
+from tamp.sim.motion import MotionPlanner
+from tamp.sim.plants import X_FlangeTcp, build_motion_scene
+from tamp.sim.refine import refine
+from tamp.sim.skill import Scene
+from tamp.planning.structs import BLOCK_SIZES
+from tamp.sim.trajectory import A_MAX, segment_profile
 
 SMALL, LARGE = [1.0, 0.0], [0.0, 1.0]
 X_STACK = np.array([[0.6, 0.15, 0.025] + SMALL, [0.7, -0.1, 0.025] + LARGE, [0.5, -0.2, 0.025] + SMALL])
@@ -74,7 +75,7 @@ def test_segment_profile_matches_drake_toppra():
     from pydrake.multibody.plant import MultibodyPlant
     from pydrake.trajectories import PiecewisePolynomial
 
-    from tamp.plants import ARM_FILE
+    from tamp.sim.plants import ARM_FILE
 
     plant = MultibodyPlant(0.0)
     Parser(plant).AddModels(str(ARM_FILE))

@@ -2,12 +2,13 @@
 import numpy as np
 import pytest
 
-from tamp import PickPlace, World, WorldConfig
-from tamp.kinematics import Q_LOWER, Q_UPPER, tcp_pose
-from tamp.motion import MotionPlanner
-from tamp.plants import X_FlangeTcp, build_motion_scene
-from tamp import structs
-from tamp.structs import BLOCK_SIZES
+from tamp.planning.structs import PickPlace
+from tamp.sim import World, WorldConfig
+from tamp.sim.kinematics import Q_LOWER, Q_UPPER, tcp_pose
+from tamp.sim.motion import MotionPlanner
+from tamp.sim.plants import X_FlangeTcp, build_motion_scene
+from tamp.planning import structs
+from tamp.planning.structs import BLOCK_SIZES
 
 SMALL, LARGE = [1.0, 0.0], [0.0, 1.0]
 BAR_HEIGHT = BLOCK_SIZES[1][2]
@@ -57,7 +58,7 @@ def test_offsets_move_toward_world_y_whatever_the_sign_of_the_block_axes(yaw, bl
     world +y for a cube turned by any multiple of 90 degrees and for a bar turned by 180 degrees."""
     from pydrake.math import RigidTransform, RotationMatrix
 
-    from tamp.skill import Scene, grasp_pose
+    from tamp.sim.skill import Scene, grasp_pose
 
     t = structs.SMALL if block == "small" else structs.LARGE
     scene_ = Scene(np.array([t]), [RigidTransform(RotationMatrix.MakeZRotation(yaw), [0.6, 0.1, 0.025])])
@@ -71,7 +72,7 @@ def test_offsets_move_toward_world_y_whatever_the_sign_of_the_block_axes(yaw, bl
 def test_a_bar_across_y_offsets_toward_world_x():
     from pydrake.math import RigidTransform, RotationMatrix
 
-    from tamp.skill import Scene
+    from tamp.sim.skill import Scene
 
     for yaw in (np.pi / 2, -np.pi / 2):
         bar = Scene(np.array([structs.LARGE]), [RigidTransform(RotationMatrix.MakeZRotation(yaw), [0.6, 0.0, 0.025])])

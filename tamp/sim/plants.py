@@ -24,9 +24,9 @@ from pydrake.common import Parallelism
 from pydrake.planning import RobotDiagramBuilder, SceneGraphCollisionChecker
 from pydrake.systems.framework import DiagramBuilder
 
-from tamp.structs import LARGE, SMALL
+from tamp.planning.structs import LARGE, SMALL
 
-MODEL_DIR = Path(__file__).resolve().parent.parent / "drake_models"
+MODEL_DIR = Path(__file__).resolve().parents[2] / "drake_models"
 ARM_FILE = MODEL_DIR / "ur10e.urdf"
 GRIPPER_FILE = MODEL_DIR / "gripper.sdf"
 TABLE_FILE = MODEL_DIR / "table.sdf"

@@ -29,11 +29,11 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from tamp.models import Models
-from tamp.search import SearchConfig, SearchResult, continuous_search, state_key
-from tamp.structs import Infeasible, KinematicFeasibility, PickPlace, RefinementOutcome
-from tamp.validate import check_problem
-from tamp.verify import (EPS_SUCCESS, TAU_VERIFY, Verification, at_goal, goal_error, refine_skeleton, verify,
+from tamp.planning.models import Models
+from tamp.planning.search import SearchConfig, SearchResult, continuous_search, state_key
+from tamp.planning.structs import Infeasible, KinematicFeasibility, PickPlace, RefinementOutcome
+from tamp.planning.validate import check_problem
+from tamp.planning.verify import (EPS_SUCCESS, TAU_VERIFY, Verification, at_goal, goal_error, refine_skeleton, verify,
                          verify_many)
 
 
@@ -411,7 +411,7 @@ METHODS: dict[str, Planner] = {"bilevel": plan_bilevel, "bilevel_alg1": plan_bil
 def plan(method: str, models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig(),
          kinematics: KinematicFeasibility | None = None) -> PlanResult:
     """Run one of METHODS on (X_init, X_goal), both (n, 5) arrays. `kinematics` (e.g. a
-    tamp.feasibility.FeasibilityChecker that observed the scene of X_init) puts kinematic feasibility
+    tamp.sim.feasibility.FeasibilityChecker that observed the scene of X_init) puts kinematic feasibility
     into the planning loop of `cfs` and `bilevel` (unless cfg.feasibility is False)."""
     if method not in METHODS:
         raise ValueError(f"unknown planning method {method!r}; choose one of {', '.join(METHODS)}")

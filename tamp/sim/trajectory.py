@@ -15,8 +15,8 @@ import numpy as np
 from pydrake.math import RigidTransform
 from pydrake.trajectories import PiecewisePolynomial
 
-from tamp.kinematics import V_MAX
-from tamp.structs import PickPlace
+from tamp.sim.kinematics import V_MAX
+from tamp.planning.structs import PickPlace
 
 # Joint acceleration limits (rad/s^2): the data sheet gives none; a conservative value that the
 # arm tracks closely under the PD controller with a carried block.

@@ -12,10 +12,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 
-from tamp.bilevel import METHODS, PlanConfig, PlanResult, plan, plan_closed_loop, replan_rounds
-from tamp.search import SearchConfig
-from tamp.validate import check_problem
-from tamp.verify import goal_error
+from tamp.planning.bilevel import METHODS, PlanConfig, PlanResult, plan, plan_closed_loop, replan_rounds
+from tamp.planning.search import SearchConfig
+from tamp.planning.validate import check_problem
+from tamp.planning.verify import goal_error
 
 LEVELS = {1: "level 1 (verified symbolic plan)", 2: "level 2 (continuous search)"}
 
@@ -90,7 +90,7 @@ def _checker(options: PlanOptions):
     """The kinematic feasibility checker for the planner (None when it is off or unused)."""
     if not options.feasibility or options.method not in ("cfs", "bilevel"):
         return None
-    from tamp.feasibility import FeasibilityChecker
+    from tamp.sim.feasibility import FeasibilityChecker
 
     return FeasibilityChecker()
 
@@ -107,8 +107,8 @@ def _open_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timeline)
         if not result.plan:
             print("empty plan: the initial state already meets the goal; nothing to execute")
         return 0
-    from tamp import World, WorldConfig
-    from tamp.refine import refine
+    from tamp.sim import World, WorldConfig
+    from tamp.sim.refine import refine
 
     world = World(WorldConfig(simplify_paths=True))
     if options.execute == "fast":
@@ -122,7 +122,7 @@ def _open_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timeline)
     if options.execute == "fast":
         X_final = world.X
     else:
-        from tamp.execute import execute
+        from tamp.sim.execute import execute
 
         X_final = execute(refined, timeline=timeline, partial=True).X_final
     error = goal_error(X_final, problem.X_goal)
@@ -133,7 +133,7 @@ def _open_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timeline)
 
 
 def _closed_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timeline) -> int:
-    from tamp import World, WorldConfig
+    from tamp.sim import World, WorldConfig
 
     world = World(WorldConfig(fidelity=options.execute, simplify_paths=True))
     world.timeline = timeline
@@ -171,8 +171,8 @@ def run_plan(problem_path: Path, models_dir: Path, options: PlanOptions) -> int:
     """The `tamp plan` command; returns the exit code (0: solved, and reached the goal if executed)."""
     import torch
 
-    from tamp.models import load_models
-    from tamp.problem import load_problem
+    from tamp.planning.models import load_models
+    from tamp.app.problem import load_problem
 
     # Planning runs many small forward passes: one thread is faster, and much faster when another
     # process keeps the second core busy (a 2-thread pass then waits for it: 20-40x slower, measured).
@@ -183,7 +183,7 @@ def run_plan(problem_path: Path, models_dir: Path, options: PlanOptions) -> int:
     if options.replay is not None and options.execute == "none":
         raise ValueError("--replay needs an execution (--execute fast or full)")
     if options.replay is not None:
-        from tamp.cli import check_output_file
+        from tamp.app.cli import check_output_file
 
         check_output_file(options.replay, "--replay")
     models = load_models(models_dir, need_symbolic=options.method != "cfs")
@@ -197,7 +197,7 @@ def run_plan(problem_path: Path, models_dir: Path, options: PlanOptions) -> int:
           f"{goal_error(problem.X_init, problem.X_goal) * 100:.1f} cm{symbolic}")
     timeline = None
     if options.replay is not None:
-        from tamp.replay import Timeline
+        from tamp.sim.replay import Timeline
 
         timeline = Timeline()
     run = _closed_loop if options.replan else _open_loop
@@ -212,7 +212,7 @@ def run_plan(problem_path: Path, models_dir: Path, options: PlanOptions) -> int:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    from tamp.cli import non_negative_int, positive_float, positive_int
+    from tamp.app.cli import non_negative_int, positive_float, positive_int
 
     p.add_argument("--problem", type=Path, required=True, help="problem file (JSON: X_init, X_goal, k, seed)")
     p.add_argument("--models", type=Path, required=True,

@@ -2,7 +2,7 @@
 
 A predicted state X (n, 5) holds positions only; the check rebuilds a scene from them with each
 block's orientation carried over from the last observed scene (the state has no yaw), and then asks,
-with the skill's own geometry (`tamp.skill`) and IK (`tamp.kinematics.solve_chain`, closed form on the
+with the skill's own geometry (`tamp.sim.skill`) and IK (`tamp.sim.kinematics.solve_chain`, closed form on the
 skill's branch, no numerical fallback):
 
 1. grasp contact: does the grasp point lie on the picked block (`skill.held_block`)?
@@ -15,7 +15,7 @@ No physics is simulated and no motion is planned: what happens after release sta
 Model's prediction. `FeasibilityChecker.refine` is the full refinement (IK, OMPL motions, grasps) of a
 plan, which the planners run before returning it: each action's motions are planned in the scene the
 Dynamics Model predicts before it, again without physics.
-The planners see this class only through `tamp.structs.KinematicFeasibility`.
+The planners see this class only through `tamp.planning.structs.KinematicFeasibility`.
 """
 from __future__ import annotations
 
@@ -26,12 +26,13 @@ from typing import Sequence
 import numpy as np
 from pydrake.math import RigidTransform
 
-from tamp.kinematics import Q_HOME, solve_chain
-from tamp.plants import X_FlangeTcp
-from tamp.refine import step_failure
-from tamp.skill import Scene, approach_poses, held_block, pick_place_waypoints
-from tamp.structs import BLOCK_SIZES, Infeasible, PickPlace, RefinementOutcome, WorldConfig
-from tamp.world import World
+from tamp.sim.kinematics import Q_HOME, solve_chain
+from tamp.sim.plants import X_FlangeTcp
+from tamp.sim.refine import step_failure
+from tamp.sim.skill import Scene, approach_poses, held_block, pick_place_waypoints
+from tamp.planning.structs import BLOCK_SIZES, Infeasible, PickPlace, RefinementOutcome
+from tamp.sim.structs import WorldConfig
+from tamp.sim.world import World
 
 # Collision set-up of each waypoint configuration, as `World.step` plans the motions through it.
 WITH_ALL_BLOCKS = ("pregrasp", "grasp")  # jaws open around the picked block
@@ -43,7 +44,7 @@ REFINE_REASONS = {"ik": Infeasible.REFINE_IK, "motion": Infeasible.REFINE_MOTION
 class FeasibilityChecker:
     """Cheap per-action check on predicted scenes, and full refinement, for one observed scene at a time.
 
-    Call `reset(X_init)` (blocks upright, settled, as `tamp.refine.refine(plan, X_init)` starts) or
+    Call `reset(X_init)` (blocks upright, settled, as `tamp.sim.refine.refine(plan, X_init)` starts) or
     `observe(scene, q)` (an exact simulator state, e.g. in closed loop) before planning from it.
     """
 
@@ -63,7 +64,7 @@ class FeasibilityChecker:
 
     # --- the observed scene ----------------------------------------------------------------------
     def reset(self, X_init: np.ndarray) -> Scene:
-        """Observe the scene X_init places upright, as `tamp.refine.refine(plan, X_init)` starts."""
+        """Observe the scene X_init places upright, as `tamp.sim.refine.refine(plan, X_init)` starts."""
         self.world.rng = np.random.default_rng(0)
         self.world.reset(X=X_init)
         self.scene, self.q = self.world.scene, self.world.q.copy()

@@ -15,7 +15,8 @@ from dataclasses import dataclass
 import numpy as np
 from pydrake.math import RigidTransform, RotationMatrix
 
-from tamp.structs import BLOCK_SIZES, LARGE, OFFSET_STEP, PickPlace, WorldConfig
+from tamp.planning.structs import BLOCK_SIZES, LARGE, OFFSET_STEP, PickPlace
+from tamp.sim.structs import WorldConfig
 
 JAW_OPENING = 0.08  # metres between the open jaws' inner faces
 _GRASP_TOLERANCE = 0.005  # metres: the grasp point may lie this far outside a block and still hold it

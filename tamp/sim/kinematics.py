@@ -15,7 +15,7 @@ from pydrake.multibody.inverse_kinematics import InverseKinematics
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.solvers import Solve
 
-from tamp.plants import X_FlangeTcp, X_WBase
+from tamp.sim.plants import X_FlangeTcp, X_WBase
 
 # Joint limits (radians) and velocity limits (rad/s) of drake_models/ur10e.urdf.
 Q_LOWER = np.array([-2 * np.pi, -2 * np.pi, -np.pi, -2 * np.pi, -2 * np.pi, -2 * np.pi])

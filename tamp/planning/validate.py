@@ -21,14 +21,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from tamp.structs import BLOCK_SIZES
+from tamp.planning.structs import BLOCK_SIZES
 
 MAX_OBJECTS = 6  # blocks the world builds plants for
 TABLE_TOP_Z_M = 0.0  # the world frame is the table top (drake_models/table.sdf)
 TABLE_X, TABLE_Y = (-0.5, 1.9), (-1.2, 1.2)  # table top extent (drake_models/table.sdf), metres
 BASE_CLEARANCE = 0.15  # metres: no block centre this close to the arm's base axis
 # Metres from the base axis within which the UR10e reaches a top-down grasp of a block on the table
-# and its pre-grasp 12 cm above (measured with tamp.kinematics.analytic_ik: 1.31 m at the grasp,
+# and its pre-grasp 12 cm above (measured with tamp.sim.kinematics.analytic_ik: 1.31 m at the grasp,
 # 1.295 m at the pre-grasp; tests/test_input_validation.py checks it against the IK).
 ARM_REACH_M = 1.29
 # Metres a block may sink into or float above its support, and two blocks may overlap: the tolerance the
@@ -59,7 +59,7 @@ def check_scene(X: np.ndarray, *, where: str = "scene", field: str = "X", uprigh
     """Raise ValueError naming `where`, `field` and the row if X is not a scene the world can hold.
 
     X must already be a well-formed (n, 5) array of finite numbers with one-hot types (see
-    `tamp.problem.problem_from_dict`); this checks the geometry. `n_max`: the models' limit.
+    `tamp.app.problem.problem_from_dict`); this checks the geometry. `n_max`: the models' limit.
     `within_reach=False` accepts blocks on the table beyond the arm's reach (the simulator holds them;
     an action on one fails its IK).
     """

@@ -109,8 +109,8 @@ def _html_path(text: str) -> Path:
 
 def cmd_simulate(args: argparse.Namespace) -> int:
     """Random pick-place actions on a random scene, one line per action."""
-    from tamp import World, WorldConfig
-    from tamp.replay import Timeline
+    from tamp.sim import World, WorldConfig
+    from tamp.sim.replay import Timeline
 
     if args.replay:
         check_output_file(args.replay, "--replay")
@@ -152,10 +152,10 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
 def cmd_view(args: argparse.Namespace) -> int:
     """Refine a plan file, execute it with the arm under physics and write the replay."""
-    from tamp.execute import execute
-    from tamp.plan_file import load_plan_file
-    from tamp.refine import refine
-    from tamp.replay import Timeline
+    from tamp.sim.execute import execute
+    from tamp.app.plan_file import load_plan_file
+    from tamp.sim.refine import refine
+    from tamp.sim.replay import Timeline
 
     X, plan = load_plan_file(args.plan)
     check_output_file(args.out, "--out")
@@ -192,7 +192,7 @@ def _object_counts(text: str) -> tuple[int, ...]:
 
 def cmd_collect(args: argparse.Namespace) -> int:
     """Random-exploration transitions (X, a, X') into a sharded dataset directory; resumable."""
-    from tamp.collect import CollectConfig, collect
+    from tamp.app.collect import CollectConfig, collect
 
     check_output_dir(args.out, "--out")
     cfg = CollectConfig(samples=args.samples, objects=args.objects, seed=args.seed,
@@ -210,7 +210,7 @@ def cmd_collect(args: argparse.Namespace) -> int:
 
 def cmd_dataset_stats(args: argparse.Namespace) -> int:
     """Counts, failure reasons, effect magnitudes and outcome classes of a dataset."""
-    from tamp.dataset_stats import dataset_stats
+    from tamp.app.dataset_stats import dataset_stats
 
     check_output_file(args.png if args.png is not None else args.directory / "stats.png", "--png")
     stats = dataset_stats(args.directory, png=args.png)
@@ -281,7 +281,7 @@ def symbol_scenes(problems: Path | None, data: Path | None, max_scenes: int, see
     if (problems is None) == (data is None):
         raise ValueError("give exactly one of --problems (a problem set) or --data (a dataset directory)")
     if problems is not None:
-        from tamp.problem import read_problem_set
+        from tamp.app.problem import read_problem_set
 
         return [X for p in read_problem_set(problems) for X in (p.X_init, p.X_goal)][:max_scenes]
     from learned import load_transitions
@@ -295,7 +295,7 @@ def symbol_scenes(problems: Path | None, data: Path | None, max_scenes: int, see
 
 def cmd_domain(args: argparse.Namespace) -> int:
     """Symbols from the Symbolic Model -> learned PDDL / PPDDL domain and its statistics."""
-    from tamp.domain import learn_domain
+    from tamp.planning.domain import learn_domain
 
     check_output_dir(args.out, "--out")
     report = learn_domain(args.model, args.data, args.out, holdout=args.holdout, seed=args.seed,
@@ -314,13 +314,13 @@ def cmd_domain(args: argparse.Namespace) -> int:
 
 def cmd_plan(args: argparse.Namespace) -> int:
     """Plan a problem file with the learned models; refine, execute and replay the plan."""
-    from tamp.plan_command import options_from_args, run_plan
+    from tamp.app.plan_command import options_from_args, run_plan
 
     return run_plan(args.problem, args.models, options_from_args(args))
 
 def cmd_demo(args: argparse.Namespace) -> int:
     """A random problem planned, refined, executed under physics, summarised and replayed."""
-    from tamp.demo import DemoConfig, run_demo
+    from tamp.app.demo import DemoConfig, run_demo
 
     check_output_file(args.replay, "--replay")
     cfg = DemoConfig(seed=args.seed, objects=args.objects, actions=args.actions, models=args.models,
@@ -502,7 +502,7 @@ def build_parser() -> argparse.ArgumentParser:
         "each symbolic candidate and the timings, then refine and execute it in the Drake world and "
         "print the final error. Exit status 0 if a plan was found (and, when executed, reached the goal).",
     )
-    from tamp.plan_command import add_arguments as add_plan_arguments
+    from tamp.app.plan_command import add_arguments as add_plan_arguments
 
     add_plan_arguments(p)
     p.set_defaults(func=cmd_plan)

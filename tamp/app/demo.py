@@ -1,7 +1,7 @@
 """`tamp demo`: one random problem solved end to end, with a replay that shows the model's predictions.
 
 A random scene of `objects` blocks and the goal after `actions` random actions that moved something
-(`tamp.problem.random_problem`) is planned with the bilevel planner and the pretrained models shipped
+(`tamp.app.problem.random_problem`) is planned with the bilevel planner and the pretrained models shipped
 in the package (or --models), refined into joint trajectories, executed with the full arm under
 physics (or in the fast world), and summarised. The Meshcat replay shows, beside the executed
 blocks, the goal (translucent green) and the Dynamics Model's predicted blocks after the current
@@ -17,13 +17,14 @@ from pathlib import Path
 
 import numpy as np
 
-from tamp.bilevel import ClosedLoopResult, PlanConfig, PlanResult, plan, plan_closed_loop, replan_rounds
-from tamp.plan_command import LEVELS, fmt_action, print_result
-from tamp.problem import Problem, random_problem
-from tamp.replay import Timeline
-from tamp.structs import TYPE_NAMES, PickPlace, WorldConfig
-from tamp.trajectory import RefinedPlan
-from tamp.verify import goal_error, goal_errors, rollout
+from tamp.planning.bilevel import ClosedLoopResult, PlanConfig, PlanResult, plan, plan_closed_loop, replan_rounds
+from tamp.app.plan_command import LEVELS, fmt_action, print_result
+from tamp.app.problem import Problem, random_problem
+from tamp.sim.replay import Timeline
+from tamp.planning.structs import TYPE_NAMES, PickPlace
+from tamp.sim.structs import WorldConfig
+from tamp.sim.trajectory import RefinedPlan
+from tamp.planning.verify import goal_error, goal_errors, rollout
 
 DEFAULT_REPLAY = Path("demo_replay.html")
 
@@ -89,8 +90,8 @@ def refine_and_execute(actions: list[PickPlace], X_init: np.ndarray, X_goal: np.
     """Refine `actions` from X_init and execute them, `full` (the arm under physics) or `fast` (the
     refinement world: kinematic carry, physics after release). Actions before a refinement failure
     are executed, none after it."""
-    from tamp import World
-    from tamp.refine import refine
+    from tamp.sim import World
+    from tamp.sim.refine import refine
 
     world = World(WorldConfig(simplify_paths=True))
     if fidelity == "fast":
@@ -101,7 +102,7 @@ def refine_and_execute(actions: list[PickPlace], X_init: np.ndarray, X_goal: np.
         X_final, execute_time, notes = world.X, 0.0, []
         sim_time = sum(s.duration for s in refined.steps)
     else:
-        from tamp.execute import execute
+        from tamp.sim.execute import execute
 
         t = time.perf_counter()
         executed = execute(refined, timeline=timeline, partial=True)
@@ -120,7 +121,7 @@ def run_demo(cfg: DemoConfig = DemoConfig()) -> DemoResult:
     write the replay(s)."""
     import torch
 
-    from tamp.models import load_models, pretrained_dir
+    from tamp.planning.models import load_models, pretrained_dir
 
     if cfg.fidelity not in ("full", "fast"):
         raise ValueError(f"fidelity must be 'full' or 'fast', got {cfg.fidelity!r}")
@@ -163,7 +164,7 @@ def run_demo(cfg: DemoConfig = DemoConfig()) -> DemoResult:
         out.execution = refine_and_execute(result.plan, problem.X_init, problem.X_goal, cfg.fidelity, timeline)
         _print_execution(out.execution, result.plan, result.predicted, problem.X_goal, cfg.fidelity)
     elif timeline is not None:  # show the problem: the initial scene and the goal
-        from tamp import World
+        from tamp.sim import World
 
         world = World(WorldConfig())
         world.timeline = timeline
@@ -294,7 +295,7 @@ def _closed_loop(problem: Problem, models, plan_cfg: PlanConfig, cfg: DemoConfig
     executed there, an action that cannot be refined changes nothing and the loop goes on. The first
     round reuses the plan already printed. The replay shows each round's prediction of the action it
     executed (the last round: of each of its actions)."""
-    from tamp import World
+    from tamp.sim import World
 
     world = World(WorldConfig(fidelity=cfg.fidelity, simplify_paths=True))
     world.timeline = timeline
@@ -335,7 +336,7 @@ def _show_loop_predictions(timeline: Timeline, planned: list[tuple[int, PlanResu
                            starts: list[float | None]) -> None:
     """Ghosts of each round's predictions, each from the replay time its action started (actions that
     never moved the arm, e.g. not refinable, have no start and no ghost)."""
-    from tamp.replay import PREDICTED_RGBA, Ghosts
+    from tamp.sim.replay import PREDICTED_RGBA, Ghosts
 
     states, times = [], []
     for r, (first, result) in enumerate(planned):

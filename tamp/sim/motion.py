@@ -17,8 +17,8 @@ from ompl import util as ou
 from pydrake.geometry import Box
 from pydrake.math import RigidTransform
 
-from tamp.kinematics import Q_LOWER, Q_UPPER
-from tamp.plants import MotionScene
+from tamp.sim.kinematics import Q_LOWER, Q_UPPER
+from tamp.sim.plants import MotionScene
 
 ou.setLogLevel(ou.LogLevel.LOG_WARN)
 

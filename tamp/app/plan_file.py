@@ -13,8 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-from tamp.structs import PickPlace
-from tamp.validate import check_scene
+from tamp.planning.structs import PickPlace
+from tamp.planning.validate import check_scene
 
 
 def read_json_file(path: str | Path, kind: str):

@@ -35,8 +35,8 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from tamp.structs import STATUSES, WorldConfig
-from tamp.validate import MAX_OBJECTS
+from tamp.sim.structs import STATUSES, WorldConfig
+from tamp.planning.validate import MAX_OBJECTS
 
 STATUS_CODES = {name: code for code, name in enumerate(STATUSES)}
 LOCK_NAME = ".collect.lock"
@@ -181,7 +181,7 @@ _WORLD = None  # the one World of a worker process
 def _worker_world(world_config: dict):
     global _WORLD
     if _WORLD is None:
-        from tamp import World  # noqa: PLC0415
+        from tamp.sim import World
 
         _WORLD = World(WorldConfig(**world_config))
     return _WORLD
@@ -217,7 +217,7 @@ class RaySceneWorker:
 def run_local(tasks: list[SceneTask], world: WorldConfig, workers: int) -> Iterator[SceneResult]:
     """Results of `tasks` in completion order: in this process (1 worker) or a spawn pool."""
     if workers == 1:
-        from tamp import World  # noqa: PLC0415
+        from tamp.sim import World
 
         w = World(world)
         for task in tasks:

@@ -26,7 +26,7 @@ from typing import Callable, Hashable
 
 import numpy as np
 
-from tamp.verify import EPS_SUCCESS, DynamicsModel
+from tamp.planning.verify import EPS_SUCCESS, DynamicsModel
 
 OFFSETS = (-1, 0, 1)
 _PAIRS = np.array([(g, r) for g in OFFSETS for r in OFFSETS], dtype=np.int64)  # the 9 offset pairs
@@ -115,7 +115,7 @@ def continuous_search(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarr
                       pruned: set[tuple[bytes, tuple]] = frozenset()) -> SearchResult:
     """Weighted A* from X_init to X_goal with the Dynamics Model as the transition.
 
-    `feasible` (optional, e.g. the kinematic check of tamp.feasibility) prunes successors whose action
+    `feasible` (optional, e.g. the kinematic check of tamp.sim.feasibility) prunes successors whose action
     is infeasible in its parent's predicted state. It is called lazily, when a successor is expanded
     or reaches the goal, so only the edges the search actually follows are checked (a few per
     expansion instead of every generated successor). `pruned` holds (state_key(X), action) pairs left

@@ -14,11 +14,12 @@ from typing import Iterable
 
 import numpy as np
 
-from tamp.skill import Scene
-from tamp.structs import PickPlace, WorldConfig
-from tamp.trajectory import RefinedPlan, RefinementFailure, concatenate, refined_action
-from tamp.validate import check_scene
-from tamp.world import World, validate_action
+from tamp.sim.skill import Scene
+from tamp.planning.structs import PickPlace
+from tamp.sim.structs import WorldConfig
+from tamp.sim.trajectory import RefinedPlan, RefinementFailure, concatenate, refined_action
+from tamp.planning.validate import check_scene
+from tamp.sim.world import World, validate_action
 
 FAILURE_STAGES = {  # StepInfo.status of a failed action -> refinement stage
     "ik_failure": "ik", "motion_failure": "motion", "nothing_grasped": "grasp"}

@@ -7,7 +7,7 @@ import numpy as np
 from pydrake.math import RigidTransform
 from pydrake.systems.analysis import Simulator
 
-from tamp.plants import PhysicsScene
+from tamp.sim.plants import PhysicsScene
 
 
 @dataclass

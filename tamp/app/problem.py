@@ -13,7 +13,7 @@ integer) seeds the sampled symbolic domains. `name` (optional string) names the 
 `actions` (optional) are the actions that generated the goal. Generated problems also say how they
 were made: `protocol` ("strict" or "paper", see `PROTOCOLS`), `moved` (how many of the k actions
 moved a block) and `run` (which of several problem sets of one file). Errors name the file and the
-field; the scenes are checked by `tamp.validate.check_problem` (reach, resting, no overlap). `random_problem(n, k, seed)` makes one from a random scene and k random actions in the fast world.
+field; the scenes are checked by `tamp.planning.validate.check_problem` (reach, resting, no overlap). `random_problem(n, k, seed)` makes one from a random scene and k random actions in the fast world.
 """
 from __future__ import annotations
 
@@ -24,11 +24,11 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from tamp.plan_file import read_json_file
-from tamp.validate import check_problem
+from tamp.app.plan_file import read_json_file
+from tamp.planning.validate import check_problem
 
 if TYPE_CHECKING:
-    from tamp.world import World
+    from tamp.sim.world import World
 
 MOVED_M = 0.01  # metres: a goal-generating action counts when some block moved at least this far
 # How the k goal-generating actions are drawn (uniformly among the 9 n^2 actions of the scene):
@@ -181,8 +181,8 @@ def random_problem(n: int, k: int, seed: int, world: "World | None" = None, name
     else RuntimeError), so k counts real steps; under `paper` the first k draws are kept whatever
     they do. `seed` also seeds the sampled symbolic domains when the problem is planned.
     """
-    from tamp.structs import WorldConfig
-    from tamp.world import World
+    from tamp.sim.structs import WorldConfig
+    from tamp.sim.world import World
 
     if n < 1 or k < 1:
         raise ValueError(f"a random problem needs n >= 1 objects and k >= 1 actions, got n={n}, k={k}")

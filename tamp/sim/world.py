@@ -4,7 +4,7 @@
 motions checked against the scene (the grasped block attached while carried); only a fully planned
 action is executed. In the `fast` fidelity the grasped block follows the gripper kinematically and
 physics runs from release until every block is at rest. In the `full` fidelity the same plan is
-time-parameterized and the arm follows it under Drake physics (tamp/execute.py); the `fast` outcome
+time-parameterized and the arm follows it under Drake physics (tamp/sim/execute.py); the `fast` outcome
 is kept in `info.X_predicted`. An action that is kinematically impossible or closes the jaws on
 nothing changes nothing, and `StepInfo` says why.
 """
@@ -17,14 +17,15 @@ from typing import Iterable
 import numpy as np
 from pydrake.math import RigidTransform
 
-from tamp.kinematics import Q_HOME, drake_ik, solve_chain
-from tamp.motion import MotionPlanner
-from tamp.physics import BlockPhysics
-from tamp.plants import X_FlangeTcp, build_motion_scene, build_physics_scene
-from tamp.replay import Timeline
-from tamp.skill import Scene, Waypoints, approach_poses, held_block, pick_place_waypoints, topdown
-from tamp.structs import BLOCK_SIZES, LARGE, OFFSETS, SMALL, PickPlace, StepInfo, WorldConfig
-from tamp.validate import MAX_OBJECTS, check_scene
+from tamp.sim.kinematics import Q_HOME, drake_ik, solve_chain
+from tamp.sim.motion import MotionPlanner
+from tamp.sim.physics import BlockPhysics
+from tamp.sim.plants import X_FlangeTcp, build_motion_scene, build_physics_scene
+from tamp.sim.replay import Timeline
+from tamp.sim.skill import Scene, Waypoints, approach_poses, held_block, pick_place_waypoints, topdown
+from tamp.planning.structs import BLOCK_SIZES, LARGE, OFFSETS, SMALL, PickPlace
+from tamp.sim.structs import StepInfo, WorldConfig
+from tamp.planning.validate import MAX_OBJECTS, check_scene
 
 MOTIONS = ("approach", "descend", "liftoff", "lift", "transfer", "lower", "retreat")
 
@@ -241,8 +242,8 @@ class World:
 
     def _step_full(self, action: PickPlace) -> tuple[np.ndarray, StepInfo]:
         """Plan and predict with the fast world, then execute the timed trajectory under physics."""
-        from tamp.execute import Executor
-        from tamp.trajectory import RefinedPlan, refined_action
+        from tamp.sim.execute import Executor
+        from tamp.sim.trajectory import RefinedPlan, refined_action
 
         scene, q = self.scene, self.q.copy()
         self._planner._motion_seed, self._planner._steps = self._motion_seed, self._steps

@@ -20,8 +20,8 @@ from pathlib import Path
 import numpy as np
 from pydrake.math import RigidTransform
 
-from tamp.kinematics import V_MAX, tcp_pose
-from tamp.structs import BLOCK_SIZES
+from tamp.sim.kinematics import V_MAX, tcp_pose
+from tamp.planning.structs import BLOCK_SIZES
 
 REPLAY_FPS = 30.0
 _REPLAY_SPEED = 0.5  # fraction of the joint velocity limits used to time kinematic motions
@@ -133,7 +133,7 @@ class Timeline:
             raise ValueError("the timeline is empty: reset and step the world with a timeline attached")
         from pydrake.geometry import Meshcat, MeshcatVisualizer, MeshcatVisualizerParams, Role
 
-        from tamp.plants import build_motion_scene
+        from tamp.sim.plants import build_motion_scene
 
         scene = build_motion_scene(self.types, padding=0.0)
         plant = scene.plant

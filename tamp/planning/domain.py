@@ -24,7 +24,7 @@ def learn_domain(model_path: str | Path, data_dir: str | Path, out_dir: str | Pa
 
     if not 0.0 <= holdout < 1.0:
         raise ValueError(f"holdout must be in [0, 1), got {holdout}")
-    from tamp.models import require_kind
+    from tamp.planning.models import require_kind
 
     model = learned.load_model(model_path)
     if not any_bottleneck:

@@ -25,12 +25,12 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, TrajectorySource
 
-from tamp.physics import blocks_at_rest
-from tamp.plants import X_FlangeTcp, add_arm_gripper_table, add_blocks
-from tamp.replay import REPLAY_FPS, Timeline
-from tamp.skill import Scene
-from tamp.structs import WorldConfig
-from tamp.trajectory import RefinedPlan
+from tamp.sim.physics import blocks_at_rest
+from tamp.sim.plants import X_FlangeTcp, add_arm_gripper_table, add_blocks
+from tamp.sim.replay import REPLAY_FPS, Timeline
+from tamp.sim.skill import Scene
+from tamp.sim.structs import WorldConfig
+from tamp.sim.trajectory import RefinedPlan
 
 KP = np.array([4000.0, 4000.0, 2000.0, 500.0, 500.0, 300.0])  # N m / rad
 KD = np.array([400.0, 400.0, 200.0, 50.0, 50.0, 30.0])  # N m s / rad

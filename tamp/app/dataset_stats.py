@@ -23,7 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
-from tamp.structs import BLOCK_SIZES, LARGE, SMALL, STATUSES
+from tamp.planning.structs import BLOCK_SIZES, LARGE, SMALL
+from tamp.sim.structs import STATUSES
 
 MOVE_TOL = 0.01  # metres: an object moved if its centre moved more than this
 LEVEL_TOL = 0.01  # metres: height tolerance of a flat stack level

@@ -16,7 +16,7 @@ from typing import Protocol
 
 import numpy as np
 
-from tamp.verify import DynamicsModel
+from tamp.planning.verify import DynamicsModel
 
 SYMBOLIC_FILE, DYNAMICS_FILE, DOMAIN_DIR = "symbolic.pt", "dynamics.pt", "domain"
 
@@ -24,7 +24,7 @@ SYMBOLIC_FILE, DYNAMICS_FILE, DOMAIN_DIR = "symbolic.pt", "dynamics.pt", "domain
 def pretrained_dir() -> Path:
     """The quick-scale models shipped inside the package (tamp/pretrained/; PROVENANCE.md says how
     they were made), the default of `tamp demo --models`."""
-    return Path(__file__).resolve().parent / "pretrained"
+    return Path(__file__).resolve().parents[1] / "pretrained"
 
 
 class SymbolModel(Protocol):

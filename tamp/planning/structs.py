@@ -1,0 +1,72 @@
+"""Plain data of the planners, shared with the simulator: block types, actions, infeasibility.
+
+`PickPlace` crosses package borders as a 4-tuple (learned/ and symbolic/ never import tamp), so it
+is a NamedTuple. Lengths are metres, angles radians, times seconds.
+"""
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from enum import Enum
+from typing import NamedTuple, Protocol, Sequence
+
+import numpy as np
+
+# Block types: index into the one-hot part of X.
+SMALL, LARGE = 0, 1
+TYPE_NAMES = ("small", "large")
+# Box sizes along the block's own x, y, z (metres).
+BLOCK_SIZES = {SMALL: (0.05, 0.05, 0.05), LARGE: (0.05, 0.25, 0.05)}
+OFFSET_STEP = 0.075  # metres per unit of offset, along tamp.sim.skill.Scene.offset_axis_xy
+OFFSETS = (-1, 0, 1)
+
+
+class PickPlace(NamedTuple):
+    """Pick object `pick` at `grasp_offset` and release it on object `place` at `release_offset`.
+
+    Offsets are in {-1, 0, +1} and scale OFFSET_STEP along the object's offset axis (y signed toward +y).
+    `place == pick` places the object where it was, shifted by the offsets.
+    """
+
+    pick: int
+    grasp_offset: int
+    place: int
+    release_offset: int
+
+
+class Infeasible(str, Enum):
+    """Why an action was found infeasible: by the cheap check on a predicted scene (the first three)
+    or by full refinement (IK, motion planning, grasp, from tamp.sim.refine)."""
+
+    NO_GRASP = "no_grasp"  # the grasp point does not lie on the picked block (jaws close on nothing or another)
+    IK = "ik"  # a waypoint has no closed-form IK solution on the skill's branch
+    COLLISION = "collision"  # a waypoint configuration collides with another block or the table
+    REFINE_IK = "refine_ik"
+    REFINE_MOTION = "refine_motion"
+    REFINE_GRASP = "refine_grasp"
+
+
+@dataclass(frozen=True)
+class RefinementOutcome:
+    """Result of fully refining a plan: None fields when every action refined."""
+
+    action_index: int | None = None  # first action that failed
+    reason: Infeasible | None = None
+    message: str = ""
+
+    @property
+    def success(self) -> bool:
+        return self.action_index is None
+
+
+class KinematicFeasibility(Protocol):
+    """What the planners need from the simulator side (tamp.sim.feasibility.FeasibilityChecker): a cheap
+    check of actions in a predicted scene and full refinement of a plan from the observed scene.
+    The planner modules see only this protocol and so stay free of Drake."""
+
+    def check(self, X: np.ndarray, actions: np.ndarray) -> list[Infeasible | None]:
+        """Per action (B, 4) in the predicted scene X (n, 5): None if feasible, else why not."""
+
+    def refine(self, actions: Sequence[Sequence[int]], trajectory: np.ndarray | None = None) -> RefinementOutcome:
+        """Fully refine the plan (IK, OMPL motions, grasps) from the observed scene, each action in
+        the scene `trajectory` (the predicted states along the plan) gives before it; no physics."""
