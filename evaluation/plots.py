@@ -5,12 +5,13 @@ Success is in percent, times in seconds; None values are drawn as missing bars.
 """
 from __future__ import annotations
 
-import os
 from pathlib import Path
 from typing import Mapping, Sequence
 
 import numpy as np
 from matplotlib.figure import Figure
+
+from tamp.records import atomic_write
 
 from .stats import Confusion
 
@@ -19,11 +20,7 @@ COLORS = {"deterministic": "#7f7f7f", "probabilistic": "#ff7f0e", "cfs": "#1f77b
 
 
 def _save(fig: Figure, path: Path) -> Path:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    fig.savefig(tmp, format="png", dpi=110, bbox_inches="tight")
-    os.replace(tmp, path)
-    return path
+    return atomic_write(path, lambda tmp: fig.savefig(tmp, format="png", dpi=110, bbox_inches="tight"))
 
 
 def _values(xs: Sequence[float | None]) -> np.ndarray:

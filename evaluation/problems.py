@@ -18,13 +18,13 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import os
 from pathlib import Path
 from typing import Iterable, Sequence
 
 import numpy as np
 
 from tamp.app.problem import PROTOCOLS, Problem, random_problem
+from tamp.records import atomic_write_text
 from tamp.app.problem import read_problem_set as read_problems  # noqa: F401 (the set reader, here by its old name)
 
 
@@ -128,18 +128,3 @@ def write_problems(path: str | Path, problems: Sequence[Problem]) -> Path:
     return atomic_write_text(path, text)
 
 
-def atomic_write_text(path: str | Path, text: str) -> Path:
-    """Write `text` to a temp file next to `path`, fsync, and rename it over `path`."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    try:
-        with open(tmp, "w") as f:
-            f.write(text)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
-    return path

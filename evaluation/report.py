@@ -13,13 +13,14 @@ from __future__ import annotations
 
 import json
 import math
-import os
 from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Iterable, Sequence
 
 from . import paper, plots
+from tamp.records import atomic_write_text
+
 from .stats import IDENTICAL, confusion, mean_std, median, paired_ttest, percentile, rate_pct
 
 METHOD_ORDER = ("deterministic", "probabilistic", "probabilistic_oracle", "cfs", "bilevel", "bilevel_alg1",
@@ -916,12 +917,6 @@ def _json_safe(x: Any) -> Any:
     return x
 
 
-def _write_atomic(path: Path, text: str) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
-
-
 def build_report(res: Results, figures: Path, ablation: dict | None = None,
                  ablation_source: Path = Path("ablation.json"), source: str = "rows.jsonl",
                  symbols: list[dict] | None = None, symbols_source: Path = Path("symbols.json")) -> tuple[str, dict]:
@@ -973,8 +968,8 @@ def write_report(results_dir: Path, ablation: Path | None = None) -> Path:
     md, numbers = build_report(Results(rows, meta, notes), results_dir / "figures", ablation_data, ablation_path,
                                str(rows_path), symbols, symbols_path)
     out = results_dir / "report.md"
-    _write_atomic(results_dir / "report.json", json.dumps(numbers, indent=1, ensure_ascii=False) + "\n")
-    _write_atomic(out, md)
+    atomic_write_text(results_dir / "report.json", json.dumps(numbers, indent=1, ensure_ascii=False) + "\n")
+    atomic_write_text(out, md)
     return out
 
 

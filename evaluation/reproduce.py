@@ -27,7 +27,6 @@ Symbolic Model is trained as the Symbolic Model, the Gumbel Dynamics Model as th
 from __future__ import annotations
 
 import json
-import os
 import sys
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -35,6 +34,8 @@ from dataclasses import asdict, dataclass, field
 from multiprocessing import get_context
 from pathlib import Path
 from typing import Any
+
+from tamp.records import atomic_write_text
 
 
 @dataclass(frozen=True)
@@ -113,9 +114,7 @@ class Stages:
         self._write()
 
     def _write(self) -> None:
-        tmp = self.path.with_suffix(".tmp")
-        tmp.write_text(json.dumps(self.state, indent=1) + "\n")
-        os.replace(tmp, self.path)
+        atomic_write_text(self.path, json.dumps(self.state, indent=1) + "\n")
 
 
 # --- the training jobs (run in worker processes) ---------------------------------------------------
@@ -149,7 +148,7 @@ def reproduce(out: str | Path, scale_name: str = "quick", workers: int | None = 
               symbolic_backend: str = "python") -> Path:
     """Run (or resume) every stage; returns the path of report.md. `models`: evaluate this models
     directory instead of collecting and training (stages collect, train and domains skipped)."""
-    from tamp.app.collect import available_cpus
+    from tamp.app.parallel import available_cpus
     from tamp.app.problem import PROTOCOLS
 
     if scale_name not in SCALES:

@@ -30,13 +30,10 @@ worker computed it or what that worker did before: the rows are the same for any
 from __future__ import annotations
 
 import dataclasses
-import fcntl
 import hashlib
 import json
-import multiprocessing as mp
 import os
 import sys
-import threading
 import time
 import traceback
 from dataclasses import dataclass
@@ -47,11 +44,12 @@ from typing import Any, Iterator, Sequence
 import numpy as np
 
 from evaluation.methods import METHODS, SYMBOLIC_BACKENDS, Method, load_method_models, required_files, resolve_methods
-from evaluation.problems import atomic_write_text, read_problems
+from evaluation.problems import read_problems
 from tamp.planning.bilevel import PlanConfig
-from tamp.app.collect import package_versions
+from tamp.app.parallel import run_tasks
 from tamp.app.problem import Problem
 from tamp.planning.verify import EPS_SUCCESS, TAU_VERIFY, goal_error
+from tamp.records import atomic_write_text, exclusive, package_versions
 
 ROWS_NAME, META_NAME, LOCK_NAME, SYMBOLS_NAME = "rows.jsonl", "meta.json", ".evaluate.lock", "symbols.json"
 FORMAT = "tamp-evaluation/1"
@@ -359,85 +357,20 @@ class Evaluator:
 
 # --------------------------------------------------------------------------- workers
 
-_EVALUATOR: Evaluator | None = None  # the one Evaluator of a worker process
-
-
-def _make_evaluator(models_dir: str, methods: list[str], models: dict | None, config: EvalConfig) -> Evaluator:
-    import torch
-
-    torch.set_num_threads(1)
-    return Evaluator(models if models is not None else load_method_models(models_dir, methods), config)
-
-
-def _init_pool_worker(models_dir: str, methods: list[str], models: dict | None, config: EvalConfig,
-                      parent_pid: int) -> None:
-    """Pool initializer: load the models once, and exit if the parent dies (e.g. kill -9)."""
-    def watch() -> None:
-        while os.getppid() == parent_pid:
-            time.sleep(0.5)
-        os._exit(1)
-
-    threading.Thread(target=watch, daemon=True).start()
-    global _EVALUATOR
-    _EVALUATOR = _make_evaluator(models_dir, methods, models, config)
-
-
-def _pool_run(task: tuple[Problem, str]) -> dict:
-    return _EVALUATOR.run(*task)
-
-
-class RayEvaluator:
-    """A Ray actor (wrapped with ray.remote at run time) holding one Evaluator."""
+class EvalWorker:
+    """One worker's Evaluator (models loaded once), for `tamp.app.parallel.run_tasks`."""
 
     def __init__(self, models_dir: str, methods: list[str], models: dict | None, config: EvalConfig) -> None:
-        self.evaluator = _make_evaluator(models_dir, methods, models, config)
+        import torch
 
-    def run(self, problem: Problem, method: str) -> dict:
+        torch.set_num_threads(1)
+        self.evaluator = Evaluator(models if models is not None else load_method_models(models_dir, methods), config)
+
+    def run(self, task: tuple[Problem, str]) -> dict:
+        problem, method = task
         # Ray hands numpy arrays over read-only (zero copy); the planners expect their own arrays
         problem = dataclasses.replace(problem, X_init=problem.X_init.copy(), X_goal=problem.X_goal.copy())
         return self.evaluator.run(problem, method)
-
-
-def _run_local(tasks, models_dir, methods, models, config: EvalConfig) -> Iterator[dict]:
-    if config.workers == 1 or len(tasks) <= 1:
-        evaluator = _make_evaluator(models_dir, methods, models, config)
-        for problem, method in tasks:
-            yield evaluator.run(problem, method)
-        return
-    ctx = mp.get_context("spawn")
-    initargs = (models_dir, methods, models, config, os.getpid())
-    with ctx.Pool(min(config.workers, len(tasks)), initializer=_init_pool_worker, initargs=initargs) as pool:
-        yield from pool.imap_unordered(_pool_run, tasks, chunksize=1)
-
-
-def _run_ray(tasks, models_dir, methods, models, config: EvalConfig) -> Iterator[dict]:
-    import logging
-
-    from tamp.app.collect import import_ray
-
-    ray = import_ray()
-    started_here = not ray.is_initialized()
-    if started_here:
-        ray.init(num_cpus=config.workers, include_dashboard=False, logging_level=logging.WARNING)
-    try:
-        Actor = ray.remote(num_cpus=1)(RayEvaluator)
-        actors = [Actor.remote(models_dir, methods, models, config) for _ in range(min(config.workers, len(tasks)))]
-        todo, pending = iter(tasks), {}
-
-        def submit(actor) -> None:
-            task = next(todo, None)
-            if task is not None:
-                pending[actor.run.remote(*task)] = actor
-
-        for actor in actors * 2:  # two tasks in flight per actor hide the round trip
-            submit(actor)
-        while pending:
-            done, _ = ray.wait(list(pending), num_returns=1)
-            submit(pending.pop(done[0]))
-            yield ray.get(done[0])
-    finally:
-        if started_here:
-            ray.shutdown()
 
 
 # --------------------------------------------------------------------------- the results directory
@@ -517,16 +450,6 @@ def _short(value) -> str:
     return text if len(text) <= 40 else text[:37] + "..."
 
 
-def _lock(out: Path):
-    f = open(out / LOCK_NAME, "w")
-    try:
-        fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except OSError:
-        f.close()
-        raise RuntimeError(f"another `tamp evaluate` is writing to {out}") from None
-    return f
-
-
 def _write_symbols(out: Path, problems: Sequence[Problem], models_dir: Path, methods: Sequence[str],
                    models: dict | None) -> None:
     """OUT/symbols.json: what the Symbolic Model's bits mean on the set's scenes (`learned.interpret`),
@@ -588,8 +511,7 @@ def evaluate(models_dir: str | Path, problems_path: str | Path, out_dir: str | P
             "config": config.defining(), "methods": methods, "versions": package_versions(), "started": started,
             "runs": [{"started": started, "methods": methods, "workers": config.workers, "backend": config.backend}]}
     out.mkdir(parents=True, exist_ok=True)
-    lock = _lock(out)
-    try:
+    with exclusive(out, LOCK_NAME, "tamp evaluate"):
         _prepare(out, meta)
         rows_path = out / ROWS_NAME
         rows, end = _scan_rows(rows_path)
@@ -603,11 +525,12 @@ def evaluate(models_dir: str | Path, problems_path: str | Path, out_dir: str | P
             raise ValueError(f"{rows_path} holds a (problem, method) row twice; the file was edited")
         pairs = [(p, m) for p in problems for m in methods]
         tasks = [(p, m) for p, m in pairs if (p.name, m) not in done]
-        run = _run_ray if config.backend == "ray" else _run_local
         with open(rows_path, "a") as f, tqdm(total=len(pairs), initial=len(pairs) - len(tasks), desc="evaluate",
                                              unit="row", disable=not config.progress, file=sys.stderr) as bar:
             if tasks:
-                for row in run(tasks, str(models_dir), methods, models, config):
+                rows_run = run_tasks(tasks, EvalWorker, (str(models_dir), methods, models, config),
+                                     workers=config.workers, backend=config.backend)
+                for row in rows_run:
                     if row["outcome"] == ERROR_OUTCOME:
                         tqdm.write(f"warning: problem {row['problem']}, method {row['method']}: {row['error']}; "
                                    f"recorded as an error row (traceback in {rows_path}), the run goes on",
@@ -616,8 +539,6 @@ def evaluate(models_dir: str | Path, problems_path: str | Path, out_dir: str | P
                     f.flush()
                     bar.update()
         return rows_path
-    finally:
-        lock.close()
 
 
 def strip_timings(row: dict) -> dict:

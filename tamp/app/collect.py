@@ -19,24 +19,21 @@ The parent packs, validates and writes the shards.
 """
 from __future__ import annotations
 
-import fcntl
 import json
 import math
-import multiprocessing as mp
-import os
 import sys
-import threading
 import time
-from collections.abc import Iterator
 from dataclasses import dataclass, field
-from importlib import metadata
 from pathlib import Path
 from typing import Any, NamedTuple
 
 import numpy as np
 
-from tamp.sim.structs import STATUSES, WorldConfig
+from tamp.app.parallel import BACKENDS, import_ray, run_tasks
+from tamp.errors import UserError
 from tamp.planning.validate import MAX_OBJECTS
+from tamp.records import exclusive, package_versions
+from tamp.sim.structs import STATUSES, WorldConfig
 
 STATUS_CODES = {name: code for code, name in enumerate(STATUSES)}
 LOCK_NAME = ".collect.lock"
@@ -120,17 +117,6 @@ class CollectConfig:
         return json.loads(json.dumps(meta))
 
 
-def package_versions() -> dict[str, str]:
-    """Versions of Python and the packages results depend on (read from metadata: imports nothing)."""
-    out = {"python": sys.version.split()[0]}
-    for name in ("bilevel-tamp", "drake", "ompl", "ur-analytic-ik", "torch", "numpy"):
-        try:
-            out[name] = metadata.version(name)
-        except metadata.PackageNotFoundError:
-            out[name] = "not installed"
-    return out
-
-
 # --------------------------------------------------------------------------- one scene (workers)
 
 class SceneTask(NamedTuple):
@@ -175,113 +161,16 @@ def run_scene(world, task: SceneTask) -> SceneResult:
                        np.array(G, np.int64), np.array(S, np.int64))
 
 
-_WORLD = None  # the one World of a worker process
-
-
-def _worker_world(world_config: dict):
-    global _WORLD
-    if _WORLD is None:
-        from tamp.sim import World
-
-        _WORLD = World(WorldConfig(**world_config))
-    return _WORLD
-
-
-def _init_pool_worker(world_config: dict, parent_pid: int) -> None:
-    """Pool initializer: build the World, and exit if the parent dies (e.g. kill -9)."""
-    def watch() -> None:
-        while os.getppid() == parent_pid:
-            time.sleep(0.5)
-        os._exit(1)
-
-    threading.Thread(target=watch, daemon=True).start()
-    _worker_world(world_config)
-
-
-def _pool_run(task: SceneTask) -> SceneResult:
-    return run_scene(_WORLD, task)
-
-
-class RaySceneWorker:
-    """A Ray actor (wrapped with ray.remote at run time) holding one World."""
+class SceneWorker:
+    """One worker's World (and its cache of Drake plants per block-type layout), kept for its lifetime."""
 
     def __init__(self, world_config: dict) -> None:
-        self.world = _worker_world(world_config)
+        from tamp.sim import World
+
+        self.world = World(WorldConfig(**world_config))
 
     def run(self, task: SceneTask) -> SceneResult:
         return run_scene(self.world, task)
-
-
-# --------------------------------------------------------------------------- backends
-
-def run_local(tasks: list[SceneTask], world: WorldConfig, workers: int) -> Iterator[SceneResult]:
-    """Results of `tasks` in completion order: in this process (1 worker) or a spawn pool."""
-    if workers == 1:
-        from tamp.sim import World
-
-        w = World(world)
-        for task in tasks:
-            yield run_scene(w, task)
-        return
-    ctx = mp.get_context("spawn")
-    with ctx.Pool(workers, initializer=_init_pool_worker, initargs=(world.to_dict(), os.getpid())) as pool:
-        yield from pool.imap_unordered(_pool_run, tasks, chunksize=1)
-
-
-def import_ray():
-    try:
-        import ray  # noqa: PLC0415
-    except ImportError:
-        raise RuntimeError("--backend ray needs Ray: pip install 'bilevel-tamp[ray]' "
-                           "(or pip install ray) into this environment") from None
-    return ray
-
-
-def run_ray(tasks: list[SceneTask], world: WorldConfig, workers: int | None,
-            address: str | None) -> Iterator[SceneResult]:
-    """Results of `tasks` from Ray actors: a local cluster of `workers` CPUs, or `address`'s.
-
-    Every node of an existing cluster must have this package installed (same versions).
-    """
-    ray = import_ray()
-    import logging  # noqa: PLC0415
-
-    started_here = not ray.is_initialized()
-    if started_here:
-        kwargs = dict(include_dashboard=False, logging_level=logging.WARNING, log_to_driver=True)
-        if address:
-            ray.init(address=address, **kwargs)
-        else:
-            ray.init(num_cpus=workers or available_cpus(), **kwargs)
-    try:
-        n_actors = workers or max(1, int(ray.cluster_resources().get("CPU", 1)))
-        Worker = ray.remote(num_cpus=1)(RaySceneWorker)
-        actors = [Worker.remote(world.to_dict()) for _ in range(min(n_actors, len(tasks)) or 1)]
-        todo = iter(tasks)
-        pending: dict[Any, Any] = {}
-
-        def submit(actor) -> None:
-            task = next(todo, None)
-            if task is not None:
-                pending[actor.run.remote(task)] = actor
-
-        for actor in actors * 2:  # two tasks in flight per actor hide the round trip
-            submit(actor)
-        while pending:
-            done, _ = ray.wait(list(pending), num_returns=1)
-            actor = pending.pop(done[0])
-            submit(actor)
-            yield ray.get(done[0])
-    finally:
-        if started_here:
-            ray.shutdown()
-
-
-def available_cpus() -> int:
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:
-        return os.cpu_count() or 1
 
 
 # --------------------------------------------------------------------------- the dataset directory
@@ -416,10 +305,10 @@ def collect(out: str | Path, cfg: CollectConfig, workers: int | None = None, bac
     from tqdm import tqdm  # noqa: PLC0415
     from learned.dataset import write_shard  # noqa: PLC0415
 
-    if backend not in ("local", "ray"):
-        raise ValueError(f"--backend must be 'local' or 'ray', got {backend!r}")
+    if backend not in BACKENDS:
+        raise UserError(f"--backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
     if address and backend != "ray":
-        raise ValueError("--address joins a Ray cluster; use it with --backend ray")
+        raise UserError("--address joins a Ray cluster; use it with --backend ray")
     if workers is not None and workers < 1:
         raise ValueError(f"--workers must be at least 1, got {workers}")
     if backend == "ray":
@@ -431,11 +320,7 @@ def collect(out: str | Path, cfg: CollectConfig, workers: int | None = None, bac
         out.mkdir(parents=True, exist_ok=True)
     except OSError as error:
         raise ValueError(f"cannot create the dataset directory {out}: {error.strerror}") from None
-    with open(out / LOCK_NAME, "w") as lock:
-        try:
-            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            raise ValueError(f"another tamp collect is writing to {out}") from None
+    with exclusive(out, LOCK_NAME, "tamp collect"):
         good, bad = prepare_directory(out, cfg, meta)
         missing = [j for j in range(cfg.n_shards) if j not in good]
         done = sum(cfg.shard_samples(j) for j in good)
@@ -443,10 +328,8 @@ def collect(out: str | Path, cfg: CollectConfig, workers: int | None = None, bac
                  for k in cfg.shard_scenes(j)]
         report = CollectReport(out, cfg.samples, cfg.samples - done, cfg.n_shards, 0, bad, 0.0)
         if tasks:
-            if backend == "ray":
-                results = run_ray(tasks, cfg.world, workers, address)
-            else:
-                results = run_local(tasks, cfg.world, min(workers or available_cpus(), len(tasks)))
+            results = run_tasks(tasks, SceneWorker, (cfg.world.to_dict(),), workers=workers, backend=backend,
+                                address=address)
             pending: dict[int, dict[int, SceneResult]] = {j: {} for j in missing}
             new = 0
             bar = tqdm(total=cfg.samples, initial=done, unit="sample", dynamic_ncols=True,

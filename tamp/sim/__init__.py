@@ -1,12 +1,19 @@
 """The simulated block world in Drake: `World` (the pick-place skill with IK, OMPL motions and
-physics), refinement of plans into joint trajectories and their execution."""
-import logging
+physics), refinement of plans into joint trajectories and their execution.
 
-import pydrake.common  # noqa: F401  (sets up the "drake" logger, which we then quieten)
+`tamp.sim.structs` (the world's configuration and step record) is plain data; `World` is imported
+on first use, so that reading a configuration loads no Drake.
+"""
+from typing import Any
 
-logging.getLogger("drake").setLevel(logging.WARNING)  # keep Drake's INFO lines off the console
-
-from tamp.sim.structs import StepInfo, WorldConfig  # noqa: E402
-from tamp.sim.world import World  # noqa: E402
+from tamp.sim.structs import StepInfo, WorldConfig
 
 __all__ = ["World", "WorldConfig", "StepInfo"]
+
+
+def __getattr__(name: str) -> Any:
+    if name == "World":
+        from tamp.sim.world import World
+
+        return World
+    raise AttributeError(f"module 'tamp.sim' has no attribute {name!r}")

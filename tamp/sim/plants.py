@@ -8,6 +8,7 @@ Two plants, each built once per scene layout (block types):
 """
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -25,6 +26,8 @@ from pydrake.planning import RobotDiagramBuilder, SceneGraphCollisionChecker
 from pydrake.systems.framework import DiagramBuilder
 
 from tamp.planning.structs import LARGE, SMALL
+
+logging.getLogger("drake").setLevel(logging.WARNING)  # keep Drake's INFO lines off the console
 
 MODEL_DIR = Path(__file__).resolve().parents[2] / "drake_models"
 ARM_FILE = MODEL_DIR / "ur10e.urdf"

@@ -13,7 +13,6 @@ action starts, which is what ties predictions to the replay's clock.
 from __future__ import annotations
 
 import html
-import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -22,6 +21,7 @@ from pydrake.math import RigidTransform
 
 from tamp.sim.kinematics import V_MAX, tcp_pose
 from tamp.planning.structs import BLOCK_SIZES
+from tamp.records import atomic_write_text
 
 REPLAY_FPS = 30.0
 _REPLAY_SPEED = 0.5  # fraction of the joint velocity limits used to time kinematic motions
@@ -169,7 +169,7 @@ class Timeline:
         page = meshcat.StaticHtml()
         if self.ghosts or self.caption:
             page = page.replace("</body>", self._overlay() + "</body>", 1)
-        return _write_atomic(Path(path), page)
+        return atomic_write_text(path, page)
 
     def _overlay(self) -> str:
         """A caption and a colour legend in the page's top-left corner."""
@@ -207,18 +207,6 @@ def _draw_ghosts(meshcat, recording, ghosts: Ghosts) -> None:
             if i > 0 and frame > frames[i - 1]:
                 recording.SetTransform(frame - 1, path, poses[i - 1])  # hold, then jump (no sliding)
             recording.SetTransform(frame, path, X)
-
-
-def _write_atomic(path: Path, text: str) -> Path:
-    """Write through a temporary file beside `path` and rename it, so a replay is never half written."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
-        tmp.write_text(text)
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
-    return path
 
 
 def _position_layout(scene):
