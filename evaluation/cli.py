@@ -5,8 +5,9 @@ import argparse
 import sys
 from pathlib import Path
 
-from tamp.app.cli import positive_float, positive_int
+from tamp.app.cli import positive_int
 from evaluation.methods import SYMBOLIC_BACKENDS
+from tamp.app.plan_command import add_planner_arguments
 from tamp.app.problem import PROTOCOLS
 
 
@@ -51,10 +52,10 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     """Every method on every problem: plan, refine, execute; rows to OUT/rows.jsonl, then the report."""
     from evaluation.run import EvalConfig, evaluate, read_rows
 
-    config = EvalConfig(fidelity=args.fidelity, n_domains=args.n_domains, search_time_limit=args.time_limit,
-                        search_max_expansions=args.max_expansions, workers=args.workers, backend=args.backend,
-                        symbolic_backend=args.symbolic_backend, oracle_max_plans=args.oracle_max_plans,
-                        progress=not args.quiet)
+    from tamp.app.plan_command import planner_config
+
+    config = EvalConfig(planner=planner_config(args), fidelity=args.fidelity, workers=args.workers,
+                        backend=args.backend, oracle_max_plans=args.oracle_max_plans, progress=not args.quiet)
     rows_path = evaluate(args.models, args.problems, args.out, args.methods, config)
     rows = read_rows(rows_path)
     print(f"{len(rows)} rows in {rows_path}: {sum(r['success'] for r in rows)} successes")
@@ -132,14 +133,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--workers", type=positive_int, default=1, help="worker processes or Ray actors (default 1)")
     p.add_argument("--backend", choices=("local", "ray"), default="local",
                    help="local process pool (default) or Ray actors")
-    p.add_argument("--time-limit", type=positive_float, default=10.0,
-                   help="continuous search time limit per planning call, s (default 10)")
-    p.add_argument("--max-expansions", type=positive_int, default=5000,
-                   help="continuous search node limit per planning call (default 5000)")
-    p.add_argument("--n-domains", type=positive_int, default=100, help="N sampled symbolic domains (default 100)")
-    p.add_argument("--symbolic-backend", choices=SYMBOLIC_BACKENDS, default="python",
-                   help="symbolic planner: python (in-process search, default) or fd (Fast Downward, as in "
-                   "the paper); recorded in meta.json and named by the report")
+    add_planner_arguments(p, backends=SYMBOLIC_BACKENDS, feasibility=False)
     p.add_argument("--oracle-max-plans", type=positive_int, default=20,
                    help="probabilistic_oracle: ranked plans executed at most per problem (default 20)")
     p.add_argument("--no-report", action="store_true", help="write the rows only (tamp report makes the report)")

@@ -230,12 +230,14 @@ def _evaluate_stages(out: Path, stages: Stages, scale: Scale, models: Path, work
     results_dir = out / "results"
     if not stages.done("evaluate"):
         from evaluation.run import EvalConfig, evaluate
+        from tamp.planning.bilevel import PlanConfig
+        from tamp.planning.search import SearchConfig
 
         _say(f"evaluate every method on {problems} ({fidelity} world)")
         t = time.perf_counter()
-        evaluate(models, problems, results_dir, config=EvalConfig(
-            fidelity=fidelity, workers=workers, backend=backend, search_time_limit=scale.search_time_limit_s,
-            symbolic_backend=symbolic_backend))
+        planner = PlanConfig(backend=symbolic_backend, search=SearchConfig(time_limit=scale.search_time_limit_s))
+        evaluate(models, problems, results_dir,
+                 config=EvalConfig(planner=planner, fidelity=fidelity, workers=workers, backend=backend))
         stages.finish("evaluate", time.perf_counter() - t)
 
     from evaluation.report import write_report

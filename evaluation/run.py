@@ -34,21 +34,21 @@ import hashlib
 import json
 import os
 import sys
-import time
 import traceback
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Any, Iterator, Sequence
+from typing import Any, Sequence
 
 import numpy as np
 
 from evaluation.methods import METHODS, SYMBOLIC_BACKENDS, Method, load_method_models, required_files, resolve_methods
 from evaluation.problems import read_problems
 from tamp.planning.bilevel import PlanConfig
-from tamp.app.parallel import run_tasks
+from tamp.app.parallel import BACKENDS, run_tasks
 from tamp.app.problem import Problem
-from tamp.planning.verify import EPS_SUCCESS, TAU_VERIFY, goal_error
+from tamp.errors import UserError
+from tamp.planning.verify import goal_error
 from tamp.records import atomic_write_text, exclusive, package_versions
 
 ROWS_NAME, META_NAME, LOCK_NAME, SYMBOLS_NAME = "rows.jsonl", "meta.json", ".evaluate.lock", "symbols.json"
@@ -71,17 +71,11 @@ LEVEL1_STAGES = ("symbols", "symbolic", "verify")
 
 @dataclass(frozen=True)
 class EvalConfig:
-    """How to evaluate. Lengths in metres, times in seconds."""
+    """How to evaluate: the planner's configuration (`tamp plan` and `tamp demo` use the same one; its
+    seed is each problem's, its feasibility each method's) and how plans are executed."""
 
+    planner: PlanConfig = PlanConfig()
     fidelity: str = "fast"  # execution: "fast" (refinement's world) or "full" (arm under physics)
-    eps: float = EPS_SUCCESS  # success: every object within eps of its goal
-    tau_verify: float = TAU_VERIFY  # Level-1 verification threshold
-    n_domains: int = 100  # N sampled symbolic domains
-    search_time_limit: float = 10.0  # continuous search, per planning call
-    search_max_expansions: int = 5000  # continuous search node limit, per planning call
-    level1_expansions: int | None = PlanConfig.level1_expansions  # symbolic search expansions, all N domains
-    level1_time_budget: float | None = PlanConfig.level1_time_budget  # all N symbolic planner calls of a call
-    symbolic_backend: str = "python"  # "python" (in-process search) or "fd" (Fast Downward, the paper's)
     oracle_max_plans: int = 20  # probabilistic_oracle: ranked plans executed at most, per problem
     workers: int = 1  # worker processes or Ray actors
     backend: str = "local"  # "local" process pool or "ray"
@@ -89,40 +83,42 @@ class EvalConfig:
 
     def __post_init__(self) -> None:
         if self.fidelity not in ("fast", "full"):
-            raise ValueError(f"--fidelity must be 'fast' or 'full', got {self.fidelity!r}")
-        if self.backend not in ("local", "ray"):
-            raise ValueError(f"--backend must be 'local' or 'ray', got {self.backend!r}")
-        if self.symbolic_backend not in SYMBOLIC_BACKENDS:
-            raise ValueError(f"--symbolic-backend must be one of {', '.join(SYMBOLIC_BACKENDS)}, "
-                             f"got {self.symbolic_backend!r}")
-        if isinstance(self.oracle_max_plans, bool) or not isinstance(self.oracle_max_plans, int) \
-                or self.oracle_max_plans < 1:
-            raise ValueError(f"--oracle-max-plans must be a positive integer, got {self.oracle_max_plans!r}")
-        if isinstance(self.workers, bool) or not isinstance(self.workers, int) or self.workers < 1:
-            raise ValueError(f"--workers must be a positive integer, got {self.workers!r}")
-        for name in ("eps", "tau_verify", "search_time_limit"):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"EvalConfig.{name} must be positive, got {getattr(self, name)}")
-        if self.n_domains < 1 or self.search_max_expansions < 1:
-            raise ValueError("--n-domains and the node limit must be positive integers")
+            raise UserError(f"--fidelity must be 'fast' or 'full', got {self.fidelity!r}")
+        if self.backend not in BACKENDS:
+            raise UserError(f"--backend must be one of {', '.join(BACKENDS)}, got {self.backend!r}")
+        if self.planner.backend not in SYMBOLIC_BACKENDS:
+            raise UserError(f"--symbolic-backend must be one of {', '.join(SYMBOLIC_BACKENDS)}, "
+                            f"got {self.planner.backend!r}")
+        for name in ("oracle_max_plans", "workers"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise UserError(f"--{name.replace('_', '-')} must be a positive integer, got {value!r}")
+
+    @property
+    def eps(self) -> float:
+        return self.planner.eps
+
+    @property
+    def tau_verify(self) -> float:
+        return self.planner.tau_verify
+
+    @property
+    def symbolic_backend(self) -> str:
+        return self.planner.backend
 
     def defining(self) -> dict[str, Any]:
         """The settings rows depend on (a results directory holds rows of one setting only)."""
-        return {"fidelity": self.fidelity, "eps_m": self.eps, "tau_verify_m": self.tau_verify,
-                "n_domains": self.n_domains, "search_time_limit_s": self.search_time_limit,
-                "search_max_expansions": self.search_max_expansions, "level1_expansions": self.level1_expansions,
-                "level1_time_budget_s": self.level1_time_budget, "symbolic_backend": self.symbolic_backend,
-                "oracle_max_plans": self.oracle_max_plans}
+        p = self.planner
+        out = {"fidelity": self.fidelity, "eps_m": p.eps, "tau_verify_m": p.tau_verify, "n_domains": p.n_domains,
+               "search_time_limit_s": p.search.time_limit, "search_max_expansions": p.search.max_expansions,
+               "level1_expansions": p.level1_expansions, "level1_time_budget_s": p.level1_time_budget,
+               "symbolic_backend": p.backend, "oracle_max_plans": self.oracle_max_plans}
+        if p.symbolic_time_limit != PlanConfig.symbolic_time_limit:  # older results directories stay resumable
+            out["symbolic_time_limit_s"] = p.symbolic_time_limit
+        return out
 
     def plan_config(self, seed: int, feasibility: bool = True) -> PlanConfig:
-        from tamp.planning.search import SearchConfig
-
-        return PlanConfig(n_domains=self.n_domains, seed=seed, tau_verify=self.tau_verify, eps=self.eps,
-                          feasibility=feasibility,
-                          backend=self.symbolic_backend,
-                          level1_expansions=self.level1_expansions, level1_time_budget=self.level1_time_budget,
-                          search=SearchConfig(max_expansions=self.search_max_expansions,
-                                                 time_limit=self.search_time_limit))
+        return dataclasses.replace(self.planner, seed=seed, feasibility=feasibility)
 
 
 # --------------------------------------------------------------------------- one (problem, method)
@@ -175,8 +171,12 @@ def _feasibility_fields(results: list) -> dict:
     return fields
 
 
-def _failure(index: int, stage: str, where: str, reason: str) -> dict:
-    return {"action": int(index), "stage": stage, "where": where, "reason": reason}
+def _failure(failure) -> dict | None:
+    """A row's `refine_failure` from a tamp.sim.trajectory.RefinementFailure (None: none)."""
+    if failure is None:
+        return None
+    return {"action": int(failure.action_index), "stage": str(failure.stage), "where": failure.where,
+            "reason": failure.reason}
 
 
 class Evaluator:
@@ -211,12 +211,11 @@ class Evaluator:
         """This worker's World of a fidelity (paths simplified: they are executed), reseeded as a new
         World(seed=0) would be, so that nothing depends on the rows computed before."""
         if fidelity not in self._worlds:
-            from tamp.sim import World, WorldConfig
+            from tamp.app.runner import executing_world
 
-            self._worlds[fidelity] = World(WorldConfig(fidelity=fidelity, simplify_paths=True))
+            self._worlds[fidelity] = executing_world(fidelity)
         world = self._worlds[fidelity]
         world.rng = np.random.default_rng(0)
-        world.timeline = None
         return world
 
     def warm_up(self, models, problem: Problem) -> None:
@@ -296,61 +295,35 @@ class Evaluator:
         if not actions:  # the planner says the initial state meets the goal: nothing to refine
             return {"refined": True, "refine_failure": None, "refine_time_s": [], "executed_actions": 0,
                     "final_error_m": _round(goal_error(problem.X_init, problem.X_goal))}
-        from tamp.sim.refine import refine
-        from tamp.planning.structs import PickPlace
+        from tamp.app.runner import execute_plan
 
-        world = self.world("fast")
-        refined = refine([PickPlace(*a) for a in actions], problem.X_init, world=world)
-        if self.config.fidelity == "fast":  # the scene after the refined actions (not a failed one's)
-            X_final = refined.X_predicted
-        else:
-            from tamp.sim.execute import execute
-
-            X_final = execute(refined, partial=True).X_final
-        f = refined.failure
-        executed = len(refined.steps)
-        return {"refined": refined.success,
-                "refine_failure": None if f is None else _failure(f.action_index, f.stage, f.where, f.reason),
-                "refine_time_s": [_round(s.refine_time) for s in refined.steps], "executed_actions": executed,
-                "final_error_m": _round(goal_error(X_final if executed else problem.X_init, problem.X_goal))}
+        ex = execute_plan(actions, problem.X_init, problem.X_goal, self.config.fidelity, world=self.world("fast"))
+        return {"refined": ex.refined.success, "refine_failure": _failure(ex.refined.failure),
+                "refine_time_s": [_round(s.refine_time) for s in ex.refined.steps],
+                "executed_actions": len(ex.refined.steps), "final_error_m": _round(ex.error)}
 
     def _closed_loop(self, problem: Problem, method: Method, models) -> dict:
-        from tamp.planning.bilevel import plan_closed_loop, replan_rounds
-        from tamp.sim.refine import FAILURE_STAGES, failed_at
+        from tamp.app.runner import run_closed_loop
+        from tamp.planning.bilevel import replan_rounds
 
         kinematics = self.checker(problem) if method.feasibility else None
-        world = self.world(self.config.fidelity)
-        X0 = world.reset(X=problem.X_init)
-        if kinematics is not None:
-            kinematics.observe(world.scene, world.q)
-        failures: list[dict] = []
-        step_times: list[float] = []
-
-        def step(action):
-            t = time.perf_counter()
-            X, info = world.step(action)
-            step_times.append(time.perf_counter() - t)
-            if kinematics is not None:
-                kinematics.observe(world.scene, world.q)
-            if info.status != "ok" and not failures:
-                failures.append(_failure(len(step_times) - 1, FAILURE_STAGES.get(info.status, "motion"), failed_at(info),
-                                         info.reason))
-            return X
-
-        out = plan_closed_loop(method.planner, models, X0, problem.X_goal, step, replan_rounds(problem.k),
-                               self.config.plan_config(problem.seed, method.feasibility), kinematics=kinematics)
+        run = run_closed_loop(method.planner, models, problem.X_init, problem.X_goal, replan_rounds(problem.k),
+                              self.config.plan_config(problem.seed, method.feasibility), self.config.fidelity,
+                              world=self.world(self.config.fidelity), kinematics=kinematics)
+        out = run.loop
         first = out.rounds[0] if out.rounds else None
         solved = first is None or first.solved  # no round: the initial state already met the goal
         executed = len(out.executed)
         X_final = out.X_final if executed else problem.X_init
+        failure = run.first_failure
         return {**_feasibility_fields(out.rounds), "solved": solved, "level": None if first is None else first.level,
                 "plan": _actions(out.executed) if solved else None,
                 "planning_time_s": _round(sum(r.timings["total"] for r in out.rounds)),
                 "level1_time_s": _round(sum(_level1_time(r) for r in out.rounds)),
                 "predicted_error_m": None if first is None else _round(first.predicted_error) if solved else None,
                 "candidates": [] if first is None else _candidates(first),
-                "refined": (not failures) if solved else None, "refine_failure": failures[0] if failures else None,
-                "refine_time_s": [_round(t) for t in step_times], "executed_actions": executed,
+                "refined": (failure is None) if solved else None, "refine_failure": _failure(failure),
+                "refine_time_s": [_round(sum(t)) for t in run.step_times], "executed_actions": executed,
                 "executed_plans": None, "final_error_m": _round(goal_error(X_final, problem.X_goal)),
                 "rounds": max(len(out.rounds) - 1, 0)}
 

@@ -20,6 +20,8 @@ sys.path.insert(0, str(Path(__file__).parent))
 from planning_stubs import StubModel, two_block_domain  # noqa: E402
 
 from evaluation.problems import generate_problems, read_problems, write_problems  # noqa: E402
+from tamp.planning.bilevel import PlanConfig
+from tamp.planning.search import SearchConfig
 from evaluation.run import OUTCOMES, ROW_KEYS, EvalConfig, evaluate, read_rows, strip_timings  # noqa: E402
 from tamp.planning.models import Models  # noqa: E402
 from tamp.app.problem import Problem  # noqa: E402
@@ -28,7 +30,7 @@ from tamp.planning.verify import goal_error  # noqa: E402
 SET = dict(ns=(2,), ks=(1, 2, 3), per_cell=1, seed=0)
 METHODS = ("deterministic", "probabilistic", "probabilistic_oracle", "cfs", "bilevel", "bilevel_alg1",
            "bilevel_replan")
-CONFIG = EvalConfig(search_max_expansions=300, progress=False)
+CONFIG = EvalConfig(planner=PlanConfig(search=SearchConfig(max_expansions=300)), progress=False)
 
 
 def stub_models() -> dict[str, Models]:
@@ -293,7 +295,7 @@ def test_an_evaluation_killed_midway_resumes_without_redoing_or_losing_rows(seri
 def test_two_workers_give_the_same_rows_as_one(serial, problems_file, tmp_path):
     (tmp_path / "models").mkdir()
     rows = read_rows(evaluate(tmp_path / "models", problems_file, tmp_path / "results",
-                              config=EvalConfig(search_max_expansions=300, progress=False, workers=2),
+                              config=EvalConfig(planner=PlanConfig(search=SearchConfig(max_expansions=300)), progress=False, workers=2),
                               models=stub_models()))
     assert _by_key(rows) == _by_key(read_rows(serial))
 
@@ -302,7 +304,7 @@ def test_fast_downward_plans_like_the_in_process_search(serial, problems_file, t
     """--symbolic-backend fd: recorded in meta.json and the rows, and the symbolic planners reach the
     same success on every problem as with the in-process search (both find shortest plans)."""
     (tmp_path / "models").mkdir()
-    config = EvalConfig(search_max_expansions=300, progress=False, symbolic_backend="fd")
+    config = EvalConfig(planner=PlanConfig(backend="fd", search=SearchConfig(max_expansions=300)), progress=False)
     rows = read_rows(evaluate(tmp_path / "models", problems_file, tmp_path / "results", config=config,
                               methods=["deterministic", "probabilistic"], models=stub_models()))
     assert json.loads((tmp_path / "results" / "meta.json").read_text())["config"]["symbolic_backend"] == "fd"
@@ -325,7 +327,7 @@ def test_a_results_directory_refuses_other_inputs(serial, problems_file, tmp_pat
         evaluate(tmp_path / "models", problems_file, serial.parent, config=CONFIG, models=stub_models())
     with pytest.raises(ValueError, match='config.fidelity: "fast" there, "full" now'):
         evaluate(serial.parents[1] / "models", problems_file, serial.parent, models=stub_models(),
-                 config=EvalConfig(search_max_expansions=300, progress=False, fidelity="full"))
+                 config=EvalConfig(planner=PlanConfig(search=SearchConfig(max_expansions=300)), progress=False, fidelity="full"))
 
 
 # --------------------------------------------------------------------------- the CLI, real model files

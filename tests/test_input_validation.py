@@ -153,6 +153,8 @@ class _Failing(StubModel):
 def test_a_pair_that_fails_mid_run_is_an_error_row_and_the_run_goes_on(tmp_path):
     from evaluation.report import write_report
     from evaluation.run import EvalConfig, evaluate, read_rows
+    from tamp.planning.bilevel import PlanConfig
+    from tamp.planning.search import SearchConfig
 
     three = np.array(INIT + [[0.6, -0.2, 0.025, 1, 0]], float)
     problems = [Problem(three, three + 0, k=1, name="a"),
@@ -161,7 +163,8 @@ def test_a_pair_that_fails_mid_run_is_an_error_row_and_the_run_goes_on(tmp_path)
     path = _problem_set(tmp_path / "set.jsonl", problems)
     stub = _Failing()
     rows_path = evaluate(tmp_path / "m", path, tmp_path / "out", ["cfs"],
-                         EvalConfig(search_max_expansions=200, progress=False), models={"cfs": Models(stub)})
+                         EvalConfig(planner=PlanConfig(search=SearchConfig(max_expansions=200)), progress=False),
+                         models={"cfs": Models(stub)})
     rows = {r["problem"]: r for r in read_rows(rows_path)}
     assert set(rows) == {"a", "b"}
     assert rows["a"]["outcome"] == "error" and "RuntimeError: boom" in rows["a"]["error"]

@@ -11,20 +11,20 @@ can see why verification rejected them.
 """
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from tamp.planning.bilevel import ClosedLoopResult, PlanConfig, PlanResult, plan, plan_closed_loop, replan_rounds
 from tamp.app.plan_command import LEVELS, fmt_action, print_result
 from tamp.app.problem import Problem, random_problem
-from tamp.sim.replay import Timeline
+from tamp.app.runner import Execution, execute_plan, kinematics_for, run_closed_loop
+from tamp.planning.bilevel import ClosedLoopResult, PlanConfig, PlanResult, plan, replan_rounds
 from tamp.planning.structs import TYPE_NAMES, PickPlace
-from tamp.sim.structs import WorldConfig
-from tamp.sim.trajectory import RefinedPlan
 from tamp.planning.verify import goal_error, goal_errors, rollout
+from tamp.sim.feasibility import FeasibilityChecker
+from tamp.sim.replay import Timeline
+from tamp.sim.structs import WorldConfig
 
 DEFAULT_REPLAY = Path("demo_replay.html")
 
@@ -41,20 +41,6 @@ class DemoConfig:
     replay: Path | None = DEFAULT_REPLAY
     candidates: int = 0  # also replay this many symbolic candidates that failed verification
     replan: bool = True  # closed loop: execute, observe, replan (up to k - 1 rounds); False: one plan
-
-
-@dataclass
-class Execution:
-    """A plan refined and executed from X_init: outcome and times (seconds)."""
-
-    refined: RefinedPlan
-    X_after: list[np.ndarray]  # executed state after each action that ran
-    X_final: np.ndarray
-    error: float  # metres: max per-object distance of X_final to the goal
-    refine_time: float
-    execute_time: float  # wall clock; 0 in the fast world, where refinement already executed the plan
-    sim_time: float  # simulated seconds of execution (arm motion and settling); fast: arm motion alone
-    notes: list[str] = field(default_factory=list)  # per-action remarks of the executor (missed grasps)
 
 
 @dataclass
@@ -85,37 +71,6 @@ class DemoResult:
         return self.outcome == "success"
 
 
-def refine_and_execute(actions: list[PickPlace], X_init: np.ndarray, X_goal: np.ndarray, fidelity: str,
-                       timeline: Timeline | None = None) -> Execution:
-    """Refine `actions` from X_init and execute them, `full` (the arm under physics) or `fast` (the
-    refinement world: kinematic carry, physics after release). Actions before a refinement failure
-    are executed, none after it."""
-    from tamp.sim import World
-    from tamp.sim.refine import refine
-
-    world = World(WorldConfig(simplify_paths=True))
-    if fidelity == "fast":
-        world.timeline = timeline
-    refined = refine(actions, X_init, world=world)
-    if fidelity == "fast":
-        X_after = [s.X_after for s in refined.steps]
-        X_final, execute_time, notes = world.X, 0.0, []
-        sim_time = sum(s.duration for s in refined.steps)
-    else:
-        from tamp.sim.execute import execute
-
-        t = time.perf_counter()
-        executed = execute(refined, timeline=timeline, partial=True)
-        execute_time = time.perf_counter() - t
-        X_after = [a.X_after for a in executed.log]
-        X_final, sim_time = executed.X_final, executed.sim_time
-        notes = [f"action {a.index}: {a.note}" for a in executed.log if a.note]
-    if timeline is not None and not timeline.times:  # nothing ran: show the initial scene
-        timeline.start(refined.scene_init, refined.q_init)
-    return Execution(refined, X_after, X_final, goal_error(X_final, X_goal), refined.refine_time,
-                     execute_time, sim_time, notes)
-
-
 def run_demo(cfg: DemoConfig = DemoConfig()) -> DemoResult:
     """Generate, plan, refine, execute (closed loop unless cfg.replan is False), print the summary and
     write the replay(s)."""
@@ -136,17 +91,20 @@ def run_demo(cfg: DemoConfig = DemoConfig()) -> DemoResult:
     if n_max is not None and cfg.objects > n_max:
         raise ValueError(f"--objects {cfg.objects}: the models in {models_dir} were trained for at most {n_max} objects")
     plan_cfg = PlanConfig(seed=cfg.seed)
+    kinematics = kinematics_for("bilevel", plan_cfg)
 
     problem = random_problem(cfg.objects, cfg.actions, cfg.seed)
     _print_problem(problem, models_dir)
     print(f"\nplanning (bilevel, {plan_cfg.n_domains} sampled domains):", flush=True)
-    result = plan("bilevel", models, problem.X_init, problem.X_goal, plan_cfg)
+    if kinematics is not None:
+        kinematics.reset(problem.X_init)
+    result = plan("bilevel", models, problem.X_init, problem.X_goal, plan_cfg, kinematics=kinematics)
     print_result(result, plan_cfg.tau_verify, indent="  ")
     out = DemoResult(problem, result, None, plan_cfg.eps)
 
     timeline = Timeline() if cfg.replay is not None else None
     if cfg.replan:
-        out.loop = _closed_loop(problem, models, plan_cfg, cfg, result, timeline, out.step_times)
+        out.loop = _closed_loop(problem, models, plan_cfg, kinematics, cfg, result, timeline, out.step_times)
         _print_loop_summary(out, cfg)
         if timeline is not None:
             timeline.caption = [f"tamp demo --seed {cfg.seed}: {problem.n} blocks, goal from {problem.k} random "
@@ -161,7 +119,7 @@ def run_demo(cfg: DemoConfig = DemoConfig()) -> DemoResult:
     if result.solved:
         what = "the arm under physics" if cfg.fidelity == "full" else "the fast world"
         print(f"\nrefining and executing {len(result.plan)} action(s) with {what}:", flush=True)
-        out.execution = refine_and_execute(result.plan, problem.X_init, problem.X_goal, cfg.fidelity, timeline)
+        out.execution = execute_plan(result.plan, problem.X_init, problem.X_goal, cfg.fidelity, timeline=timeline)
         _print_execution(out.execution, result.plan, result.predicted, problem.X_goal, cfg.fidelity)
     elif timeline is not None:  # show the problem: the initial scene and the goal
         from tamp.sim import World
@@ -202,7 +160,7 @@ def _replay_candidates(out: DemoResult, models, cfg: DemoConfig) -> None:
         actions = [PickPlace(*a) for a in c.actions]
         predicted = rollout(models.require_dynamics(), problem.X_init, c.actions)
         timeline = Timeline()
-        ex = refine_and_execute(actions, problem.X_init, problem.X_goal, cfg.fidelity, timeline)
+        ex = execute_plan(actions, problem.X_init, problem.X_goal, cfg.fidelity, timeline=timeline)
         ran = f"all {len(actions)} action(s)" if ex.refined.success else \
             f"{len(ex.refined.steps)} of {len(actions)} action(s), refinement failed: {ex.refined.failure}"
         if not ex.refined.success:
@@ -288,48 +246,40 @@ def _print_summary(out: DemoResult, cfg: DemoConfig) -> None:
     print(f"  outcome     {outcome}", flush=True)
 
 
-def _closed_loop(problem: Problem, models, plan_cfg: PlanConfig, cfg: DemoConfig, first: PlanResult,
-                 timeline: Timeline | None, step_times: list[tuple[float, float]]) -> ClosedLoopResult:
+def _closed_loop(problem: Problem, models, plan_cfg: PlanConfig, kinematics: FeasibilityChecker | None,
+                 cfg: DemoConfig, first: PlanResult, timeline: Timeline | None,
+                 step_times: list[tuple[float, float]]) -> ClosedLoopResult:
     """Execute the first action of the plan, observe the scene, replan from it (up to k - 1 rounds;
     the last plan runs to its end), in a World of the demo's fidelity: each action is refined and
     executed there, an action that cannot be refined changes nothing and the loop goes on. The first
     round reuses the plan already printed. The replay shows each round's prediction of the action it
     executed (the last round: of each of its actions)."""
-    from tamp.sim import World
-
-    world = World(WorldConfig(fidelity=cfg.fidelity, simplify_paths=True))
-    world.timeline = timeline
-    X0 = world.reset(X=problem.X_init)
     rounds = replan_rounds(problem.k)
     print(f"\nclosed loop ({cfg.fidelity} world): execute, observe, replan; up to {rounds} replanning "
           f"round(s)", flush=True)
     planned: list[tuple[int, PlanResult]] = []  # (index of the round's first executed action, result)
-    executed = []
+    executed: list[PickPlace] = []
 
-    def plan_round(method, models_, X, X_goal, config):
-        result = first if not planned else plan(method, models_, X, X_goal, config)
+    def plan_round(method, models_, X, X_goal, config, **kinematics):
+        result = first if not planned else plan(method, models_, X, X_goal, config, **kinematics)
         planned.append((len(executed), result))
         if len(planned) > 1:
             print(f"round {len(planned) - 1}: replanned from the observed scene", flush=True)
             print_result(result, config.tau_verify, indent="  ")
         return result
 
-    def step(action: PickPlace) -> np.ndarray:
-        t, marks = time.perf_counter(), len(timeline.action_starts) if timeline is not None else 0
-        X, info = world.step(action)
-        started = timeline is not None and len(timeline.action_starts) > marks  # it moved the arm
-        executed.append(timeline.action_starts[marks] if started else None)
-        execute = info.timings.get("execute", 0.0)  # full fidelity; the fast world's step is all refinement
-        step_times.append((time.perf_counter() - t - execute, execute))
+    def show_step(action: PickPlace, X: np.ndarray, info, seconds: float) -> None:
+        executed.append(action)
         why = f" ({info.reason})" if info.status != "ok" and info.reason else ""
         print(f"  executed {fmt_action(action)}: {info.status}{why}; blocks {goal_error(X, problem.X_goal) * 100:.1f} "
-              f"cm from the goal, {time.perf_counter() - t:.1f} s", flush=True)
-        return X
+              f"cm from the goal, {seconds:.1f} s", flush=True)
 
-    loop = plan_closed_loop("bilevel", models, X0, problem.X_goal, step, rounds, plan_cfg, planner=plan_round)
+    run = run_closed_loop("bilevel", models, problem.X_init, problem.X_goal, rounds, plan_cfg, cfg.fidelity,
+                          kinematics=kinematics, timeline=timeline, planner=plan_round, on_step=show_step)
+    step_times.extend(run.step_times)
     if timeline is not None:
-        _show_loop_predictions(timeline, planned, executed)
-    return loop
+        _show_loop_predictions(timeline, planned, run.action_starts)
+    return run.loop
 
 
 def _show_loop_predictions(timeline: Timeline, planned: list[tuple[int, PlanResult]],

@@ -8,11 +8,11 @@ by action in a World of that fidelity and replans from each observed state (up t
 from __future__ import annotations
 
 import argparse
+import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
-
-from tamp.planning.bilevel import METHODS, PlanConfig, PlanResult, plan, plan_closed_loop, replan_rounds
+from tamp.planning.bilevel import METHODS, SYMBOLIC_BACKENDS, PlanConfig, PlanResult, plan, replan_rounds
 from tamp.planning.search import SearchConfig
 from tamp.planning.validate import check_problem
 from tamp.planning.verify import goal_error
@@ -22,16 +22,14 @@ LEVELS = {1: "level 1 (verified symbolic plan)", 2: "level 2 (continuous search)
 
 @dataclass
 class PlanOptions:
+    """`tamp plan`: what to plan with, and how to execute the plan."""
+
     method: str = "bilevel"
     execute: str = "fast"  # none | fast | full
     replan: bool = False
     rounds: int | None = None  # replanning rounds (default k - 1 of the problem, else 4)
     replay: Path | None = None
-    n_domains: int = 100
-    backend: str = "python"
-    max_expansions: int = 5000
-    time_limit: float = 30.0  # seconds for the continuous search
-    feasibility: bool = True  # kinematic check and refinement in the planning loop (cfs, bilevel)
+    planner: PlanConfig = PlanConfig()  # its seed is replaced by the problem's
 
 
 def fmt_action(a) -> str:
@@ -86,17 +84,13 @@ def print_result(result: PlanResult, tau: float, indent: str = "") -> None:
     print(f"{p}  timings: " + ", ".join(f"{k} {_ms(result.timings[k])}" for k in stages if k in result.timings))
 
 
-def _checker(options: PlanOptions):
-    """The kinematic feasibility checker for the planner (None when it is off or unused)."""
-    if not options.feasibility or options.method not in ("cfs", "bilevel"):
-        return None
-    from tamp.sim.feasibility import FeasibilityChecker
-
-    return FeasibilityChecker()
-
+# The runners load the simulator (Drake): imported when a plan is run, so that `tamp --help` and
+# argument errors stay fast.
 
 def _open_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timeline) -> int:
-    kinematics = _checker(options)
+    from tamp.app.runner import execute_plan, kinematics_for
+
+    kinematics = kinematics_for(options.method, cfg)
     if kinematics is not None:
         kinematics.reset(problem.X_init)
     result = plan(options.method, models, problem.X_init, problem.X_goal, cfg, kinematics=kinematics)
@@ -107,60 +101,34 @@ def _open_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timeline)
         if not result.plan:
             print("empty plan: the initial state already meets the goal; nothing to execute")
         return 0
-    from tamp.sim import World, WorldConfig
-    from tamp.sim.refine import refine
-
-    world = World(WorldConfig(simplify_paths=True))
-    if options.execute == "fast":
-        world.timeline = timeline
-    refined = refine(result.plan, problem.X_init, world=world)
-    if refined.success:
-        print(f"refinement: ok, {len(refined.steps)} action(s) refined in {refined.refine_time:.2f} s, "
-              f"{sum(s.duration for s in refined.steps):.1f} s of arm motion")
+    ex = execute_plan(result.plan, problem.X_init, problem.X_goal, options.execute, timeline=timeline)
+    if ex.refined.success:
+        print(f"refinement: ok, {len(ex.refined.steps)} action(s) refined in {ex.refine_time:.2f} s, "
+              f"{sum(s.duration for s in ex.refined.steps):.1f} s of arm motion")
     else:
-        print(f"refinement: failed: {refined.failure}; executing the {len(refined.steps)} action(s) before it")
-    if options.execute == "fast":
-        X_final = world.X
-    else:
-        from tamp.sim.execute import execute
-
-        X_final = execute(refined, timeline=timeline, partial=True).X_final
-    error = goal_error(X_final, problem.X_goal)
-    ok = error < cfg.eps
-    print(f"execution ({options.execute}): final error {error * 100:.1f} cm (max over objects) -> "
+        print(f"refinement: failed: {ex.refined.failure}; executing the {len(ex.refined.steps)} action(s) before it")
+    ok = ex.error < cfg.eps
+    print(f"execution ({options.execute}): final error {ex.error * 100:.1f} cm (max over objects) -> "
           f"{'success' if ok else 'failure'} (eps {cfg.eps * 100:g} cm)")
-    return 0 if ok and refined.success else 1
+    return 0 if ok and ex.success else 1
 
 
 def _closed_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timeline) -> int:
-    from tamp.sim import World, WorldConfig
+    from tamp.app.runner import kinematics_for, run_closed_loop
 
-    world = World(WorldConfig(fidelity=options.execute, simplify_paths=True))
-    world.timeline = timeline
-    X0 = world.reset(X=problem.X_init)
-    infos = []
-    kinematics = _checker(options)
-    if kinematics is not None:
-        kinematics.observe(world.scene, world.q)
-
-    def step(action):
-        X, info = world.step(action)
-        infos.append(info)
-        if kinematics is not None:
-            kinematics.observe(world.scene, world.q)
+    def show_step(action, X, info, seconds) -> None:
         print(f"  executed {fmt_action(action)}: {info.status}{': ' + info.reason if info.reason else ''}; "
               f"now {goal_error(X, problem.X_goal) * 100:.1f} cm from the goal")
-        return X
 
-    rounds = replan_rounds(problem.k) if options.rounds is None else options.rounds
-    print(f"closed loop: up to {rounds} replanning round(s), executing in the {options.execute} world")
-
-    def show(r: int, result: PlanResult) -> None:
+    def show_round(r: int, result: PlanResult) -> None:
         print(f"round {r}:")
         print_result(result, cfg.tau_verify, indent="  ")
 
-    out = plan_closed_loop(options.method, models, X0, problem.X_goal, step, rounds, cfg, on_round=show,
-                           kinematics=kinematics)
+    rounds = replan_rounds(problem.k) if options.rounds is None else options.rounds
+    print(f"closed loop: up to {rounds} replanning round(s), executing in the {options.execute} world")
+    out = run_closed_loop(options.method, models, problem.X_init, problem.X_goal, rounds, cfg, options.execute,
+                          kinematics=kinematics_for(options.method, cfg), timeline=timeline,
+                          on_round=show_round, on_step=show_step).loop
     print(f"closed loop ended: {out.reason}")
     print(f"execution ({options.execute}): {len(out.executed)} action(s), final error {out.error * 100:.1f} cm "
           f"(max over objects) -> {'success' if out.success else 'failure'} (eps {cfg.eps * 100:g} cm)")
@@ -187,12 +155,10 @@ def run_plan(problem_path: Path, models_dir: Path, options: PlanOptions) -> int:
 
         check_output_file(options.replay, "--replay")
     models = load_models(models_dir, need_symbolic=options.method != "cfs")
-    cfg = PlanConfig(n_domains=options.n_domains, seed=problem.seed, backend=options.backend,
-                     feasibility=options.feasibility,
-                     search=SearchConfig(max_expansions=options.max_expansions, time_limit=options.time_limit))
+    cfg = dataclasses.replace(options.planner, seed=problem.seed)
     check_problem(problem.X_init, problem.X_goal, str(problem_path), n_max=models.n_max)  # the models' limit
     k = "?" if problem.k is None else problem.k
-    symbolic = "" if options.method == "cfs" else f"; symbolic planner {options.backend}"
+    symbolic = "" if options.method == "cfs" else f"; symbolic planner {cfg.backend}"
     print(f"problem {problem_path}: {problem.n} objects, k = {k}, seed {problem.seed}; initial error "
           f"{goal_error(problem.X_init, problem.X_goal) * 100:.1f} cm{symbolic}")
     timeline = None
@@ -212,7 +178,8 @@ def run_plan(problem_path: Path, models_dir: Path, options: PlanOptions) -> int:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    from tamp.app.cli import non_negative_int, positive_float, positive_int
+    """The flags of `tamp plan`."""
+    from tamp.app.cli import non_negative_int
 
     p.add_argument("--problem", type=Path, required=True, help="problem file (JSON: X_init, X_goal, k, seed)")
     p.add_argument("--models", type=Path, required=True,
@@ -227,21 +194,45 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="refine and execute the plan in the fast world (default) or with the arm under "
                    "physics (full), or not at all")
     p.add_argument("--replay", type=Path, default=None, metavar="OUT.html", help="write a Meshcat HTML replay")
-    p.add_argument("--n-domains", type=positive_int, default=100, help="N sampled symbolic domains (default 100)")
-    p.add_argument("--symbolic-backend", "--backend", dest="backend", choices=("python", "fd", "fd-naive"),
-                   default="python", help="symbolic planner: python (in-process search, default), fd (Fast "
-                   "Downward, as in the paper) or fd-naive (one Fast Downward driver call per sampled domain)")
-    p.add_argument("--max-expansions", type=positive_int, default=5000, help="continuous search node limit (default 5000)")
-    p.add_argument("--time-limit", type=positive_float, default=30.0, help="continuous search time limit, s (default 30)")
-    p.add_argument("--no-feasibility", dest="feasibility", action="store_false",
-                   help="cfs and bilevel without kinematics in the planning loop (no feasibility check of actions "
-                   "on the predicted states, no refinement before a plan is returned)")
+    add_planner_arguments(p)
+
+
+def add_planner_arguments(p: argparse.ArgumentParser, backends: tuple[str, ...] = SYMBOLIC_BACKENDS,
+                          feasibility: bool = True) -> None:
+    """The planner's flags, the same for `tamp plan` and `tamp evaluate`; `planner_config` reads them.
+    `feasibility`: offer --no-feasibility (evaluate chooses it per method instead)."""
+    from tamp.app.cli import positive_float, positive_int
+
+    default = PlanConfig()
+    p.add_argument("--n-domains", type=positive_int, default=default.n_domains,
+                   help=f"N sampled symbolic domains (default {default.n_domains})")
+    help_backend = {"python": "python (in-process search, default)", "fd": "fd (Fast Downward, as in the paper)",
+                    "fd-naive": "fd-naive (one Fast Downward driver call per sampled domain)"}
+    p.add_argument("--symbolic-backend", dest="symbolic_backend", choices=backends, default=default.backend,
+                   help="symbolic planner: " + ", ".join(help_backend[b] for b in backends))
+    p.add_argument("--symbolic-time-limit", type=positive_float, default=default.symbolic_time_limit,
+                   help=f"wall-clock limit per symbolic planner call, s (default {default.symbolic_time_limit:g}; "
+                   "Fast Downward needs more at 4 objects)")
+    p.add_argument("--max-expansions", type=positive_int, default=default.search.max_expansions,
+                   help=f"continuous search node limit per planning call (default {default.search.max_expansions})")
+    p.add_argument("--time-limit", type=positive_float, default=default.search.time_limit,
+                   help=f"continuous search time limit per planning call, s (default {default.search.time_limit:g})")
+    if feasibility:
+        p.add_argument("--no-feasibility", dest="feasibility", action="store_false",
+                       help="cfs and bilevel without kinematics in the planning loop (no feasibility check of "
+                       "actions on the predicted states, no refinement before a plan is returned)")
+
+
+def planner_config(args: argparse.Namespace) -> PlanConfig:
+    """The PlanConfig of the flags of `add_planner_arguments` (seed 0: callers set the problem's)."""
+    return PlanConfig(n_domains=args.n_domains, backend=args.symbolic_backend,
+                      symbolic_time_limit=args.symbolic_time_limit, feasibility=getattr(args, "feasibility", True),
+                      search=SearchConfig(max_expansions=args.max_expansions, time_limit=args.time_limit))
 
 
 def options_from_args(args: argparse.Namespace) -> PlanOptions:
     if args.replay is not None and args.replay.suffix.lower() not in (".html", ".htm"):
         raise ValueError(f"the replay is an HTML file; give a path ending in .html, got {args.replay}")
-    return PlanOptions(args.method, args.execute, args.replan, args.rounds, args.replay, args.n_domains,
-                       args.backend, args.max_expansions, args.time_limit, args.feasibility)
+    return PlanOptions(args.method, args.execute, args.replan, args.rounds, args.replay, planner_config(args))
 
 

@@ -29,6 +29,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from tamp.errors import UserError
 from tamp.planning.models import Models
 from tamp.planning.search import SearchConfig, SearchResult, continuous_search, state_key
 from tamp.planning.structs import Infeasible, KinematicFeasibility, PickPlace, RefinementOutcome
@@ -37,13 +38,18 @@ from tamp.planning.verify import (EPS_SUCCESS, TAU_VERIFY, Verification, at_goal
                          verify_many)
 
 
+SYMBOLIC_BACKENDS = ("python", "fd", "fd-naive")  # in-process search; Fast Downward, batched or one call per domain
+
+
 @dataclass(frozen=True)
 class PlanConfig:
+    """The planner's settings, one configuration for `tamp plan`, `tamp demo` and `tamp evaluate`."""
+
     n_domains: int = 100  # N sampled PDDL domains
     seed: int = 0  # seed of the sampled domains
     tau_verify: float = TAU_VERIFY  # metres
     eps: float = EPS_SUCCESS  # metres: success tolerance (goal test of the search, closed loop)
-    backend: str = "python"  # symbolic planner backend: python | fd | fd-naive
+    backend: str = "python"  # symbolic planner backend, one of SYMBOLIC_BACKENDS
     symbolic_time_limit: float = 10.0  # seconds per symbolic planner call
     level1_expansions: int | None = 10_000  # search expansions for all N domains of one problem (deterministic)
     level1_time_budget: float | None = None  # seconds for all N symbolic planner calls (machine-dependent)
@@ -58,6 +64,15 @@ class PlanConfig:
     feasibility: bool = True  # check actions on the predicted states, refine a plan before returning it
     max_refinements: int = 4  # full refinements per planning call (Level-1 candidates and Level-2 plans)
     search: SearchConfig = SearchConfig()
+
+    def __post_init__(self) -> None:
+        if self.backend not in SYMBOLIC_BACKENDS:
+            raise UserError(f"symbolic backend must be one of {', '.join(SYMBOLIC_BACKENDS)}, got {self.backend!r}")
+        for name in ("tau_verify", "eps", "symbolic_time_limit"):
+            if not getattr(self, name) > 0:
+                raise UserError(f"PlanConfig.{name} must be positive, got {getattr(self, name)}")
+        if self.n_domains < 1:
+            raise UserError(f"the number of sampled domains must be at least 1, got {self.n_domains}")
 
 
 @dataclass
@@ -406,13 +421,15 @@ Planner = Callable[..., PlanResult]  # (models, X_init, X_goal, cfg, kinematics=
 METHODS: dict[str, Planner] = {"bilevel": plan_bilevel, "bilevel_alg1": plan_bilevel_alg1,
                                "probabilistic": plan_probabilistic, "deterministic": plan_deterministic,
                                "cfs": plan_cfs}
+# the methods that put kinematics in their planning loop when given a checker (and cfg.feasibility)
+KINEMATIC_METHODS = frozenset({"cfs", "bilevel"})
 
 
 def plan(method: str, models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig(),
          kinematics: KinematicFeasibility | None = None) -> PlanResult:
     """Run one of METHODS on (X_init, X_goal), both (n, 5) arrays. `kinematics` (e.g. a
     tamp.sim.feasibility.FeasibilityChecker that observed the scene of X_init) puts kinematic feasibility
-    into the planning loop of `cfs` and `bilevel` (unless cfg.feasibility is False)."""
+    into the planning loop of KINEMATIC_METHODS (unless cfg.feasibility is False)."""
     if method not in METHODS:
         raise ValueError(f"unknown planning method {method!r}; choose one of {', '.join(METHODS)}")
     X_init, X_goal = np.asarray(X_init, dtype=float), np.asarray(X_goal, dtype=float)

@@ -26,6 +26,7 @@ from typing import Callable, Hashable
 
 import numpy as np
 
+from tamp.errors import UserError
 from tamp.planning.verify import EPS_SUCCESS, DynamicsModel
 
 OFFSETS = (-1, 0, 1)
@@ -40,10 +41,15 @@ class SearchConfig:
     misplaced: float = EPS_SUCCESS  # metres: 2-D distance beyond which an object is misplaced
     resolution: float = 0.01  # metres: grid of the duplicate-detection key
     max_expansions: int = 5000
-    time_limit: float = 30.0  # seconds of wall-clock time
+    time_limit: float = 10.0  # seconds of wall-clock time (every published figure used 10 s)
     max_depth: int = 10  # longest plan considered
     batched: bool = True  # one predict_effect call per expansion (False: one per action, for the benchmark)
     prune: bool = True  # goal-oriented pruning (False: all 9 n^2 actions)
+
+    def __post_init__(self) -> None:
+        if not self.time_limit > 0 or self.max_expansions < 1 or self.max_depth < 1:
+            raise UserError(f"the continuous search needs a positive time limit, node limit and depth, got "
+                            f"{self.time_limit} s, {self.max_expansions} nodes, depth {self.max_depth}")
 
 
 @dataclass

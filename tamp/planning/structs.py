@@ -5,8 +5,7 @@ is a NamedTuple. Lengths are metres, angles radians, times seconds.
 """
 from __future__ import annotations
 
-import dataclasses
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from enum import Enum
 from typing import NamedTuple, Protocol, Sequence
 

@@ -1,0 +1,160 @@
+"""The two ways a plan meets the world, one implementation each, used by `tamp demo`, `tamp plan`
+and `tamp evaluate`:
+
+- open loop (`execute_plan`): refine the whole plan from the initial scene (IK, OMPL motions,
+  grasps, in a `fast` World), then execute the refined actions: `fast` takes the refinement's own
+  outcome, `full` runs the time-parameterized trajectory with the arm under physics. Actions before
+  a refinement failure run, none after it.
+- closed loop (`run_closed_loop`): in a World of the chosen fidelity, execute the first action of
+  each plan, observe the scene and replan (`tamp.planning.bilevel.plan_closed_loop`); an action that
+  cannot be refined changes nothing and the loop goes on from the observed scene.
+
+Both take an optional `Timeline` to record a replay, and a `World` to reuse (its Drake plants are
+cached per block layout); the planners see the simulator only through `kinematics_for`.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Callable, Sequence
+
+import numpy as np
+
+from tamp.planning.bilevel import KINEMATIC_METHODS, ClosedLoopResult, PlanConfig, PlanResult, plan_closed_loop
+from tamp.planning.models import Models
+from tamp.planning.structs import PickPlace
+from tamp.planning.verify import goal_error
+from tamp.sim import World, WorldConfig
+from tamp.sim.feasibility import FeasibilityChecker
+from tamp.sim.refine import FAILURE_STAGES, failed_at, refine
+from tamp.sim.replay import Timeline
+from tamp.sim.structs import StepInfo
+from tamp.sim.trajectory import RefinedPlan, RefinementFailure
+
+FIDELITIES = ("fast", "full")
+
+
+def kinematics_for(method: str, config: PlanConfig) -> FeasibilityChecker | None:
+    """The kinematic feasibility checker a planning call uses: one for the methods that put
+    kinematics in the planning loop (`KINEMATIC_METHODS`) when `config.feasibility`, else None."""
+    return FeasibilityChecker() if config.feasibility and method in KINEMATIC_METHODS else None
+
+
+def executing_world(fidelity: str = "fast") -> World:
+    """A World for executed plans: paths simplified (they are run, not just checked)."""
+    if fidelity not in FIDELITIES:
+        raise ValueError(f"fidelity must be one of {', '.join(FIDELITIES)}, got {fidelity!r}")
+    return World(WorldConfig(fidelity=fidelity, simplify_paths=True))
+
+
+@dataclass
+class Execution:
+    """A plan refined and executed from X_init: outcome and times (seconds)."""
+
+    refined: RefinedPlan
+    X_after: list[np.ndarray]  # executed state after each action that ran
+    X_final: np.ndarray  # after the executed actions (X_init when none ran)
+    error: float  # metres: max per-object distance of X_final to the goal
+    refine_time: float
+    execute_time: float  # wall clock; 0 in the fast world, where refinement already executed the plan
+    sim_time: float  # simulated seconds of execution (arm motion and settling); fast: arm motion alone
+    notes: list[str] = field(default_factory=list)  # per-action remarks of the executor (missed grasps)
+
+    @property
+    def success(self) -> bool:
+        """Every action refined (the goal test is the caller's: it knows eps)."""
+        return self.refined.success
+
+
+def execute_plan(actions: Sequence[PickPlace | Sequence[int]], X_init: np.ndarray, X_goal: np.ndarray,
+                 fidelity: str = "fast", *, world: World | None = None,
+                 timeline: Timeline | None = None) -> Execution:
+    """Refine `actions` from X_init and execute them (see the module docstring). `world`: a `fast`
+    World to refine in (default: a new one); it is left at the refined actions' outcome."""
+    if fidelity not in FIDELITIES:
+        raise ValueError(f"fidelity must be one of {', '.join(FIDELITIES)}, got {fidelity!r}")
+    world = world or executing_world("fast")
+    world.timeline = timeline if fidelity == "fast" else None
+    refined = refine([PickPlace(*a) for a in actions], X_init, world=world)
+    world.timeline = None
+    if fidelity == "fast":
+        X_after = [s.X_after for s in refined.steps]
+        X_final, execute_time, notes = refined.X_predicted, 0.0, []
+        sim_time = sum(s.duration for s in refined.steps)
+    else:
+        from tamp.sim.execute import execute
+
+        t = time.perf_counter()
+        executed = execute(refined, timeline=timeline, partial=True)
+        execute_time = time.perf_counter() - t
+        X_after = [a.X_after for a in executed.log]
+        X_final, sim_time = executed.X_final, executed.sim_time
+        notes = [f"action {a.index}: {a.note}" for a in executed.log if a.note]
+    if not refined.steps:
+        X_final = refined.X_init
+    if timeline is not None and not timeline.times:  # nothing ran: show the initial scene
+        timeline.start(refined.scene_init, refined.q_init)
+    return Execution(refined, X_after, X_final, goal_error(X_final, X_goal), refined.refine_time,
+                     execute_time, sim_time, notes)
+
+
+@dataclass
+class ClosedLoopRun:
+    """A closed loop and what each executed action did in the world."""
+
+    loop: ClosedLoopResult
+    infos: list[StepInfo] = field(default_factory=list)  # per executed action
+    step_times: list[tuple[float, float]] = field(default_factory=list)  # (refine, execute) wall s per action
+    action_starts: list[float | None] = field(default_factory=list)  # replay time each action began (None: arm never moved)
+
+    @property
+    def first_failure(self) -> RefinementFailure | None:
+        """The first executed action the world could not carry out (IK, motion or grasp)."""
+        for index, (action, info) in enumerate(zip(self.loop.executed, self.infos)):
+            if info.status != "ok":
+                return RefinementFailure(index, PickPlace(*action), FAILURE_STAGES.get(info.status, "motion"),
+                                         failed_at(info), info.reason)
+        return None
+
+
+StepCallback = Callable[[PickPlace, np.ndarray, StepInfo, float], None]  # (action, X observed, info, wall s)
+
+
+def run_closed_loop(method: str, models: Models, X_init: np.ndarray, X_goal: np.ndarray, rounds: int,
+                    config: PlanConfig, fidelity: str = "fast", *, world: World | None = None,
+                    kinematics: FeasibilityChecker | None = None, timeline: Timeline | None = None,
+                    planner: Callable[..., PlanResult] | None = None,
+                    on_round: Callable[[int, PlanResult], None] | None = None,
+                    on_step: StepCallback | None = None) -> ClosedLoopRun:
+    """Plan, execute the first action in a World of `fidelity`, observe, replan, up to `rounds`
+    replanning rounds (the last plan runs to its end). `kinematics` observes every scene the world
+    reaches; `planner` and `on_round` are passed to `plan_closed_loop`, `on_step` is called after
+    every executed action."""
+    world = world or executing_world(fidelity)
+    world.timeline = timeline
+    X0 = world.reset(X=X_init)
+    if kinematics is not None:
+        kinematics.observe(world.scene, world.q)
+    run = ClosedLoopRun(loop=None)  # type: ignore[arg-type]  (set below, once the loop has run)
+
+    def step(action: PickPlace) -> np.ndarray:
+        t, marks = time.perf_counter(), len(timeline.action_starts) if timeline is not None else 0
+        X, info = world.step(action)
+        seconds = time.perf_counter() - t
+        if kinematics is not None:
+            kinematics.observe(world.scene, world.q)
+        started = timeline is not None and len(timeline.action_starts) > marks  # it moved the arm
+        run.action_starts.append(timeline.action_starts[marks] if started else None)
+        execute = info.timings.get("execute", 0.0)  # full fidelity; the fast world's step is all refinement
+        run.step_times.append((seconds - execute, execute))
+        run.infos.append(info)
+        if on_step is not None:
+            on_step(action, X, info, seconds)
+        return X
+
+    try:
+        run.loop = plan_closed_loop(method, models, X0, X_goal, step, rounds, config, on_round=on_round,
+                                    planner=planner, kinematics=kinematics)
+    finally:
+        world.timeline = None
+    return run
