@@ -5,6 +5,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from tamp.errors import UserError
 from tamp.app.cli import positive_int
 from evaluation.methods import SYMBOLIC_BACKENDS
 from tamp.app.plan_command import add_planner_arguments
@@ -74,9 +75,9 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 def cmd_report(args: argparse.Namespace) -> int:
     """Tables, figures and significance tests from a results directory."""
     if not (args.directory / "rows.jsonl").is_file():
-        raise FileNotFoundError(f"no rows.jsonl in {args.directory} (the --out directory of `tamp evaluate`)")
+        raise UserError(f"no rows.jsonl in {args.directory} (the --out directory of `tamp evaluate`)")
     if args.ablation is not None and not args.ablation.is_file():
-        raise FileNotFoundError(f"no ablation file at {args.ablation}")
+        raise UserError(f"no ablation file at {args.ablation}")
     print(f"report written to {_write_report(args.directory, args.ablation)}")
     return 0
 

@@ -31,6 +31,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
 
+from tamp.errors import UserError
 from tamp.planning.models import DOMAIN_DIR, DYNAMICS_FILE, SYMBOLIC_FILE, Models
 
 VARIANTS_DIR = "variants"
@@ -101,19 +102,19 @@ def resolve_methods(models_dir: str | Path, methods: Sequence[str] | None = None
     """
     models_dir = Path(models_dir)
     if not models_dir.is_dir():
-        raise FileNotFoundError(f"no models directory at {models_dir}")
+        raise UserError(f"no models directory at {models_dir}")
     if methods is None:
         methods = default_methods(models_dir)
     methods = list(methods)
     if not methods:
-        raise ValueError("no methods to evaluate")
+        raise UserError("no methods to evaluate")
     unknown = [m for m in methods if m not in METHODS]
     if unknown:
-        raise ValueError(f"unknown method {unknown[0]!r}; choose from {', '.join(METHODS)}")
+        raise UserError(f"unknown method {unknown[0]!r}; choose from {', '.join(METHODS)}")
     for m in methods:
         missing = [p for p in required_files(models_dir, m) if not p.is_file()]
         if missing:
-            raise FileNotFoundError(f"method {m} needs {missing[0]}, which does not exist")
+            raise UserError(f"method {m} needs {missing[0]}, which does not exist")
     return [m for m in METHODS if m in methods]
 
 
@@ -136,7 +137,7 @@ def load_method_models(models_dir: str | Path, methods: Sequence[str]) -> dict[s
         model, domain = learned.load_model(path), symbolic.load_domain(domain_dir)
         cfg = model.config
         if (cfg.d_z, cfg.heads) != (domain.n_unary, domain.n_relations):
-            raise ValueError(f"{path} has d_z={cfg.d_z}, K={cfg.heads} but the domain in {domain_dir} was "
+            raise UserError(f"{path} has d_z={cfg.d_z}, K={cfg.heads} but the domain in {domain_dir} was "
                              f"learned with d_z={domain.n_unary}, K={domain.n_relations}")
         sets["symbolic_sigmoid"] = Models(sets["default"].dynamics, model, domain)
     if "dynamics_gumbel" in needed:

@@ -23,7 +23,8 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from tamp.app.problem import PROTOCOLS, Problem, random_problem
+from tamp.errors import UserError
+from tamp.app.problem import PROTOCOLS, Problem, StuckScene, random_problem
 from tamp.records import atomic_write_text
 from tamp.app.problem import read_problem_set as read_problems  # noqa: F401 (the set reader, here by its old name)
 
@@ -51,9 +52,9 @@ def _problem(n: int, k: int, i: int, seed: int, world, run: int | None = None,
             problem = random_problem(n, k, scene_seed(seed, n, k, i, attempt), world=world, name=name,
                                      protocol=protocol)
             return problem if run is None else dataclasses.replace(problem, run=run)
-        except RuntimeError:
+        except StuckScene:
             continue
-    raise RuntimeError(f"problem {name}: no scene out of {MAX_ATTEMPTS} allowed {k} "
+    raise UserError(f"problem {name}: no scene out of {MAX_ATTEMPTS} allowed {k} "
                        "scene-changing random actions")
 
 
@@ -84,13 +85,13 @@ def generate_problems(ns: Sequence[int] = (2, 3, 4), ks: Sequence[int] = (1, 2, 
 
     ns, ks = _counts(ns, "--objects", 1, 6), _counts(ks, "--actions", 1, None)
     if per_cell < 1:
-        raise ValueError(f"--per-cell must be a positive integer, got {per_cell}")
+        raise UserError(f"--per-cell must be a positive integer, got {per_cell}")
     if runs < 1:
-        raise ValueError(f"--runs must be a positive integer, got {runs}")
+        raise UserError(f"--runs must be a positive integer, got {runs}")
     if not (0 <= seed and seed + runs - 1 < 2**63):
-        raise ValueError(f"--seed must be in [0, 2^63 - runs], got {seed}")
+        raise UserError(f"--seed must be in [0, 2^63 - runs], got {seed}")
     if protocol not in PROTOCOLS:
-        raise ValueError(f"--protocol must be one of {', '.join(PROTOCOLS)}, got {protocol!r}")
+        raise UserError(f"--protocol must be one of {', '.join(PROTOCOLS)}, got {protocol!r}")
     cells: list[Cell] = [(n, k, i, seed + j, None if runs == 1 else j, protocol)
                          for j in range(runs) for n in ns for k in ks for i in range(per_cell)]
     bar = dict(total=len(cells), desc="problems", unit="problem", disable=not progress)
@@ -105,13 +106,13 @@ def generate_problems(ns: Sequence[int] = (2, 3, 4), ks: Sequence[int] = (1, 2, 
 def _counts(values: Iterable[int], option: str, low: int, high: int | None) -> tuple[int, ...]:
     values = tuple(int(v) for v in values)
     if not values:
-        raise ValueError(f"{option} needs at least one value")
+        raise UserError(f"{option} needs at least one value")
     bad = [v for v in values if v < low or (high is not None and v > high)]
     if bad:
         limit = f"{low}..{high}" if high is not None else f">= {low}"
-        raise ValueError(f"{option}: values must be {limit}, got {bad[0]}")
+        raise UserError(f"{option}: values must be {limit}, got {bad[0]}")
     if len(set(values)) != len(values):
-        raise ValueError(f"{option} lists a value twice: {','.join(map(str, values))}")
+        raise UserError(f"{option} lists a value twice: {','.join(map(str, values))}")
     return values
 
 
@@ -120,9 +121,9 @@ def write_problems(path: str | Path, problems: Sequence[Problem]) -> Path:
     seen: set[str] = set()
     for p in problems:
         if p.name is None:
-            raise ValueError("every problem of a set needs a name")
+            raise UserError("every problem of a set needs a name")
         if p.name in seen:
-            raise ValueError(f"duplicate problem name {p.name!r}")
+            raise UserError(f"duplicate problem name {p.name!r}")
         seen.add(p.name)
     text = "".join(json.dumps(p.to_dict()) + "\n" for p in problems)
     return atomic_write_text(path, text)

@@ -19,6 +19,8 @@ from pathlib import Path
 from typing import Any, Callable, Iterable, Sequence
 
 from . import paper, plots
+from tamp.errors import UserError
+from tamp.planning.structs import OUTCOMES, Outcome
 from tamp.records import atomic_write_text
 
 from .stats import IDENTICAL, confusion, mean_std, median, paired_ttest, percentile, rate_pct
@@ -44,8 +46,7 @@ METHOD_INFO = {
     "bilevel_nofeas": "`bilevel` without kinematics in the planning loop",
     "bilevel_replan_nofeas": "`bilevel_replan` without kinematics in the planning loop",
 }
-OUTCOMES = ("success", "no_plan", "kinematic_failure", "refinement_failure", "wrong_plan")
-ERROR_OUTCOME = "error"  # a (problem, method) that raised (evaluation.run): listed, left out of the tables
+ERROR_OUTCOME = Outcome.ERROR.value  # a (problem, method) that raised (evaluation.run): listed, left out of the tables
 STAGES = ("ik", "motion", "grasp")
 BACKEND_INFO = {"python": "our in-process search (`python`)", "fd": "Fast Downward (`fd`, as in the paper)"}
 PROTOCOL_INFO = {"strict": "`strict` (every one of the k random actions moved a block)",
@@ -103,11 +104,11 @@ _NUMBER = (int, float)
 def _check(path: Path, line: int, row: dict, name: str, types: tuple, nullable: bool, what: str) -> None:
     value = row.get(name)
     if name not in row and not nullable:
-        raise ValueError(f"{path}, line {line}: missing field {name!r}")
+        raise UserError(f"{path}, line {line}: missing field {name!r}")
     if value is None and nullable:
         return
     if (isinstance(value, bool) and bool not in types) or not isinstance(value, types):
-        raise ValueError(f"{path}, line {line}: field {name!r} must be {what}, got {value!r}")
+        raise UserError(f"{path}, line {line}: field {name!r} must be {what}, got {value!r}")
 
 
 def load_rows(path: Path) -> list[dict]:
@@ -125,12 +126,12 @@ def load_rows(path: Path) -> list[dict]:
 def _read_rows(path: Path) -> tuple[list[dict], int | None]:
     """(rows, number of an incomplete last line that was left out, or None)."""
     if not path.is_file():
-        raise ValueError(f"{path}: no rows file (expected the JSONL written by `tamp evaluate`)")
+        raise UserError(f"{path}: no rows file (expected the JSONL written by `tamp evaluate`)")
     rows, seen, cells, dropped = [], {}, {}, None
     try:
         lines = path.read_text().split("\n")
     except UnicodeDecodeError as error:
-        raise ValueError(f"{path}: not a text file ({error.reason} at byte {error.start})") from None
+        raise UserError(f"{path}: not a text file ({error.reason} at byte {error.start})") from None
     for i, text in enumerate(lines, start=1):
         if not text.strip():
             continue
@@ -140,22 +141,22 @@ def _read_rows(path: Path) -> tuple[list[dict], int | None]:
             if i == len(lines):  # no newline after it: an append cut short
                 dropped = i
                 break
-            raise ValueError(f"{path}, line {i}: not valid JSON ({error.msg})") from None
+            raise UserError(f"{path}, line {i}: not valid JSON ({error.msg})") from None
         if not isinstance(row, dict):
-            raise ValueError(f"{path}, line {i}: expected a JSON object, got {type(row).__name__}")
+            raise UserError(f"{path}, line {i}: expected a JSON object, got {type(row).__name__}")
         _check_row(path, i, row)
         key = (row["problem"], row["method"])
         if key in seen:
-            raise ValueError(f"{path}, line {i}: problem {key[0]!r} with method {key[1]!r} already on "
+            raise UserError(f"{path}, line {i}: problem {key[0]!r} with method {key[1]!r} already on "
                              f"line {seen[key]}")
         seen[key] = i
         cell = cells.setdefault(row["problem"], (row["n"], row["k"], i))
         if cell[:2] != (row["n"], row["k"]):
-            raise ValueError(f"{path}, line {i}: problem {row['problem']!r} has n={row['n']}, k={row['k']} "
+            raise UserError(f"{path}, line {i}: problem {row['problem']!r} has n={row['n']}, k={row['k']} "
                              f"but n={cell[0]}, k={cell[1]} on line {cell[2]}")
         rows.append(row)
     if not rows:
-        raise ValueError(f"{path}: no rows")
+        raise UserError(f"{path}: no rows")
     return rows, dropped
 
 
@@ -172,22 +173,22 @@ def _check_row(path: Path, i: int, row: dict) -> None:
     _check(path, i, row, "refine_failure", (dict,), True, "an object or null")
     _check(path, i, row, "refine_time_s", (list,), True, "a list of seconds or null")
     if row["outcome"] not in OUTCOMES + (ERROR_OUTCOME,):
-        raise ValueError(f"{path}, line {i}: field 'outcome' must be one of {', '.join(OUTCOMES + (ERROR_OUTCOME,))}, "
+        raise UserError(f"{path}, line {i}: field 'outcome' must be one of {', '.join(OUTCOMES + (ERROR_OUTCOME,))}, "
                          f"got {row['outcome']!r}")
     if isinstance(row.get("refine_failure"), dict) and row["refine_failure"].get("stage") not in STAGES:
-        raise ValueError(f"{path}, line {i}: field 'refine_failure.stage' must be one of "
+        raise UserError(f"{path}, line {i}: field 'refine_failure.stage' must be one of "
                          f"{', '.join(STAGES)}, got {row['refine_failure'].get('stage')!r}")
     if not all(isinstance(t, _NUMBER) and not isinstance(t, bool) for t in row.get("refine_time_s") or []):
-        raise ValueError(f"{path}, line {i}: field 'refine_time_s' must be a list of seconds")
+        raise UserError(f"{path}, line {i}: field 'refine_time_s' must be a list of seconds")
 
 
 def _read_json(path: Path, what: str) -> dict:
     try:
         data = json.loads(path.read_text())
     except json.JSONDecodeError as error:
-        raise ValueError(f"{path}: not valid JSON ({error.msg}, line {error.lineno}); expected {what}") from None
+        raise UserError(f"{path}: not valid JSON ({error.msg}, line {error.lineno}); expected {what}") from None
     if not isinstance(data, dict):
-        raise ValueError(f"{path}: expected a JSON object ({what})")
+        raise UserError(f"{path}: expected a JSON object ({what})")
     return data
 
 
@@ -196,10 +197,10 @@ def _read_symbols(path: Path) -> list[dict]:
     try:
         data = json.loads(path.read_text())
     except json.JSONDecodeError as error:
-        raise ValueError(f"{path}: not valid JSON ({error.msg}, line {error.lineno})") from None
+        raise UserError(f"{path}: not valid JSON ({error.msg}, line {error.lineno})") from None
     keys = {"name", "rate", "count", "best", "agreement", "negated", "phi"}
     if not isinstance(data, list) or not all(isinstance(b, dict) and keys <= set(b) for b in data):
-        raise ValueError(f"{path}: expected a list of bits with fields {', '.join(sorted(keys))}")
+        raise UserError(f"{path}: expected a list of bits with fields {', '.join(sorted(keys))}")
     return data
 
 
@@ -208,11 +209,11 @@ def load_ablation(path: Path) -> dict:
     data = _read_json(path, "the output of `tamp ablate-activations`")
     acts = data.get("activations")
     if not isinstance(acts, dict) or not acts:
-        raise ValueError(f"{path}: field 'activations' must be an object of activation -> results")
+        raise UserError(f"{path}: field 'activations' must be an object of activation -> results")
     for name, r in acts.items():
         for f in ("mean_cm", "std_cm"):
             if not isinstance(r, dict) or not isinstance(r.get(f), _NUMBER):
-                raise ValueError(f"{path}: field 'activations.{name}.{f}' must be a number")
+                raise UserError(f"{path}: field 'activations.{name}.{f}' must be a number")
     return data
 
 
@@ -956,11 +957,11 @@ def write_report(results_dir: Path, ablation: Path | None = None) -> Path:
     notes += [f"Problem `{r['problem']}` with method `{r['method']}` raised an error and is left out of every "
               f"table: {r.get('error', 'no message')}" for r in errors]
     if not rows:
-        raise ValueError(f"{rows_path}: every row is an error row ({len(errors)}); nothing to report")
+        raise UserError(f"{rows_path}: every row is an error row ({len(errors)}); nothing to report")
     meta_path = results_dir / "meta.json"
     meta = _read_json(meta_path, "the evaluation's meta.json") if meta_path.is_file() else None
     if ablation is not None and not Path(ablation).is_file():
-        raise ValueError(f"{ablation}: no such ablation file")
+        raise UserError(f"{ablation}: no such ablation file")
     ablation_path = Path(ablation) if ablation is not None else results_dir / "ablation.json"
     ablation_data = load_ablation(ablation_path) if ablation_path.is_file() else None
     symbols_path = results_dir / "symbols.json"

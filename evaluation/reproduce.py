@@ -35,6 +35,7 @@ from multiprocessing import get_context
 from pathlib import Path
 from typing import Any
 
+from tamp.errors import UserError
 from tamp.records import atomic_write_text
 
 
@@ -100,7 +101,7 @@ class Stages:
         if self.path.is_file():
             self.state = json.loads(self.path.read_text())
             if self.state.get("setup") != setup:
-                raise ValueError(f"{out} holds a reproduction with other settings ({self.path}: scale "
+                raise UserError(f"{out} holds a reproduction with other settings ({self.path}: scale "
                                  f"{self.state.get('setup', {}).get('scale')!r}); use another --out")
         else:
             self.state = {"setup": setup, "finished": {}}
@@ -152,15 +153,15 @@ def reproduce(out: str | Path, scale_name: str = "quick", workers: int | None = 
     from tamp.app.problem import PROTOCOLS
 
     if scale_name not in SCALES:
-        raise ValueError(f"unknown scale {scale_name!r}; choose one of {', '.join(SCALES)}")
+        raise UserError(f"unknown scale {scale_name!r}; choose one of {', '.join(SCALES)}")
     if protocol not in PROTOCOLS:
-        raise ValueError(f"--protocol must be one of {', '.join(PROTOCOLS)}, got {protocol!r}")
+        raise UserError(f"--protocol must be one of {', '.join(PROTOCOLS)}, got {protocol!r}")
     if runs < 1:
-        raise ValueError(f"--runs must be a positive integer, got {runs}")
+        raise UserError(f"--runs must be a positive integer, got {runs}")
     if models is not None:
         models = Path(models).resolve()
         if not models.is_dir():
-            raise FileNotFoundError(f"no models directory at {models} (--models: symbolic.pt, dynamics.pt, domain/)")
+            raise UserError(f"no models directory at {models} (--models: symbolic.pt, dynamics.pt, domain/)")
     scale, out = SCALES[scale_name], Path(out)
     out.mkdir(parents=True, exist_ok=True)
     workers = workers or available_cpus()

@@ -48,6 +48,7 @@ from tamp.planning.bilevel import PlanConfig
 from tamp.app.parallel import BACKENDS, run_tasks
 from tamp.app.problem import Problem
 from tamp.errors import UserError
+from tamp.planning.structs import OUTCOMES, Outcome
 from tamp.planning.verify import goal_error
 from tamp.records import atomic_write_text, exclusive, package_versions
 
@@ -61,8 +62,7 @@ ROW_KEYS = ("problem", "n", "k", "run", "protocol", "moved", "method", "solved",
 # the only fields that vary between runs
 TIMING_KEYS = ("planning_time_s", "level1_time_s", "refine_time_s", "search_time_s", "feasibility_time_s",
                "plan_refine_time_s")
-OUTCOMES = ("success", "no_plan", "kinematic_failure", "refinement_failure", "wrong_plan")
-ERROR_OUTCOME = "error"  # a pair that raised (see Evaluator.error_row); not one of OUTCOMES
+ERROR_OUTCOME = Outcome.ERROR.value  # a pair that raised (see Evaluator.error_row); not one of OUTCOMES
 MAX_CANDIDATES = 20
 # meta.json fields that define the rows: a results directory is resumed only if all of them match
 DEFINING_KEYS = ("models_dir", "model_files", "problems", "problems_sha256", "config")
@@ -123,13 +123,9 @@ class EvalConfig:
 
 # --------------------------------------------------------------------------- one (problem, method)
 
-def row_outcome(solved: bool, refine_failure: dict | None, final_error: float, eps: float) -> str:
-    """no_plan | kinematic_failure (IK) | refinement_failure (motion, grasp) | wrong_plan | success."""
-    if not solved:
-        return "no_plan"
-    if refine_failure is not None:
-        return "kinematic_failure" if refine_failure["stage"] == "ik" else "refinement_failure"
-    return "success" if final_error < eps else "wrong_plan"
+def row_outcome(solved: bool, refine_failure: dict | None, final_error: float, eps: float) -> Outcome:
+    """The row's Outcome (see `tamp.planning.structs.Outcome`)."""
+    return Outcome.of(solved, None if refine_failure is None else refine_failure["stage"], final_error, eps)
 
 
 def _round(x: float | None, digits: int = 6) -> float | None:
@@ -247,7 +243,7 @@ class Evaluator:
                "fidelity": c.fidelity, "eps_m": c.eps, "tau_verify_m": c.tau_verify,
                "symbolic_backend": c.symbolic_backend if method.symbolic else None}
         row["outcome"] = row_outcome(row["solved"], row["refine_failure"], row["final_error_m"], c.eps)
-        row["success"] = row["outcome"] == "success"
+        row["success"] = row["outcome"] == Outcome.SUCCESS
         return {k: row[k] for k in ROW_KEYS}
 
     def error_row(self, problem: Problem, method_name: str, error: BaseException) -> dict:
@@ -259,7 +255,7 @@ class Evaluator:
                "level": None, "plan": None, "planning_time_s": 0.0, "level1_time_s": None,
                "predicted_error_m": None, "candidates": [], "refined": None, "refine_failure": None,
                "refine_time_s": [], "executed_actions": 0, "executed_plans": None, "final_error_m": None,
-               "success": False, "outcome": "error", "rounds": None, "fidelity": c.fidelity, "eps_m": c.eps,
+               "success": False, "outcome": Outcome.ERROR, "rounds": None, "fidelity": c.fidelity, "eps_m": c.eps,
                "tau_verify_m": c.tau_verify, "symbolic_backend": c.symbolic_backend if METHODS[method_name].symbolic else None}
         row = {k: row.get(k) for k in ROW_KEYS}  # fields an error row cannot have are None
         row["error"] = f"{type(error).__name__}: {error}"
@@ -374,9 +370,9 @@ def _scan_rows(path: Path) -> tuple[list[dict], int]:
         try:
             row = json.loads(line)
             if not isinstance(row, dict) or "problem" not in row or "method" not in row:
-                raise ValueError("not a result row")
+                raise UserError("not a result row")
         except ValueError as error:
-            raise ValueError(f"{path} line {number} is not a result row ({error}); the file was damaged "
+            raise UserError(f"{path} line {number} is not a result row ({error}); the file was damaged "
                              "by something other than an interrupted evaluation") from None
         rows.append(row)
         end += len(line) + 1
@@ -388,15 +384,15 @@ def _prepare(out: Path, meta: dict) -> None:
     path = out / META_NAME
     if not path.exists():
         if (out / ROWS_NAME).exists():
-            raise ValueError(f"{out} has {ROWS_NAME} but no {META_NAME}; give a new --out directory")
+            raise UserError(f"{out} has {ROWS_NAME} but no {META_NAME}; give a new --out directory")
         atomic_write_text(path, json.dumps(meta, indent=2) + "\n")
         return
     try:
         old = json.loads(path.read_text())
     except json.JSONDecodeError as error:
-        raise ValueError(f"{path}: not valid JSON ({error})") from None
+        raise UserError(f"{path}: not valid JSON ({error})") from None
     if old.get("format") != FORMAT:
-        raise ValueError(f"{path} is not the meta file of a `tamp evaluate` results directory")
+        raise UserError(f"{path} is not the meta file of a `tamp evaluate` results directory")
     diffs = []
     for key in DEFINING_KEYS:
         a, b = old.get(key), meta[key]
@@ -406,7 +402,7 @@ def _prepare(out: Path, meta: dict) -> None:
         elif a != b:
             diffs.append(f"{key}: {_short(a)} there, {_short(b)} now")
     if diffs:
-        raise ValueError(f"{out} holds rows of other inputs ({'; '.join(diffs[:3])}); use a new --out "
+        raise UserError(f"{out} holds rows of other inputs ({'; '.join(diffs[:3])}); use a new --out "
                          "directory, or the same models, problem set and settings to resume")
     if old.get("versions") != meta["versions"]:
         from tqdm import tqdm
@@ -467,14 +463,14 @@ def evaluate(models_dir: str | Path, problems_path: str | Path, out_dir: str | P
         methods = [m for m in METHODS if m in (methods or models)]
         missing = [m for m in methods if m not in models]
         if missing:
-            raise ValueError(f"no models given for method {missing[0]}")
+            raise UserError(f"no models given for method {missing[0]}")
     problems = read_problems(problems_path)
     loaded = models if models is not None else load_method_models(models_dir, methods)
     for method in methods:
         n_max = getattr(loaded[method], "n_max", None)
         too_big = [p for p in problems if n_max is not None and p.n > n_max]
         if too_big:
-            raise ValueError(f"{problems_path}: problem {too_big[0].name} has {too_big[0].n} objects, but the models "
+            raise UserError(f"{problems_path}: problem {too_big[0].name} has {too_big[0].n} objects, but the models "
                              f"of method {method} were trained for at most {n_max}")
     if models is None and config.workers == 1 and config.backend == "local":
         models = loaded  # one process: the models just loaded serve the run
@@ -495,7 +491,7 @@ def evaluate(models_dir: str | Path, problems_path: str | Path, out_dir: str | P
         _write_symbols(out, problems, models_dir, methods, models)
         done = {(r["problem"], r["method"]) for r in rows}
         if len(done) < len(rows):
-            raise ValueError(f"{rows_path} holds a (problem, method) row twice; the file was edited")
+            raise UserError(f"{rows_path} holds a (problem, method) row twice; the file was edited")
         pairs = [(p, m) for p in problems for m in methods]
         tasks = [(p, m) for p, m in pairs if (p.name, m) not in done]
         with open(rows_path, "a") as f, tqdm(total=len(pairs), initial=len(pairs) - len(tasks), desc="evaluate",

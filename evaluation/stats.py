@@ -11,6 +11,7 @@ from typing import Sequence
 import numpy as np
 from scipy import stats as _scipy
 
+
 IDENTICAL = "identical"  # the paired samples agree on every problem: no test to make
 
 

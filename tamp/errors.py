@@ -3,9 +3,30 @@ prints its message on one line and exits with status 2. Any other exception is a
 the user with its traceback.
 
 A subclass of ValueError, so library callers that catch ValueError keep working. The libraries
-below `tamp` (`learned`, `symbolic`) raise plain ValueError; the command line turns those into
-UserError where it hands them a user's input (`tamp.app.cli.user_input`)."""
+below `tamp` (`learned`, `symbolic`) do not know this type: they raise ValueError for bad input,
+and `is_user_error` counts those (raised by their own code, not deeper) as the user's."""
+from __future__ import annotations
+
+from pathlib import Path
+
+# packages whose own ValueErrors are about their input (which the command line took from the user)
+LIBRARIES = tuple(str(Path(__file__).resolve().parents[1] / name) for name in ("learned", "symbolic"))
 
 
 class UserError(ValueError):
     """A mistake in what the user gave (flags, files, scenes), said in one line."""
+
+
+def is_user_error(error: BaseException) -> bool:
+    """UserError; an OSError about a file (missing, unreadable); or a ValueError raised by the code
+    of `learned` or `symbolic` themselves (their input checks), not by code they call."""
+    if isinstance(error, UserError):
+        return True
+    if isinstance(error, OSError) and error.filename is not None:
+        return True
+    if isinstance(error, ValueError) and error.__traceback__ is not None:
+        tb = error.__traceback__
+        while tb.tb_next is not None:
+            tb = tb.tb_next
+        return str(Path(tb.tb_frame.f_code.co_filename).resolve()).startswith(LIBRARIES)
+    return False

@@ -86,15 +86,15 @@ def test_a_stuck_scene_is_replaced_by_the_next_seed_of_its_problem(monkeypatch):
     def stuck_first(n, k, seed, world=None, name=None, **kwargs):
         tried.append(seed)
         if len(tried) == 1:
-            raise RuntimeError("stuck")
+            raise ep.StuckScene("stuck")
         return real(n, k, seed, world=world, name=name, **kwargs)
 
     monkeypatch.setattr(ep, "random_problem", stuck_first)
     (problem,) = ep.generate_problems(ns=(2,), ks=(1,), per_cell=1, seed=5, progress=False)
     assert tried == [ep.scene_seed(5, 2, 1, 0), ep.scene_seed(5, 2, 1, 0, attempt=1)]
     assert problem.seed == tried[1] and problem.name == "n2-k1-000"
-    monkeypatch.setattr(ep, "random_problem", lambda *a, **kw: (_ for _ in ()).throw(RuntimeError("stuck")))
-    with pytest.raises(RuntimeError, match="n2-k1-000: no scene out of 10"):
+    monkeypatch.setattr(ep, "random_problem", lambda *a, **kw: (_ for _ in ()).throw(ep.StuckScene("stuck")))
+    with pytest.raises(ep.UserError, match="n2-k1-000: no scene out of 10"):
         ep.generate_problems(ns=(2,), ks=(1,), per_cell=1, seed=5, progress=False)
 
 

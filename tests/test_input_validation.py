@@ -264,3 +264,29 @@ def test_damaged_operators_file_is_named(tmp_path, capsys, text, message):
     problem.write_text(json.dumps({"X_init": INIT, "X_goal": GOAL}))
     assert main(["plan", "--problem", str(problem), "--models", str(models), "--execute", "none"]) == 2
     _one_line_error(capsys, str(models / "domain" / "operators.json"), message)
+
+
+def test_a_bug_reaches_the_user_with_its_traceback_a_mistake_in_one_line(tmp_path, monkeypatch, capsys):
+    import tamp.app.plan_command as plan_command
+
+    def buggy(*args, **kwargs):
+        return np.zeros(2)[np.array([5])]  # an IndexError deep in the planner: not the user's doing
+
+    monkeypatch.setattr(plan_command, "run_plan", buggy)
+    with pytest.raises(IndexError):
+        main(["plan", "--problem", str(tmp_path / "p.json"), "--models", str(tmp_path)])
+
+    def shape_bug(*args, **kwargs):
+        return np.zeros(2).reshape(3)  # a ValueError raised by numpy for our own mistake
+
+    monkeypatch.setattr(plan_command, "run_plan", shape_bug)
+    with pytest.raises(ValueError, match="reshape"):
+        main(["plan", "--problem", str(tmp_path / "p.json"), "--models", str(tmp_path)])
+
+
+def test_bad_input_found_by_the_libraries_below_tamp_is_a_one_line_user_error(tmp_path, capsys):
+    (tmp_path / "data").mkdir()
+    code = main(["train", "--data", str(tmp_path / "data"), "--out", str(tmp_path / "m.pt"), "--epochs", "1"])
+    err = capsys.readouterr().err
+    assert code == 2 and err.startswith("tamp train: error: ") and len(err.strip().splitlines()) == 1
+    assert "Traceback" not in err

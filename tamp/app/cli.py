@@ -10,6 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
+from tamp.errors import UserError, is_user_error
+
 
 # learned.ACTIVATIONS, spelled out so that `tamp --help` does not import torch (tests check they agree).
 BOTTLENECKS = ("gumbel_sigmoid", "sigmoid", "tanh", "none")
@@ -69,9 +71,9 @@ def _writable_folder(folder: Path, flag: str, target: Path) -> None:
     while not existing.exists() and existing != existing.parent:
         existing = existing.parent
     if not existing.is_dir():
-        raise ValueError(f"{flag} {target}: {existing} is not a folder")
+        raise UserError(f"{flag} {target}: {existing} is not a folder")
     if not os.access(existing, os.W_OK | os.X_OK):
-        raise ValueError(f"{flag} {target}: {existing} is not writable")
+        raise UserError(f"{flag} {target}: {existing} is not writable")
 
 
 def check_output_file(path: str | Path, flag: str = "--out") -> Path:
@@ -79,14 +81,14 @@ def check_output_file(path: str | Path, flag: str = "--out") -> Path:
     writable); missing parent folders are created. ValueError naming the flag otherwise."""
     path = Path(path)
     if path.is_dir():
-        raise ValueError(f"{flag} {path}: is a folder; give a file path")
+        raise UserError(f"{flag} {path}: is a folder; give a file path")
     if path.exists() and not os.access(path, os.W_OK):
-        raise ValueError(f"{flag} {path}: the file is not writable")
+        raise UserError(f"{flag} {path}: the file is not writable")
     _writable_folder(path.parent, flag, path)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
     except OSError as error:
-        raise ValueError(f"{flag} {path}: cannot create its folder ({error.strerror})") from None
+        raise UserError(f"{flag} {path}: cannot create its folder ({error.strerror})") from None
     return path
 
 
@@ -95,7 +97,7 @@ def check_output_dir(path: str | Path, flag: str = "--out") -> Path:
     nothing is created. ValueError naming the flag otherwise."""
     path = Path(path)
     if path.exists() and not path.is_dir():
-        raise ValueError(f"{flag} {path}: exists and is not a folder")
+        raise UserError(f"{flag} {path}: exists and is not a folder")
     _writable_folder(path, flag, path)
     return path
 
@@ -227,7 +229,7 @@ def cmd_train(args: argparse.Namespace) -> int:
 
     check_output_file(args.out, "--out")
     if args.resume and not last_path(Path(args.out)).is_file():
-        raise ValueError(f"--resume: no training state at {last_path(Path(args.out))} to continue from "
+        raise UserError(f"--resume: no training state at {last_path(Path(args.out))} to continue from "
                          "(leave out --resume to start a new training)")
     sizes = {k: v for k, v in (("d_z", args.d_z), ("heads", args.heads)) if v is not None}
     config = ModelConfig(activation=args.bottleneck, arm_input=not args.no_arm_input, **sizes)
@@ -279,7 +281,7 @@ def symbol_scenes(problems: Path | None, data: Path | None, max_scenes: int, see
     """Scenes to read symbols on: X_init and X_goal of a problem set, or (at most `max_scenes`,
     drawn with `seed`) the states of a dataset's transitions."""
     if (problems is None) == (data is None):
-        raise ValueError("give exactly one of --problems (a problem set) or --data (a dataset directory)")
+        raise UserError("give exactly one of --problems (a problem set) or --data (a dataset directory)")
     if problems is not None:
         from tamp.app.problem import read_problem_set
 
@@ -288,7 +290,7 @@ def symbol_scenes(problems: Path | None, data: Path | None, max_scenes: int, see
 
     t = load_transitions(data)
     if len(t) == 0:
-        raise ValueError(f"{data}: the dataset holds no transitions")
+        raise UserError(f"{data}: the dataset holds no transitions")
     pick = np.random.default_rng(seed).permutation(len(t))[:max_scenes]
     return [t.X[i, :int(t.n[i])] for i in sorted(pick)]
 
@@ -557,12 +559,15 @@ def _add_plugin_commands(sub) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run one command; returns the exit code (2 for a user error, with a one-line message)."""
+    """Run one command; returns the exit code (2 for a user error, with a one-line message; any other
+    exception propagates with its traceback)."""
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
         code = args.func(args)
-    except (ValueError, FileNotFoundError, RuntimeError) as error:
+    except Exception as error:
+        if not is_user_error(error):
+            raise  # a bug: the traceback says where
         print(f"tamp {args.command}: error: {error}", file=sys.stderr)
         code = 2
     except KeyboardInterrupt:

@@ -54,22 +54,22 @@ class CollectConfig:
 
     def __post_init__(self) -> None:
         if isinstance(self.samples, bool) or not isinstance(self.samples, int) or self.samples < 1:
-            raise ValueError(f"--samples must be a positive integer, got {self.samples!r}")
+            raise UserError(f"--samples must be a positive integer, got {self.samples!r}")
         objects = tuple(int(n) for n in self.objects)
         if not objects:
-            raise ValueError("--objects needs at least one object count, e.g. 2,3,4")
+            raise UserError("--objects needs at least one object count, e.g. 2,3,4")
         bad = [n for n in objects if not 1 <= n <= MAX_OBJECTS]
         if bad:
-            raise ValueError(f"--objects: object counts must be in 1..{MAX_OBJECTS}, got {bad[0]}")
+            raise UserError(f"--objects: object counts must be in 1..{MAX_OBJECTS}, got {bad[0]}")
         if len(set(objects)) != len(objects):
-            raise ValueError(f"--objects lists a count twice: {','.join(map(str, objects))}")
+            raise UserError(f"--objects lists a count twice: {','.join(map(str, objects))}")
         object.__setattr__(self, "objects", tuple(sorted(objects)))
         if self.actions_per_scene < 1:
-            raise ValueError(f"--actions-per-scene must be at least 1, got {self.actions_per_scene}")
+            raise UserError(f"--actions-per-scene must be at least 1, got {self.actions_per_scene}")
         if self.scenes_per_shard < 1:
-            raise ValueError(f"--scenes-per-shard must be at least 1, got {self.scenes_per_shard}")
+            raise UserError(f"--scenes-per-shard must be at least 1, got {self.scenes_per_shard}")
         if not 0 <= self.seed < 2**63:
-            raise ValueError(f"--seed must be in [0, 2^63), got {self.seed}")
+            raise UserError(f"--seed must be in [0, 2^63), got {self.seed}")
 
     @property
     def n_max(self) -> int:
@@ -213,14 +213,14 @@ def prepare_directory(out: Path, cfg: CollectConfig, meta: dict) -> tuple[set[in
     if meta_path.exists():
         old = read_meta(out)
         if any(old.get(k) != meta[k] for k in DEFINING_KEYS):
-            raise ValueError(f"{out} holds a dataset collected with other parameters "
+            raise UserError(f"{out} holds a dataset collected with other parameters "
                              f"({_describe_difference(old, meta)}); use a new --out directory, "
                              "or the same parameters to resume it")
         if old.get("versions") != meta["versions"]:
             _warn(f"{out} was started with other package versions ({old.get('versions')}); "
                   "resuming anyway, the new shards may differ from what those versions would give")
     elif out.exists() and any(not p.name.startswith(".") for p in out.iterdir()):
-        raise ValueError(f"{out} is not empty and has no {META_NAME}; give a new or empty --out directory")
+        raise UserError(f"{out} is not empty and has no {META_NAME}; give a new or empty --out directory")
     else:
         out.mkdir(parents=True, exist_ok=True)
         write_meta(out, meta)
@@ -235,7 +235,7 @@ def prepare_directory(out: Path, cfg: CollectConfig, meta: dict) -> tuple[set[in
             continue
         j = int(match.group(1))
         if j >= cfg.n_shards:
-            raise ValueError(f"{path} is beyond the {cfg.n_shards} shards of this dataset; "
+            raise UserError(f"{path} is beyond the {cfg.n_shards} shards of this dataset; "
                              "the directory was modified by hand")
         try:
             shard = read_shard(path, cfg.n_max, status_values)
@@ -310,7 +310,7 @@ def collect(out: str | Path, cfg: CollectConfig, workers: int | None = None, bac
     if address and backend != "ray":
         raise UserError("--address joins a Ray cluster; use it with --backend ray")
     if workers is not None and workers < 1:
-        raise ValueError(f"--workers must be at least 1, got {workers}")
+        raise UserError(f"--workers must be at least 1, got {workers}")
     if backend == "ray":
         import_ray()  # fail before touching the directory
     out = Path(out)
@@ -319,7 +319,7 @@ def collect(out: str | Path, cfg: CollectConfig, workers: int | None = None, bac
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as error:
-        raise ValueError(f"cannot create the dataset directory {out}: {error.strerror}") from None
+        raise UserError(f"cannot create the dataset directory {out}: {error.strerror}") from None
     with exclusive(out, LOCK_NAME, "tamp collect"):
         good, bad = prepare_directory(out, cfg, meta)
         missing = [j for j in range(cfg.n_shards) if j not in good]

@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from tamp.errors import UserError
 from tamp.planning.structs import BLOCK_SIZES, LARGE, SMALL
 from tamp.sim.structs import STATUSES
 
@@ -167,7 +168,7 @@ def dataset_stats(directory: str | Path, png: str | Path | None = None) -> Datas
 
     directory = Path(directory)
     if not directory.is_dir():
-        raise FileNotFoundError(f"no dataset directory {directory}")
+        raise UserError(f"no dataset directory {directory}")
     meta = read_meta(directory)
     codes = {int(v): k for k, v in meta["status_codes"].items()}
     parts, skipped = [], []
@@ -179,7 +180,7 @@ def dataset_stats(directory: str | Path, png: str | Path | None = None) -> Datas
             print(f"warning: skipping corrupt shard {path.name}: {reason}", file=sys.stderr)
             skipped.append(f"{path.name}: {reason}")
     if not parts:
-        raise ValueError(f"{directory}: no readable shards")
+        raise UserError(f"{directory}: no readable shards")
     present = {p.name for p in shard_paths(directory)}
     expected = meta.get("collection", {}).get("shards")
     missing = [f"shard-{j:06d}.npz" for j in range(expected or 0) if f"shard-{j:06d}.npz" not in present]

@@ -16,11 +16,12 @@ from pathlib import Path
 
 import numpy as np
 
+from tamp.errors import UserError
 from tamp.app.plan_command import LEVELS, fmt_action, print_result
 from tamp.app.problem import Problem, random_problem
 from tamp.app.runner import Execution, execute_plan, kinematics_for, run_closed_loop
 from tamp.planning.bilevel import ClosedLoopResult, PlanConfig, PlanResult, plan, replan_rounds
-from tamp.planning.structs import TYPE_NAMES, PickPlace
+from tamp.planning.structs import TYPE_NAMES, Outcome, PickPlace
 from tamp.planning.verify import goal_error, goal_errors, rollout
 from tamp.sim.feasibility import FeasibilityChecker
 from tamp.sim.replay import Timeline
@@ -54,21 +55,20 @@ class DemoResult:
     step_times: list[tuple[float, float]] = field(default_factory=list)  # closed loop: (refine, execute) s
 
     @property
-    def outcome(self) -> str:
-        """success | no plan | refinement failed | goal missed"""
+    def outcome(self) -> Outcome:
+        """As `tamp evaluate` counts it (closed loop: no plan, wrong plan or success)."""
         if self.loop is not None:
             if self.loop.success:
-                return "success"
-            return "no plan" if not self.loop.executed else "goal missed"
+                return Outcome.SUCCESS
+            return Outcome.NO_PLAN if not self.loop.executed else Outcome.WRONG_PLAN
         if self.execution is None:
-            return "no plan"
-        if not self.execution.refined.success:
-            return "refinement failed"
-        return "success" if self.execution.error < self.eps else "goal missed"
+            return Outcome.NO_PLAN
+        failure = self.execution.refined.failure
+        return Outcome.of(True, None if failure is None else failure.stage, self.execution.error, self.eps)
 
     @property
     def success(self) -> bool:
-        return self.outcome == "success"
+        return self.outcome == Outcome.SUCCESS
 
 
 def run_demo(cfg: DemoConfig = DemoConfig()) -> DemoResult:
@@ -79,17 +79,17 @@ def run_demo(cfg: DemoConfig = DemoConfig()) -> DemoResult:
     from tamp.planning.models import load_models, pretrained_dir
 
     if cfg.fidelity not in ("full", "fast"):
-        raise ValueError(f"fidelity must be 'full' or 'fast', got {cfg.fidelity!r}")
+        raise UserError(f"fidelity must be 'full' or 'fast', got {cfg.fidelity!r}")
     if cfg.candidates < 0:
-        raise ValueError(f"candidates must be 0 or more, got {cfg.candidates}")
+        raise UserError(f"candidates must be 0 or more, got {cfg.candidates}")
     if cfg.candidates and cfg.replay is None:
-        raise ValueError("candidate replays need a replay path")
+        raise UserError("candidate replays need a replay path")
     torch.set_num_threads(1)
     models_dir = pretrained_dir() if cfg.models is None else Path(cfg.models)
     models = load_models(models_dir)
     n_max = getattr(getattr(models.dynamics, "config", None), "n_max", None)
     if n_max is not None and cfg.objects > n_max:
-        raise ValueError(f"--objects {cfg.objects}: the models in {models_dir} were trained for at most {n_max} objects")
+        raise UserError(f"--objects {cfg.objects}: the models in {models_dir} were trained for at most {n_max} objects")
     plan_cfg = PlanConfig(seed=cfg.seed)
     kinematics = kinematics_for("bilevel", plan_cfg)
 
@@ -238,11 +238,11 @@ def _print_summary(out: DemoResult, cfg: DemoConfig) -> None:
     print(times)
     if ex is not None:
         print(f"  final error {ex.error * 100:.1f} cm (max over blocks; eps {out.eps * 100:g} cm)")
-    outcome = {"success": "success: every block within eps of its goal",
-               "no plan": "failure: the planner found no plan",
-               "refinement failed": "failure: the plan could not be refined into arm motions "
-                                    f"({ex.refined.failure if ex else ''})",
-               "goal missed": "failure: the plan was executed but missed the goal"}[out.outcome]
+    not_refined = f"failure: the plan could not be refined into arm motions ({ex.refined.failure if ex else ''})"
+    outcome = {Outcome.SUCCESS: "success: every block within eps of its goal",
+               Outcome.NO_PLAN: "failure: the planner found no plan",
+               Outcome.KINEMATIC_FAILURE: not_refined, Outcome.REFINEMENT_FAILURE: not_refined,
+               Outcome.WRONG_PLAN: "failure: the plan was executed but missed the goal"}[out.outcome]
     print(f"  outcome     {outcome}", flush=True)
 
 
@@ -315,7 +315,7 @@ def _print_loop_summary(out: DemoResult, cfg: DemoConfig) -> None:
     print(times + (f", execution {execute:.1f} s" if cfg.fidelity == "full" else
                    " (execution: the refinement world's, included)"))
     print(f"  final error {loop.error * 100:.1f} cm (max over blocks; eps {out.eps * 100:g} cm)")
-    outcome = {"success": "success: every block within eps of its goal",
-               "no plan": "failure: the planner found no plan",
-               "goal missed": "failure: the goal was not reached within the replanning rounds"}[out.outcome]
+    outcome = {Outcome.SUCCESS: "success: every block within eps of its goal",
+               Outcome.NO_PLAN: "failure: the planner found no plan",
+               Outcome.WRONG_PLAN: "failure: the goal was not reached within the replanning rounds"}[out.outcome]
     print(f"  outcome     {outcome}", flush=True)

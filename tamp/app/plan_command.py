@@ -12,6 +12,7 @@ import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
+from tamp.errors import UserError
 from tamp.planning.bilevel import METHODS, SYMBOLIC_BACKENDS, PlanConfig, PlanResult, plan, replan_rounds
 from tamp.planning.search import SearchConfig
 from tamp.planning.validate import check_problem
@@ -147,9 +148,9 @@ def run_plan(problem_path: Path, models_dir: Path, options: PlanOptions) -> int:
     torch.set_num_threads(1)
     problem = load_problem(problem_path)
     if options.replan and options.execute == "none":
-        raise ValueError("--replan executes actions and observes the world; it needs --execute fast or full")
+        raise UserError("--replan executes actions and observes the world; it needs --execute fast or full")
     if options.replay is not None and options.execute == "none":
-        raise ValueError("--replay needs an execution (--execute fast or full)")
+        raise UserError("--replay needs an execution (--execute fast or full)")
     if options.replay is not None:
         from tamp.app.cli import check_output_file
 
@@ -232,7 +233,7 @@ def planner_config(args: argparse.Namespace) -> PlanConfig:
 
 def options_from_args(args: argparse.Namespace) -> PlanOptions:
     if args.replay is not None and args.replay.suffix.lower() not in (".html", ".htm"):
-        raise ValueError(f"the replay is an HTML file; give a path ending in .html, got {args.replay}")
+        raise UserError(f"the replay is an HTML file; give a path ending in .html, got {args.replay}")
     return PlanOptions(args.method, args.execute, args.replan, args.rounds, args.replay, planner_config(args))
 
 

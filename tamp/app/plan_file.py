@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from tamp.errors import UserError
 from tamp.planning.structs import PickPlace
 from tamp.planning.validate import check_scene
 
@@ -21,11 +22,11 @@ def read_json_file(path: str | Path, kind: str):
     """The parsed content of a JSON file; a missing file or bad JSON is an error naming the file."""
     path = Path(path)
     if not path.is_file():
-        raise FileNotFoundError(f"no {kind} file at {path}")
+        raise UserError(f"no {kind} file at {path}")
     try:
         return json.loads(path.read_text())
     except json.JSONDecodeError as error:
-        raise ValueError(f"{path}: not valid JSON ({error})") from None
+        raise UserError(f"{path}: not valid JSON ({error})") from None
 
 
 def load_plan_file(path: str | Path) -> tuple[np.ndarray, list[PickPlace]]:
@@ -33,26 +34,26 @@ def load_plan_file(path: str | Path) -> tuple[np.ndarray, list[PickPlace]]:
     path = Path(path)
     data = read_json_file(path, "plan")
     if not isinstance(data, dict):
-        raise ValueError(f"{path}: expected a JSON object with fields 'X' and 'actions'")
+        raise UserError(f"{path}: expected a JSON object with fields 'X' and 'actions'")
     key = "X" if "X" in data else "X_init" if "X_init" in data else None
     if key is None:
-        raise ValueError(f"{path}: missing field 'X' (the initial scene, n rows of x, y, z, small, large)")
+        raise UserError(f"{path}: missing field 'X' (the initial scene, n rows of x, y, z, small, large)")
     try:
         X = np.array(data[key], dtype=float)
     except (TypeError, ValueError):
-        raise ValueError(f"{path}: field '{key}' must be a list of [x, y, z, small, large] rows") from None
+        raise UserError(f"{path}: field '{key}' must be a list of [x, y, z, small, large] rows") from None
     if X.ndim != 2 or X.shape[1] != 5:
-        raise ValueError(f"{path}: field '{key}' must have rows of 5 numbers, got shape {X.shape}")
+        raise UserError(f"{path}: field '{key}' must have rows of 5 numbers, got shape {X.shape}")
     check_scene(X, where=str(path), field=key, upright=True)  # the scene is placed as given
     if "actions" not in data:
-        raise ValueError(f"{path}: missing field 'actions' (a list of [pick, grasp_offset, place, release_offset])")
+        raise UserError(f"{path}: missing field 'actions' (a list of [pick, grasp_offset, place, release_offset])")
     actions = data["actions"]
     if not isinstance(actions, list) or not actions:
-        raise ValueError(f"{path}: field 'actions' must be a non-empty list")
+        raise UserError(f"{path}: field 'actions' must be a non-empty list")
     plan = []
     for k, a in enumerate(actions):
         if not (isinstance(a, list) and len(a) == 4 and all(isinstance(v, int) and not isinstance(v, bool) for v in a)):
-            raise ValueError(f"{path}: actions[{k}] must be 4 integers [pick, grasp_offset, place, release_offset], got {a!r}")
+            raise UserError(f"{path}: actions[{k}] must be 4 integers [pick, grasp_offset, place, release_offset], got {a!r}")
         plan.append(PickPlace(*a))
     return X, plan
 

@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from tamp.errors import UserError
 from tamp.app.plan_file import read_json_file
 from tamp.planning.validate import check_problem
 
@@ -71,20 +72,20 @@ class Problem:
 
 def _state(data: dict, field: str, where: str) -> np.ndarray:
     if field not in data:
-        raise ValueError(f"{where}: missing field '{field}' (n rows of [x, y, z, small, large])")
+        raise UserError(f"{where}: missing field '{field}' (n rows of [x, y, z, small, large])")
     rows = data[field]
     if not isinstance(rows, list) or not rows or not all(isinstance(r, list) for r in rows):
-        raise ValueError(f"{where}: field '{field}' must be a non-empty list of [x, y, z, small, large] rows")
+        raise UserError(f"{where}: field '{field}' must be a non-empty list of [x, y, z, small, large] rows")
     for i, row in enumerate(rows):
         if len(row) != 5 or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in row):
-            raise ValueError(f"{where}: field '{field}' row {i} must be 5 numbers [x, y, z, small, large], got {row!r}")
+            raise UserError(f"{where}: field '{field}' row {i} must be 5 numbers [x, y, z, small, large], got {row!r}")
     X = np.array(rows, dtype=float)
     if not np.all(np.isfinite(X)):
-        raise ValueError(f"{where}: field '{field}' contains a non-finite number")
+        raise UserError(f"{where}: field '{field}' contains a non-finite number")
     onehot = X[:, 3:]
     bad = np.flatnonzero(~(np.isin(onehot, (0.0, 1.0)).all(axis=1) & (onehot.sum(axis=1) == 1)))
     if bad.size:
-        raise ValueError(f"{where}: field '{field}' row {bad[0]}: the type must be one-hot "
+        raise UserError(f"{where}: field '{field}' row {bad[0]}: the type must be one-hot "
                          f"[1, 0] (small) or [0, 1] (large), got {onehot[bad[0]].tolist()}")
     return X
 
@@ -95,41 +96,41 @@ FIELDS = ("X_init", "X_goal", "k", "seed", "name", "actions", "protocol", "moved
 def problem_from_dict(data: object, where: str = "problem") -> Problem:
     """Check a parsed problem object; ValueError naming `where` and the field."""
     if not isinstance(data, dict):
-        raise ValueError(f"{where}: expected a JSON object with fields 'X_init' and 'X_goal'")
+        raise UserError(f"{where}: expected a JSON object with fields 'X_init' and 'X_goal'")
     X_init, X_goal = _state(data, "X_init", where), _state(data, "X_goal", where)
     if X_goal.shape != X_init.shape:
-        raise ValueError(f"{where}: field 'X_goal' has {len(X_goal)} objects, 'X_init' has {len(X_init)}")
+        raise UserError(f"{where}: field 'X_goal' has {len(X_goal)} objects, 'X_init' has {len(X_init)}")
     differs = np.flatnonzero(np.any(X_goal[:, 3:] != X_init[:, 3:], axis=1))
     if differs.size:
-        raise ValueError(f"{where}: field 'X_goal' row {differs[0]} has another block type than in 'X_init'")
+        raise UserError(f"{where}: field 'X_goal' row {differs[0]} has another block type than in 'X_init'")
     k = data.get("k")
     if k is not None and (not isinstance(k, int) or isinstance(k, bool) or k < 1):
-        raise ValueError(f"{where}: field 'k' must be a positive integer, got {k!r}")
+        raise UserError(f"{where}: field 'k' must be a positive integer, got {k!r}")
     seed = data.get("seed", 0)
     if not isinstance(seed, int) or isinstance(seed, bool):
-        raise ValueError(f"{where}: field 'seed' must be an integer, got {seed!r}")
+        raise UserError(f"{where}: field 'seed' must be an integer, got {seed!r}")
     unknown = sorted(set(data) - set(FIELDS))
     if unknown:
-        raise ValueError(f"{where}: unknown field '{unknown[0]}' (expected {', '.join(FIELDS)})")
+        raise UserError(f"{where}: unknown field '{unknown[0]}' (expected {', '.join(FIELDS)})")
     name = data.get("name")
     if name is not None and not isinstance(name, str):
-        raise ValueError(f"{where}: field 'name' must be a string, got {name!r}")
+        raise UserError(f"{where}: field 'name' must be a string, got {name!r}")
     actions = data.get("actions", [])
     n = len(X_init)
     if not isinstance(actions, list) or not all(
             isinstance(a, list) and len(a) == 4 and all(isinstance(v, int) and not isinstance(v, bool) for v in a)
             and 0 <= a[0] < n and 0 <= a[2] < n and a[1] in (-1, 0, 1) and a[3] in (-1, 0, 1) for a in actions):
-        raise ValueError(f"{where}: field 'actions' must be a list of [pick, grasp_offset, place, release_offset] "
+        raise UserError(f"{where}: field 'actions' must be a list of [pick, grasp_offset, place, release_offset] "
                          f"with objects in 0..{n - 1} and offsets in -1, 0, 1")
     protocol = data.get("protocol")
     if protocol is not None and protocol not in PROTOCOLS:
-        raise ValueError(f"{where}: field 'protocol' must be one of {', '.join(PROTOCOLS)}, got {protocol!r}")
+        raise UserError(f"{where}: field 'protocol' must be one of {', '.join(PROTOCOLS)}, got {protocol!r}")
     moved, run = data.get("moved"), data.get("run")
     for field_name, value in (("moved", moved), ("run", run)):
         if value is not None and (not isinstance(value, int) or isinstance(value, bool) or value < 0):
-            raise ValueError(f"{where}: field '{field_name}' must be a non-negative integer, got {value!r}")
+            raise UserError(f"{where}: field '{field_name}' must be a non-negative integer, got {value!r}")
     if moved is not None and k is not None and moved > k:
-        raise ValueError(f"{where}: field 'moved' is {moved}, more than the k = {k} actions")
+        raise UserError(f"{where}: field 'moved' is {moved}, more than the k = {k} actions")
     check_problem(X_init, X_goal, where)
     return Problem(X_init, X_goal, k, seed, name, tuple(tuple(a) for a in actions), protocol, moved, run)
 
@@ -147,7 +148,7 @@ def read_problem_set(path: str | Path) -> list[Problem]:
     """Read a problem set; errors name the file, the line and the field. Names must be unique."""
     path = Path(path)
     if not path.is_file():
-        raise FileNotFoundError(f"no problem set at {path}")
+        raise UserError(f"no problem set at {path}")
     problems: list[Problem] = []
     first_line: dict[str, int] = {}
     for number, line in enumerate(path.read_text().splitlines(), start=1):
@@ -157,18 +158,22 @@ def read_problem_set(path: str | Path) -> list[Problem]:
         try:
             data = json.loads(line)
         except json.JSONDecodeError as error:
-            raise ValueError(f"{where}: not valid JSON ({error})") from None
+            raise UserError(f"{where}: not valid JSON ({error})") from None
         problem = problem_from_dict(data, where)
         if problem.name is None:
-            raise ValueError(f"{where}: missing field 'name' (every problem of a set is named)")
+            raise UserError(f"{where}: missing field 'name' (every problem of a set is named)")
         if problem.name in first_line:
-            raise ValueError(f"{where}: duplicate problem name {problem.name!r} (also on line "
+            raise UserError(f"{where}: duplicate problem name {problem.name!r} (also on line "
                              f"{first_line[problem.name]})")
         first_line[problem.name] = number
         problems.append(problem)
     if not problems:
-        raise ValueError(f"{path}: no problems in the file")
+        raise UserError(f"{path}: no problems in the file")
     return problems
+
+
+class StuckScene(UserError):
+    """A random scene in which too few random actions change anything (e.g. every one fails)."""
 
 
 def random_problem(n: int, k: int, seed: int, world: "World | None" = None, name: str | None = None,
@@ -185,9 +190,9 @@ def random_problem(n: int, k: int, seed: int, world: "World | None" = None, name
     from tamp.sim.world import World
 
     if n < 1 or k < 1:
-        raise ValueError(f"a random problem needs n >= 1 objects and k >= 1 actions, got n={n}, k={k}")
+        raise UserError(f"a random problem needs n >= 1 objects and k >= 1 actions, got n={n}, k={k}")
     if protocol not in PROTOCOLS:
-        raise ValueError(f"protocol must be one of {', '.join(PROTOCOLS)}, got {protocol!r}")
+        raise UserError(f"protocol must be one of {', '.join(PROTOCOLS)}, got {protocol!r}")
     world = world or World(WorldConfig())
     X_init = world.reset(n_objects=n, seed=seed)
     rng = np.random.default_rng([seed, 1])  # the actions' stream, apart from the scene's
@@ -205,6 +210,6 @@ def random_problem(n: int, k: int, seed: int, world: "World | None" = None, name
             kept.append(action)
             moved += int(changed)
     if len(kept) < k:
-        raise RuntimeError(f"seed {seed}: only {len(kept)} of {k} random actions changed the scene "
-                           f"in {max_tries} draws")
+        raise StuckScene(f"seed {seed}: only {len(kept)} of {k} random actions changed the scene "
+                         f"in {max_tries} draws; try another seed")
     return Problem(X_init, world.X, k, seed, name, tuple(kept), protocol, moved)

@@ -20,6 +20,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from tamp.errors import UserError
 from tamp.planning.bilevel import KINEMATIC_METHODS, ClosedLoopResult, PlanConfig, PlanResult, plan_closed_loop
 from tamp.planning.models import Models
 from tamp.planning.structs import PickPlace
@@ -28,8 +29,8 @@ from tamp.sim import World, WorldConfig
 from tamp.sim.feasibility import FeasibilityChecker
 from tamp.sim.refine import FAILURE_STAGES, failed_at, refine
 from tamp.sim.replay import Timeline
-from tamp.sim.structs import StepInfo
-from tamp.sim.trajectory import RefinedPlan, RefinementFailure
+from tamp.sim.structs import StepInfo, StepStatus
+from tamp.sim.trajectory import FailureStage, RefinedPlan, RefinementFailure
 
 FIDELITIES = ("fast", "full")
 
@@ -43,7 +44,7 @@ def kinematics_for(method: str, config: PlanConfig) -> FeasibilityChecker | None
 def executing_world(fidelity: str = "fast") -> World:
     """A World for executed plans: paths simplified (they are run, not just checked)."""
     if fidelity not in FIDELITIES:
-        raise ValueError(f"fidelity must be one of {', '.join(FIDELITIES)}, got {fidelity!r}")
+        raise UserError(f"fidelity must be one of {', '.join(FIDELITIES)}, got {fidelity!r}")
     return World(WorldConfig(fidelity=fidelity, simplify_paths=True))
 
 
@@ -72,7 +73,7 @@ def execute_plan(actions: Sequence[PickPlace | Sequence[int]], X_init: np.ndarra
     """Refine `actions` from X_init and execute them (see the module docstring). `world`: a `fast`
     World to refine in (default: a new one); it is left at the refined actions' outcome."""
     if fidelity not in FIDELITIES:
-        raise ValueError(f"fidelity must be one of {', '.join(FIDELITIES)}, got {fidelity!r}")
+        raise UserError(f"fidelity must be one of {', '.join(FIDELITIES)}, got {fidelity!r}")
     world = world or executing_world("fast")
     world.timeline = timeline if fidelity == "fast" else None
     refined = refine([PickPlace(*a) for a in actions], X_init, world=world)
@@ -111,9 +112,10 @@ class ClosedLoopRun:
     def first_failure(self) -> RefinementFailure | None:
         """The first executed action the world could not carry out (IK, motion or grasp)."""
         for index, (action, info) in enumerate(zip(self.loop.executed, self.infos)):
-            if info.status != "ok":
-                return RefinementFailure(index, PickPlace(*action), FAILURE_STAGES.get(info.status, "motion"),
-                                         failed_at(info), info.reason)
+            if info.status != StepStatus.OK:
+                return RefinementFailure(index, PickPlace(*action),
+                                         FAILURE_STAGES.get(info.status, FailureStage.MOTION), failed_at(info),
+                                         info.reason)
         return None
 
 

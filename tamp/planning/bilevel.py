@@ -31,7 +31,7 @@ import numpy as np
 
 from tamp.errors import UserError
 from tamp.planning.models import Models
-from tamp.planning.search import SearchConfig, SearchResult, continuous_search, state_key
+from tamp.planning.search import SearchConfig, SearchResult, SearchStatus, continuous_search, state_key
 from tamp.planning.structs import Infeasible, KinematicFeasibility, PickPlace, RefinementOutcome
 from tamp.planning.validate import check_problem
 from tamp.planning.verify import (EPS_SUCCESS, TAU_VERIFY, Verification, at_goal, goal_error, refine_skeleton, verify,
@@ -274,7 +274,8 @@ def _level2(models: Models, X_init, X_goal, cfg: PlanConfig, result: PlanResult,
         if feas.refinements_left <= 0:
             result.reasons.append(f"level 2: refinement budget ({cfg.max_refinements}) used up; the plan found "
                                   "was not refined")
-            result.search.status, result.search.reason = "refinement_budget", "refinement budget used up"
+            result.search.status = SearchStatus.REFINEMENT_BUDGET
+            result.search.reason = "refinement budget used up"
             break
         outcome = feas.refine(2, out.trajectory, out.plan)
         if outcome.success:

@@ -10,6 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
+from tamp.errors import UserError
+
 
 def learn_domain(model_path: str | Path, data_dir: str | Path, out_dir: str | Path, holdout: float = 0.1,
                  seed: int = 0, sampled_domains: int = 0, skip_corrupt: bool = True,
@@ -23,7 +25,7 @@ def learn_domain(model_path: str | Path, data_dir: str | Path, out_dir: str | Pa
     import symbolic
 
     if not 0.0 <= holdout < 1.0:
-        raise ValueError(f"holdout must be in [0, 1), got {holdout}")
+        raise UserError(f"holdout must be in [0, 1), got {holdout}")
     from tamp.planning.models import require_kind
 
     model = learned.load_model(model_path)
@@ -33,10 +35,10 @@ def learn_domain(model_path: str | Path, data_dir: str | Path, out_dir: str | Pa
     if only_moved:
         data = data.subset(np.flatnonzero(learned.moved_picks(data.X, data.X_next, data.action)))
     if len(data) == 0:
-        raise ValueError(f"{data_dir}: the dataset holds no transitions" + (" that moved their picked block"
+        raise UserError(f"{data_dir}: the dataset holds no transitions" + (" that moved their picked block"
                                                                           if only_moved else ""))
     if data.X.shape[1] > model.config.n_max:
-        raise ValueError(f"{data_dir}: scenes of up to {data.X.shape[1]} objects, but the model takes "
+        raise UserError(f"{data_dir}: scenes of up to {data.X.shape[1]} objects, but the model takes "
                          f"at most {model.config.n_max}")
     u_pre, r_pre = model.symbols_batch(data.X, data.mask)
     u_post, r_post = model.symbols_batch(data.X_next, data.mask)

@@ -16,6 +16,7 @@ from typing import Protocol
 
 import numpy as np
 
+from tamp.errors import UserError
 from tamp.planning.verify import DynamicsModel
 
 SYMBOLIC_FILE, DYNAMICS_FILE, DOMAIN_DIR = "symbolic.pt", "dynamics.pt", "domain"
@@ -44,7 +45,7 @@ class Models:
         from symbolic import SymbolicPlanner
 
         if self.symbolic is None or self.domain is None:
-            raise ValueError("the symbolic level needs a Symbolic Model and a learned domain "
+            raise UserError("the symbolic level needs a Symbolic Model and a learned domain "
                              f"({SYMBOLIC_FILE} and {DOMAIN_DIR}/ in the models directory)")
         if (backend, time_limit) not in self.planners:
             self.planners[backend, time_limit] = SymbolicPlanner(self.domain, backend=backend,
@@ -60,7 +61,7 @@ class Models:
 
     def require_dynamics(self) -> DynamicsModel:
         if self.dynamics is None:
-            raise ValueError(f"this method needs the Dynamics Model ({DYNAMICS_FILE} in the models directory)")
+            raise UserError(f"this method needs the Dynamics Model ({DYNAMICS_FILE} in the models directory)")
         return self.dynamics
 
 
@@ -72,10 +73,10 @@ def require_kind(model, kind: str, path: str | Path) -> None:
     if activation is None:  # not a trained network (a stub): nothing to check
         return
     if kind == "symbolic" and activation != "gumbel_sigmoid":
-        raise ValueError(f"{path}: a Dynamics Model ({activation} bottleneck), but a Symbolic Model is needed "
+        raise UserError(f"{path}: a Dynamics Model ({activation} bottleneck), but a Symbolic Model is needed "
                          "(tamp train --bottleneck gumbel_sigmoid)")
     if kind == "dynamics" and activation == "gumbel_sigmoid":
-        raise ValueError(f"{path}: a Symbolic Model (gumbel_sigmoid bottleneck), but a Dynamics Model is needed "
+        raise UserError(f"{path}: a Symbolic Model (gumbel_sigmoid bottleneck), but a Dynamics Model is needed "
                          "(tamp train --bottleneck sigmoid)")
 
 
@@ -89,14 +90,14 @@ def load_models(directory: str | Path, need_symbolic: bool = True) -> Models:
 
     directory = Path(directory)
     if not directory.is_dir():
-        raise FileNotFoundError(f"no models directory at {directory} (expected {SYMBOLIC_FILE}, "
+        raise UserError(f"no models directory at {directory} (expected {SYMBOLIC_FILE}, "
                                 f"{DYNAMICS_FILE} and {DOMAIN_DIR}/ in it)")
     paths = {"dynamics": directory / DYNAMICS_FILE, "symbolic": directory / SYMBOLIC_FILE,
              "domain": directory / DOMAIN_DIR / "operators.json"}
     wanted = ("dynamics", "symbolic", "domain") if need_symbolic else ("dynamics",)
     missing = [str(paths[w]) for w in wanted if not paths[w].is_file()]
     if missing:
-        raise FileNotFoundError(f"missing model file(s): {', '.join(missing)}")
+        raise UserError(f"missing model file(s): {', '.join(missing)}")
     models = Models(learned.load_model(paths["dynamics"]))
     require_kind(models.dynamics, "dynamics", paths["dynamics"])
     if need_symbolic:
@@ -105,7 +106,7 @@ def load_models(directory: str | Path, need_symbolic: bool = True) -> Models:
         models.domain = symbolic.load_domain(directory / DOMAIN_DIR)
         cfg = models.symbolic.config
         if (cfg.d_z, cfg.heads) != (models.domain.n_unary, models.domain.n_relations):
-            raise ValueError(f"{paths['symbolic']} has d_z={cfg.d_z}, K={cfg.heads} but the domain in "
+            raise UserError(f"{paths['symbolic']} has d_z={cfg.d_z}, K={cfg.heads} but the domain in "
                              f"{paths['domain'].parent} was learned with d_z={models.domain.n_unary}, "
                              f"K={models.domain.n_relations}")
     return models

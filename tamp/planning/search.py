@@ -22,6 +22,7 @@ import heapq
 import time
 from collections import Counter
 from dataclasses import dataclass, field
+from enum import StrEnum
 from typing import Callable, Hashable
 
 import numpy as np
@@ -52,9 +53,19 @@ class SearchConfig:
                             f"{self.time_limit} s, {self.max_expansions} nodes, depth {self.max_depth}")
 
 
+class SearchStatus(StrEnum):
+    """How a continuous search ended."""
+
+    SOLVED = "solved"
+    EXHAUSTED = "exhausted"  # every state within max_depth actions was expanded
+    NODE_LIMIT = "node_limit"
+    TIME_LIMIT = "time_limit"
+    REFINEMENT_BUDGET = "refinement_budget"  # its plans kept failing refinement (bilevel with kinematics)
+
+
 @dataclass
 class SearchResult:
-    status: str  # "solved" | "exhausted" | "node_limit" | "time_limit"
+    status: SearchStatus
     plan: list[tuple[int, int, int, int]] | None
     trajectory: np.ndarray | None  # (len(plan) + 1, n, 5) predicted states along the plan
     reason: str
@@ -70,7 +81,7 @@ class SearchResult:
 
     @property
     def solved(self) -> bool:
-        return self.status == "solved"
+        return self.status == SearchStatus.SOLVED
 
 
 # feasible(X, action) -> None if the action is feasible in the predicted scene X, else why not (a reason)
@@ -159,7 +170,7 @@ def continuous_search(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarr
     d0 = np.linalg.norm(X_init[:, :3] - goal, axis=1)
     out = SearchResult("exhausted", None, None, "", best_error=float(d0.max(initial=0.0)))
 
-    def finish(status: str, reason: str, index: int | None = None) -> SearchResult:
+    def finish(status: SearchStatus, reason: str, index: int | None = None) -> SearchResult:
         out.status, out.reason, out.time = status, reason, time.perf_counter() - t0
         if index is not None:
             plan, states = [], []
@@ -173,17 +184,17 @@ def continuous_search(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarr
         return out
 
     if np.all(d0 < config.eps):
-        return finish("solved", "the initial state is already within eps of the goal", 0)
+        return finish(SearchStatus.SOLVED, "the initial state is already within eps of the goal", 0)
     best_g = {key(X_init[:, :3]): 0}
     frontier = [(config.weight * d0.sum() / config.h_unit, d0.sum(), 0)]  # (f, h, node index)
     n_objects = len(X_init)
     every = all_actions(n_objects)
     while frontier:
         if out.expanded >= config.max_expansions:
-            return finish("node_limit", f"node limit: {out.expanded} expansions without reaching the goal "
+            return finish(SearchStatus.NODE_LIMIT, f"node limit: {out.expanded} expansions without reaching the goal "
                           f"(closest predicted state {out.best_error * 100:.1f} cm from it)")
         if time.perf_counter() - t0 > config.time_limit:
-            return finish("time_limit", f"time limit: {config.time_limit:g} s ({out.expanded} expansions) "
+            return finish(SearchStatus.TIME_LIMIT, f"time limit: {config.time_limit:g} s ({out.expanded} expansions) "
                           f"without reaching the goal (closest predicted state {out.best_error * 100:.1f} cm from it)")
         _, _, index = heapq.heappop(frontier)
         P, _, _, g = nodes[index]
@@ -219,9 +230,9 @@ def continuous_search(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarr
                 continue
             best_g[k] = g + 1
             if reached[b]:
-                return finish("solved", f"solved: {g + 1} actions after {out.expanded} expansions",
+                return finish(SearchStatus.SOLVED, f"solved: {g + 1} actions after {out.expanded} expansions",
                               len(nodes) - 1)
             heapq.heappush(frontier, (g + 1 + config.weight * h[b], h[b], len(nodes) - 1))
-    return finish("exhausted", f"exhausted: every state reachable within {config.max_depth} actions "
+    return finish(SearchStatus.EXHAUSTED, f"exhausted: every state reachable within {config.max_depth} actions "
                   f"(pruned actions, {config.resolution * 100:g} cm grid) expanded, {out.expanded} expansions; "
                   f"closest predicted state {out.best_error * 100:.1f} cm from the goal")

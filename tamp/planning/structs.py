@@ -6,7 +6,7 @@ is a NamedTuple. Lengths are metres, angles radians, times seconds.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from enum import Enum
+from enum import StrEnum
 from typing import NamedTuple, Protocol, Sequence
 
 import numpy as np
@@ -33,7 +33,7 @@ class PickPlace(NamedTuple):
     release_offset: int
 
 
-class Infeasible(str, Enum):
+class Infeasible(StrEnum):
     """Why an action was found infeasible: by the cheap check on a predicted scene (the first three)
     or by full refinement (IK, motion planning, grasp, from tamp.sim.refine)."""
 
@@ -69,3 +69,28 @@ class KinematicFeasibility(Protocol):
     def refine(self, actions: Sequence[Sequence[int]], trajectory: np.ndarray | None = None) -> RefinementOutcome:
         """Fully refine the plan (IK, OMPL motions, grasps) from the observed scene, each action in
         the scene `trajectory` (the predicted states along the plan) gives before it; no physics."""
+
+
+class Outcome(StrEnum):
+    """What became of a problem once its plan was refined and executed (a row of `tamp evaluate`)."""
+
+    SUCCESS = "success"  # every block within eps of its goal
+    NO_PLAN = "no_plan"  # the planner returned no plan
+    KINEMATIC_FAILURE = "kinematic_failure"  # an action of the plan had no IK solution
+    REFINEMENT_FAILURE = "refinement_failure"  # no collision-free motion, or the grasp missed
+    WRONG_PLAN = "wrong_plan"  # executed, but some block ended beyond eps of its goal
+    ERROR = "error"  # planning or execution raised (an evaluation records it and goes on)
+
+    @classmethod
+    def of(cls, solved: bool, failure_stage: str | None, final_error: float, eps: float) -> "Outcome":
+        """The outcome of a plan (`solved`) whose refinement failed at `failure_stage` ("ik", "motion",
+        "grasp"; None if every action refined) and ended `final_error` metres from the goal."""
+        if not solved:
+            return cls.NO_PLAN
+        if failure_stage is not None:
+            return cls.KINEMATIC_FAILURE if failure_stage == "ik" else cls.REFINEMENT_FAILURE
+        return cls.SUCCESS if final_error < eps else cls.WRONG_PLAN
+
+
+# the outcomes the statistics count (an ERROR row is listed apart)
+OUTCOMES = tuple(o.value for o in Outcome if o is not Outcome.ERROR)

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from tamp.errors import UserError
 from tamp.planning.structs import BLOCK_SIZES
 
 MAX_OBJECTS = 6  # blocks the world builds plants for
@@ -65,43 +66,43 @@ def check_scene(X: np.ndarray, *, where: str = "scene", field: str = "X", uprigh
     """
     X = np.asarray(X, dtype=float)
     if X.ndim != 2 or X.shape[1] != 5 or not np.all(np.isfinite(X)):
-        raise ValueError(f"{where}: field '{field}' must be an (n, 5) array of finite numbers, got shape {X.shape}")
+        raise UserError(f"{where}: field '{field}' must be an (n, 5) array of finite numbers, got shape {X.shape}")
     onehot = X[:, 3:5]
     bad = np.flatnonzero(~(np.isin(onehot, (0.0, 1.0)).all(axis=1) & (onehot.sum(axis=1) == 1)))
     if bad.size:
-        raise ValueError(f"{where}: field '{field}' row {bad[0]}: the type must be one-hot [1, 0] (small) or "
+        raise UserError(f"{where}: field '{field}' row {bad[0]}: the type must be one-hot [1, 0] (small) or "
                          f"[0, 1] (large), got {onehot[bad[0]].tolist()}")
     n = len(X)
     limit = MAX_OBJECTS if n_max is None else min(MAX_OBJECTS, n_max)
     if not 1 <= n <= limit:
         by = "the world holds" if n_max is None or n_max >= MAX_OBJECTS else "the models were trained for"
-        raise ValueError(f"{where}: field '{field}' has {n} blocks, but {by} 1..{limit}")
+        raise UserError(f"{where}: field '{field}' has {n} blocks, but {by} 1..{limit}")
     types = np.argmax(X[:, 3:5], axis=1)
     p = X[:, :3]
     for i in range(n):
         x, y, z = p[i]
         row = f"{where}: field '{field}' row {i}: block at ({x:.3f}, {y:.3f}, {z:.3f}) m"
         if not (TABLE_X[0] <= x <= TABLE_X[1] and TABLE_Y[0] <= y <= TABLE_Y[1]):
-            raise ValueError(f"{row} is off the table (x in {TABLE_X}, y in {TABLE_Y})")
+            raise UserError(f"{row} is off the table (x in {TABLE_X}, y in {TABLE_Y})")
         r = float(np.hypot(x, y))
         if r < BASE_CLEARANCE:
-            raise ValueError(f"{row} is inside the robot's base (closer than {BASE_CLEARANCE} m to its axis)")
+            raise UserError(f"{row} is inside the robot's base (closer than {BASE_CLEARANCE} m to its axis)")
         if within_reach and r > ARM_REACH_M:
-            raise ValueError(f"{row} is out of the arm's reach ({r:.3f} m from its base, at most {ARM_REACH_M} m)")
+            raise UserError(f"{row} is out of the arm's reach ({r:.3f} m from its base, at most {ARM_REACH_M} m)")
         low, _ = _half_heights(types[i], upright)
         if z - low < TABLE_TOP_Z_M - tolerance_m:
-            raise ValueError(f"{row} is inside the table (its centre must be at least {low:.3f} m above the table top)")
+            raise UserError(f"{row} is inside the table (its centre must be at least {low:.3f} m above the table top)")
     for i in range(n):
         for j in range(i):
             if _interpenetrate(p[i], types[i], p[j], types[j], upright, tolerance_m):
-                raise ValueError(f"{where}: field '{field}' rows {j} and {i}: blocks at "
+                raise UserError(f"{where}: field '{field}' rows {j} and {i}: blocks at "
                                  f"({p[j, 0]:.3f}, {p[j, 1]:.3f}, {p[j, 2]:.3f}) m and "
                                  f"({p[i, 0]:.3f}, {p[i, 1]:.3f}, {p[i, 2]:.3f}) m overlap (interpenetrate)")
     supported = _supported(p, types, upright, tolerance_m)
     for i in range(n):
         if not supported[i]:
             low, high = _half_heights(types[i], upright)
-            raise ValueError(f"{where}: field '{field}' row {i}: block at ({p[i, 0]:.3f}, {p[i, 1]:.3f}, "
+            raise UserError(f"{where}: field '{field}' row {i}: block at ({p[i, 0]:.3f}, {p[i, 1]:.3f}, "
                              f"{p[i, 2]:.3f}) m rests neither on the table nor on a block that does (its "
                              f"bottom would be {p[i, 2] - high:.3f}..{p[i, 2] - low:.3f} m above the table top)")
 

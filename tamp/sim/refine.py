@@ -16,13 +16,14 @@ import numpy as np
 
 from tamp.sim.skill import Scene
 from tamp.planning.structs import PickPlace
-from tamp.sim.structs import WorldConfig
-from tamp.sim.trajectory import RefinedPlan, RefinementFailure, concatenate, refined_action
+from tamp.sim.structs import StepInfo, StepStatus, WorldConfig
+from tamp.sim.trajectory import FailureStage, RefinedPlan, RefinementFailure, concatenate, refined_action
 from tamp.planning.validate import check_scene
 from tamp.sim.world import World, validate_action
 
 FAILURE_STAGES = {  # StepInfo.status of a failed action -> refinement stage
-    "ik_failure": "ik", "motion_failure": "motion", "nothing_grasped": "grasp"}
+    StepStatus.IK_FAILURE: FailureStage.IK, StepStatus.MOTION_FAILURE: FailureStage.MOTION,
+    StepStatus.NOTHING_GRASPED: FailureStage.GRASP}
 
 
 def refine(
@@ -71,18 +72,18 @@ def refine(
     return result
 
 
-def step_failure(info) -> tuple[str, str, str] | None:
+def step_failure(info: StepInfo) -> tuple[FailureStage, str, str] | None:
     """(stage, where, reason) of an action that did not refine (its StepInfo), or None if it did:
     every IK and motion found, the block grasped and the retreat after release free."""
-    if info.status == "ok" and info.motion_success.get("retreat", False):
+    if info.status == StepStatus.OK and info.motion_success.get("retreat", False):
         return None
-    return (FAILURE_STAGES.get(info.status, "motion"), failed_at(info),
+    return (FAILURE_STAGES.get(info.status, FailureStage.MOTION), failed_at(info),
             info.reason or "the retreat after release was blocked")
 
 
-def failed_at(info) -> str:
+def failed_at(info: StepInfo) -> str:
     """The first waypoint (IK) or motion of a failed action, or "grasp" / "retreat"."""
     for name, ok in list(info.ik_success.items()) + list(info.motion_success.items()):
         if not ok:
             return name
-    return "grasp" if info.status == "nothing_grasped" else "retreat"
+    return "grasp" if info.status == StepStatus.NOTHING_GRASPED else "retreat"

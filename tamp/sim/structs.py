@@ -6,9 +6,11 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
+from enum import StrEnum
 
 import numpy as np
 
+from tamp.errors import UserError
 from tamp.planning.structs import PickPlace
 
 @dataclass(frozen=True)
@@ -41,29 +43,42 @@ class WorldConfig:
 
     def __post_init__(self) -> None:
         if self.fidelity not in ("fast", "full"):
-            raise ValueError(f"WorldConfig.fidelity must be 'fast' or 'full', got {self.fidelity!r}")
+            raise UserError(f"WorldConfig.fidelity must be 'fast' or 'full', got {self.fidelity!r}")
         for name in ("workspace_x", "workspace_y"):
             lo, hi = getattr(self, name)
             if not lo < hi:
-                raise ValueError(f"WorldConfig.{name} must be (low, high) with low < high, got {(lo, hi)}")
+                raise UserError(f"WorldConfig.{name} must be (low, high) with low < high, got {(lo, hi)}")
         if not 0.0 <= self.p_large <= 1.0:
-            raise ValueError(f"WorldConfig.p_large must be in [0, 1], got {self.p_large}")
+            raise UserError(f"WorldConfig.p_large must be in [0, 1], got {self.p_large}")
         if self.time_step <= 0 or self.settle_max_time <= 0:
-            raise ValueError("WorldConfig.time_step and settle_max_time must be positive")
+            raise UserError("WorldConfig.time_step and settle_max_time must be positive")
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
+
+
+class StepStatus(StrEnum):
+    """What one `World.step` did. Datasets store the index in STATUSES (stable across versions)."""
+
+    OK = "ok"  # the action was carried out
+    IK_FAILURE = "ik_failure"  # a waypoint has no IK solution: nothing moved
+    MOTION_FAILURE = "motion_failure"  # a motion found no collision-free path: nothing moved
+    NOTHING_GRASPED = "nothing_grasped"  # the jaws closed on nothing: nothing moved
+
+
+# Outcome codes, stable across versions (datasets store the integer).
+STATUSES = tuple(s.value for s in StepStatus)
 
 
 @dataclass
 class StepInfo:
     """What happened during one `World.step`.
 
-    `status` is one of STATUSES; `reason` says in words why an action changed nothing.
+    `reason` says in words why an action changed nothing.
     """
 
     action: PickPlace
-    status: str = "ok"
+    status: StepStatus = StepStatus.OK
     reason: str = ""
     ik_success: dict[str, bool] = field(default_factory=dict)  # waypoint name -> IK found
     motion_success: dict[str, bool] = field(default_factory=dict)  # motion name -> path found
@@ -81,12 +96,12 @@ class StepInfo:
 
     @property
     def changed(self) -> bool:
-        return self.status == "ok"
+        return self.status == StepStatus.OK
 
     def to_dict(self) -> dict:
         record = {
             "action": list(self.action),
-            "status": self.status,
+            "status": self.status.value if isinstance(self.status, StepStatus) else self.status,
             "reason": self.reason,
             "ik_success": dict(self.ik_success),
             "motion_success": dict(self.motion_success),
@@ -99,7 +114,3 @@ class StepInfo:
         if self.execution is not None:
             record["execution"] = self.execution.to_dict()
         return record
-
-
-# Outcome codes, stable across versions (datasets store the integer).
-STATUSES = ("ok", "ik_failure", "motion_failure", "nothing_grasped")

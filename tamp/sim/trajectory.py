@@ -10,6 +10,7 @@ tests/test_refine.py compares the two). The result is piecewise quadratic and st
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from enum import StrEnum
 
 import numpy as np
 from pydrake.math import RigidTransform
@@ -134,13 +135,21 @@ def refined_action(action: PickPlace, info, X_before: np.ndarray, X_after: np.nd
     )
 
 
+class FailureStage(StrEnum):
+    """The stage at which an action could not be refined."""
+
+    IK = "ik"  # a waypoint has no IK solution on the skill's branch
+    MOTION = "motion"  # no collision-free path for a motion (or the retreat after release)
+    GRASP = "grasp"  # the jaws closed on nothing
+
+
 @dataclass
 class RefinementFailure:
     """Why a plan could not be refined: which action, which waypoint or motion, and why."""
 
     action_index: int
     action: PickPlace
-    stage: str  # "ik", "motion" or "grasp"
+    stage: FailureStage
     where: str  # waypoint or motion name
     reason: str
 

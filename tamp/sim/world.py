@@ -17,6 +17,7 @@ from typing import Iterable
 import numpy as np
 from pydrake.math import RigidTransform
 
+from tamp.errors import UserError
 from tamp.sim.kinematics import Q_HOME, drake_ik, solve_chain
 from tamp.sim.motion import MotionPlanner
 from tamp.sim.physics import BlockPhysics
@@ -67,7 +68,7 @@ class World:
         else:
             if isinstance(n_objects, bool) or not isinstance(n_objects, (int, np.integer)) \
                     or not 1 <= n_objects <= MAX_OBJECTS:
-                raise ValueError(f"n_objects must be an integer in 1..{MAX_OBJECTS}, got {n_objects!r}")
+                raise UserError(f"n_objects must be an integer in 1..{MAX_OBJECTS}, got {n_objects!r}")
             types, positions = self._random_layout(int(n_objects))
         self.q = Q_HOME.copy()
         scene = Scene(types, [RigidTransform(p) for p in positions])
@@ -319,30 +320,30 @@ def validate_action(action, n: int) -> PickPlace:
         if any(float(v) != int(v) for v in action):
             raise TypeError
     except (TypeError, ValueError):
-        raise ValueError(f"an action is 4 integers (pick, grasp_offset, place, release_offset), got {action!r}") from None
+        raise UserError(f"an action is 4 integers (pick, grasp_offset, place, release_offset), got {action!r}") from None
     if len(values) != 4:
-        raise ValueError(f"an action is 4 integers (pick, grasp_offset, place, release_offset), got {action!r}")
+        raise UserError(f"an action is 4 integers (pick, grasp_offset, place, release_offset), got {action!r}")
     pick, grasp_offset, place, release_offset = values
     for name, index in (("pick", pick), ("place", place)):
         if not 0 <= index < n:
-            raise ValueError(f"{name} object index {index} is out of range for a scene of {n} objects")
+            raise UserError(f"{name} object index {index} is out of range for a scene of {n} objects")
     for name, offset in (("grasp_offset", grasp_offset), ("release_offset", release_offset)):
         if offset not in OFFSETS:
-            raise ValueError(f"{name} must be -1, 0 or +1, got {offset}")
+            raise UserError(f"{name} must be -1, 0 or +1, got {offset}")
     return PickPlace(pick, grasp_offset, place, release_offset)
 
 
 def _parse_X(X) -> tuple[np.ndarray, np.ndarray]:
     X = np.asarray(X, dtype=float) if not isinstance(X, np.ndarray) else X.astype(float)
     if X.ndim != 2 or X.shape[1] != 5:
-        raise ValueError(f"X must have shape (n, 5) (x, y, z, one-hot type), got shape {X.shape}")
+        raise UserError(f"X must have shape (n, 5) (x, y, z, one-hot type), got shape {X.shape}")
     if not 1 <= X.shape[0] <= MAX_OBJECTS:
-        raise ValueError(f"X must describe 1..{MAX_OBJECTS} objects, got {X.shape[0]}")
+        raise UserError(f"X must describe 1..{MAX_OBJECTS} objects, got {X.shape[0]}")
     if not np.all(np.isfinite(X)):
-        raise ValueError("X contains NaN or infinite values")
+        raise UserError("X contains NaN or infinite values")
     onehot = X[:, 3:]
     if not np.all((onehot == 0) | (onehot == 1)) or not np.all(onehot.sum(axis=1) == 1):
-        raise ValueError(f"X[:, 3:5] must be a one-hot type (small, large) per object, got {onehot.tolist()}")
+        raise UserError(f"X[:, 3:5] must be a one-hot type (small, large) per object, got {onehot.tolist()}")
     check_scene(X, where="X", upright=True, within_reach=False)  # placed upright, axis-aligned
     types = onehot.argmax(axis=1).astype(int)
     positions = X[:, :3].copy()
