@@ -467,11 +467,8 @@ def evaluate(models_dir: str | Path, problems_path: str | Path, out_dir: str | P
     problems = read_problems(problems_path)
     loaded = models if models is not None else load_method_models(models_dir, methods)
     for method in methods:
-        n_max = getattr(loaded[method], "n_max", None)
-        too_big = [p for p in problems if n_max is not None and p.n > n_max]
-        if too_big:
-            raise UserError(f"{problems_path}: problem {too_big[0].name} has {too_big[0].n} objects, but the models "
-                             f"of method {method} were trained for at most {n_max}")
+        for p in problems:
+            loaded[method].require_objects(p.n, f"{problems_path}: problem {p.name}")
     if models is None and config.workers == 1 and config.backend == "local":
         models = loaded  # one process: the models just loaded serve the run
     started = datetime.now(timezone.utc).isoformat(timespec="seconds")

@@ -87,9 +87,7 @@ def run_demo(cfg: DemoConfig = DemoConfig()) -> DemoResult:
     torch.set_num_threads(1)
     models_dir = pretrained_dir() if cfg.models is None else Path(cfg.models)
     models = load_models(models_dir)
-    n_max = getattr(getattr(models.dynamics, "config", None), "n_max", None)
-    if n_max is not None and cfg.objects > n_max:
-        raise UserError(f"--objects {cfg.objects}: the models in {models_dir} were trained for at most {n_max} objects")
+    models.require_objects(cfg.objects, f"--objects {cfg.objects}: the scene")
     plan_cfg = PlanConfig(seed=cfg.seed)
     kinematics = kinematics_for("bilevel", plan_cfg)
 

@@ -15,7 +15,6 @@ from pathlib import Path
 from tamp.errors import UserError
 from tamp.planning.bilevel import METHODS, SYMBOLIC_BACKENDS, PlanConfig, PlanResult, plan, replan_rounds
 from tamp.planning.search import SearchConfig
-from tamp.planning.validate import check_problem
 from tamp.planning.verify import goal_error
 
 LEVELS = {1: "level 1 (verified symbolic plan)", 2: "level 2 (continuous search)"}
@@ -157,7 +156,7 @@ def run_plan(problem_path: Path, models_dir: Path, options: PlanOptions) -> int:
         check_output_file(options.replay, "--replay")
     models = load_models(models_dir, need_symbolic=options.method != "cfs")
     cfg = dataclasses.replace(options.planner, seed=problem.seed)
-    check_problem(problem.X_init, problem.X_goal, str(problem_path), n_max=models.n_max)  # the models' limit
+    models.require_objects(problem.n, str(problem_path))
     k = "?" if problem.k is None else problem.k
     symbolic = "" if options.method == "cfs" else f"; symbolic planner {cfg.backend}"
     print(f"problem {problem_path}: {problem.n} objects, k = {k}, seed {problem.seed}; initial error "

@@ -34,7 +34,7 @@ from tamp.planning.models import Models
 from tamp.planning.search import SearchConfig, SearchResult, SearchStatus, continuous_search, state_key
 from tamp.planning.structs import Infeasible, KinematicFeasibility, PickPlace, RefinementOutcome
 from tamp.planning.validate import check_problem
-from tamp.planning.verify import (EPS_SUCCESS, TAU_VERIFY, Verification, at_goal, goal_error, refine_skeleton, verify,
+from tamp.planning.verify import (EPS_SUCCESS, TAU_VERIFY, Verification, at_goal, goal_error, refine_skeleton, states_pair, verify,
                          verify_many)
 
 
@@ -433,9 +433,7 @@ def plan(method: str, models: Models, X_init, X_goal, cfg: PlanConfig = PlanConf
     into the planning loop of KINEMATIC_METHODS (unless cfg.feasibility is False)."""
     if method not in METHODS:
         raise ValueError(f"unknown planning method {method!r}; choose one of {', '.join(METHODS)}")
-    X_init, X_goal = np.asarray(X_init, dtype=float), np.asarray(X_goal, dtype=float)
-    if X_init.shape != X_goal.shape or X_init.ndim != 2 or X_init.shape[1] != 5:
-        raise ValueError(f"X_init and X_goal must both be (n, 5), got {X_init.shape} and {X_goal.shape}")
+    X_init, X_goal = states_pair(X_init, X_goal)
     # an observed X_init may hold tilted blocks: checked as any scene, not as one placed upright
     check_problem(X_init, X_goal, where="plan()", n_max=getattr(models, "n_max", None), init_upright=False)
     return METHODS[method](models, X_init, X_goal, cfg, kinematics=kinematics)

@@ -59,6 +59,11 @@ class Models:
         limits = [n for n in limits if n is not None]
         return min(limits) if limits else None
 
+    def require_objects(self, n: int, what: str) -> None:
+        """UserError if `what` (a problem, a scene) has more objects than the networks take."""
+        if self.n_max is not None and n > self.n_max:
+            raise UserError(f"{what} has {n} objects, but the models were trained for at most {self.n_max}")
+
     def require_dynamics(self) -> DynamicsModel:
         if self.dynamics is None:
             raise UserError(f"this method needs the Dynamics Model ({DYNAMICS_FILE} in the models directory)")

@@ -28,9 +28,9 @@ from typing import Callable, Hashable
 import numpy as np
 
 from tamp.errors import UserError
-from tamp.planning.verify import EPS_SUCCESS, DynamicsModel
+from tamp.planning.structs import OFFSETS
+from tamp.planning.verify import EPS_SUCCESS, DynamicsModel, states_pair
 
-OFFSETS = (-1, 0, 1)
 _PAIRS = np.array([(g, r) for g in OFFSETS for r in OFFSETS], dtype=np.int64)  # the 9 offset pairs
 
 
@@ -138,9 +138,7 @@ def continuous_search(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarr
     expansion instead of every generated successor). `pruned` holds (state_key(X), action) pairs left
     out altogether (e.g. known to fail refinement)."""
     t0 = time.perf_counter()
-    X_init, X_goal = np.asarray(X_init, dtype=float), np.asarray(X_goal, dtype=float)
-    if X_init.shape != X_goal.shape or X_init.ndim != 2 or X_init.shape[1] != 5:
-        raise ValueError(f"X_init and X_goal must both be (n, 5), got {X_init.shape} and {X_goal.shape}")
+    X_init, X_goal = states_pair(X_init, X_goal)
     goal = X_goal[:, :3]
     types = X_init[:, 3:]
 

@@ -155,12 +155,19 @@ def refine_skeleton(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarray
     return [plan for plan, _ in beam]
 
 
-def verify(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarray, actions: Sequence,
-           tau: float = TAU_VERIFY) -> Verification:
-    """Roll `actions` out from X_init with the Dynamics Model and compare with X_goal."""
+def states_pair(X_init, X_goal) -> tuple[np.ndarray, np.ndarray]:
+    """X_init and X_goal as float arrays of one (n, 5) shape (ValueError otherwise): what every
+    planner entry point takes."""
     X_init, X_goal = np.asarray(X_init, dtype=float), np.asarray(X_goal, dtype=float)
     if X_init.shape != X_goal.shape or X_init.ndim != 2 or X_init.shape[1] != 5:
         raise ValueError(f"X_init and X_goal must both be (n, 5), got {X_init.shape} and {X_goal.shape}")
+    return X_init, X_goal
+
+
+def verify(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarray, actions: Sequence,
+           tau: float = TAU_VERIFY) -> Verification:
+    """Roll `actions` out from X_init with the Dynamics Model and compare with X_goal."""
+    X_init, X_goal = states_pair(X_init, X_goal)
     trajectory = rollout(model, X_init, actions)
     return Verification(tuple(tuple(int(v) for v in a) for a in actions), trajectory,
                         goal_errors(trajectory[-1], X_goal), tau)
