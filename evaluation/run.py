@@ -218,7 +218,7 @@ class Evaluator:
             self._worlds[fidelity] = World(WorldConfig(fidelity=fidelity, simplify_paths=True))
         world = self._worlds[fidelity]
         world.rng = np.random.default_rng(0)
-        world.timeline = None
+        world.observer = None
         return world
 
     def warm_up(self, models, problem: Problem) -> None:

@@ -95,7 +95,7 @@ def refine_and_execute(actions: list[PickPlace], X_init: np.ndarray, X_goal: np.
 
     world = World(WorldConfig(simplify_paths=True))
     if fidelity == "fast":
-        world.timeline = timeline
+        world.observer = timeline
     refined = refine(actions, X_init, world=world)
     if fidelity == "fast":
         X_after = [s.X_after for s in refined.steps]
@@ -105,13 +105,13 @@ def refine_and_execute(actions: list[PickPlace], X_init: np.ndarray, X_goal: np.
         from tamp.sim.execute import execute
 
         t = time.perf_counter()
-        executed = execute(refined, timeline=timeline, partial=True)
+        executed = execute(refined, observer=timeline, partial=True)
         execute_time = time.perf_counter() - t
         X_after = [a.X_after for a in executed.log]
         X_final, sim_time = executed.X_final, executed.sim_time
         notes = [f"action {a.index}: {a.note}" for a in executed.log if a.note]
     if timeline is not None and not timeline.times:  # nothing ran: show the initial scene
-        timeline.start(refined.scene_init, refined.q_init)
+        timeline.scene_started(refined.scene_init, refined.q_init)
     return Execution(refined, X_after, X_final, goal_error(X_final, X_goal), refined.refine_time,
                      execute_time, sim_time, notes)
 
@@ -167,7 +167,7 @@ def run_demo(cfg: DemoConfig = DemoConfig()) -> DemoResult:
         from tamp.sim import World
 
         world = World(WorldConfig())
-        world.timeline = timeline
+        world.observer = timeline
         world.reset(X=problem.X_init)
 
     _print_summary(out, cfg)
@@ -298,7 +298,7 @@ def _closed_loop(problem: Problem, models, plan_cfg: PlanConfig, cfg: DemoConfig
     from tamp.sim import World
 
     world = World(WorldConfig(fidelity=cfg.fidelity, simplify_paths=True))
-    world.timeline = timeline
+    world.observer = timeline
     X0 = world.reset(X=problem.X_init)
     rounds = replan_rounds(problem.k)
     print(f"\nclosed loop ({cfg.fidelity} world): execute, observe, replan; up to {rounds} replanning "

@@ -112,7 +112,7 @@ def _open_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timeline)
 
     world = World(WorldConfig(simplify_paths=True))
     if options.execute == "fast":
-        world.timeline = timeline
+        world.observer = timeline
     refined = refine(result.plan, problem.X_init, world=world)
     if refined.success:
         print(f"refinement: ok, {len(refined.steps)} action(s) refined in {refined.refine_time:.2f} s, "
@@ -124,7 +124,7 @@ def _open_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timeline)
     else:
         from tamp.sim.execute import execute
 
-        X_final = execute(refined, timeline=timeline, partial=True).X_final
+        X_final = execute(refined, observer=timeline, partial=True).X_final
     error = goal_error(X_final, problem.X_goal)
     ok = error < cfg.eps
     print(f"execution ({options.execute}): final error {error * 100:.1f} cm (max over objects) -> "
@@ -136,7 +136,7 @@ def _closed_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timelin
     from tamp.sim import World, WorldConfig
 
     world = World(WorldConfig(fidelity=options.execute, simplify_paths=True))
-    world.timeline = timeline
+    world.observer = timeline
     X0 = world.reset(X=problem.X_init)
     infos = []
     kinematics = _checker(options)

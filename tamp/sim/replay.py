@@ -7,8 +7,8 @@ offline in any browser.
 A timeline can also carry *ghosts*: translucent copies of the blocks at positions that were not
 executed, drawn beside the executed blocks (the paper's Fig. 3): the goal, shown throughout, and
 the Dynamics Model's prediction after each action, shown from the start of that action until the
-next action's prediction replaces it. The world and the executor call `mark_action()` when an
-action starts, which is what ties predictions to the replay's clock.
+next action's prediction replaces it. A timeline is a `WorldObserver`: the world and the executor
+report each action's start (`action_started`), which is what ties predictions to the replay's clock.
 """
 from __future__ import annotations
 
@@ -16,11 +16,13 @@ import html
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Sequence
 
 import numpy as np
 from pydrake.math import RigidTransform
 
 from tamp.sim.kinematics import V_MAX, tcp_pose
+from tamp.sim.observer import Carried, PhysicsFrame, WorldObserver
 from tamp.planning.structs import BLOCK_SIZES
 
 REPLAY_FPS = 30.0
@@ -60,8 +62,10 @@ class Ghosts:
 
 
 @dataclass
-class Timeline:
-    """Frames of a replay: times (s), arm joints (6,), block poses (n, 7) as quaternion wxyz + xyz."""
+class Timeline(WorldObserver):
+    """Frames of a replay: times (s), arm joints (6,), block poses (n, 7) as quaternion wxyz + xyz.
+
+    Attach it to a world (`world.observer = timeline`) or pass it to an execution to record them."""
 
     types: np.ndarray | None = None
     times: list[float] = field(default_factory=list)
@@ -75,8 +79,8 @@ class Timeline:
     def t_end(self) -> float:
         return self.times[-1] if self.times else 0.0
 
-    def mark_action(self) -> None:
-        """Note that an action starts now (called by the world and the executor before its frames)."""
+    def action_started(self) -> None:
+        """Note that an action starts now (its frames follow)."""
         self.action_starts.append(self.t_end)
 
     def show_goal(self, X_goal: np.ndarray) -> None:
@@ -94,7 +98,7 @@ class Timeline:
             self.ghosts.append(Ghosts("predicted", predicted[1:len(starts) + 1], list(starts), PREDICTED_RGBA,
                                       "Dynamics Model's prediction after the current action"))
 
-    def start(self, scene, q: np.ndarray) -> None:
+    def scene_started(self, scene, q: np.ndarray) -> None:
         """Begin a new scene (a reset); earlier frames are kept and the replay continues."""
         self.types = np.array(scene.types)
         self._add(self.t_end, q, [_pose7(X) for X in scene.X_WB])
@@ -104,9 +108,10 @@ class Timeline:
         self.q_arm.append(np.array(q, dtype=float))
         self.blocks.append(np.array(poses, dtype=float))
 
-    def add_motions(self, paths: list[np.ndarray], X_WB: list[RigidTransform], carried) -> None:
-        """Kinematic joint paths, timed at half the joint velocity limits; `carried` is
-        (block indices, their poses in the tcp frame) for blocks moving with the gripper."""
+    def motions_executed(self, paths: Sequence[np.ndarray], X_WB: Sequence[RigidTransform],
+                         carried: Carried | None) -> None:
+        """Kinematic joint paths, timed at half the joint velocity limits; the carried blocks move
+        with the gripper."""
         poses = [_pose7(X) for X in X_WB]
         for path in paths:
             for a, b in zip(path[:-1], path[1:]):
@@ -121,11 +126,11 @@ class Timeline:
                             frame[c] = _pose7(X_WG @ X_GC)
                     self._add(t0 + s * duration, q, frame)
 
-    def add_physics(self, record: list, q_arm: np.ndarray) -> None:
-        """Settling frames from BlockPhysics.settle(record=...), the arm still."""
+    def physics_frames(self, frames: Sequence[PhysicsFrame]) -> None:
+        """Simulated frames, timed from the end of the replay so far."""
         t0 = self.t_end
-        for t, poses in record:
-            self._add(t0 + t, q_arm, [_pose7(X) for X in poses])
+        for frame in frames:
+            self._add(t0 + frame.t, frame.q, [_pose7(X) for X in frame.X_WB])
 
     def write_html(self, path: str | Path) -> Path:
         """Render the frames (and ghosts) to a self-contained Meshcat HTML file, written atomically."""
