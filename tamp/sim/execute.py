@@ -153,8 +153,8 @@ class Executor:
         for weld in self._welds:
             plant.SetConstraintActiveStatus(ctx, weld, False)
         scene0 = refined.scene_init
-        for body, X in zip(self._block_bodies, scene0.X_WB):
-            plant.SetFreeBodyPose(ctx, body, X)
+        for body, X_WB in zip(self._block_bodies, scene0.X_WB):
+            plant.SetFreeBodyPose(ctx, body, X_WB)
         q = plant.GetPositions(ctx)
         q[self._arm_idx] = refined.q_init
         plant.SetPositions(ctx, q)

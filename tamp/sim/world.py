@@ -187,7 +187,7 @@ class World:
 
         # Approach: jaws open over the grasp point, then down to it.
         approach = approach_poses(scene, action, self.config)
-        X_grasp = dict(approach)["grasp"]
+        X_WGrasp = dict(approach)["grasp"]
         qs = self._solve_ik(approach, info)
         if qs is None:
             return self._unchanged(info, t_start)
@@ -197,7 +197,7 @@ class World:
             return self._unchanged(info, t_start, t_motion)
         info.timings["motion"] = time.perf_counter() - t_motion
 
-        held = held_block(scene, X_grasp)
+        held = held_block(scene, X_WGrasp)
         info.grasped = held
         if held < 0:
             info.status, info.reason = "nothing_grasped", "the jaws closed on nothing at the grasp point"
@@ -214,7 +214,7 @@ class World:
         planner.set_block_poses(scene.X_WB, parked=tuple(wp.carried))
         ok = self._plan(planner, [("liftoff", qs["grasp"], qs["liftoff"])], info, paths)
         sizes = [BLOCK_SIZES[int(scene.types[c])] for c in wp.carried]
-        planner.attach(list(zip(sizes, [X_FlangeTcp @ X for X in wp.X_GC])))
+        planner.attach(list(zip(sizes, [X_FlangeTcp @ X_GC for X_GC in wp.X_GC])))
         carry = [("lift", qs["liftoff"], qs["lift"]), ("transfer", qs["lift"], qs["preplace"]),
                  ("lower", qs["preplace"], qs["place"])]
         ok = ok and self._plan(planner, carry, info, paths)
@@ -224,10 +224,10 @@ class World:
             return self._unchanged(info, t_start)
 
         # Execute: carry kinematically, release, let physics decide.
-        X_release = list(scene.X_WB)
+        X_WB_release = list(scene.X_WB)
         for c, X_GC in zip(wp.carried, wp.X_GC):
-            X_release[c] = wp.place @ X_GC
-        info.X_release = Scene(scene.types, X_release).X()
+            X_WB_release[c] = wp.place @ X_GC
+        info.X_release = Scene(scene.types, X_WB_release).X()
         self.observer.action_started()
         self.observer.motions_executed([paths[m] for m in ("approach", "descend")], scene.X_WB, None)
         self.observer.motions_executed([paths[m] for m in ("liftoff", "lift", "transfer", "lower")], scene.X_WB,
@@ -235,13 +235,13 @@ class World:
         if settle:
             t_physics = time.perf_counter()
             record: list[tuple[float, list[RigidTransform]]] = []
-            settled = physics.settle(X_release, record)
+            settled = physics.settle(X_WB_release, record)
             info.timings["physics"] = time.perf_counter() - t_physics
             info.settle_time, info.settled = settled.time, settled.settled
             self.observer.physics_frames([PhysicsFrame(t, qs["place"], X_WB) for t, X_WB in record])
             self.scene = Scene(scene.types, settled.X_WB)
         else:
-            self.scene = Scene(scene.types, X_release)
+            self.scene = Scene(scene.types, X_WB_release)
 
         # Retreat straight up with open jaws. The jaws opened around the released blocks, and any
         # block that moved while settling may lean on them: those are not obstacles to lifting away.
@@ -305,9 +305,9 @@ class World:
     def _solve_ik(self, waypoints, info: StepInfo, q_start=None, skip=(), known=None) -> dict | None:
         t0 = time.perf_counter()
         planner, _ = self._layout(self.scene.types)
-        todo = [(name, X) for name, X in waypoints if name not in skip]
+        todo = [(name, X_WG) for name, X_WG in waypoints if name not in skip]
         found, failed = solve_chain(todo, self.q if q_start is None else q_start,
-                                    lambda X, q_ref: self._numerical_ik(planner, X, q_ref))
+                                    lambda X_WG, q_ref: self._numerical_ik(planner, X_WG, q_ref))
         qs = {**(known or {}), **found}
         for name in found:
             info.ik_success[name] = True
