@@ -89,7 +89,7 @@ def test_predictions_are_tied_to_the_start_of_each_action():
     for t in (0.0, 1.0, 2.0):  # action 0 starts at 0 s, action 1 at 1 s; action 2 never starts
         timeline._add(t, np.zeros(6), np.zeros((2, 7)))
         if t < 2.0:
-            timeline.mark_action()
+            timeline.action_started()
     predicted = np.arange(4 * 2 * 5, dtype=float).reshape(4, 2, 5)  # X_init and after each of 3 actions
     timeline.show_goal(predicted[-1])
     timeline.show_predictions(predicted)

@@ -139,3 +139,20 @@ def test_refine_rejects_bad_input():
         refine([PickPlace(0, 0, 1, 0)])
     scene = Scene(np.array([0]), [RigidTransform([0.6, 0.0, 0.025])])
     assert refine([], scene=scene).success
+
+
+def test_an_executor_built_once_runs_plans_as_a_fresh_one_would():
+    """The diagram is reused across plans (the grasp is a context parameter): the second plan on it
+    must not inherit the first one's state, grasp or weld."""
+    from tamp.sim.execute import Executor
+
+    first, second = refine(STACK_PLAN[:1], X_STACK), refine([PickPlace(1, -1, 1, 1)], X_STACK)
+    executor = Executor(first.scene_init.types)
+    executor.run(first)
+    reused = executor.run(second)
+    fresh = execute(second)
+    assert reused.log[0].grasped and fresh.log[0].grasped
+    np.testing.assert_array_equal(reused.X_final, fresh.X_final)
+    np.testing.assert_array_equal(reused.q_final, fresh.q_final)
+    with pytest.raises(ValueError, match="types"):
+        executor.run(refine([PickPlace(0, 0, 1, 0)], X_STACK[:2]))

@@ -116,9 +116,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
     if args.replay:
         check_output_file(args.replay, "--replay")
-    world = World(WorldConfig(), seed=args.seed)
-    if args.replay:
-        world.timeline = Timeline()
+    timeline = Timeline() if args.replay else None
+    world = World(WorldConfig(), seed=args.seed, observer=timeline)
     X = world.reset(n_objects=args.objects)
     rng = np.random.default_rng(args.seed)
     if args.json:
@@ -146,7 +145,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
                   f"{t.get('motion', 0) * 1e3:.0f}, physics {t.get('physics', 0) * 1e3:.0f})")
         X = X_next
     if args.replay:
-        path = world.timeline.write_html(args.replay)
+        path = timeline.write_html(args.replay)
         print(f"replay written to {path} ({path.stat().st_size / 1e6:.1f} MB); open it in a browser",
               file=sys.stderr if args.json else sys.stdout)
     return 0
@@ -172,7 +171,7 @@ def cmd_view(args: argparse.Namespace) -> int:
             return 1
         print(f"executing the {len(refined.steps)} refined action(s) before it, nothing past it")
     timeline = Timeline()
-    result = execute(refined, timeline=timeline, partial=True)
+    result = execute(refined, observer=timeline, partial=True)
     for entry in result.log:
         print(f"executed action {entry.index}: {'grasped' if entry.grasped else entry.note}; "
               f"{entry.prediction_error * 100:.1f} cm from the prediction; tracking error "

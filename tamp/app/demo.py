@@ -123,7 +123,7 @@ def run_demo(cfg: DemoConfig = DemoConfig()) -> DemoResult:
         from tamp.sim import World
 
         world = World(WorldConfig())
-        world.timeline = timeline
+        world.observer = timeline
         world.reset(X=problem.X_init)
 
     _print_summary(out, cfg)

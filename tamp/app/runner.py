@@ -75,9 +75,9 @@ def execute_plan(actions: Sequence[PickPlace | Sequence[int]], X_init: np.ndarra
     if fidelity not in FIDELITIES:
         raise UserError(f"fidelity must be one of {', '.join(FIDELITIES)}, got {fidelity!r}")
     world = world or executing_world("fast")
-    world.timeline = timeline if fidelity == "fast" else None
+    world.observer = timeline if fidelity == "fast" else None
     refined = refine([PickPlace(*a) for a in actions], X_init, world=world)
-    world.timeline = None
+    world.observer = None
     if fidelity == "fast":
         X_after = [s.X_after for s in refined.steps]
         X_final, execute_time, notes = refined.X_predicted, 0.0, []
@@ -86,7 +86,7 @@ def execute_plan(actions: Sequence[PickPlace | Sequence[int]], X_init: np.ndarra
         from tamp.sim.execute import execute
 
         t = time.perf_counter()
-        executed = execute(refined, timeline=timeline, partial=True)
+        executed = execute(refined, observer=timeline, partial=True)
         execute_time = time.perf_counter() - t
         X_after = [a.X_after for a in executed.log]
         X_final, sim_time = executed.X_final, executed.sim_time
@@ -94,7 +94,7 @@ def execute_plan(actions: Sequence[PickPlace | Sequence[int]], X_init: np.ndarra
     if not refined.steps:
         X_final = refined.X_init
     if timeline is not None and not timeline.times:  # nothing ran: show the initial scene
-        timeline.start(refined.scene_init, refined.q_init)
+        timeline.scene_started(refined.scene_init, refined.q_init)
     return Execution(refined, X_after, X_final, goal_error(X_final, X_goal), refined.refine_time,
                      execute_time, sim_time, notes)
 
@@ -133,7 +133,7 @@ def run_closed_loop(method: str, models: Models, X_init: np.ndarray, X_goal: np.
     reaches; `planner` and `on_round` are passed to `plan_closed_loop`, `on_step` is called after
     every executed action."""
     world = world or executing_world(fidelity)
-    world.timeline = timeline
+    world.observer = timeline
     X0 = world.reset(X=X_init)
     if kinematics is not None:
         kinematics.observe(world.scene, world.q)
@@ -158,5 +158,5 @@ def run_closed_loop(method: str, models: Models, X_init: np.ndarray, X_goal: np.
         run.loop = plan_closed_loop(method, models, X0, X_goal, step, rounds, config, on_round=on_round,
                                     planner=planner, kinematics=kinematics)
     finally:
-        world.timeline = None
+        world.observer = None
     return run

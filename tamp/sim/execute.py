@@ -6,10 +6,17 @@ trajectory's position and velocity; gravity is off for the arm and gripper, as a
 controller compensates it. The gripper holds a block with a **weld constraint** activated when the
 jaws close and removed when they open: the jaws are rigid and open (see drake_models/gripper.sdf),
 so a weld gives the firm grasp of a real parallel gripper without finger contact dynamics. The
-constraint's pose is the planned grasp; if, at the moment of closing, the block is not where the
+weld holds the block at the planned grasp; if, at the moment of closing, the block is not where the
 plan expects it between the jaws (more than GRASP_TOLERANCE away), nothing is welded and the log
 says the grasp missed. Blocks resting on the grasped one ride on it by contact. After each action
 the arm holds still until every block is at rest (as in the `fast` world).
+
+The diagram is built once per block layout and reused for every plan. Drake 1.51 fixes a weld
+constraint's frames (X_AP, X_BQ) when it is added, before Finalize; only its active status lives in
+the context. The grasp, which differs per action, is therefore a context parameter of its own: a
+massless `grasp` body welded to the gripper at a `FixedOffsetFrame` whose pose in the gripper
+(`SetPoseInParentFrame`) is set to each action's planned grasp, and one weld constraint per block
+between that body and the block, all inactive until their block is grasped.
 """
 from __future__ import annotations
 
@@ -20,21 +27,23 @@ import numpy as np
 from pydrake.math import RigidTransform
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import AddMultibodyPlantSceneGraph, ContactModel, DiscreteContactApproximation
-from pydrake.multibody.tree import JointActuatorIndex, PdControllerGains
+from pydrake.multibody.tree import FixedOffsetFrame, JointActuatorIndex, PdControllerGains, SpatialInertia
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, TrajectorySource
+from pydrake.trajectories import PiecewisePolynomial
 
+from tamp.sim.observer import PhysicsFrame, WorldObserver
 from tamp.sim.physics import blocks_at_rest
 from tamp.sim.plants import X_FlangeTcp, add_arm_gripper_table, add_blocks
-from tamp.sim.replay import REPLAY_FPS, Timeline
 from tamp.sim.skill import Scene
 from tamp.sim.structs import WorldConfig
-from tamp.sim.trajectory import RefinedPlan
+from tamp.sim.trajectory import RefinedAction, RefinedPlan
 
 KP = np.array([4000.0, 4000.0, 2000.0, 500.0, 500.0, 300.0])  # N m / rad
 KD = np.array([400.0, 400.0, 200.0, 50.0, 50.0, 30.0])  # N m s / rad
 GRASP_TOLERANCE = 0.015  # metres between the planned and the actual grasped block position
+FRAME_PERIOD = 1.0 / 30.0  # seconds between the physics frames reported to an observer
 
 
 @dataclass
@@ -84,18 +93,18 @@ class ExecutionResult:
 
 
 class Executor:
-    """One Drake diagram for a plan: weld constraints for each action's grasp, inactive until used."""
+    """The Drake diagram of one block layout (block types), reused for every plan executed on it."""
 
-    def __init__(self, refined: RefinedPlan, config: WorldConfig | None = None) -> None:
+    def __init__(self, types: np.ndarray, config: WorldConfig | None = None) -> None:
         self.config = config or WorldConfig()
-        types = refined.scene_init.types
+        self.types = np.array(types)
         builder = DiagramBuilder()
         plant, _ = AddMultibodyPlantSceneGraph(builder, time_step=self.config.time_step)
         plant.set_discrete_contact_approximation(DiscreteContactApproximation.kLagged)
         plant.set_contact_model(ContactModel.kHydroelasticWithFallback)
         parser = Parser(plant)
         arm, gripper = add_arm_gripper_table(plant, parser)
-        self.blocks = add_blocks(parser, types)
+        self.blocks = add_blocks(parser, self.types)
         plant.set_gravity_enabled(arm, False)
         plant.set_gravity_enabled(gripper, False)
         # (GetJointActuatorIndices(arm) is empty before Finalize; the arm's actuators come first.)
@@ -105,16 +114,17 @@ class Executor:
             actuator.set_controller_gains(PdControllerGains(p=KP[k], d=KD[k]))
         gripper_body = plant.GetBodyByName("gripper_base", gripper)
         self._block_bodies = [plant.get_body(plant.GetBodyIndices(b)[0]) for b in self.blocks]
-        self._welds = []
-        for step in refined.steps:
-            X_GripperBlock = X_FlangeTcp @ step.X_GC[0]
-            self._welds.append(plant.AddWeldConstraint(gripper_body, X_GripperBlock,
-                                                       self._block_bodies[step.grasped], RigidTransform()))
+        # The grasped block's pose in the gripper: a frame set per action (see the module docstring).
+        self._grasp_frame = plant.AddFrame(FixedOffsetFrame("grasp", gripper_body.body_frame(), RigidTransform()))
+        grasp_body = plant.AddRigidBody("grasp", gripper, SpatialInertia.Zero())
+        plant.WeldFrames(self._grasp_frame, grasp_body.body_frame())
+        self._welds = [plant.AddWeldConstraint(grasp_body, RigidTransform(), body, RigidTransform())
+                       for body in self._block_bodies]
         plant.Finalize()
-        first = refined.steps[0].trajectory if refined.steps else None
-        self._source = builder.AddSystem(TrajectorySource(first, output_derivative_order=1, zero_derivatives_beyond_limits=True)) if first else None
-        if self._source is not None:
-            builder.Connect(self._source.get_output_port(), plant.get_desired_state_input_port(arm))
+        self._source = builder.AddSystem(TrajectorySource(PiecewisePolynomial(np.zeros((6, 1))),
+                                                          output_derivative_order=1,
+                                                          zero_derivatives_beyond_limits=True))
+        builder.Connect(self._source.get_output_port(), plant.get_desired_state_input_port(arm))
         zero = builder.AddSystem(ConstantVectorSource(np.zeros(6)))
         builder.Connect(zero.get_output_port(), plant.get_actuation_input_port(arm))
         self.plant, self.arm, self.gripper_body = plant, arm, gripper_body
@@ -122,62 +132,61 @@ class Executor:
         self.simulator = Simulator(self.diagram)
         self.context = self.simulator.get_mutable_context()
         self.plant_context = plant.GetMyMutableContextFromRoot(self.context)
-        for weld in self._welds:
-            plant.SetConstraintActiveStatus(self.plant_context, weld, False)
         self._arm_idx = np.array([plant.get_joint(j).position_start() for j in plant.GetJointIndices(arm)
                                   if plant.get_joint(j).num_positions() == 1])
-        self.refined = refined
 
     def _scene(self) -> Scene:
         poses = [self.plant.EvalBodyPoseInWorld(self.plant_context, b) for b in self._block_bodies]
-        return Scene(self.refined.scene_init.types, poses)
+        return Scene(self.types, poses)
 
     def _q_arm(self) -> np.ndarray:
         return self.plant.GetPositions(self.plant_context)[self._arm_idx]
 
-    def run(self, timeline: Timeline | None = None) -> ExecutionResult:
+    def run(self, refined: RefinedPlan, observer: WorldObserver | None = None) -> ExecutionResult:
+        """Execute the refined plan's actions from its initial scene, reporting to `observer`."""
+        if list(refined.scene_init.types) != list(self.types):
+            raise ValueError(f"this executor's blocks are of types {self.types.tolist()}, the plan's "
+                             f"{np.asarray(refined.scene_init.types).tolist()}")
+        observer = observer if observer is not None else WorldObserver()
         plant, ctx = self.plant, self.plant_context
-        scene0 = self.refined.scene_init
-        for body, X in zip(self._block_bodies, scene0.X_WB):
-            plant.SetFreeBodyPose(ctx, body, X)
+        self.diagram.SetDefaultContext(self.context)  # as built: no state or grasp left by an earlier plan
+        for weld in self._welds:
+            plant.SetConstraintActiveStatus(ctx, weld, False)
+        scene0 = refined.scene_init
+        for body, X_WB in zip(self._block_bodies, scene0.X_WB):
+            plant.SetFreeBodyPose(ctx, body, X_WB)
         q = plant.GetPositions(ctx)
-        q[self._arm_idx] = self.refined.q_init
+        q[self._arm_idx] = refined.q_init
         plant.SetPositions(ctx, q)
         plant.SetVelocities(ctx, np.zeros(plant.num_velocities()))
-        if timeline is not None:
-            timeline.start(scene0, self.refined.q_init)
-        log = []
-        for k, step in enumerate(self.refined.steps):
-            log.append(self._run_action(k, step, timeline))
+        observer.scene_started(scene0, refined.q_init)
+        log = [self._run_action(k, step, observer) for k, step in enumerate(refined.steps)]
         scene = self._scene()
         return ExecutionResult(scene.X(), scene, self._q_arm(), log)
 
-    def _run_action(self, k: int, step, timeline: Timeline | None) -> ExecutedAction:
+    def _run_action(self, k: int, step: RefinedAction, observer: WorldObserver) -> ExecutedAction:
         plant, ctx = self.plant, self.plant_context
         t_wall = time.perf_counter()
         X_before = self._scene().X()
         self._source.UpdateTrajectory(step.trajectory)
         self.context.SetTime(0.0)
         self.simulator.Initialize()
-        t_offset = timeline.t_end if timeline is not None else 0.0
-        if timeline is not None:
-            timeline.mark_action()
-        frame = 1.0 / REPLAY_FPS
+        observer.action_started()
+        frames: list[PhysicsFrame] = []
         max_error = 0.0
         grasped, note = False, ""
         events = [(step.t_grasp, "grasp"), (step.t_release, "release"), (step.duration, "end")]
         t = 0.0
         for t_event, event in events:
             while t < t_event - 1e-9:
-                t = min(t + frame, t_event)
+                t = min(t + FRAME_PERIOD, t_event)
                 self.simulator.AdvanceTo(t)
                 max_error = max(max_error, float(np.max(np.abs(self._q_arm() - step.trajectory.value(t).ravel()))))
-                if timeline is not None:
-                    self._record(timeline, t_offset + t)
+                frames.append(self._frame(t))
             if event == "grasp":
-                grasped, note = self._close(k, step)
+                grasped, note = self._close(step)
             elif event == "release":
-                plant.SetConstraintActiveStatus(ctx, self._welds[k], False)
+                plant.SetConstraintActiveStatus(ctx, self._welds[step.grasped], False)
         # Hold still until the blocks are at rest.
         cfg = self.config
         still_since, t_end = t, t
@@ -185,46 +194,47 @@ class Executor:
         while t < t_end + cfg.settle_max_time:
             t += 0.01
             self.simulator.AdvanceTo(t)
-            if timeline is not None and t - timeline.t_end + t_offset >= frame - 1e-9:
-                self._record(timeline, t_offset + t)
+            if t - (frames[-1].t if frames else 0.0) >= FRAME_PERIOD - 1e-9:
+                frames.append(self._frame(t))
             if self._at_rest():
                 if t - still_since >= cfg.settle_window - 1e-9:
                     settled = True
                     break
             else:
                 still_since = t
+        observer.physics_frames(frames)
         scene = self._scene()
         return ExecutedAction(k, X_before, scene.X(), step.X_after, grasped, max_error, t - t_end, settled,
                               t, time.perf_counter() - t_wall, note)
 
-    def _close(self, k: int, step) -> tuple[bool, str]:
-        """Engage the weld if the planned block is between the jaws."""
+    def _close(self, step: RefinedAction) -> tuple[bool, str]:
+        """Weld the planned block at the planned grasp if it is between the jaws."""
         X_WG = self.plant.EvalBodyPoseInWorld(self.plant_context, self.gripper_body) @ X_FlangeTcp
         X_WB_expected = X_WG @ step.X_GC[0]
         X_WB = self.plant.EvalBodyPoseInWorld(self.plant_context, self._block_bodies[step.grasped])
         miss = float(np.linalg.norm(X_WB.translation() - X_WB_expected.translation()))
         if miss > GRASP_TOLERANCE:
             return False, f"grasp missed: object {step.grasped} was {miss * 100:.1f} cm from the planned grasp"
-        self.plant.SetConstraintActiveStatus(self.plant_context, self._welds[k], True)
+        self._grasp_frame.SetPoseInParentFrame(self.plant_context, X_FlangeTcp @ step.X_GC[0])
+        self.plant.SetConstraintActiveStatus(self.plant_context, self._welds[step.grasped], True)
         return True, ""
 
     def _at_rest(self) -> bool:
         return blocks_at_rest(self.plant, self.plant_context, self._block_bodies, self.config.settle_speed,
                               self.config.settle_angular_speed)
 
-    def _record(self, timeline: Timeline, t: float) -> None:
-        scene = self._scene()
-        timeline._add(t, self._q_arm(), [np.r_[X.rotation().ToQuaternion().wxyz(), X.translation()] for X in scene.X_WB])
+    def _frame(self, t: float) -> PhysicsFrame:
+        return PhysicsFrame(t, self._q_arm(), self._scene().X_WB)
 
 
-def execute(refined: RefinedPlan, config: WorldConfig | None = None, timeline: Timeline | None = None,
+def execute(refined: RefinedPlan, config: WorldConfig | None = None, observer: WorldObserver | None = None,
             partial: bool = False) -> ExecutionResult:
-    """Execute a refined plan with the arm under physics; returns the final state and a per-action
-    log. A plan whose refinement failed is not executed (ValueError) unless `partial`, in which
-    case only the actions before the failure run."""
+    """Execute a refined plan with the arm under physics, reporting to `observer`; returns the final
+    state and a per-action log. A plan whose refinement failed is not executed (ValueError) unless
+    `partial`, in which case only the actions before the failure run."""
     if refined.failure is not None and not partial:
         raise ValueError(f"the plan could not be refined, so nothing was executed: {refined.failure}")
     if not refined.steps:
         scene = refined.scene_init
         return ExecutionResult(scene.X(), scene, np.array(refined.q_init), [])
-    return Executor(refined, config).run(timeline)
+    return Executor(refined.scene_init.types, config).run(refined, observer)

@@ -115,7 +115,7 @@ class FeasibilityChecker:
             return Infeasible.COLLISION
         # The carried blocks attached to the gripper for the carrying waypoints: attaching costs about
         # half a millisecond, building a checker per grasp ~150 ms (and predicted grasps rarely repeat).
-        planner.attach([(BLOCK_SIZES[int(scene.types[c])], X_FlangeTcp @ X) for c, X in zip(wp.carried, wp.X_GC)])
+        planner.attach([(BLOCK_SIZES[int(scene.types[c])], X_FlangeTcp @ X_GC) for c, X_GC in zip(wp.carried, wp.X_GC)])
         try:
             return None if all(planner.is_valid(qs[name]) for name in CARRYING) else Infeasible.COLLISION
         finally:

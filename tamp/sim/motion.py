@@ -81,11 +81,11 @@ class MotionPlanner:
 
     def set_block_poses(self, X_WB: list[RigidTransform], parked: tuple[int, ...] = ()) -> None:
         """Block poses for collision checking; blocks in `parked` are removed from the scene."""
-        for i, X in enumerate(X_WB):
+        for i, X_WBi in enumerate(X_WB):
             if i in parked:
                 self._set_block(i, _PARKED)
             else:
-                self._set_block(i, np.r_[X.rotation().ToQuaternion().wxyz(), X.translation()])
+                self._set_block(i, np.r_[X_WBi.rotation().ToQuaternion().wxyz(), X_WBi.translation()])
 
     def attach(self, shapes: list[tuple[tuple[float, float, float], RigidTransform]]) -> None:
         """Attach boxes (size, pose in the gripper body frame) to the gripper."""

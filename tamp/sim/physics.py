@@ -40,8 +40,8 @@ class BlockPhysics:
         plant, ctx = self.scene.plant, self._plant_context
         root = self._simulator.get_mutable_context()
         root.SetTime(0.0)
-        for body, X in zip(self._bodies, X_WB):
-            plant.SetFreeBodyPose(ctx, body, X)
+        for body, X_WBi in zip(self._bodies, X_WB):
+            plant.SetFreeBodyPose(ctx, body, X_WBi)
             plant.SetFreeBodySpatialVelocity(ctx, body, _zero_velocity())
         self._simulator.Initialize()
         still_since = 0.0

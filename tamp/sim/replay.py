@@ -7,19 +7,21 @@ offline in any browser.
 A timeline can also carry *ghosts*: translucent copies of the blocks at positions that were not
 executed, drawn beside the executed blocks (the paper's Fig. 3): the goal, shown throughout, and
 the Dynamics Model's prediction after each action, shown from the start of that action until the
-next action's prediction replaces it. The world and the executor call `mark_action()` when an
-action starts, which is what ties predictions to the replay's clock.
+next action's prediction replaces it. A timeline is a `WorldObserver`: the world and the executor
+report each action's start (`action_started`), which is what ties predictions to the replay's clock.
 """
 from __future__ import annotations
 
 import html
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Sequence
 
 import numpy as np
 from pydrake.math import RigidTransform
 
 from tamp.sim.kinematics import V_MAX, tcp_pose
+from tamp.sim.observer import Carried, PhysicsFrame, WorldObserver
 from tamp.planning.structs import BLOCK_SIZES
 from tamp.records import atomic_write_text
 
@@ -28,10 +30,16 @@ _REPLAY_SPEED = 0.5  # fraction of the joint velocity limits used to time kinema
 GOAL_RGBA = (0.1, 0.8, 0.2, 0.35)  # translucent green
 PREDICTED_RGBA = (1.0, 0.55, 0.0, 0.35)  # translucent orange
 GHOST_SCALE = 1.04  # ghosts are slightly larger than the blocks, so that one on a block stays visible
+CAMERA_FOV = np.radians(75.0)  # Meshcat's vertical field of view
+VIEW_ASPECT = 1.6  # width / height the opening view is framed for (1280 x 800)
+VIEW_MARGIN = 0.9  # the framed points fill at most this fraction of the view
+# From the blocks toward the camera: beyond the table's far side (+x), to the right and above, so
+# that the arm (base at the origin) stands behind the blocks, facing the viewer, without hiding them.
+VIEW_DIRECTION = np.array([1.0, -0.5, 0.35]) / np.linalg.norm([1.0, -0.5, 0.35])
 
 
-def _pose7(X: RigidTransform) -> np.ndarray:
-    return np.r_[X.rotation().ToQuaternion().wxyz(), X.translation()]
+def _pose7(X_AB: RigidTransform) -> np.ndarray:
+    return np.r_[X_AB.rotation().ToQuaternion().wxyz(), X_AB.translation()]
 
 
 @dataclass
@@ -60,8 +68,10 @@ class Ghosts:
 
 
 @dataclass
-class Timeline:
-    """Frames of a replay: times (s), arm joints (6,), block poses (n, 7) as quaternion wxyz + xyz."""
+class Timeline(WorldObserver):
+    """Frames of a replay: times (s), arm joints (6,), block poses (n, 7) as quaternion wxyz + xyz.
+
+    Attach it to a world (`world.observer = timeline`) or pass it to an execution to record them."""
 
     types: np.ndarray | None = None
     times: list[float] = field(default_factory=list)
@@ -75,8 +85,8 @@ class Timeline:
     def t_end(self) -> float:
         return self.times[-1] if self.times else 0.0
 
-    def mark_action(self) -> None:
-        """Note that an action starts now (called by the world and the executor before its frames)."""
+    def action_started(self) -> None:
+        """Note that an action starts now (its frames follow)."""
         self.action_starts.append(self.t_end)
 
     def show_goal(self, X_goal: np.ndarray) -> None:
@@ -94,20 +104,21 @@ class Timeline:
             self.ghosts.append(Ghosts("predicted", predicted[1:len(starts) + 1], list(starts), PREDICTED_RGBA,
                                       "Dynamics Model's prediction after the current action"))
 
-    def start(self, scene, q: np.ndarray) -> None:
+    def scene_started(self, scene, q: np.ndarray) -> None:
         """Begin a new scene (a reset); earlier frames are kept and the replay continues."""
         self.types = np.array(scene.types)
-        self._add(self.t_end, q, [_pose7(X) for X in scene.X_WB])
+        self._add(self.t_end, q, [_pose7(X_WB) for X_WB in scene.X_WB])
 
     def _add(self, t: float, q: np.ndarray, poses) -> None:
         self.times.append(float(t))
         self.q_arm.append(np.array(q, dtype=float))
         self.blocks.append(np.array(poses, dtype=float))
 
-    def add_motions(self, paths: list[np.ndarray], X_WB: list[RigidTransform], carried) -> None:
-        """Kinematic joint paths, timed at half the joint velocity limits; `carried` is
-        (block indices, their poses in the tcp frame) for blocks moving with the gripper."""
-        poses = [_pose7(X) for X in X_WB]
+    def motions_executed(self, paths: Sequence[np.ndarray], X_WB: Sequence[RigidTransform],
+                         carried: Carried | None) -> None:
+        """Kinematic joint paths, timed at half the joint velocity limits; the carried blocks move
+        with the gripper."""
+        poses = [_pose7(X_WBi) for X_WBi in X_WB]
         for path in paths:
             for a, b in zip(path[:-1], path[1:]):
                 duration = max(float(np.max(np.abs(b - a) / (_REPLAY_SPEED * V_MAX))), 1.0 / REPLAY_FPS)
@@ -121,11 +132,11 @@ class Timeline:
                             frame[c] = _pose7(X_WG @ X_GC)
                     self._add(t0 + s * duration, q, frame)
 
-    def add_physics(self, record: list, q_arm: np.ndarray) -> None:
-        """Settling frames from BlockPhysics.settle(record=...), the arm still."""
+    def physics_frames(self, frames: Sequence[PhysicsFrame]) -> None:
+        """Simulated frames, timed from the end of the replay so far."""
         t0 = self.t_end
-        for t, poses in record:
-            self._add(t0 + t, q_arm, [_pose7(X) for X in poses])
+        for frame in frames:
+            self._add(t0 + frame.t, frame.q, [_pose7(X_WB) for X_WB in frame.X_WB])
 
     def write_html(self, path: str | Path) -> Path:
         """Render the frames (and ghosts) to a self-contained Meshcat HTML file, written atomically."""
@@ -138,7 +149,8 @@ class Timeline:
         scene = build_motion_scene(self.types, padding=0.0)
         plant = scene.plant
         meshcat = Meshcat()
-        meshcat.SetCameraPose(camera_in_world=[1.7, -1.1, 0.9], target_in_world=[0.6, 0.0, 0.1])
+        camera, target = self.camera()
+        meshcat.SetCameraPose(camera_in_world=camera, target_in_world=target)
         from pydrake.systems.framework import DiagramBuilder
 
         # A visualizer on the motion scene's scene graph, driven by hand.
@@ -170,6 +182,29 @@ class Timeline:
         if self.ghosts or self.caption:
             page = page.replace("</body>", self._overlay() + "</body>", 1)
         return atomic_write_text(path, page)
+
+    def camera(self) -> tuple[np.ndarray, np.ndarray]:
+        """The replay's opening view, (camera position, target) in the world, framed on what the
+        replay shows: the target is the centre of the box that holds every block (executed, carried
+        and ghosts) throughout the replay, and the camera, looking from VIEW_DIRECTION, is as near
+        as it can be with that box and the gripper's whole path inside the view."""
+        centres = np.concatenate([poses[:, 4:] for poses in self.blocks]
+                                 + [g.states[:, :, :3].reshape(-1, 3) for g in self.ghosts])
+        reach = max(max(BLOCK_SIZES[int(t)]) for t in self.types) / 2  # of a block from its centre
+        lo, hi = centres.min(axis=0) - reach, centres.max(axis=0) + reach
+        target = (lo + hi) / 2
+        box = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+        gripper = np.array([tcp_pose(q).translation() for q in self.q_arm])
+        d = np.r_[box, gripper] - target
+        # In camera coordinates (forward -VIEW_DIRECTION, right, up), a point at depth
+        # distance - d.v fits when its offsets stay within tan(fov / 2) of that depth.
+        right = np.cross(-VIEW_DIRECTION, [0.0, 0.0, 1.0])
+        right /= np.linalg.norm(right)
+        up = np.cross(right, -VIEW_DIRECTION)
+        tan_half = np.tan(CAMERA_FOV / 2) * VIEW_MARGIN
+        distance = float(np.max(d @ VIEW_DIRECTION + np.maximum(np.abs(d @ up), np.abs(d @ right) / VIEW_ASPECT)
+                                / tan_half))
+        return target + distance * VIEW_DIRECTION, target
 
     def _overlay(self) -> str:
         """A caption and a colour legend in the page's top-left corner."""
@@ -203,10 +238,10 @@ def _draw_ghosts(meshcat, recording, ghosts: Ghosts) -> None:
             recording.SetProperty(0, path, "visible", False)
             recording.SetProperty(frames[0] - 1, path, "visible", False)
         recording.SetProperty(frames[0], path, "visible", True)
-        for i, (frame, X) in enumerate(zip(frames, poses)):
+        for i, (frame, X_WGhost) in enumerate(zip(frames, poses)):
             if i > 0 and frame > frames[i - 1]:
                 recording.SetTransform(frame - 1, path, poses[i - 1])  # hold, then jump (no sliding)
-            recording.SetTransform(frame, path, X)
+            recording.SetTransform(frame, path, X_WGhost)
 
 
 def _position_layout(scene):

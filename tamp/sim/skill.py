@@ -192,9 +192,9 @@ def pick_place_waypoints(scene: Scene, action: PickPlace, grasped: int, config: 
     )
 
 
-def _raised_to(X: RigidTransform, z: float) -> RigidTransform:
-    """X moved vertically to height z (metres), orientation kept."""
-    return RigidTransform(X.rotation(), np.r_[X.translation()[:2], z])
+def _raised_to(X_WG: RigidTransform, z: float) -> RigidTransform:
+    """X_WG moved vertically to height z (metres), orientation kept."""
+    return RigidTransform(X_WG.rotation(), np.r_[X_WG.translation()[:2], z])
 
 
 def _wrap(a: float) -> float:

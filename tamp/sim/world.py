@@ -6,13 +6,15 @@ action is executed. In the `fast` fidelity the grasped block follows the gripper
 physics runs from release until every block is at rest. In the `full` fidelity the same plan is
 time-parameterized and the arm follows it under Drake physics (tamp/sim/execute.py); the `fast` outcome
 is kept in `info.X_predicted`. An action that is kinematically impossible or closes the jaws on
-nothing changes nothing, and `StepInfo` says why.
+nothing changes nothing, and `StepInfo` says why. What happens is reported to the world's
+`observer` (tamp/sim/observer.py), e.g. a replay's Timeline.
 """
 from __future__ import annotations
 
 import dataclasses
 import time
-from typing import Iterable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Iterable
 
 import numpy as np
 from pydrake.math import RigidTransform
@@ -20,34 +22,68 @@ from pydrake.math import RigidTransform
 from tamp.errors import UserError
 from tamp.sim.kinematics import Q_HOME, drake_ik, solve_chain
 from tamp.sim.motion import MotionPlanner
+from tamp.sim.observer import Carried, PhysicsFrame, WorldObserver
 from tamp.sim.physics import BlockPhysics
 from tamp.sim.plants import X_FlangeTcp, build_motion_scene, build_physics_scene
-from tamp.sim.replay import Timeline
 from tamp.sim.skill import Scene, Waypoints, approach_poses, held_block, pick_place_waypoints, topdown
 from tamp.planning.structs import BLOCK_SIZES, LARGE, OFFSETS, SMALL, PickPlace
 from tamp.sim.structs import StepInfo, WorldConfig
 from tamp.planning.validate import MAX_OBJECTS, check_scene
 
+if TYPE_CHECKING:
+    from tamp.sim.execute import Executor
+
 MOTIONS = ("approach", "descend", "liftoff", "lift", "transfer", "lower", "retreat")
 
 
-class World:
-    """Random or given block scenes and the pick-place skill on them."""
+@dataclass
+class MotionSeeds:
+    """RRTConnect's seeds: a function of the scene's seed, the step and the motion only, so that a
+    scene's motions do not depend on what was planned before it."""
 
-    def __init__(self, config: WorldConfig | None = None, seed: int = 0) -> None:
+    scene: int = 0
+    step: int = 0  # actions planned in this scene
+
+    def restart(self, scene_seed: int) -> None:
+        self.scene, self.step = int(scene_seed), 0
+
+    def of(self, motion: str) -> int:
+        return (self.scene * 1_000_003 + self.step * 16 + MOTIONS.index(motion)) % (2**31 - 1)
+
+
+class World:
+    """Random or given block scenes and the pick-place skill on them.
+
+    `observer` is told what happens (scenes, actions, motions, physics frames); `motion_seeds`,
+    when given, is shared with the world that owns it (the full fidelity's predicting world)."""
+
+    def __init__(self, config: WorldConfig | None = None, seed: int = 0, *,
+                 observer: WorldObserver | None = None, motion_seeds: MotionSeeds | None = None) -> None:
         self.config = config or WorldConfig()
         self.seed = seed
         self.rng = np.random.default_rng(seed)
         self.q = Q_HOME.copy()
         self.scene: Scene | None = None
-        self.timeline: Timeline | None = None  # set to a Timeline to record frames for a replay
+        self.observer = observer
+        self.motion_seeds = motion_seeds if motion_seeds is not None else MotionSeeds()
         self._layouts: dict[tuple[int, ...], tuple[MotionPlanner, BlockPhysics]] = {}
-        self._motion_seed = 0  # seeds RRTConnect per scene, step and motion
-        self._steps = 0
-        # The full fidelity plans (and predicts) with a fast world whose executed paths are simplified.
-        self._planner: World | None = None
+        # The full fidelity plans and predicts each action with a fast world (executed paths
+        # simplified) that shares its motion seeds, then executes it under physics with an
+        # executor built once per block layout.
+        self._predictor: World | None = None
+        self._executors: dict[tuple[int, ...], Executor] = {}
         if self.config.fidelity == "full":
-            self._planner = World(dataclasses.replace(self.config, fidelity="fast", simplify_paths=True), seed)
+            self._predictor = World(dataclasses.replace(self.config, fidelity="fast", simplify_paths=True), seed,
+                                    motion_seeds=self.motion_seeds)
+
+    @property
+    def observer(self) -> WorldObserver:
+        """Who is told what happens; a `WorldObserver` that ignores it all when nobody watches."""
+        return self._observer
+
+    @observer.setter
+    def observer(self, observer: WorldObserver | None) -> None:
+        self._observer = observer if observer is not None else WorldObserver()
 
     # --- scenes ------------------------------------------------------------------------------
     def reset(self, n_objects: int | None = None, X: np.ndarray | None = None, seed: int | None = None) -> np.ndarray:
@@ -61,8 +97,7 @@ class World:
             raise ValueError("reset takes exactly one of n_objects or X")
         if seed is not None:
             self.rng = np.random.default_rng(seed)
-        self._motion_seed = int(self.rng.integers(2**31 - 1))
-        self._steps = 0
+        self.motion_seeds.restart(int(self.rng.integers(2**31 - 1)))
         if X is not None:
             types, positions = _parse_X(X)
         else:
@@ -75,17 +110,15 @@ class World:
         _, physics = self._layout(types)
         settled = physics.settle(scene.X_WB)
         self.scene = Scene(types, settled.X_WB)
-        if self.timeline is not None:
-            self.timeline.start(self.scene, self.q)
+        self.observer.scene_started(self.scene, self.q)
         return self.scene.X()
 
     def set_scene(self, scene: Scene, q: np.ndarray, motion_seed: int | None = None) -> None:
         """Continue from an exact simulator state (block poses with orientation, arm joints); with
         `motion_seed` the motion plans from here depend on that seed alone, as after `reset(seed=...)`."""
         if motion_seed is not None:
-            self._motion_seed, self._steps = int(motion_seed), 0
-        if self.timeline is not None:
-            self.timeline.start(scene, q)
+            self.motion_seeds.restart(motion_seed)
+        self.observer.scene_started(scene, q)
         self.scene = Scene(np.array(scene.types), list(scene.X_WB))
         self.q = np.array(q, dtype=float)
 
@@ -142,13 +175,11 @@ class World:
         Model's prediction."""
         scene = self._require_scene()
         action = validate_action(action, scene.n)
-        if self._planner is not None:
+        if self._predictor is not None:
             if not settle:
                 raise ValueError("settle=False plans without physics; it needs the fast world")
             return self._step_full(action)
-        self._steps += 1
-        if self.timeline is not None:
-            self.timeline.mark_action()
+        self.motion_seeds.step += 1
         info = StepInfo(action)
         t_start = time.perf_counter()
         planner, physics = self._layout(scene.types)
@@ -157,7 +188,7 @@ class World:
 
         # Approach: jaws open over the grasp point, then down to it.
         approach = approach_poses(scene, action, self.config)
-        X_grasp = dict(approach)["grasp"]
+        X_WGrasp = dict(approach)["grasp"]
         qs = self._solve_ik(approach, info)
         if qs is None:
             return self._unchanged(info, t_start)
@@ -167,7 +198,7 @@ class World:
             return self._unchanged(info, t_start, t_motion)
         info.timings["motion"] = time.perf_counter() - t_motion
 
-        held = held_block(scene, X_grasp)
+        held = held_block(scene, X_WGrasp)
         info.grasped = held
         if held < 0:
             info.status, info.reason = "nothing_grasped", "the jaws closed on nothing at the grasp point"
@@ -184,7 +215,7 @@ class World:
         planner.set_block_poses(scene.X_WB, parked=tuple(wp.carried))
         ok = self._plan(planner, [("liftoff", qs["grasp"], qs["liftoff"])], info, paths)
         sizes = [BLOCK_SIZES[int(scene.types[c])] for c in wp.carried]
-        planner.attach(list(zip(sizes, [X_FlangeTcp @ X for X in wp.X_GC])))
+        planner.attach(list(zip(sizes, [X_FlangeTcp @ X_GC for X_GC in wp.X_GC])))
         carry = [("lift", qs["liftoff"], qs["lift"]), ("transfer", qs["lift"], qs["preplace"]),
                  ("lower", qs["preplace"], qs["place"])]
         ok = ok and self._plan(planner, carry, info, paths)
@@ -194,24 +225,24 @@ class World:
             return self._unchanged(info, t_start)
 
         # Execute: carry kinematically, release, let physics decide.
-        X_release = list(scene.X_WB)
+        X_WB_release = list(scene.X_WB)
         for c, X_GC in zip(wp.carried, wp.X_GC):
-            X_release[c] = wp.place @ X_GC
-        info.X_release = Scene(scene.types, X_release).X()
-        if self.timeline is not None:
-            self.timeline.add_motions([paths[m] for m in ("approach", "descend")], scene.X_WB, None)
-            self.timeline.add_motions([paths[m] for m in ("liftoff", "lift", "transfer", "lower")], scene.X_WB, (wp.carried, wp.X_GC))
+            X_WB_release[c] = wp.place @ X_GC
+        info.X_release = Scene(scene.types, X_WB_release).X()
+        self.observer.action_started()
+        self.observer.motions_executed([paths[m] for m in ("approach", "descend")], scene.X_WB, None)
+        self.observer.motions_executed([paths[m] for m in ("liftoff", "lift", "transfer", "lower")], scene.X_WB,
+                                       Carried(wp.carried, wp.X_GC))
         if settle:
             t_physics = time.perf_counter()
-            record = [] if self.timeline is not None else None
-            settled = physics.settle(X_release, record)
+            record: list[tuple[float, list[RigidTransform]]] = []
+            settled = physics.settle(X_WB_release, record)
             info.timings["physics"] = time.perf_counter() - t_physics
             info.settle_time, info.settled = settled.time, settled.settled
-            if self.timeline is not None:
-                self.timeline.add_physics(record, qs["place"])
+            self.observer.physics_frames([PhysicsFrame(t, qs["place"], X_WB) for t, X_WB in record])
             self.scene = Scene(scene.types, settled.X_WB)
         else:
-            self.scene = Scene(scene.types, X_release)
+            self.scene = Scene(scene.types, X_WB_release)
 
         # Retreat straight up with open jaws. The jaws opened around the released blocks, and any
         # block that moved while settling may lean on them: those are not obstacles to lifting away.
@@ -219,7 +250,7 @@ class World:
         moved = [k for k in range(scene.n) if k in wp.carried
                  or np.linalg.norm(self.scene.X_WB[k].translation() - scene.X_WB[k].translation()) > 1e-3]
         planner.set_block_poses(self.scene.X_WB, parked=tuple(moved))
-        seed = self._motion_seed_for("retreat")
+        seed = self.motion_seeds.of("retreat")
         retreat = planner.plan(qs["place"], qs["retreat"], self.config.planning_time,
                                direct=self.config.direct_motions, simplify=self.config.simplify_paths, seed=seed,
                                max_checks=self.config.planning_checks)
@@ -227,8 +258,7 @@ class World:
         if retreat.path is not None:
             paths["retreat"] = retreat.path
             self.q = qs["retreat"]
-            if self.timeline is not None:
-                self.timeline.add_motions([paths["retreat"]], self.scene.X_WB, None)
+            self.observer.motions_executed([paths["retreat"]], self.scene.X_WB, None)
         else:
             # The blocks have moved; the arm cannot leave without disturbing them. It is taken
             # home (a reset of the arm alone) so that the next action starts collision-free.
@@ -242,15 +272,13 @@ class World:
         return self.scene.X(), info
 
     def _step_full(self, action: PickPlace) -> tuple[np.ndarray, StepInfo]:
-        """Plan and predict with the fast world, then execute the timed trajectory under physics."""
-        from tamp.sim.execute import Executor
+        """Plan and predict with the fast world (which takes the step's motion seeds from the shared
+        `motion_seeds`), then execute the timed trajectory under physics."""
         from tamp.sim.trajectory import RefinedPlan, refined_action
 
         scene, q = self.scene, self.q.copy()
-        self._planner._motion_seed, self._planner._steps = self._motion_seed, self._steps
-        self._steps += 1
-        self._planner.set_scene(scene, q)
-        X_predicted, info = self._planner.step(action)
+        self._predictor.set_scene(scene, q)
+        X_predicted, info = self._predictor.step(action)
         info.X_predicted = X_predicted
         if info.status == "ok" and not info.motion_success.get("retreat", False):
             info.status = "motion_failure"  # no trajectory without a way out: nothing is executed
@@ -259,19 +287,28 @@ class World:
         t0 = time.perf_counter()
         step = refined_action(action, info, scene.X(), X_predicted, q)
         plan = RefinedPlan(scene.X(), [action], scene_init=scene, q_init=q, steps=[step])
-        result = Executor(plan, self.config).run(self.timeline)
+        result = self._executor(scene.types).run(plan, self.observer)
         self.scene, self.q = result.scene, step.q["retreat"].copy()
         info.execution = result.log[0]
         info.timings["execute"] = time.perf_counter() - t0
         info.timings["total"] += info.timings["execute"]
         return self.scene.X(), info
 
+    def _executor(self, types: np.ndarray) -> Executor:
+        """The full fidelity's executor (Drake diagram) of a block layout, built once."""
+        from tamp.sim.execute import Executor
+
+        key = tuple(int(t) for t in types)
+        if key not in self._executors:
+            self._executors[key] = Executor(types, self.config)
+        return self._executors[key]
+
     def _solve_ik(self, waypoints, info: StepInfo, q_start=None, skip=(), known=None) -> dict | None:
         t0 = time.perf_counter()
         planner, _ = self._layout(self.scene.types)
-        todo = [(name, X) for name, X in waypoints if name not in skip]
+        todo = [(name, X_WG) for name, X_WG in waypoints if name not in skip]
         found, failed = solve_chain(todo, self.q if q_start is None else q_start,
-                                    lambda X, q_ref: self._numerical_ik(planner, X, q_ref))
+                                    lambda X_WG, q_ref: self._numerical_ik(planner, X_WG, q_ref))
         qs = {**(known or {}), **found}
         for name in found:
             info.ik_success[name] = True
@@ -292,7 +329,7 @@ class World:
     def _plan(self, planner: MotionPlanner, motions, info: StepInfo, paths: dict) -> bool:
         for name, q_a, q_b in motions:
             result = planner.plan(q_a, q_b, self.config.planning_time, direct=self.config.direct_motions,
-                                  simplify=self.config.simplify_paths, seed=self._motion_seed_for(name),
+                                  simplify=self.config.simplify_paths, seed=self.motion_seeds.of(name),
                                   max_checks=self.config.planning_checks)
             info.motion_success[name] = result.path is not None
             if result.path is None:
@@ -301,10 +338,6 @@ class World:
                 return False
             paths[name] = result.path
         return True
-
-    def _motion_seed_for(self, motion: str) -> int:
-        """RRTConnect's seed for one motion: a function of the scene seed, step and motion only."""
-        return (self._motion_seed * 1_000_003 + self._steps * 16 + MOTIONS.index(motion)) % (2**31 - 1)
 
     def _unchanged(self, info: StepInfo, t_start: float, t_motion: float | None = None) -> tuple[np.ndarray, StepInfo]:
         if t_motion is not None:
