@@ -111,7 +111,7 @@ def test_grasp_blocked_by_a_block_on_top_changes_nothing(world):
 
 
 def test_block_resting_on_the_picked_bar_is_carried_along(world):
-    X0 = world.reset(X=scene(((0.6, 0.1, 0.025), SMALL), ((0.7, -0.15, 0.025), LARGE), ((0.5, -0.2, 0.025), LARGE)))
+    world.reset(X=scene(((0.6, 0.1, 0.025), SMALL), ((0.7, -0.15, 0.025), LARGE), ((0.5, -0.2, 0.025), LARGE)))
     X1, _ = world.step(PickPlace(0, 0, 1, -1))  # cube on the bar's -y end
     X2, info = world.step(PickPlace(1, 1, 2, 0))  # bar held at its +y end onto the other bar
     assert info.status == "ok" and info.carried == [1, 0]

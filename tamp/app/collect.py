@@ -33,7 +33,7 @@ from tamp.app.parallel import BACKENDS, import_ray, run_tasks
 from tamp.errors import UserError
 from tamp.planning.validate import MAX_OBJECTS
 from tamp.records import exclusive, package_versions
-from tamp.sim.structs import STATUSES, WorldConfig
+from tamp.sim.structs import STATUSES, StepStatus, WorldConfig
 
 STATUS_CODES = {name: code for code, name in enumerate(STATUSES)}
 LOCK_NAME = ".collect.lock"
@@ -154,7 +154,7 @@ def run_scene(world, task: SceneTask) -> SceneResult:
         Xs.append(X)
         As.append(tuple(action))
         Xn.append(X_next)
-        G.append(info.grasped if info.status == "ok" else -1)
+        G.append(info.grasped if info.status == StepStatus.OK else -1)
         S.append(STATUS_CODES[info.status])
         X = X_next
     return SceneResult(task.k, np.array(Xs), np.array(As, np.int64), np.array(Xn),

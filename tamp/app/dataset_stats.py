@@ -25,7 +25,7 @@ import numpy as np
 
 from tamp.errors import UserError
 from tamp.planning.structs import BLOCK_SIZES, LARGE, SMALL
-from tamp.sim.structs import STATUSES
+from tamp.sim.structs import STATUSES, StepStatus
 
 MOVE_TOL = 0.01  # metres: an object moved if its centre moved more than this
 LEVEL_TOL = 0.01  # metres: height tolerance of a flat stack level
@@ -33,7 +33,7 @@ HEIGHT = 0.05  # metres: every block is 5 cm tall
 # Rotation-invariant reach of a footprint: half its diagonal (metres).
 REACH = {t: float(np.hypot(*BLOCK_SIZES[t][:2]) / 2) for t in (SMALL, LARGE)}
 CLASSES = ("moved", "stacked", "toppled", "unchanged")
-OUTCOMES = CLASSES + tuple(s for s in STATUSES if s != "ok")
+SAMPLE_OUTCOMES = CLASSES + tuple(s for s in STATUSES if s != StepStatus.OK)  # of one transition
 
 
 def resting_flat(X: np.ndarray, mask: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -75,7 +75,7 @@ class DatasetStats:
     directory: Path
     meta: dict
     n: np.ndarray  # (S,) object counts
-    outcome: np.ndarray  # (S,) outcome names (OUTCOMES)
+    outcome: np.ndarray  # (S,) outcome names (SAMPLE_OUTCOMES)
     displacement: np.ndarray  # (S,) metres: how far the grasped object moved (NaN if none)
     others_moved: np.ndarray  # (S,) bool: an object other than the grasped one moved > 1 cm
     skipped: list[str] = field(default_factory=list)  # "name: reason" of corrupt shards
@@ -143,7 +143,7 @@ class DatasetStats:
         ax1.legend()
         ns = np.unique(self.n)
         bottom = np.zeros(len(ns))
-        for outcome in OUTCOMES:
+        for outcome in SAMPLE_OUTCOMES:
             frac = np.array([(self.outcome[self.n == n] == outcome).mean() for n in ns])
             ax2.bar([str(n) for n in ns], frac, bottom=bottom, label=outcome)
             bottom += frac

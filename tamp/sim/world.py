@@ -27,7 +27,7 @@ from tamp.sim.physics import BlockPhysics
 from tamp.sim.plants import X_FlangeTcp, build_motion_scene, build_physics_scene
 from tamp.sim.skill import Scene, Waypoints, approach_poses, held_block, pick_place_waypoints, topdown
 from tamp.planning.structs import BLOCK_SIZES, LARGE, OFFSETS, SMALL, PickPlace
-from tamp.sim.structs import StepInfo, WorldConfig
+from tamp.sim.structs import StepInfo, StepStatus, WorldConfig
 from tamp.planning.validate import MAX_OBJECTS, check_scene
 
 if TYPE_CHECKING:
@@ -201,7 +201,7 @@ class World:
         held = held_block(scene, X_WGrasp)
         info.grasped = held
         if held < 0:
-            info.status, info.reason = "nothing_grasped", "the jaws closed on nothing at the grasp point"
+            info.status, info.reason = StepStatus.NOTHING_GRASPED, "the jaws closed on nothing at the grasp point"
             return self._unchanged(info, t_start)
 
         wp = pick_place_waypoints(scene, action, held, self.config)
@@ -280,9 +280,9 @@ class World:
         self._predictor.set_scene(scene, q)
         X_predicted, info = self._predictor.step(action)
         info.X_predicted = X_predicted
-        if info.status == "ok" and not info.motion_success.get("retreat", False):
-            info.status = "motion_failure"  # no trajectory without a way out: nothing is executed
-        if info.status != "ok":
+        if info.status == StepStatus.OK and not info.motion_success.get("retreat", False):
+            info.status = StepStatus.MOTION_FAILURE  # no trajectory without a way out: nothing is executed
+        if info.status != StepStatus.OK:
             return scene.X(), info
         t0 = time.perf_counter()
         step = refined_action(action, info, scene.X(), X_predicted, q)
@@ -315,7 +315,7 @@ class World:
         if failed is not None:
             info.ik_success[failed] = False
             p = dict(todo)[failed].translation()
-            info.status = "ik_failure"
+            info.status = StepStatus.IK_FAILURE
             info.reason = f"no IK solution for the {failed} pose at ({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) m"
         info.timings["ik"] = info.timings.get("ik", 0.0) + time.perf_counter() - t0
         return qs if failed is None else None
@@ -333,7 +333,7 @@ class World:
                                   max_checks=self.config.planning_checks)
             info.motion_success[name] = result.path is not None
             if result.path is None:
-                info.status = "motion_failure"
+                info.status = StepStatus.MOTION_FAILURE
                 info.reason = f"{name} motion: {result.reason}"
                 return False
             paths[name] = result.path
