@@ -8,6 +8,7 @@ from pathlib import Path
 from tamp.errors import UserError
 from tamp.app.cli import positive_int
 from evaluation.methods import SYMBOLIC_BACKENDS
+from tamp.app.parallel import add_arguments as add_parallel_arguments
 from tamp.app.plan_command import add_planner_arguments
 from tamp.app.problem import PROTOCOLS
 
@@ -56,7 +57,8 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     from tamp.app.plan_command import planner_config
 
     config = EvalConfig(planner=planner_config(args), fidelity=args.fidelity, workers=args.workers,
-                        backend=args.backend, oracle_max_plans=args.oracle_max_plans, progress=not args.quiet)
+                        backend=args.backend, address=args.address, oracle_max_plans=args.oracle_max_plans,
+                        progress=not args.quiet)
     rows_path = evaluate(args.models, args.problems, args.out, args.methods, config)
     rows = read_rows(rows_path)
     print(f"{len(rows)} rows in {rows_path}: {sum(r['success'] for r in rows)} successes")
@@ -131,9 +133,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--methods", type=_name_list, default=None, help="comma-separated methods (default: all available)")
     p.add_argument("--fidelity", choices=("fast", "full"), default="fast",
                    help="execute in the fast world (default) or with the arm under physics")
-    p.add_argument("--workers", type=positive_int, default=1, help="worker processes or Ray actors (default 1)")
-    p.add_argument("--backend", choices=("local", "ray"), default="local",
-                   help="local process pool (default) or Ray actors")
+    add_parallel_arguments(p, workers_default=1)
     add_planner_arguments(p, backends=SYMBOLIC_BACKENDS, feasibility=False)
     p.add_argument("--oracle-max-plans", type=positive_int, default=20,
                    help="probabilistic_oracle: ranked plans executed at most per problem (default 20)")

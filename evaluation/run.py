@@ -79,6 +79,7 @@ class EvalConfig:
     oracle_max_plans: int = 20  # probabilistic_oracle: ranked plans executed at most, per problem
     workers: int = 1  # worker processes or Ray actors
     backend: str = "local"  # "local" process pool or "ray"
+    address: str | None = None  # with backend "ray": the cluster to join (None: start a local one)
     progress: bool = True  # progress bar on stderr
 
     def __post_init__(self) -> None:
@@ -495,7 +496,7 @@ def evaluate(models_dir: str | Path, problems_path: str | Path, out_dir: str | P
                                              unit="row", disable=not config.progress, file=sys.stderr) as bar:
             if tasks:
                 rows_run = run_tasks(tasks, EvalWorker, (str(models_dir), methods, models, config),
-                                     workers=config.workers, backend=config.backend)
+                                     workers=config.workers, backend=config.backend, address=config.address)
                 for row in rows_run:
                     if row["outcome"] == ERROR_OUTCOME:
                         tqdm.write(f"warning: problem {row['problem']}, method {row['method']}: {row['error']}; "

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
+from tamp.app.parallel import add_arguments as add_parallel_arguments
 from tamp.errors import UserError, is_user_error
 
 
@@ -365,12 +366,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--objects", type=_object_counts, default=(2, 3, 4),
                    help="object counts drawn uniformly per scene, e.g. 2,3,4 (default)")
     p.add_argument("--out", type=Path, required=True, help="dataset directory (new, or the one to resume)")
-    p.add_argument("--workers", type=positive_int, default=None,
-                   help="worker processes or Ray actors (default: all CPUs, of the cluster with --address)")
-    p.add_argument("--backend", choices=("local", "ray"), default="local",
-                   help="local process pool (default) or Ray (optional extra: pip install ray)")
-    p.add_argument("--address", default=None,
-                   help="with --backend ray: join this Ray cluster (e.g. auto or HOST:6379) instead of starting one")
+    add_parallel_arguments(p)
     p.add_argument("--seed", type=int, default=0, help="dataset seed (default 0)")
     p.add_argument("--actions-per-scene", type=int, default=10, metavar="M",
                    help="chained random actions per scene (default 10)")

@@ -132,3 +132,17 @@ def _run_ray(tasks: Sequence[Any], make: Callable[..., Worker], args: tuple, wor
     finally:
         if started_here:
             ray.shutdown()
+
+
+def add_arguments(p, workers_default: int | None = None) -> None:
+    """--workers, --backend and --address, the same for collect, evaluate and reproduce."""
+    from tamp.app.cli import positive_int
+
+    default = "all CPUs, of the cluster with --address" if workers_default is None else str(workers_default)
+    p.add_argument("--workers", type=positive_int, default=workers_default,
+                   help=f"worker processes or Ray actors (default: {default})")
+    p.add_argument("--backend", choices=BACKENDS, default="local",
+                   help="local process pool (default) or Ray actors (optional extra: pip install 'bilevel-tamp[ray]')")
+    p.add_argument("--address", default=None,
+                   help="with --backend ray: join this Ray cluster (e.g. auto or HOST:6379; every node needs this "
+                   "package installed) instead of starting a local one")
