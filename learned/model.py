@@ -83,6 +83,7 @@ class Bottleneck(nn.Module):
         if self.activation == "gumbel_sigmoid":
             if not self.training:
                 return (logits > 0).to(logits.dtype)
+            logits = logits.float()  # the noise in float32 also under bfloat16 autocast
             u = torch.rand_like(logits).clamp_(1e-6, 1 - 1e-6)
             return torch.sigmoid((logits + torch.log(u) - torch.log1p(-u)) / self.temperature)
         if self.activation == "sigmoid":
