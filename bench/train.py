@@ -4,7 +4,7 @@
     .venv/bin/python bench/train.py --data runs/quick/data --target-cm 2.0 --time-limit-min 10
 
 Before: the paper's settings (`TrainSettings.paper()`: batch 128, lr 1e-4, float32, one thread).
-After: `TrainSettings()` (batch 1024, lr scaled by sqrt(batch / 128), bfloat16 autocast where the
+After: `TrainSettings()` (batch 1024, lr scaled linearly to 8e-4, bfloat16 autocast where the
 CPU has native bfloat16, early stopping), at each of ``--threads``. Prints (1) training throughput
 (samples/s of `train_model`'s loop: forward, backward, Adam; median of ``--reps`` one-epoch runs)
 and the after/before ratio, (2) planner-side inference throughput (predict_effect over all 144

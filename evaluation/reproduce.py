@@ -83,7 +83,7 @@ SCALES: dict[str, Scale] = {
                    per_cell=10, search_time_limit_s=10.0),
     # to convergence (patience 100 epochs, at most the paper's 4000) at the fast settings of issue 19
     "paper": Scale(samples=160_000, epochs=4000, train_time_limit_s=None, ablation_runs=10, ablation_epochs=4000,
-                   per_cell=100, search_time_limit_s=60.0, batch_size=1024, lr=2.83e-4, precision="bfloat16",
+                   per_cell=100, search_time_limit_s=60.0, batch_size=1024, lr=8e-4, precision="bfloat16",
                    patience_epochs=100),
 }
 

@@ -430,7 +430,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--batch-size", type=positive_int, default=1024,
                    help="Adam batch size (default 1024; the paper's: 128)")
     p.add_argument("--lr", type=positive_float, default=None,
-                   help="learning rate (default 1e-4 * sqrt(batch size / 128); the paper's: 1e-4 at batch 128)")
+                   help="Adam learning rate (default 1e-4 * batch size / 128; the paper's: 1e-4 at batch 128)")
     p.add_argument("--patience", type=non_negative_int, default=TRAIN_PATIENCE, metavar="EPOCHS",
                    help=f"stop once the validation error has not improved for this many epochs (default "
                    f"{TRAIN_PATIENCE}; 0: train all --epochs)")

@@ -180,8 +180,8 @@ def test_a_time_limited_run_is_unfinished_and_resumes_to_the_one_sitting_result(
 def test_train_settings_scale_the_learning_rate_with_the_batch():
     from learned.train import PAPER_LR, TrainSettings, scaled_lr
 
-    assert scaled_lr(128) == PAPER_LR and scaled_lr(512) == pytest.approx(2 * PAPER_LR)
-    assert TrainSettings(batch_size=512).resolved().lr == pytest.approx(2e-4)
+    assert scaled_lr(128) == PAPER_LR and scaled_lr(1024) == pytest.approx(8 * PAPER_LR)
+    assert TrainSettings(batch_size=512).resolved().lr == pytest.approx(4e-4)
     assert TrainSettings(batch_size=512, lr=1e-3).kwargs()["lr"] == 1e-3
     paper = TrainSettings.paper().kwargs()
     assert (paper["batch_size"], paper["lr"], paper["precision"], paper["patience_epochs"]) == (128, 1e-4, "float32",
