@@ -79,9 +79,12 @@ class Scale:
 
 
 SCALES: dict[str, Scale] = {
+    # the paper's training settings, 250 epochs: what the bundled models were made with (tamp/pretrained), and
+    # existing quick OUTs stay resumable; the fast settings would do better here (learned/README.md, training)
     "quick": Scale(samples=40_000, epochs=250, train_time_limit_s=None, ablation_runs=2, ablation_epochs=15,
                    per_cell=10, search_time_limit_s=10.0),
     # to convergence (patience 100 epochs, at most the paper's 4000) at the fast settings of issue 19
+    # (learned.train.TrainSettings: batch 1024, lr 1e-4 scaled linearly, bfloat16 autocast)
     "paper": Scale(samples=160_000, epochs=4000, train_time_limit_s=None, ablation_runs=10, ablation_epochs=4000,
                    per_cell=100, search_time_limit_s=60.0, batch_size=1024, lr=8e-4, precision="bfloat16",
                    patience_epochs=100),
