@@ -186,10 +186,14 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def cmd_reproduce(args: argparse.Namespace) -> int:
     """Every stage of the paper's experiments, resumable."""
-    from evaluation.reproduce import reproduce
+    from evaluation.reproduce import TrainingUnfinished, reproduce
 
-    report = reproduce(args.out, args.scale, workers=args.workers, backend=args.backend, fidelity=args.fidelity,
-                       protocol=args.protocol, runs=args.runs, models=args.models,
-                       symbolic_backend=args.symbolic_backend)
+    try:
+        report = reproduce(args.out, args.scale, workers=args.workers, backend=args.backend, fidelity=args.fidelity,
+                           protocol=args.protocol, runs=args.runs, models=args.models,
+                           symbolic_backend=args.symbolic_backend)
+    except TrainingUnfinished as e:
+        print(f"unfinished: {e}", file=sys.stderr)
+        return 3
     print(f"report written to {report}")
     return 0

@@ -32,6 +32,15 @@ def save_checkpoint(path: str | Path, model: EffectModel, train_state: dict[str,
     atomic_write_bytes(Path(path), lambda f: f.write(buf.getbuffer()))
 
 
+def update_train_state(path: str | Path, info: dict[str, Any]) -> None:
+    """Atomically merge ``info`` into the training state of the checkpoint at ``path``."""
+    payload = read_checkpoint(path)
+    payload["train"] = {**payload.get("train", {}), **info}
+    buf = io.BytesIO()
+    torch.save(payload, buf)
+    atomic_write_bytes(Path(path), lambda f: f.write(buf.getbuffer()))
+
+
 def read_checkpoint(path: str | Path) -> dict[str, Any]:
     """Load a checkpoint payload safely; ValueError (with the path) if it is not one of ours."""
     path = Path(path)

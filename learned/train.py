@@ -8,23 +8,102 @@ known exactly). The zero-effect baseline (predict X' = X) is reported next to it
 
 Files: ``out_path`` holds the best model by validation error; ``<out>.last.pt`` holds the
 latest epoch with optimizer and RNG state, which ``resume=True`` continues from exactly.
+
+Speed (issue 19). The paper's settings (batch 128, lr 1e-4, float32) spend nearly all their time
+in matrix products that already run near one core's float32 peak, so the levers are fewer
+cheaper flops and fewer steps: ``precision="bfloat16"`` runs the forward and backward passes under
+bfloat16 autocast (weights, Adam state, loss and validation stay float32), about 3x the samples/s
+on a CPU with AVX512-BF16 or AMX (slower elsewhere: `bf16_fast`); larger batches
+(`TrainSettings`, batch 1024) feed bigger matrix products, with the learning rate scaled
+linearly from the paper's 1e-4 at batch 128 (`scaled_lr`: 8e-4 at 1024). On the quick-scale data
+the linear scaling kept the error per epoch of batch 128 (so the time to an error falls with the
+samples/s), while square-root scaling (2.8e-4) needed ~2.5x the epochs and the unscaled 1e-4 more
+still; figures in learned/README.md (training). The epoch's permutation is applied once
+(contiguous slices per step), and running statistics stay tensors until the epoch ends.
+
+Stopping. ``epochs`` is a maximum; with ``patience_epochs`` training stops once the validation
+error has not improved by ``min_delta_cm`` for that many epochs ("converged"). Why a run stopped
+is a `StopReason`, kept in the result, in both checkpoints and on the last history record. Only
+``time_limit_s`` depends on the machine: such a run is ``finished == False`` and resuming it gives
+what one sitting would have; resuming a finished run returns its result without training.
 """
 from __future__ import annotations
 
 import copy
+import math
 import time
 from dataclasses import dataclass, field
+from enum import Enum
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 import torch
 from tqdm.auto import tqdm
 
-from .checkpoint import model_from_payload, read_checkpoint, save_checkpoint
+from .checkpoint import model_from_payload, read_checkpoint, save_checkpoint, update_train_state
 from .dataset import Transitions, load_transitions
 from .effects import arm_displacement, effect_targets, moved_picks
 from .model import EffectModel, ModelConfig
+
+Precision = Literal["float32", "bfloat16"]
+PAPER_BATCH, PAPER_LR = 128, 1e-4
+"""The paper's (and the bundled models') Adam batch size and learning rate."""
+
+
+class StopReason(str, Enum):
+    """Why training stopped. All but TIME_LIMIT are properties of the data and settings alone."""
+    CONVERGED = "converged"            # no validation improvement for patience_epochs
+    MAX_EPOCHS = "max_epochs"          # ``epochs`` reached
+    TARGET_REACHED = "target_reached"  # validation error <= target_val_cm
+    MAX_STEPS = "max_steps"            # ``max_steps`` optimizer steps taken
+    TIME_LIMIT = "time_limit"          # wall-clock cap: unfinished, resume to finish
+
+
+def scaled_lr(batch_size: int, base_lr: float = PAPER_LR, base_batch: int = PAPER_BATCH) -> float:
+    """Adam learning rate for ``batch_size``: ``base_lr * batch_size / base_batch`` (linear scaling).
+
+    Measured on the quick-scale data at batch 1024: linear (8e-4) matched batch 128's validation
+    error per epoch; square root (2.8e-4) and none (1e-4) fell behind (learned/README.md).
+    """
+    return base_lr * batch_size / base_batch
+
+
+def bf16_fast() -> bool:
+    """Whether this CPU multiplies bfloat16 natively (AVX512-BF16 or AMX), so autocast pays."""
+    try:
+        flags = Path("/proc/cpuinfo").read_text()
+    except OSError:
+        return False
+    return torch.backends.mkldnn.is_available() and any(f in flags for f in (" avx512_bf16", " amx_bf16"))
+
+
+@dataclass(frozen=True)
+class TrainSettings:
+    """Optimisation settings (not the architecture). Defaults: the fast ones of issue 19;
+    `TrainSettings.paper()` is the paper's / the bundled models' (batch 128, lr 1e-4, float32)."""
+    batch_size: int = 1024
+    lr: float | None = None          # None: scaled_lr(batch_size)
+    precision: Precision | None = None  # None: bfloat16 where bf16_fast(), else float32
+    threads: int = 1                 # 2 paid only on an idle machine (see learned/README.md)
+    patience_epochs: int | None = 100
+    min_delta_cm: float = 0.0
+
+    @classmethod
+    def paper(cls) -> "TrainSettings":
+        return cls(batch_size=PAPER_BATCH, lr=PAPER_LR, precision="float32", patience_epochs=None)
+
+    def resolved(self) -> "TrainSettings":
+        """The same settings with ``lr`` and ``precision`` made explicit for this machine."""
+        return TrainSettings(self.batch_size, scaled_lr(self.batch_size) if self.lr is None else self.lr,
+                             self.precision or ("bfloat16" if bf16_fast() else "float32"), self.threads,
+                             self.patience_epochs, self.min_delta_cm)
+
+    def kwargs(self) -> dict[str, Any]:
+        """Keyword arguments of `train_model`."""
+        r = self.resolved()
+        return {"batch_size": r.batch_size, "lr": r.lr, "precision": r.precision, "threads": r.threads,
+                "patience_epochs": r.patience_epochs, "min_delta_cm": r.min_delta_cm}
 
 
 @dataclass
@@ -34,8 +113,15 @@ class TrainResult:
     best_epoch: int
     steps: int                    # optimizer steps taken in total (including resumed ones)
     samples_per_s: float          # training throughput of this call (forward + backward)
-    history: list[dict[str, float]] = field(default_factory=list)
+    history: list[dict[str, Any]] = field(default_factory=list)
     out_path: Path | None = None
+    stop_reason: StopReason = StopReason.MAX_EPOCHS
+    epochs_reached: int = 0       # epochs trained in total (including resumed ones)
+
+    @property
+    def finished(self) -> bool:
+        """False when a wall-clock cap stopped the run: resume it for the result."""
+        return self.stop_reason is not StopReason.TIME_LIMIT
 
 
 def last_path(out_path: str | Path) -> Path:
@@ -105,24 +191,47 @@ def evaluate(model: EffectModel, data: "Transitions | dict[str, torch.Tensor]",
             "loss": sq / N / float(model.effect_scale) ** 2}
 
 
+class _Plateau:
+    """Early-stopping bookkeeping: the epoch of the last improvement by more than ``min_delta_cm``
+    over the error at the previous such improvement (rebuilt from the history on resume)."""
+
+    def __init__(self, min_delta_cm: float, history: list[dict[str, Any]]) -> None:
+        self.min_delta_cm, self.ref_cm, self.epoch = min_delta_cm, math.inf, -1
+        for h in history:
+            self.update(h["epoch"], h["val_err_cm"])
+
+    def update(self, epoch: int, val_cm: float) -> None:
+        if val_cm < self.ref_cm - self.min_delta_cm:
+            self.ref_cm, self.epoch = val_cm, epoch
+
+
 def train_model(data: "str | Path | Transitions", config: ModelConfig | None = None,
                 epochs: int = 100, out_path: str | Path | None = None, *,
-                val_data: Transitions | None = None, batch_size: int = 128, lr: float = 1e-4,
+                val_data: Transitions | None = None, batch_size: int = PAPER_BATCH, lr: float = PAPER_LR,
                 val_fraction: float = 0.1, seed: int = 0, max_steps: int | None = None,
                 resume: bool = False, threads: int | None = None, progress: bool = True,
                 target_val_cm: float | None = None, time_limit_s: float | None = None,
-                only_moved: bool = False) -> TrainResult:
+                only_moved: bool = False, patience_epochs: int | None = None, min_delta_cm: float = 0.0,
+                precision: Precision = "float32") -> TrainResult:
     """Train an EffectModel on a dataset directory or in-memory Transitions.
 
     Validation data is ``val_data`` if given, else a seeded ``val_fraction`` split of ``data``.
     Validates after every epoch (and when ``max_steps`` stops training early), keeps the best
     model by validation effect error (written to ``out_path`` if given) and the latest state
     (``last_path(out_path)``). ``resume=True`` continues from the latest state up to ``epochs``.
-    Training also stops after the epoch in which the validation error reaches ``target_val_cm``
-    or the wall time of this call exceeds ``time_limit_s``; history records carry ``elapsed_s``.
+    Training stops (`StopReason`) after at most ``epochs`` epochs / ``max_steps`` steps, once the
+    validation error has not improved by ``min_delta_cm`` for ``patience_epochs`` epochs, once it
+    reaches ``target_val_cm``, or (unfinished) before an epoch that would start after
+    ``time_limit_s`` of this call's wall time (each call trains at least one epoch); history
+    records carry ``elapsed_s``.
     ``only_moved`` keeps the transitions that moved their picked block (`effects.moved_picks`),
     in training and validation alike: what the Symbolic Model learns its symbols from.
+    Defaults are the paper's settings; `TrainSettings().kwargs()` gives the fast ones.
     """
+    if precision not in ("float32", "bfloat16"):
+        raise ValueError(f"precision must be float32 or bfloat16, got {precision!r}")
+    if patience_epochs is not None and patience_epochs < 1:
+        raise ValueError(f"patience_epochs must be >= 1, got {patience_epochs}")
     if threads:
         torch.set_num_threads(threads)
     if not isinstance(data, Transitions):
@@ -141,8 +250,12 @@ def train_model(data: "str | Path | Transitions", config: ModelConfig | None = N
     config = config or ModelConfig(n_max=data.n_max)
     if data.n_max > config.n_max:
         raise ValueError(f"dataset n_max {data.n_max} exceeds model n_max {config.n_max}")
+    # Settings that change the result; the defaults are left out so that older runs stay resumable.
     options = {"batch_size": batch_size, "lr": lr, "val_fraction": val_fraction, "seed": seed,
-               "num_train": len(data), "num_val": len(val_data), **({"only_moved": True} if only_moved else {})}
+               "num_train": len(data), "num_val": len(val_data), **({"only_moved": True} if only_moved else {}),
+               **({"precision": precision} if precision != "float32" else {}),
+               **({"patience_epochs": patience_epochs, "min_delta_cm": min_delta_cm}
+                  if patience_epochs is not None else {})}
     tr, va = prepare(data), prepare(val_data)
 
     torch.manual_seed(seed)
@@ -168,7 +281,8 @@ def train_model(data: "str | Path | Transitions", config: ModelConfig | None = N
             model = model_from_payload(payload, lp).train()
             opt = torch.optim.Adam(model.parameters(), lr=lr)
             opt.load_state_dict(st["optimizer"])
-            epoch0, step, history = int(st["epoch"]) + 1, int(st["step"]), list(st["history"])
+            epoch0, step = int(st["epoch"]) + 1, int(st["step"])
+            history = [{k: v for k, v in h.items() if k != "stop_reason"} for h in st["history"]]
             torch.set_rng_state(st["rng"])
             best_payload = read_checkpoint(out_path)
             best = {"val_cm": float(st["best_val_cm"]), "epoch": int(st["best_epoch"]),
@@ -181,47 +295,61 @@ def train_model(data: "str | Path | Transitions", config: ModelConfig | None = N
     bar = tqdm(total=total, initial=min(step, total), disable=not progress, unit="step",
                dynamic_ncols=True)
     scale = float(model.effect_scale)
+    plateau = _Plateau(min_delta_cm, history)
     train_time, trained = 0.0, 0
     start = time.perf_counter()
     elapsed0 = history[-1]["elapsed_s"] if history else 0.0
-    for epoch in range(epoch0, epochs):
-        if max_steps is not None and step >= max_steps:
-            break
+    epoch = epoch0
+
+    def stop_reason() -> StopReason | None:
+        """Why not to train epoch ``epoch``. The wall-clock cap comes last, so that it never hides another
+        reason, and lets every call train an epoch, so that resuming time-limited calls always progresses."""
+        if patience_epochs is not None and plateau.epoch >= 0 and epoch - 1 - plateau.epoch >= patience_epochs:
+            return StopReason.CONVERGED
         if target_val_cm is not None and best["val_cm"] <= target_val_cm:
-            break
-        if time_limit_s is not None and time.perf_counter() - start > time_limit_s:
-            break
+            return StopReason.TARGET_REACHED
+        if max_steps is not None and step >= max_steps:
+            return StopReason.MAX_STEPS
+        if epoch >= epochs:
+            return StopReason.MAX_EPOCHS
+        if time_limit_s is not None and epoch > epoch0 and time.perf_counter() - start > time_limit_s:
+            return StopReason.TIME_LIMIT
+        return None
+
+    while (reason := stop_reason()) is None:
         perm = torch.randperm(N, generator=torch.Generator().manual_seed(seed * 100003 + epoch))
-        run_loss = run_err = run_n = run_b = 0.0
+        # One gather per epoch; the steps then slice contiguous views.
+        Xe, Ae, Me, Te = (tr[k][perm] for k in ("X", "action", "mask", "target"))
+        run_loss, run_err = torch.zeros((), dtype=torch.float64), torch.zeros((), dtype=torch.float64)
+        run_b = 0
         t0 = time.perf_counter()
         for s in range(0, N, batch_size):
-            idx = perm[s:s + batch_size]
-            M = tr["mask"][idx]
-            pred = model(tr["X"][idx], tr["action"][idx], M)
-            d = pred - tr["target"][idx]
+            X, A, M, T = Xe[s:s + batch_size], Ae[s:s + batch_size], Me[s:s + batch_size], Te[s:s + batch_size]
+            with torch.autocast("cpu", dtype=torch.bfloat16, enabled=precision == "bfloat16"):
+                pred = model(X, A, M)
+            d = pred.float() - T
             loss = (d / scale).pow(2).sum(dim=(1, 2)).mean()
             opt.zero_grad(set_to_none=True)
             loss.backward()
             opt.step()
             step += 1
-            trained += len(idx)
-            with torch.no_grad():
-                run_loss += loss.item() * len(idx)
-                run_b += len(idx)
-                run_err += d.norm(dim=-1)[M].sum().item() * 100
-                run_n += int(M.sum())
+            n = X.shape[0]
+            trained += n
+            with torch.no_grad():  # running sums stay tensors: read once per epoch
+                run_loss += loss.detach() * n
+                run_err += d.detach().norm(dim=-1).mul(M).sum()
+            run_b += n
             bar.update(1)
-            if step % 20 == 0:
-                bar.set_postfix(epoch=epoch, loss=f"{run_loss / run_b:.4f}",
-                                err_cm=f"{run_err / run_n:.2f}", best_val_cm=f"{best['val_cm']:.2f}")
             if max_steps is not None and step >= max_steps:
                 break
         train_time += time.perf_counter() - t0
+        run_n = int(Me[:run_b].sum())  # real objects trained on this epoch
         val = evaluate(model, va)
-        rec = {"epoch": epoch, "step": step, "train_err_cm": run_err / max(run_n, 1),
+        rec = {"epoch": epoch, "step": step, "train_err_cm": 100 * float(run_err) / max(run_n, 1),
                "val_err_cm": val["err_cm"], "val_zero_cm": val["zero_cm"], "val_loss": val["loss"],
                "elapsed_s": elapsed0 + time.perf_counter() - start}
         history.append(rec)
+        plateau.update(epoch, val["err_cm"])
         if val["err_cm"] < best["val_cm"]:
             best = {"val_cm": val["err_cm"], "epoch": epoch,
                     "state": copy.deepcopy(model.state_dict())}
@@ -233,14 +361,25 @@ def train_model(data: "str | Path | Transitions", config: ModelConfig | None = N
                 "kind": "last", "epoch": epoch, "step": step, "options": options,
                 "optimizer": opt.state_dict(), "rng": torch.get_rng_state(),
                 "best_val_cm": best["val_cm"], "best_epoch": best["epoch"], "history": history})
-        bar.set_postfix(epoch=epoch, val_cm=f"{val['err_cm']:.2f}", best_val_cm=f"{best['val_cm']:.2f}",
-                        zero_cm=f"{val['zero_cm']:.2f}")
+        bar.set_postfix(epoch=epoch, loss=f"{float(run_loss) / max(run_b, 1):.4f}", val_cm=f"{val['err_cm']:.2f}",
+                        best_val_cm=f"{best['val_cm']:.2f}", zero_cm=f"{val['zero_cm']:.2f}")
+        epoch += 1
     bar.close()
 
-    final = EffectModel(config)
     if best["state"] is None:
         raise ValueError("no training epoch ran (epochs already reached?)")
+    epochs_reached = len(history)
+    stop = {"stop_reason": reason.value, "finished": reason is not StopReason.TIME_LIMIT,
+            "epochs_reached": epochs_reached}
+    if history:
+        history[-1]["stop_reason"] = reason.value
+    if out_path is not None:
+        update_train_state(out_path, stop)
+        if last_path(out_path).exists():
+            update_train_state(last_path(out_path), {**stop, "history": history})
+    final = EffectModel(config)
     final.load_state_dict(best["state"])
     return TrainResult(model=final.eval(), best_val_cm=best["val_cm"], best_epoch=best["epoch"],
                        steps=step, samples_per_s=trained / train_time if train_time else 0.0,
-                       history=history, out_path=Path(out_path) if out_path else None)
+                       history=history, out_path=Path(out_path) if out_path else None,
+                       stop_reason=reason, epochs_reached=epochs_reached)

@@ -46,3 +46,36 @@ def test_domain_with_a_corrupt_model_is_a_clear_error(tiny_dataset, tmp_path, ca
     bad.write_bytes(b"not a checkpoint")
     assert main(["domain", "--model", str(bad), "--data", str(tiny_dataset), "--out", str(tmp_path / "d")]) == 2
     assert "bad.pt" in capsys.readouterr().err
+
+
+def test_train_defaults_match_the_train_settings():
+    """tamp/cli.py spells the fast training defaults out (no torch import for --help); they must agree."""
+    from learned.train import TrainSettings
+    from tamp.cli import TRAIN_PATIENCE, build_parser
+
+    args = build_parser().parse_args(["train", "--data", "d", "--out", "m.pt"])
+    s = TrainSettings()
+    assert (args.batch_size, args.lr, args.precision, args.patience) == (s.batch_size, s.lr, s.precision,
+                                                                        s.patience_epochs) == (1024, None, None,
+                                                                                               TRAIN_PATIENCE)
+
+
+def test_train_prints_why_it_stopped_and_resumes_a_time_limited_run(tiny_dataset, tmp_path, capsys):
+    model = tmp_path / "m.pt"
+    base = ["train", "--data", str(tiny_dataset), "--out", str(model), "--epochs", "3", "--batch-size", "64",
+            "--lr", "1e-3", "--patience", "5", "--precision", "float32"]
+    assert main(base + ["--time-limit-min", "1e-9"]) == 0
+    out = capsys.readouterr().out
+    assert "stopped: time_limit after 1 epochs (batch 64, lr 0.001, float32)" in out and "--resume" in out
+    assert main(base + ["--resume"]) == 0
+    assert "stopped: max_epochs after 3 epochs" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("flag,value", [("--batch-size", "0"), ("--lr", "-1"), ("--lr", "nan"), ("--patience", "-2"),
+                                        ("--precision", "float16"), ("--time-limit-min", "0")])
+def test_train_bad_settings_are_one_line_errors(tmp_path, capsys, flag, value):
+    with pytest.raises(SystemExit) as e:
+        main(["train", "--data", str(tmp_path), "--out", str(tmp_path / "m.pt"), flag, value])
+    assert e.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert flag in err[-1] and "Traceback" not in "\n".join(err)

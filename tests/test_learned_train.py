@@ -107,3 +107,84 @@ def test_only_moved_trains_on_the_transitions_that_moved_the_picked_block(tmp_pa
     options = torch.load(tmp_path / "m.pt", weights_only=True)["train"]["options"]
     assert options["only_moved"] and options["num_train"] + options["num_val"] == moved.sum()
     assert res.best_epoch == 0
+
+
+TINY = ModelConfig(hidden=16, d_msg=8, d_z=4, heads=2, activation="gumbel_sigmoid")
+
+
+def _same_weights(a, b):
+    sa, sb = a.model.state_dict(), b.model.state_dict()
+    return sa.keys() == sb.keys() and all(torch.equal(sa[k], sb[k]) for k in sa)
+
+
+@pytest.mark.parametrize("precision", ["float32", "bfloat16"])
+def test_k_epochs_then_resume_equals_one_sitting(tmp_path, precision):
+    """Fast settings (bfloat16 autocast, early stopping armed): N epochs in one call == k, then resume to N."""
+    data = generate(400, seed=6)
+    kw = dict(batch_size=64, lr=3e-3, seed=2, progress=False, precision=precision, patience_epochs=50,
+              min_delta_cm=0.01, threads=1)
+    straight = train_model(data, TINY, 6, tmp_path / "a.pt", **kw)
+    first = train_model(data, TINY, 3, tmp_path / "b.pt", **kw)
+    assert first.stop_reason.value == "max_epochs" and first.epochs_reached == 3 and first.finished
+    resumed = train_model(data, TINY, 6, tmp_path / "b.pt", resume=True, **kw)
+    assert resumed.best_val_cm == straight.best_val_cm and resumed.best_epoch == straight.best_epoch
+    assert resumed.epochs_reached == straight.epochs_reached == 6 and resumed.steps == straight.steps
+    assert _same_weights(resumed, straight)
+    untimed = lambda hist: [{k: v for k, v in h.items() if k != "elapsed_s"} for h in hist]
+    assert untimed(resumed.history) == untimed(straight.history)
+    assert [h.get("stop_reason") for h in resumed.history] == [None] * 5 + ["max_epochs"]
+    with pytest.raises(ValueError, match="different config/options"):  # the precision is part of the result
+        train_model(data, TINY, 8, tmp_path / "b.pt", resume=True,
+                    **{**kw, "precision": "bfloat16" if precision == "float32" else "float32"})
+
+
+def test_early_stopping_stops_on_a_plateau_and_resuming_it_is_a_no_op(tmp_path):
+    """With a min_delta the tiny set cannot keep beating, training stops `patience` epochs after the last
+    improvement; the reason is in the result, both checkpoints and the history; a resume trains nothing."""
+    data = generate(300, seed=7)
+    kw = dict(batch_size=64, lr=1e-3, seed=0, progress=False, patience_epochs=3, min_delta_cm=0.5, threads=1)
+    res = train_model(data, TINY, 200, tmp_path / "m.pt", **kw)
+    assert res.stop_reason.value == "converged" and res.finished and res.epochs_reached < 200
+    vals = [h["val_err_cm"] for h in res.history]
+    ref, last = float("inf"), -1  # the last epoch that beat the previous such one by min_delta
+    for e, v in enumerate(vals):
+        if v < ref - 0.5:
+            ref, last = v, e
+    assert res.epochs_reached - 1 - last == 3
+    assert res.history[-1]["stop_reason"] == "converged" and res.best_val_cm == min(vals)
+    for path in (tmp_path / "m.pt", last_path(tmp_path / "m.pt")):
+        st = torch.load(path, weights_only=True)["train"]
+        assert (st["stop_reason"], st["finished"], st["epochs_reached"]) == ("converged", True, res.epochs_reached)
+    again = train_model(data, TINY, 400, tmp_path / "m.pt", resume=True, **kw)
+    assert again.stop_reason.value == "converged" and again.epochs_reached == res.epochs_reached
+    assert again.steps == res.steps and again.best_val_cm == res.best_val_cm and _same_weights(again, res)
+
+
+def test_a_time_limited_run_is_unfinished_and_resumes_to_the_one_sitting_result(tmp_path):
+    data = generate(300, seed=8)
+    kw = dict(batch_size=64, lr=1e-3, seed=1, progress=False, threads=1)
+    straight = train_model(data, TINY, 4, tmp_path / "a.pt", **kw)
+    out, calls = tmp_path / "b.pt", 0
+    res = train_model(data, TINY, 4, out, time_limit_s=1e-9, **kw)  # one epoch per call, whatever the time
+    while not res.finished:
+        assert res.stop_reason.value == "time_limit" and res.epochs_reached == calls + 1
+        st = torch.load(out, weights_only=True)["train"]
+        assert st["finished"] is False and st["stop_reason"] == "time_limit"
+        calls += 1
+        res = train_model(data, TINY, 4, out, time_limit_s=1e-9, resume=True, **kw)
+    assert calls == 3 and res.stop_reason.value == "max_epochs" and res.epochs_reached == 4
+    assert torch.load(out, weights_only=True)["train"]["finished"] is True
+    assert res.best_val_cm == straight.best_val_cm and _same_weights(res, straight)
+
+
+def test_train_settings_scale_the_learning_rate_with_the_batch():
+    from learned.train import PAPER_LR, TrainSettings, scaled_lr
+
+    assert scaled_lr(128) == PAPER_LR and scaled_lr(1024) == pytest.approx(8 * PAPER_LR)
+    assert TrainSettings(batch_size=512).resolved().lr == pytest.approx(4e-4)
+    assert TrainSettings(batch_size=512, lr=1e-3).kwargs()["lr"] == 1e-3
+    paper = TrainSettings.paper().kwargs()
+    assert (paper["batch_size"], paper["lr"], paper["precision"], paper["patience_epochs"]) == (128, 1e-4, "float32",
+                                                                                                 None)
+    with pytest.raises(ValueError, match="precision"):
+        train_model(generate(50, seed=0), TINY, 1, precision="float16", progress=False)

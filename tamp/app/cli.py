@@ -16,6 +16,7 @@ from tamp.errors import UserError, is_user_error
 
 # learned.ACTIVATIONS, spelled out so that `tamp --help` does not import torch (tests check they agree).
 BOTTLENECKS = ("gumbel_sigmoid", "sigmoid", "tanh", "none")
+TRAIN_PATIENCE = 100  # learned.train.TrainSettings.patience_epochs, for the same reason
 
 
 def _number(text: str, parse, ok, expected: str):
@@ -225,7 +226,7 @@ def cmd_dataset_stats(args: argparse.Namespace) -> int:
 def cmd_train(args: argparse.Namespace) -> int:
     """Train a Symbolic (gumbel_sigmoid) or Dynamics (sigmoid) Model on a dataset."""
     from learned import ModelConfig, train_model
-    from learned.train import last_path
+    from learned.train import TrainSettings, last_path
 
     check_output_file(args.out, "--out")
     if args.resume and not last_path(Path(args.out)).is_file():
@@ -233,11 +234,16 @@ def cmd_train(args: argparse.Namespace) -> int:
                          "(leave out --resume to start a new training)")
     sizes = {k: v for k, v in (("d_z", args.d_z), ("heads", args.heads)) if v is not None}
     config = ModelConfig(activation=args.bottleneck, arm_input=not args.no_arm_input, **sizes)
-    result = train_model(args.data, config, epochs=args.epochs,
-                         out_path=args.out, batch_size=args.batch_size, lr=args.lr,
-                         val_fraction=args.val_fraction, seed=args.seed, threads=args.threads,
-                         resume=args.resume, only_moved=args.only_moved)
+    settings = TrainSettings(batch_size=args.batch_size, lr=args.lr, precision=args.precision, threads=args.threads,
+                             patience_epochs=args.patience or None).resolved()
+    result = train_model(args.data, config, epochs=args.epochs, out_path=args.out, val_fraction=args.val_fraction,
+                         seed=args.seed, resume=args.resume, only_moved=args.only_moved,
+                         time_limit_s=None if args.time_limit_min is None else 60 * args.time_limit_min,
+                         **settings.kwargs())
     print(f"best validation effect error {result.best_val_cm:.2f} cm (epoch {result.best_epoch}) -> {result.out_path}")
+    print(f"stopped: {result.stop_reason.value} after {result.epochs_reached} epochs (batch {settings.batch_size}, "
+          f"lr {settings.lr:.3g}, {settings.precision})"
+          + ("" if result.finished else "; unfinished: rerun with --resume to continue"))
     return 0
 
 
@@ -410,14 +416,26 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--data", required=True, help="dataset directory (tamp collect --out)")
     p.add_argument("--bottleneck", choices=BOTTLENECKS, default="sigmoid",
                    help="bottleneck activation: gumbel_sigmoid = Symbolic Model, sigmoid = Dynamics Model (default)")
-    p.add_argument("--epochs", type=positive_int, default=100, help="training epochs (default 100)")
+    p.add_argument("--epochs", type=positive_int, default=1000,
+                   help="training epochs at most (default 1000; --patience usually stops earlier)")
     p.add_argument("--out", required=True, help="checkpoint file to write (e.g. models/dynamics.pt)")
     p.add_argument("--d-z", type=positive_int, default=None,
                    help="unary symbol bits per object (default: learned.ModelConfig's; more bits, more operators)")
     p.add_argument("--heads", type=positive_int, default=None,
                    help="relation types = attention heads (default: learned.ModelConfig's)")
-    p.add_argument("--batch-size", type=positive_int, default=128)
-    p.add_argument("--lr", type=positive_float, default=1e-4, help="learning rate (default 1e-4)")
+    # defaults: learned.train.TrainSettings' (spelled out so that --help does not import torch; a test checks)
+    p.add_argument("--batch-size", type=positive_int, default=1024,
+                   help="Adam batch size (default 1024; the paper's: 128)")
+    p.add_argument("--lr", type=positive_float, default=None,
+                   help="Adam learning rate (default 1e-4 * batch size / 128; the paper's: 1e-4 at batch 128)")
+    p.add_argument("--patience", type=non_negative_int, default=TRAIN_PATIENCE, metavar="EPOCHS",
+                   help=f"stop once the validation error has not improved for this many epochs (default "
+                   f"{TRAIN_PATIENCE}; 0: train all --epochs)")
+    p.add_argument("--precision", choices=("float32", "bfloat16"), default=None,
+                   help="forward/backward precision (default: bfloat16 autocast where the CPU has native "
+                   "bfloat16, else float32; weights and loss stay float32)")
+    p.add_argument("--time-limit-min", type=positive_float, default=None, metavar="MIN",
+                   help="stop after the epoch that passes this wall time; the run is unfinished, --resume continues")
     p.add_argument("--val-fraction", type=fraction, default=0.1, help="validation fraction, in [0, 1) (default 0.1)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--threads", type=positive_int, default=1, help="torch threads (default 1)")
