@@ -49,9 +49,9 @@ def test_domain_with_a_corrupt_model_is_a_clear_error(tiny_dataset, tmp_path, ca
 
 
 def test_train_defaults_match_the_train_settings():
-    """tamp/cli.py spells the fast training defaults out (no torch import for --help); they must agree."""
+    """tamp/app/cli.py spells the fast training defaults out (no torch import for --help); they must agree."""
     from learned.train import TrainSettings
-    from tamp.cli import TRAIN_PATIENCE, build_parser
+    from tamp.app.cli import TRAIN_PATIENCE, build_parser
 
     args = build_parser().parse_args(["train", "--data", "d", "--out", "m.pt"])
     s = TrainSettings()
