@@ -37,7 +37,7 @@ or run this benchmark with --synthetic DIR (toy data, models trained in a few mi
 def make_synthetic_models(out: Path, samples: int = 30000, seconds: float = 100.0, seed: int = 0) -> None:
     """Dynamics + Symbolic Model trained on toy transitions for `seconds` each, and their domain."""
     import torch
-    from learned import ModelConfig, train_model
+    from learned import ModelConfig, TrainConfig, train_model
     from learned.synthetic import generate
     from symbolic import build_domain
 
@@ -48,8 +48,8 @@ def make_synthetic_models(out: Path, samples: int = 30000, seconds: float = 100.
                # a narrower bottleneck than the default keeps the toy domain small
                "symbolic": ModelConfig(activation="gumbel_sigmoid", d_z=4, heads=2)}
     for name, config in configs.items():
-        r = train_model(data, config, epochs=100_000, out_path=out / f"{name}.pt", lr=1e-3, seed=seed,
-                        time_limit_s=seconds, progress=False)
+        r = train_model(data, config, TrainConfig(epochs=100_000, lr=1e-3, seed=seed, time_limit_s=seconds),
+                        out / f"{name}.pt", progress=False)
         print(f"trained {name}: {r.best_val_cm:.2f} cm validation effect error (epoch {r.best_epoch})", flush=True)
     model = r.model
     u0, r0 = model.symbols_batch(data.X, data.mask)

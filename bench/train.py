@@ -3,8 +3,8 @@
     .venv/bin/python bench/train.py                                  # 50k toy samples (no Drake)
     .venv/bin/python bench/train.py --data runs/quick/data --target-cm 2.0 --time-limit-min 10
 
-Before: the paper's settings (`TrainSettings.paper()`: batch 128, lr 1e-4, float32, one thread).
-After: `TrainSettings()` (batch 1024, lr scaled linearly to 8e-4, bfloat16 autocast where the
+Before: the paper's settings (`TrainConfig()`: batch 128, lr 1e-4, float32, one thread).
+After: `TrainConfig.fast()` (batch 1024, lr scaled linearly to 8e-4, bfloat16 autocast where the
 CPU has native bfloat16, early stopping), at each of ``--threads``. Prints (1) training throughput
 (samples/s of `train_model`'s loop: forward, backward, Adam; median of ``--reps`` one-epoch runs)
 and the after/before ratio, (2) planner-side inference throughput (predict_effect over all 144
@@ -30,14 +30,14 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from learned import EffectModel, ModelConfig, load_transitions, train_model  # noqa: E402
 from learned.synthetic import generate  # noqa: E402
-from learned.train import TrainSettings  # noqa: E402
+from learned.train import TrainConfig  # noqa: E402
 
 
-def throughput(data, config: ModelConfig, settings: TrainSettings, reps: int, max_samples: int) -> float:
+def throughput(data, config: ModelConfig, settings: TrainConfig, reps: int, max_samples: int) -> float:
     """Median samples/s of `train_model`'s training loop over ``reps`` one-epoch runs (at most
     ``max_samples`` training samples each, so that big datasets stay quick to measure)."""
     sub = data.subset(np.arange(min(len(data), max_samples)))
-    rates = [train_model(sub, config, epochs=1, seed=0, progress=False, **settings.kwargs()).samples_per_s
+    rates = [train_model(sub, config, replace(settings, epochs=1, seed=0), progress=False).samples_per_s
              for _ in range(reps)]
     return float(np.median(rates))
 
@@ -54,13 +54,13 @@ def inference_rate(config: ModelConfig, reps: int = 200) -> float:
     return reps / (time.perf_counter() - t0)
 
 
-def time_to_error(data, config: ModelConfig, settings: TrainSettings, target_cm: float, limit_s: float,
+def time_to_error(data, config: ModelConfig, settings: TrainConfig, target_cm: float, limit_s: float,
                   only_moved: bool) -> dict:
     """Wall time until the validation error first reaches ``target_cm``, within ``limit_s``."""
     with tempfile.TemporaryDirectory() as tmp:
-        res = train_model(data, config, epochs=100_000, out_path=Path(tmp) / "bench.pt", seed=0, progress=False,
-                          target_val_cm=target_cm, time_limit_s=limit_s, only_moved=only_moved,
-                          **settings.kwargs())
+        train = replace(settings, epochs=100_000, seed=0, target_val_cm=target_cm, time_limit_s=limit_s,
+                        only_moved=only_moved)
+        res = train_model(data, config, train, Path(tmp) / "bench.pt", progress=False)
     hit = next((h for h in res.history if h["val_err_cm"] <= target_cm), None)
     return {"time_to_target_s": hit["elapsed_s"] if hit else None, "epoch": hit["epoch"] if hit else None,
             "best_val_cm": res.best_val_cm, "best_epoch": res.best_epoch, "epochs": res.epochs_reached,
@@ -68,7 +68,7 @@ def time_to_error(data, config: ModelConfig, settings: TrainSettings, target_cm:
             "zero_effect_val_cm": res.history[-1]["val_zero_cm"]}
 
 
-def _describe(s: TrainSettings) -> str:
+def _describe(s: TrainConfig) -> str:
     return f"batch {s.batch_size}, lr {s.lr:.3g}, {s.precision}, {s.threads} thread(s)"
 
 
@@ -100,8 +100,8 @@ def main(argv: list[str] | None = None) -> dict:
     n_params = sum(p.numel() for p in EffectModel(config).parameters())
     print(f"model: {a.model} {config} ({n_params} parameters)")
 
-    before = TrainSettings.paper().resolved()
-    afters = [replace(TrainSettings(), threads=int(t)).resolved() for t in a.threads.split(",")]
+    before = TrainConfig(threads=1)  # the paper's settings
+    afters = [TrainConfig.fast(threads=int(t)) for t in a.threads.split(",")]
     out: dict = {"source": source, "num_samples": len(data), "model": a.model, "config": config.to_dict(),
                  "before": asdict(before), "throughput": [], "load_average": os.getloadavg()[0]}
     rate0 = throughput(data, config, before, a.reps, a.throughput_samples)

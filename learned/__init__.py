@@ -9,10 +9,10 @@ from .dataset import (DatasetWriter, ShardError, TransitionDataset, Transitions,
                       read_meta)
 from .effects import arm_displacement, effect_targets, encode_actions, moved_picks
 from .model import ACTIVATIONS, EffectModel, ModelConfig
-from .train import TrainResult, evaluate, train_model
+from .train import TrainConfig, TrainResult, evaluate, train_model
 
 __all__ = [
-    "ACTIVATIONS", "DatasetWriter", "EffectModel", "ModelConfig", "ShardError", "TrainResult",
+    "ACTIVATIONS", "DatasetWriter", "EffectModel", "ModelConfig", "ShardError", "TrainConfig", "TrainResult",
     "TransitionDataset", "Transitions", "ablate_activations", "arm_displacement", "effect_targets",
     "encode_actions", "evaluate", "format_ablation_markdown", "load_model", "load_transitions", "moved_picks", "read_meta",
     "save_checkpoint",

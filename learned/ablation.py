@@ -18,7 +18,7 @@ import torch
 
 from .dataset import Transitions, load_transitions
 from .model import ACTIVATIONS, ModelConfig
-from .train import evaluate, split_indices, train_model
+from .train import TrainConfig, evaluate, split_indices, train_model
 
 LABELS = {"gumbel_sigmoid": "Gumbel-Sigmoid", "tanh": "Tanh", "none": "No activation",
           "sigmoid": "Sigmoid"}
@@ -26,18 +26,20 @@ PAPER_ORDER = ("gumbel_sigmoid", "tanh", "none", "sigmoid")
 
 
 def ablate_activations(data: "str | Path | Transitions", runs: int = 10, *,
-                       activations: Sequence[str] = PAPER_ORDER, epochs: int = 100,
+                       activations: Sequence[str] = PAPER_ORDER, train: TrainConfig | None = None,
                        config: ModelConfig | None = None, test_fraction: float = 0.2,
-                       val_fraction: float = 0.1, seed: int = 0, max_steps: int | None = None,
-                       batch_size: int = 128, lr: float = 1e-4, out_dir: str | Path | None = None,
-                       threads: int | None = None, progress: bool = True) -> dict[str, Any]:
+                       out_dir: str | Path | None = None, progress: bool = True) -> dict[str, Any]:
     """Train ``runs`` models per activation; mean +- std (sample std) test effect error in cm.
 
-    With ``out_dir``, the per-run best checkpoints go to ``out_dir/models/`` and the report is
-    written by ``write_ablation_report``.
+    Run r trains with `train` (default `TrainConfig()`, the paper's settings) at seed `train.seed + r`,
+    validating on its own `train.val_fraction` split of what the test split leaves. With
+    ``out_dir``, the per-run best checkpoints go to ``out_dir/models/`` and the report is written by
+    ``write_ablation_report``.
     """
-    if threads:
-        torch.set_num_threads(threads)
+    train = train or TrainConfig()
+    seed = train.seed
+    if train.threads:
+        torch.set_num_threads(train.threads)
     for a in activations:
         if a not in ACTIVATIONS:
             raise ValueError(f"activation {a!r} not in {ACTIVATIONS}")
@@ -52,13 +54,12 @@ def ablate_activations(data: "str | Path | Transitions", runs: int = 10, *,
     for act in activations:
         errs, val_errs = [], []
         for r in range(runs):
-            tr_idx, va_idx = split_indices(len(rest), (val_fraction,), seed + r)
+            tr_idx, va_idx = split_indices(len(rest), (train.val_fraction,), seed + r)
             out = (Path(out_dir) / "models" / f"{act}-run{r}.pt") if out_dir else None
             if out:
                 out.parent.mkdir(parents=True, exist_ok=True)
-            res = train_model(rest.subset(tr_idx), replace(base, activation=act), epochs, out,
-                              val_data=rest.subset(va_idx), batch_size=batch_size, lr=lr,
-                              seed=seed + r, max_steps=max_steps, progress=progress)
+            res = train_model(rest.subset(tr_idx), replace(base, activation=act), replace(train, seed=seed + r),
+                              out, val_data=rest.subset(va_idx), progress=progress)
             ev = evaluate(res.model, test)
             errs.append(ev["err_cm"])
             val_errs.append(res.best_val_cm)
@@ -66,10 +67,12 @@ def ablate_activations(data: "str | Path | Transitions", runs: int = 10, *,
         per_act[act] = {"label": LABELS[act], "mean_cm": float(np.mean(errs)),
                         "std_cm": float(np.std(errs, ddof=1)) if runs > 1 else 0.0,
                         "runs_cm": errs, "val_cm": val_errs}
-    results = {"source": source, "runs": runs, "epochs": epochs, "max_steps": max_steps,
+    results = {"source": source, "runs": runs, "epochs": train.epochs, "max_steps": train.max_steps,
                "seed": seed, "num_train_val": len(rest), "num_test": len(test),
                "zero_effect_cm": zero_cm, "config": base.to_dict(),
-               "training": {"batch_size": batch_size, "lr": lr, "val_fraction": val_fraction},
+               "training": {"batch_size": train.batch_size, "lr": train.lr, "val_fraction": train.val_fraction,
+                            **({"precision": train.precision} if train.precision != "float32" else {}),
+                            **({"patience_epochs": train.patience_epochs} if train.patience_epochs else {})},
                "machine": {"python": platform.python_version(), "torch": torch.__version__,
                            "threads": torch.get_num_threads()},
                "activations": per_act}

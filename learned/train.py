@@ -14,7 +14,7 @@ in matrix products that already run near one core's float32 peak, so the levers 
 cheaper flops and fewer steps: ``precision="bfloat16"`` runs the forward and backward passes under
 bfloat16 autocast (weights, Adam state, loss and validation stay float32), about 3x the samples/s
 on a CPU with AVX512-BF16 or AMX (slower elsewhere: `bf16_fast`); larger batches
-(`TrainSettings`, batch 1024) feed bigger matrix products, with the learning rate scaled
+(`TrainConfig.fast()`, batch 1024) feed bigger matrix products, with the learning rate scaled
 linearly from the paper's 1e-4 at batch 128 (`scaled_lr`: 8e-4 at 1024). On the quick-scale data
 the linear scaling kept the error per epoch of batch 128 (so the time to an error falls with the
 samples/s), while square-root scaling (2.8e-4) needed ~2.5x the epochs and the unscaled 1e-4 more
@@ -79,31 +79,46 @@ def bf16_fast() -> bool:
 
 
 @dataclass(frozen=True)
-class TrainSettings:
-    """Optimisation settings (not the architecture). Defaults: the fast ones of issue 19;
-    `TrainSettings.paper()` is the paper's / the bundled models' (batch 128, lr 1e-4, float32)."""
-    batch_size: int = 1024
-    lr: float | None = None          # None: scaled_lr(batch_size)
-    precision: Precision | None = None  # None: bfloat16 where bf16_fast(), else float32
-    threads: int = 1                 # 2 paid only on an idle machine (see learned/README.md)
-    patience_epochs: int | None = 100
-    min_delta_cm: float = 0.0
+class TrainConfig:
+    """How to train (the architecture is `ModelConfig`'s). The defaults are the paper's settings, those
+    of the bundled models: Adam at batch 128 and lr 1e-4 in float32 for a fixed number of epochs.
+    `TrainConfig.fast()` gives issue 19's: batch 1024 with the learning rate scaled linearly,
+    bfloat16 autocast where the CPU has it natively, one thread, early stopping."""
+
+    epochs: int = 100  # at most
+    batch_size: int = PAPER_BATCH
+    lr: float = PAPER_LR
+    precision: Precision = "float32"
+    threads: int | None = None  # torch threads (None: leave torch's setting)
+    patience_epochs: int | None = None  # stop after this many epochs without improvement (None: never)
+    min_delta_cm: float = 0.0  # the least decrease of the validation error that counts as improvement
+    val_fraction: float = 0.1  # the seeded validation split, when no val_data is given
+    seed: int = 0
+    only_moved: bool = False  # only the transitions that moved their picked block (the Symbolic Model)
+    max_steps: int | None = None  # optimizer steps at most
+    target_val_cm: float | None = None  # stop once the validation error reaches this
+    time_limit_s: float | None = None  # wall-clock cap of one call: the run is then unfinished, resumable
+
+    def __post_init__(self) -> None:
+        if self.precision not in ("float32", "bfloat16"):
+            raise ValueError(f"precision must be float32 or bfloat16, got {self.precision!r}")
+        if self.patience_epochs is not None and self.patience_epochs < 1:
+            raise ValueError(f"patience_epochs must be >= 1, got {self.patience_epochs}")
+        if self.epochs < 1 or self.batch_size < 1 or not self.lr > 0:
+            raise ValueError(f"epochs and batch_size must be >= 1 and lr > 0, got {self.epochs}, "
+                             f"{self.batch_size}, {self.lr}")
+        if not 0.0 < self.val_fraction < 1.0:
+            raise ValueError(f"val_fraction must be in (0, 1), got {self.val_fraction}")
 
     @classmethod
-    def paper(cls) -> "TrainSettings":
-        return cls(batch_size=PAPER_BATCH, lr=PAPER_LR, precision="float32", patience_epochs=None)
-
-    def resolved(self) -> "TrainSettings":
-        """The same settings with ``lr`` and ``precision`` made explicit for this machine."""
-        return TrainSettings(self.batch_size, scaled_lr(self.batch_size) if self.lr is None else self.lr,
-                             self.precision or ("bfloat16" if bf16_fast() else "float32"), self.threads,
-                             self.patience_epochs, self.min_delta_cm)
-
-    def kwargs(self) -> dict[str, Any]:
-        """Keyword arguments of `train_model`."""
-        r = self.resolved()
-        return {"batch_size": r.batch_size, "lr": r.lr, "precision": r.precision, "threads": r.threads,
-                "patience_epochs": r.patience_epochs, "min_delta_cm": r.min_delta_cm}
+    def fast(cls, batch_size: int = 1024, **changes: Any) -> "TrainConfig":
+        """Issue 19's settings (learned/README.md): `lr` scaled linearly with the batch unless given,
+        bfloat16 where `bf16_fast()`, one thread, patience 100 epochs, at most 1000 epochs."""
+        settings: dict[str, Any] = {"epochs": 1000, "batch_size": batch_size, "lr": scaled_lr(batch_size),
+                                    "precision": "bfloat16" if bf16_fast() else "float32", "threads": 1,
+                                    "patience_epochs": 100}
+        settings.update(changes)
+        return cls(**settings)
 
 
 @dataclass
@@ -206,13 +221,8 @@ class _Plateau:
 
 
 def train_model(data: "str | Path | Transitions", config: ModelConfig | None = None,
-                epochs: int = 100, out_path: str | Path | None = None, *,
-                val_data: Transitions | None = None, batch_size: int = PAPER_BATCH, lr: float = PAPER_LR,
-                val_fraction: float = 0.1, seed: int = 0, max_steps: int | None = None,
-                resume: bool = False, threads: int | None = None, progress: bool = True,
-                target_val_cm: float | None = None, time_limit_s: float | None = None,
-                only_moved: bool = False, patience_epochs: int | None = None, min_delta_cm: float = 0.0,
-                precision: Precision = "float32") -> TrainResult:
+                train: TrainConfig | None = None, out_path: str | Path | None = None, *,
+                val_data: Transitions | None = None, resume: bool = False, progress: bool = True) -> TrainResult:
     """Train an EffectModel on a dataset directory or in-memory Transitions.
 
     Validation data is ``val_data`` if given, else a seeded ``val_fraction`` split of ``data``.
@@ -226,12 +236,15 @@ def train_model(data: "str | Path | Transitions", config: ModelConfig | None = N
     records carry ``elapsed_s``.
     ``only_moved`` keeps the transitions that moved their picked block (`effects.moved_picks`),
     in training and validation alike: what the Symbolic Model learns its symbols from.
-    Defaults are the paper's settings; `TrainSettings().kwargs()` gives the fast ones.
+    `train` (default `TrainConfig()`, the paper's settings) says how; the names below are its fields.
     """
-    if precision not in ("float32", "bfloat16"):
-        raise ValueError(f"precision must be float32 or bfloat16, got {precision!r}")
-    if patience_epochs is not None and patience_epochs < 1:
-        raise ValueError(f"patience_epochs must be >= 1, got {patience_epochs}")
+    train = train or TrainConfig()
+    epochs, batch_size, lr, precision, threads = (train.epochs, train.batch_size, train.lr, train.precision,
+                                                  train.threads)
+    patience_epochs, min_delta_cm, val_fraction, seed = (train.patience_epochs, train.min_delta_cm,
+                                                         train.val_fraction, train.seed)
+    only_moved, max_steps, target_val_cm, time_limit_s = (train.only_moved, train.max_steps, train.target_val_cm,
+                                                          train.time_limit_s)
     if threads:
         torch.set_num_threads(threads)
     if not isinstance(data, Transitions):

@@ -50,14 +50,14 @@ def test_domain_with_a_corrupt_model_is_a_clear_error(tiny_dataset, tmp_path, ca
 
 def test_train_defaults_match_the_train_settings():
     """tamp/app/cli.py spells the fast training defaults out (no torch import for --help); they must agree."""
-    from learned.train import TrainSettings
-    from tamp.app.cli import TRAIN_PATIENCE, build_parser
+    from learned import TrainConfig
+    from tamp.app.cli import TRAIN_PATIENCE, _train_config, build_parser
 
-    args = build_parser().parse_args(["train", "--data", "d", "--out", "m.pt"])
-    s = TrainSettings()
-    assert (args.batch_size, args.lr, args.precision, args.patience) == (s.batch_size, s.lr, s.precision,
-                                                                        s.patience_epochs) == (1024, None, None,
-                                                                                               TRAIN_PATIENCE)
+    for command in (["train", "--out", "m.pt"], ["ablate-activations"]):
+        args = build_parser().parse_args([*command, "--data", "d"])
+        assert (args.batch_size, args.lr, args.precision, args.patience) == (1024, None, None, TRAIN_PATIENCE)
+        assert _train_config(args) == TrainConfig.fast(epochs=args.epochs)
+    assert TrainConfig.fast().patience_epochs == TRAIN_PATIENCE
 
 
 def test_train_prints_why_it_stopped_and_resumes_a_time_limited_run(tiny_dataset, tmp_path, capsys):

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 import torch
 
-from learned import ModelConfig, ablate_activations
+from learned import ModelConfig, TrainConfig, ablate_activations
 from learned.synthetic import write_synthetic_dataset
 
 torch.set_num_threads(1)
@@ -14,7 +14,7 @@ torch.set_num_threads(1)
 def test_ablation_table_from_a_dataset_dir(tmp_path):
     data_dir = write_synthetic_dataset(tmp_path / "ds", 400, seed=4, shard_size=128)
     cfg = ModelConfig(hidden=16, d_msg=8, d_z=4, heads=2)
-    res = ablate_activations(data_dir, runs=2, epochs=50, max_steps=25, config=cfg, lr=1e-3,
+    res = ablate_activations(data_dir, runs=2, train=TrainConfig(epochs=50, max_steps=25, lr=1e-3), config=cfg,
                              test_fraction=0.25, out_dir=tmp_path / "out", progress=False)
     assert res["num_test"] == 100 and res["num_train_val"] == 300
     acts = res["activations"]

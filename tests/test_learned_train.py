@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 import torch
 
-from learned import ModelConfig, evaluate, load_model, train_model
+from learned import ModelConfig, TrainConfig, evaluate, load_model, train_model
 from learned.synthetic import generate
 from learned.train import last_path, split_indices
 
@@ -11,12 +11,16 @@ torch.set_num_threads(1)
 SMALL = dict(hidden=64, d_msg=32, d_z=8, heads=4)
 
 
+def fit(data, config, epochs, out, *, resume=False, progress=False, **train):
+    """train_model with TrainConfig(epochs=epochs, **train)."""
+    return train_model(data, config, TrainConfig(epochs=epochs, **train), out, resume=resume, progress=progress)
+
+
 @pytest.fixture(scope="module")
 def trained(tmp_path_factory):
     out = tmp_path_factory.mktemp("run") / "model.pt"
     data = generate(2000, seed=1)
-    res = train_model(data, ModelConfig(**SMALL), epochs=100, out_path=out, max_steps=400,
-                      lr=1e-3, seed=0, progress=False)
+    res = fit(data, ModelConfig(**SMALL), 100, out, max_steps=400, lr=1e-3, seed=0)
     return res, out, data
 
 
@@ -54,16 +58,16 @@ def test_resume_continues_exactly(tmp_path):
     data = generate(300, seed=5)
     cfg = ModelConfig(hidden=16, d_msg=8, d_z=4, heads=2, activation="gumbel_sigmoid")
     kw = dict(batch_size=32, lr=1e-3, seed=3, progress=False)
-    straight = train_model(data, cfg, 4, tmp_path / "a.pt", **kw)
-    train_model(data, cfg, 2, tmp_path / "b.pt", **kw)
-    resumed = train_model(data, cfg, 4, tmp_path / "b.pt", resume=True, **kw)
+    straight = fit(data, cfg, 4, tmp_path / "a.pt", **kw)
+    fit(data, cfg, 2, tmp_path / "b.pt", **kw)
+    resumed = fit(data, cfg, 4, tmp_path / "b.pt", resume=True, **kw)
     assert [h["epoch"] for h in resumed.history] == [0, 1, 2, 3]
     untimed = lambda hist: [{k: v for k, v in h.items() if k != "elapsed_s"} for h in hist]
     assert untimed(resumed.history) == untimed(straight.history)
     a, b = straight.model.state_dict(), resumed.model.state_dict()
     assert all(torch.equal(a[k], b[k]) for k in a)
     with pytest.raises(ValueError, match="different config"):
-        train_model(data, ModelConfig(hidden=16, d_msg=8, d_z=5, heads=2), 6, tmp_path / "b.pt",
+        fit(data, ModelConfig(hidden=16, d_msg=8, d_z=5, heads=2), 6, tmp_path / "b.pt",
                     resume=True, **kw)
 
 
@@ -102,8 +106,7 @@ def test_only_moved_trains_on_the_transitions_that_moved_the_picked_block(tmp_pa
     data = generate(600, seed=4)
     moved = moved_picks(data.X, data.X_next, data.action)
     assert 0 < moved.sum() < len(data)  # the synthetic data grasps nothing now and then
-    res = train_model(data, ModelConfig(**SMALL), epochs=1, out_path=tmp_path / "m.pt", max_steps=2,
-                      seed=0, progress=False, only_moved=True)
+    res = fit(data, ModelConfig(**SMALL), 1, tmp_path / "m.pt", max_steps=2, seed=0, only_moved=True)
     options = torch.load(tmp_path / "m.pt", weights_only=True)["train"]["options"]
     assert options["only_moved"] and options["num_train"] + options["num_val"] == moved.sum()
     assert res.best_epoch == 0
@@ -123,10 +126,10 @@ def test_k_epochs_then_resume_equals_one_sitting(tmp_path, precision):
     data = generate(400, seed=6)
     kw = dict(batch_size=64, lr=3e-3, seed=2, progress=False, precision=precision, patience_epochs=50,
               min_delta_cm=0.01, threads=1)
-    straight = train_model(data, TINY, 6, tmp_path / "a.pt", **kw)
-    first = train_model(data, TINY, 3, tmp_path / "b.pt", **kw)
+    straight = fit(data, TINY, 6, tmp_path / "a.pt", **kw)
+    first = fit(data, TINY, 3, tmp_path / "b.pt", **kw)
     assert first.stop_reason.value == "max_epochs" and first.epochs_reached == 3 and first.finished
-    resumed = train_model(data, TINY, 6, tmp_path / "b.pt", resume=True, **kw)
+    resumed = fit(data, TINY, 6, tmp_path / "b.pt", resume=True, **kw)
     assert resumed.best_val_cm == straight.best_val_cm and resumed.best_epoch == straight.best_epoch
     assert resumed.epochs_reached == straight.epochs_reached == 6 and resumed.steps == straight.steps
     assert _same_weights(resumed, straight)
@@ -134,7 +137,7 @@ def test_k_epochs_then_resume_equals_one_sitting(tmp_path, precision):
     assert untimed(resumed.history) == untimed(straight.history)
     assert [h.get("stop_reason") for h in resumed.history] == [None] * 5 + ["max_epochs"]
     with pytest.raises(ValueError, match="different config/options"):  # the precision is part of the result
-        train_model(data, TINY, 8, tmp_path / "b.pt", resume=True,
+        fit(data, TINY, 8, tmp_path / "b.pt", resume=True,
                     **{**kw, "precision": "bfloat16" if precision == "float32" else "float32"})
 
 
@@ -143,7 +146,7 @@ def test_early_stopping_stops_on_a_plateau_and_resuming_it_is_a_no_op(tmp_path):
     improvement; the reason is in the result, both checkpoints and the history; a resume trains nothing."""
     data = generate(300, seed=7)
     kw = dict(batch_size=64, lr=1e-3, seed=0, progress=False, patience_epochs=3, min_delta_cm=0.5, threads=1)
-    res = train_model(data, TINY, 200, tmp_path / "m.pt", **kw)
+    res = fit(data, TINY, 200, tmp_path / "m.pt", **kw)
     assert res.stop_reason.value == "converged" and res.finished and res.epochs_reached < 200
     vals = [h["val_err_cm"] for h in res.history]
     ref, last = float("inf"), -1  # the last epoch that beat the previous such one by min_delta
@@ -155,7 +158,7 @@ def test_early_stopping_stops_on_a_plateau_and_resuming_it_is_a_no_op(tmp_path):
     for path in (tmp_path / "m.pt", last_path(tmp_path / "m.pt")):
         st = torch.load(path, weights_only=True)["train"]
         assert (st["stop_reason"], st["finished"], st["epochs_reached"]) == ("converged", True, res.epochs_reached)
-    again = train_model(data, TINY, 400, tmp_path / "m.pt", resume=True, **kw)
+    again = fit(data, TINY, 400, tmp_path / "m.pt", resume=True, **kw)
     assert again.stop_reason.value == "converged" and again.epochs_reached == res.epochs_reached
     assert again.steps == res.steps and again.best_val_cm == res.best_val_cm and _same_weights(again, res)
 
@@ -163,28 +166,27 @@ def test_early_stopping_stops_on_a_plateau_and_resuming_it_is_a_no_op(tmp_path):
 def test_a_time_limited_run_is_unfinished_and_resumes_to_the_one_sitting_result(tmp_path):
     data = generate(300, seed=8)
     kw = dict(batch_size=64, lr=1e-3, seed=1, progress=False, threads=1)
-    straight = train_model(data, TINY, 4, tmp_path / "a.pt", **kw)
+    straight = fit(data, TINY, 4, tmp_path / "a.pt", **kw)
     out, calls = tmp_path / "b.pt", 0
-    res = train_model(data, TINY, 4, out, time_limit_s=1e-9, **kw)  # one epoch per call, whatever the time
+    res = fit(data, TINY, 4, out, time_limit_s=1e-9, **kw)  # one epoch per call, whatever the time
     while not res.finished:
         assert res.stop_reason.value == "time_limit" and res.epochs_reached == calls + 1
         st = torch.load(out, weights_only=True)["train"]
         assert st["finished"] is False and st["stop_reason"] == "time_limit"
         calls += 1
-        res = train_model(data, TINY, 4, out, time_limit_s=1e-9, resume=True, **kw)
+        res = fit(data, TINY, 4, out, time_limit_s=1e-9, resume=True, **kw)
     assert calls == 3 and res.stop_reason.value == "max_epochs" and res.epochs_reached == 4
     assert torch.load(out, weights_only=True)["train"]["finished"] is True
     assert res.best_val_cm == straight.best_val_cm and _same_weights(res, straight)
 
 
 def test_train_settings_scale_the_learning_rate_with_the_batch():
-    from learned.train import PAPER_LR, TrainSettings, scaled_lr
+    from learned.train import PAPER_LR, TrainConfig, scaled_lr
 
     assert scaled_lr(128) == PAPER_LR and scaled_lr(1024) == pytest.approx(8 * PAPER_LR)
-    assert TrainSettings(batch_size=512).resolved().lr == pytest.approx(4e-4)
-    assert TrainSettings(batch_size=512, lr=1e-3).kwargs()["lr"] == 1e-3
-    paper = TrainSettings.paper().kwargs()
-    assert (paper["batch_size"], paper["lr"], paper["precision"], paper["patience_epochs"]) == (128, 1e-4, "float32",
-                                                                                                 None)
+    assert TrainConfig.fast(512).lr == pytest.approx(4e-4)
+    assert TrainConfig.fast(512, lr=1e-3).lr == 1e-3
+    paper = TrainConfig()
+    assert (paper.batch_size, paper.lr, paper.precision, paper.patience_epochs) == (128, 1e-4, "float32", None)
     with pytest.raises(ValueError, match="precision"):
-        train_model(generate(50, seed=0), TINY, 1, precision="float16", progress=False)
+        TrainConfig(precision="float16")

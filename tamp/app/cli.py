@@ -16,7 +16,7 @@ from tamp.errors import UserError, is_user_error
 
 # learned.ACTIVATIONS, spelled out so that `tamp --help` does not import torch (tests check they agree).
 BOTTLENECKS = ("gumbel_sigmoid", "sigmoid", "tanh", "none")
-TRAIN_PATIENCE = 100  # learned.train.TrainSettings.patience_epochs, for the same reason
+TRAIN_PATIENCE = 100  # learned.TrainConfig.fast().patience_epochs, for the same reason
 
 
 def _number(text: str, parse, ok, expected: str):
@@ -226,7 +226,7 @@ def cmd_dataset_stats(args: argparse.Namespace) -> int:
 def cmd_train(args: argparse.Namespace) -> int:
     """Train a Symbolic (gumbel_sigmoid) or Dynamics (sigmoid) Model on a dataset."""
     from learned import ModelConfig, train_model
-    from learned.train import TrainSettings, last_path
+    from learned.train import last_path
 
     check_output_file(args.out, "--out")
     if args.resume and not last_path(Path(args.out)).is_file():
@@ -234,12 +234,9 @@ def cmd_train(args: argparse.Namespace) -> int:
                          "(leave out --resume to start a new training)")
     sizes = {k: v for k, v in (("d_z", args.d_z), ("heads", args.heads)) if v is not None}
     config = ModelConfig(activation=args.bottleneck, arm_input=not args.no_arm_input, **sizes)
-    settings = TrainSettings(batch_size=args.batch_size, lr=args.lr, precision=args.precision, threads=args.threads,
-                             patience_epochs=args.patience or None).resolved()
-    result = train_model(args.data, config, epochs=args.epochs, out_path=args.out, val_fraction=args.val_fraction,
-                         seed=args.seed, resume=args.resume, only_moved=args.only_moved,
-                         time_limit_s=None if args.time_limit_min is None else 60 * args.time_limit_min,
-                         **settings.kwargs())
+    settings = _train_config(args, only_moved=args.only_moved, val_fraction=args.val_fraction,
+                             time_limit_s=None if args.time_limit_min is None else 60 * args.time_limit_min)
+    result = train_model(args.data, config, settings, args.out, resume=args.resume)
     print(f"best validation effect error {result.best_val_cm:.2f} cm (epoch {result.best_epoch}) -> {result.out_path}")
     print(f"stopped: {result.stop_reason.value} after {result.epochs_reached} epochs (batch {settings.batch_size}, "
           f"lr {settings.lr:.3g}, {settings.precision})"
@@ -247,13 +244,39 @@ def cmd_train(args: argparse.Namespace) -> int:
     return 0
 
 
+def _add_train_arguments(p: argparse.ArgumentParser) -> None:
+    """How to train, for `train` and `ablate-activations`: learned.TrainConfig.fast()'s defaults, spelled
+    out so that --help does not import torch (a test checks they agree); `_train_config` reads them."""
+    p.add_argument("--batch-size", type=positive_int, default=1024,
+                   help="Adam batch size (default 1024; the paper's: 128)")
+    p.add_argument("--lr", type=positive_float, default=None,
+                   help="Adam learning rate (default 1e-4 * batch size / 128; the paper's: 1e-4 at batch 128)")
+    p.add_argument("--patience", type=non_negative_int, default=TRAIN_PATIENCE, metavar="EPOCHS",
+                   help=f"stop once the validation error has not improved for this many epochs (default "
+                   f"{TRAIN_PATIENCE}; 0: train all --epochs)")
+    p.add_argument("--precision", choices=("float32", "bfloat16"), default=None,
+                   help="forward/backward precision (default: bfloat16 autocast where the CPU has native "
+                   "bfloat16, else float32; weights and loss stay float32)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the split, the initial weights and the batches")
+    p.add_argument("--threads", type=positive_int, default=1, help="torch threads (default 1)")
+
+
+def _train_config(args: argparse.Namespace, **changes):
+    """The learned.TrainConfig of the flags of `_add_train_arguments` (and --epochs), with `changes`."""
+    from learned import TrainConfig
+
+    given = {"epochs": args.epochs, "patience_epochs": args.patience or None, "seed": args.seed,
+             "threads": args.threads, **({"lr": args.lr} if args.lr is not None else {}),
+             **({"precision": args.precision} if args.precision is not None else {})}
+    return TrainConfig.fast(args.batch_size, **given, **changes)
+
+
 def cmd_ablate(args: argparse.Namespace) -> int:
     """Table I of the paper: effect error per bottleneck activation over several seeds."""
     from learned import ablate_activations, format_ablation_markdown
 
     check_output_dir(args.out_dir, "--out-dir")
-    result = ablate_activations(args.data, runs=args.runs, epochs=args.epochs, out_dir=args.out_dir,
-                                seed=args.seed, threads=args.threads)
+    result = ablate_activations(args.data, runs=args.runs, train=_train_config(args), out_dir=args.out_dir)
     print(format_ablation_markdown(result))
     print(f"written to {args.out_dir}/ablation.md and ablation.json")
     return 0
@@ -423,22 +446,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="unary symbol bits per object (default: learned.ModelConfig's; more bits, more operators)")
     p.add_argument("--heads", type=positive_int, default=None,
                    help="relation types = attention heads (default: learned.ModelConfig's)")
-    # defaults: learned.train.TrainSettings' (spelled out so that --help does not import torch; a test checks)
-    p.add_argument("--batch-size", type=positive_int, default=1024,
-                   help="Adam batch size (default 1024; the paper's: 128)")
-    p.add_argument("--lr", type=positive_float, default=None,
-                   help="Adam learning rate (default 1e-4 * batch size / 128; the paper's: 1e-4 at batch 128)")
-    p.add_argument("--patience", type=non_negative_int, default=TRAIN_PATIENCE, metavar="EPOCHS",
-                   help=f"stop once the validation error has not improved for this many epochs (default "
-                   f"{TRAIN_PATIENCE}; 0: train all --epochs)")
-    p.add_argument("--precision", choices=("float32", "bfloat16"), default=None,
-                   help="forward/backward precision (default: bfloat16 autocast where the CPU has native "
-                   "bfloat16, else float32; weights and loss stay float32)")
+    _add_train_arguments(p)
     p.add_argument("--time-limit-min", type=positive_float, default=None, metavar="MIN",
                    help="stop after the epoch that passes this wall time; the run is unfinished, --resume continues")
     p.add_argument("--val-fraction", type=fraction, default=0.1, help="validation fraction, in [0, 1) (default 0.1)")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--threads", type=positive_int, default=1, help="torch threads (default 1)")
     p.add_argument("--resume", action="store_true", help="continue from <out>.last.pt")
     p.add_argument("--no-arm-input", action="store_true",
                    help="leave the arm's pick-to-place displacement out of the action encoding, so that "
@@ -458,8 +469,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--runs", type=positive_int, default=3, help="seeds per activation (default 3; the paper: 10)")
     p.add_argument("--epochs", type=positive_int, default=20, help="epochs per run (default 20)")
     p.add_argument("--out-dir", default="runs/ablation", help="where ablation.md / ablation.json go")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--threads", type=positive_int, default=1)
+    _add_train_arguments(p)
     p.set_defaults(func=cmd_ablate)
 
     p = sub.add_parser(
