@@ -5,11 +5,11 @@ import argparse
 import sys
 from pathlib import Path
 
-from tamp.errors import UserError
-from tamp.app.cli import positive_int
 from evaluation.methods import SYMBOLIC_BACKENDS
+from tamp.app.cli import positive_int
 from tamp.app.plan_command import add_planner_arguments
 from tamp.app.problem import PROTOCOLS
+from tamp.errors import UserError
 
 
 def _int_list(text: str) -> tuple[int, ...]:
@@ -35,7 +35,8 @@ def cmd_problems(args: argparse.Namespace) -> int:
     problems = generate_problems(args.objects, args.actions, args.per_cell, args.seed, progress=not args.quiet,
                                  protocol=args.protocol, runs=args.runs, workers=args.workers)
     path = write_problems(args.out, problems)
-    seeds = f"seed {args.seed}" if args.runs == 1 else f"{args.runs} runs, seeds {args.seed}..{args.seed + args.runs - 1}"
+    last = args.seed + args.runs - 1
+    seeds = f"seed {args.seed}" if args.runs == 1 else f"{args.runs} runs, seeds {args.seed}..{last}"
     moved = sum(p.moved for p in problems)
     print(f"wrote {len(problems)} problems to {path} (objects {','.join(map(str, args.objects))}, actions "
           f"{','.join(map(str, args.actions))}, {args.per_cell} per cell, {seeds}, {args.protocol} protocol: "
@@ -52,7 +53,6 @@ def _write_report(directory: Path, ablation: Path | None = None) -> Path:
 def cmd_evaluate(args: argparse.Namespace) -> int:
     """Every method on every problem: plan, refine, execute; rows to OUT/rows.jsonl, then the report."""
     from evaluation.run import EvalConfig, evaluate, read_rows
-
     from tamp.app.plan_command import planner_config
 
     config = EvalConfig(planner=planner_config(args), fidelity=args.fidelity, workers=args.workers,
@@ -176,7 +176,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="problem sets: strict (every random action moves something, default) or paper (actions "
                    "kept whatever their outcome, as the paper's authors do)")
     p.add_argument("--runs", type=positive_int, default=1,
-                   help="problem sets of consecutive seeds, reported as mean ± std over runs (default 1; the paper: 10)")
+                   help="problem sets of consecutive seeds, reported as mean ± std over runs "
+                        "(default 1; the paper: 10)")
     p.add_argument("--models", type=Path, default=None,
                    help="evaluate this models directory (e.g. tamp/pretrained) instead of collecting and training")
     p.add_argument("--symbolic-backend", choices=SYMBOLIC_BACKENDS, default="python",

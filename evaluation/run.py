@@ -44,10 +44,10 @@ import numpy as np
 
 from evaluation.methods import METHODS, SYMBOLIC_BACKENDS, Method, load_method_models, required_files, resolve_methods
 from evaluation.problems import read_problems
-from tamp.planning.bilevel import PlanConfig
 from tamp.app.parallel import BACKENDS, run_tasks
 from tamp.app.problem import Problem
 from tamp.errors import UserError
+from tamp.planning.bilevel import PlanConfig
 from tamp.planning.structs import OUTCOMES, Outcome
 from tamp.planning.verify import goal_error
 from tamp.records import atomic_write_text, exclusive, package_versions
@@ -256,7 +256,8 @@ class Evaluator:
                "predicted_error_m": None, "candidates": [], "refined": None, "refine_failure": None,
                "refine_time_s": [], "executed_actions": 0, "executed_plans": None, "final_error_m": None,
                "success": False, "outcome": Outcome.ERROR, "rounds": None, "fidelity": c.fidelity, "eps_m": c.eps,
-               "tau_verify_m": c.tau_verify, "symbolic_backend": c.symbolic_backend if METHODS[method_name].symbolic else None}
+               "tau_verify_m": c.tau_verify,
+               "symbolic_backend": c.symbolic_backend if METHODS[method_name].symbolic else None}
         row = {k: row.get(k) for k in ROW_KEYS}  # fields an error row cannot have are None
         row["error"] = f"{type(error).__name__}: {error}"
         row["traceback"] = "".join(traceback.format_exception(type(error), error, error.__traceback__))
@@ -269,7 +270,8 @@ class Evaluator:
         extra = {} if kinematics is None else {"kinematics": kinematics}
         result = plan(method.planner, models, problem.X_init, problem.X_goal,
                       self.config.plan_config(problem.seed, method.feasibility), **extra)
-        fields = {**_feasibility_fields([result]), "solved": result.solved, "level": result.level, "plan": _actions(result.plan),
+        fields = {**_feasibility_fields([result]), "solved": result.solved, "level": result.level,
+                  "plan": _actions(result.plan),
                   "planning_time_s": _round(result.timings["total"]), "level1_time_s": _round(_level1_time(result)),
                   "predicted_error_m": _round(result.predicted_error), "candidates": _candidates(result),
                   "refined": None, "refine_failure": None, "refine_time_s": [], "executed_actions": 0,

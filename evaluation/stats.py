@@ -11,7 +11,6 @@ from typing import Sequence
 import numpy as np
 from scipy import stats as _scipy
 
-
 IDENTICAL = "identical"  # the paired samples agree on every problem: no test to make
 
 

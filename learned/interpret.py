@@ -59,7 +59,8 @@ def relation_facts(X: np.ndarray) -> dict[str, np.ndarray]:
             "z_i <= z_j (vertical order)": z[:, None] <= z[None, :] + 0.02,
             "y_i < y_j": y[:, None] < y[None, :], "x_i < x_j": x[:, None] < x[None, :],
             "near (< 10 cm)": dist < NEAR_M, "same type": t[:, None] == t[None, :],
-            "i large": np.broadcast_to(t[:, None] == 1, on.shape), "j large": np.broadcast_to(t[None, :] == 1, on.shape)}
+            "i large": np.broadcast_to(t[:, None] == 1, on.shape),
+            "j large": np.broadcast_to(t[None, :] == 1, on.shape)}
 
 
 @dataclass

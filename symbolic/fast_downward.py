@@ -23,6 +23,7 @@ from pathlib import Path
 
 from symbolic.structs import PlannerResult, PlannerStatus, PlanStep
 
+
 def _find_fd() -> Path:
     import importlib.util
 

@@ -32,8 +32,16 @@ from symbolic.grounding import GroundTask, check_problem, problem_states, steps_
 from symbolic.pddl import DomainWriter, effect_probabilities, problem_pddl
 from symbolic.sampling import dedup_choices, sample_choices
 from symbolic.search import action_costs, bfs, most_likely
-from symbolic.structs import (Action, OperatorSet, PlannerResult, PlannerStatus, PlanStep, ProbabilisticPlanResult,
-                              RankedPlan, SymbolicProblem)
+from symbolic.structs import (
+    Action,
+    OperatorSet,
+    PlannerResult,
+    PlannerStatus,
+    PlanStep,
+    ProbabilisticPlanResult,
+    RankedPlan,
+    SymbolicProblem,
+)
 
 BACKENDS = ("python", "fd", "fd-naive")
 # python backend: "shortest" = breadth-first search, the first shortest plan in ground-action order

@@ -21,8 +21,8 @@ def _scene_paths(html_file) -> bytes:
 def test_the_shipped_models_are_small_load_and_plan():
     import torch
 
-    from tamp.planning.bilevel import PlanConfig, plan
     from tamp.app.problem import random_problem
+    from tamp.planning.bilevel import PlanConfig, plan
 
     torch.set_num_threads(1)
     directory = pretrained_dir()

@@ -17,15 +17,15 @@ import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
-from planning_stubs import StubModel, two_block_domain  # noqa: E402
+from planning_stubs import StubModel, two_block_domain
 
-from evaluation.problems import generate_problems, read_problems, write_problems  # noqa: E402
+from evaluation.problems import generate_problems, read_problems, write_problems
+from evaluation.run import OUTCOMES, ROW_KEYS, EvalConfig, evaluate, read_rows, strip_timings
+from tamp.app.problem import Problem
 from tamp.planning.bilevel import PlanConfig
+from tamp.planning.models import Models
 from tamp.planning.search import SearchConfig
-from evaluation.run import OUTCOMES, ROW_KEYS, EvalConfig, evaluate, read_rows, strip_timings  # noqa: E402
-from tamp.planning.models import Models  # noqa: E402
-from tamp.app.problem import Problem  # noqa: E402
-from tamp.planning.verify import goal_error  # noqa: E402
+from tamp.planning.verify import goal_error
 
 SET = dict(ns=(2,), ks=(1, 2, 3), per_cell=1, seed=0)
 METHODS = ("deterministic", "probabilistic", "probabilistic_oracle", "cfs", "bilevel", "bilevel_alg1",
@@ -101,8 +101,8 @@ def test_a_stuck_scene_is_replaced_by_the_next_seed_of_its_problem(monkeypatch):
 def test_the_paper_protocol_keeps_actions_that_move_nothing():
     """`paper`: the first k drawn actions whatever they do (replayed, they give the goal and move
     exactly `moved` times); `strict` redraws until every one moves a block."""
-    from tamp.sim import World, WorldConfig
     from tamp.app.problem import MOVED_M
+    from tamp.sim import World, WorldConfig
 
     args = dict(ns=(2,), ks=(1, 3), per_cell=3, seed=2, progress=False)
     paper = generate_problems(**args, protocol="paper")
@@ -220,9 +220,9 @@ def test_the_oracle_succeeds_iff_one_executed_plan_succeeds(serial):
 def test_the_oracle_counts_success_iff_some_plan_reaches_the_goal(monkeypatch):
     """Three ranked plans of which only the last reaches the goal: success after three executions;
     with a cap of two plans, failure after two."""
-    from tamp.planning.bilevel import Candidate, PlanResult
-    from evaluation.run import Evaluator
     import evaluation.run as er
+    from evaluation.run import Evaluator
+    from tamp.planning.bilevel import Candidate, PlanResult
 
     problem = Problem(np.zeros((2, 5)), np.ones((2, 5)), k=1, seed=0, name="p")
     ranked = [Candidate(((0, 0, 1, 0),), 5, 0.5), Candidate(((0, 1, 1, 0),), 3, 0.3),
@@ -254,7 +254,8 @@ def test_the_oracle_counts_success_iff_some_plan_reaches_the_goal(monkeypatch):
         assert row["plan"] == [list(a) for a in executed[-1]]
         executed.clear()
         top = evaluator.run(problem, "probabilistic")  # the unverified planner executes its top plan only
-        assert not top["success"] and top["executed_plans"] == 1 and [tuple(map(tuple, e)) for e in executed] == [ranked[0].actions]
+        assert not top["success"] and top["executed_plans"] == 1
+        assert [tuple(map(tuple, e)) for e in executed] == [ranked[0].actions]
 
 
 def test_an_evaluation_killed_midway_resumes_without_redoing_or_losing_rows(serial, problems_file, tmp_path):
@@ -295,7 +296,8 @@ def test_an_evaluation_killed_midway_resumes_without_redoing_or_losing_rows(seri
 def test_two_workers_give_the_same_rows_as_one(serial, problems_file, tmp_path):
     (tmp_path / "models").mkdir()
     rows = read_rows(evaluate(tmp_path / "models", problems_file, tmp_path / "results",
-                              config=EvalConfig(planner=PlanConfig(search=SearchConfig(max_expansions=300)), progress=False, workers=2),
+                              config=EvalConfig(planner=PlanConfig(search=SearchConfig(max_expansions=300)),
+                                                progress=False, workers=2),
                               models=stub_models()))
     assert _by_key(rows) == _by_key(read_rows(serial))
 
@@ -327,7 +329,8 @@ def test_a_results_directory_refuses_other_inputs(serial, problems_file, tmp_pat
         evaluate(tmp_path / "models", problems_file, serial.parent, config=CONFIG, models=stub_models())
     with pytest.raises(ValueError, match='config.fidelity: "fast" there, "full" now'):
         evaluate(serial.parents[1] / "models", problems_file, serial.parent, models=stub_models(),
-                 config=EvalConfig(planner=PlanConfig(search=SearchConfig(max_expansions=300)), progress=False, fidelity="full"))
+                 config=EvalConfig(planner=PlanConfig(search=SearchConfig(max_expansions=300)), progress=False,
+                                   fidelity="full"))
 
 
 # --------------------------------------------------------------------------- the CLI, real model files

@@ -15,12 +15,12 @@ import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
-from planning_stubs import StubModel, two_block_domain  # noqa: E402
+from planning_stubs import StubModel, two_block_domain
 
-from tamp.app.cli import main  # noqa: E402
-from tamp.planning.models import Models, pretrained_dir  # noqa: E402
-from tamp.app.problem import Problem, random_problem  # noqa: E402
-from tamp.planning.validate import ARM_REACH_M, check_problem, check_scene  # noqa: E402
+from tamp.app.cli import main
+from tamp.app.problem import Problem, random_problem
+from tamp.planning.models import Models, pretrained_dir
+from tamp.planning.validate import ARM_REACH_M, check_problem, check_scene
 
 INIT = [[0.60, 0.15, 0.025, 1, 0], [0.70, -0.10, 0.025, 0, 1]]
 GOAL = [[0.70, -0.10, 0.075, 1, 0], [0.70, -0.10, 0.025, 0, 1]]

@@ -39,7 +39,8 @@ def test_topdown_ik_round_trip_on_branch():
     rng = np.random.default_rng(1)
     for _ in range(100):
         p = [rng.uniform(0.4, 0.95), rng.uniform(-0.45, 0.45), rng.uniform(0.0, 0.4)]
-        X = RigidTransform(RotationMatrix.MakeZRotation(rng.uniform(-np.pi, np.pi)) @ RotationMatrix.MakeXRotation(np.pi), p)
+        R = RotationMatrix.MakeZRotation(rng.uniform(-np.pi, np.pi)) @ RotationMatrix.MakeXRotation(np.pi)
+        X = RigidTransform(R, p)
         q = analytic_ik(X, Q_HOME)
         assert q is not None, p
         assert on_branch(q)

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 from pydrake.math import RigidTransform
 
-from tamp.planning.structs import PickPlace
+from tamp.planning.structs import BLOCK_SIZES, PickPlace
 from tamp.sim import World, WorldConfig
 from tamp.sim.execute import execute
 from tamp.sim.kinematics import Q_LOWER, Q_UPPER, V_MAX, tcp_pose
@@ -11,7 +11,6 @@ from tamp.sim.motion import MotionPlanner
 from tamp.sim.plants import X_FlangeTcp, build_motion_scene
 from tamp.sim.refine import refine
 from tamp.sim.skill import Scene
-from tamp.planning.structs import BLOCK_SIZES
 from tamp.sim.trajectory import A_MAX, segment_profile
 
 SMALL, LARGE = [1.0, 0.0], [0.0, 1.0]

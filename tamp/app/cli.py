@@ -12,7 +12,6 @@ import numpy as np
 
 from tamp.errors import UserError, is_user_error
 
-
 # learned.ACTIVATIONS, spelled out so that `tamp --help` does not import torch (tests check they agree).
 BOTTLENECKS = ("gumbel_sigmoid", "sigmoid", "tanh", "none")
 
@@ -153,8 +152,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
 def cmd_view(args: argparse.Namespace) -> int:
     """Refine a plan file, execute it with the arm under physics and write the replay."""
-    from tamp.sim.execute import execute
     from tamp.app.plan_file import load_plan_file
+    from tamp.sim.execute import execute
     from tamp.sim.refine import refine
     from tamp.sim.replay import Timeline
 

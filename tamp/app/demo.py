@@ -16,10 +16,10 @@ from pathlib import Path
 
 import numpy as np
 
-from tamp.errors import UserError
 from tamp.app.plan_command import LEVELS, fmt_action, print_result
 from tamp.app.problem import Problem, random_problem
 from tamp.app.runner import Execution, execute_plan, kinematics_for, run_closed_loop
+from tamp.errors import UserError
 from tamp.planning.bilevel import ClosedLoopResult, PlanConfig, PlanResult, plan, replan_rounds
 from tamp.planning.structs import TYPE_NAMES, Outcome, PickPlace
 from tamp.planning.verify import goal_error, goal_errors, rollout
@@ -302,7 +302,8 @@ def _print_loop_summary(out: DemoResult, cfg: DemoConfig) -> None:
     loop = out.loop
     print(f"\nsummary (seed {cfg.seed}, {cfg.fidelity} execution, closed loop):")
     levels = ", ".join("no plan" if r.level is None else
-                       f"level {r.level} (predicted {r.predicted_error * 100:.1f} cm from the goal)" for r in loop.rounds)
+                       f"level {r.level} (predicted {r.predicted_error * 100:.1f} cm from the goal)"
+                       for r in loop.rounds)
     print(f"  plans       {len(loop.rounds)} round(s): {levels}; {len(loop.executed)} action(s) executed")
     for a in loop.executed:
         print(f"              {fmt_action(a)}")

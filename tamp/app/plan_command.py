@@ -139,8 +139,8 @@ def run_plan(problem_path: Path, models_dir: Path, options: PlanOptions) -> int:
     """The `tamp plan` command; returns the exit code (0: solved, and reached the goal if executed)."""
     import torch
 
-    from tamp.planning.models import load_models
     from tamp.app.problem import load_problem
+    from tamp.planning.models import load_models
 
     # Planning runs many small forward passes: one thread is faster, and much faster when another
     # process keeps the second core busy (a 2-thread pass then waits for it: 20-40x slower, measured).
@@ -189,7 +189,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    "bilevel_alg1: the paper's Algorithm 1 without our Level-1 extensions)")
     p.add_argument("--replan", action="store_true",
                    help="closed loop: execute the first action, observe, replan (up to k - 1 rounds)")
-    p.add_argument("--rounds", type=non_negative_int, default=None, help="replanning rounds (default: k - 1 of the problem)")
+    p.add_argument("--rounds", type=non_negative_int, default=None,
+                   help="replanning rounds (default: k - 1 of the problem)")
     p.add_argument("--execute", choices=("none", "fast", "full"), default="fast",
                    help="refine and execute the plan in the fast world (default) or with the arm under "
                    "physics (full), or not at all")

@@ -106,7 +106,8 @@ class ClosedLoopRun:
     loop: ClosedLoopResult
     infos: list[StepInfo] = field(default_factory=list)  # per executed action
     step_times: list[tuple[float, float]] = field(default_factory=list)  # (refine, execute) wall s per action
-    action_starts: list[float | None] = field(default_factory=list)  # replay time each action began (None: arm never moved)
+    # replay time each action began (None: the arm never moved)
+    action_starts: list[float | None] = field(default_factory=list)
 
     @property
     def first_failure(self) -> RefinementFailure | None:

@@ -34,9 +34,17 @@ from tamp.planning.models import Models
 from tamp.planning.search import SearchConfig, SearchResult, SearchStatus, continuous_search, state_key
 from tamp.planning.structs import Infeasible, KinematicFeasibility, PickPlace, RefinementOutcome
 from tamp.planning.validate import check_problem
-from tamp.planning.verify import (EPS_SUCCESS, TAU_VERIFY, Verification, at_goal, goal_error, refine_skeleton, states_pair, verify,
-                         verify_many)
-
+from tamp.planning.verify import (
+    EPS_SUCCESS,
+    TAU_VERIFY,
+    Verification,
+    at_goal,
+    goal_error,
+    refine_skeleton,
+    states_pair,
+    verify,
+    verify_many,
+)
 
 SYMBOLIC_BACKENDS = ("python", "fd", "fd-naive")  # in-process search; Fast Downward, batched or one call per domain
 
@@ -510,5 +518,5 @@ def replan_rounds(k: int | None, default: int = 4) -> int:
 
 
 __all__: Sequence[str] = ["Candidate", "ClosedLoopResult", "METHODS", "PlanConfig", "PlanResult", "Planner",
-                          "plan", "plan_bilevel", "plan_bilevel_alg1", "plan_cfs", "plan_closed_loop", "plan_deterministic",
-                          "plan_probabilistic", "replan_rounds"]
+                          "plan", "plan_bilevel", "plan_bilevel_alg1", "plan_cfs", "plan_closed_loop",
+                          "plan_deterministic", "plan_probabilistic", "replan_rounds"]

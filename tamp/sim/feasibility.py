@@ -26,11 +26,11 @@ from typing import Sequence
 import numpy as np
 from pydrake.math import RigidTransform
 
+from tamp.planning.structs import BLOCK_SIZES, Infeasible, PickPlace, RefinementOutcome
 from tamp.sim.kinematics import Q_HOME, solve_chain
 from tamp.sim.plants import X_FlangeTcp
 from tamp.sim.refine import step_failure
 from tamp.sim.skill import Scene, approach_poses, held_block, pick_place_waypoints
-from tamp.planning.structs import BLOCK_SIZES, Infeasible, PickPlace, RefinementOutcome
 from tamp.sim.structs import WorldConfig
 from tamp.sim.world import World
 
@@ -82,7 +82,8 @@ class FeasibilityChecker:
         X = np.asarray(X, dtype=float)
         if len(X) != self.scene.n:
             raise ValueError(f"X has {len(X)} objects, the observed scene {self.scene.n}")
-        return Scene(self.scene.types, [RigidTransform(X_WB.rotation(), p) for X_WB, p in zip(self.scene.X_WB, X[:, :3])])
+        return Scene(self.scene.types,
+                     [RigidTransform(X_WB.rotation(), p) for X_WB, p in zip(self.scene.X_WB, X[:, :3])])
 
     # --- the cheap check ---------------------------------------------------------------------------
     def check(self, X: np.ndarray, actions) -> list[Infeasible | None]:

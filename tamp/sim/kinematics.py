@@ -117,7 +117,8 @@ def drake_ik(
     # Other bodies (free blocks) stay where they are.
     others = np.setdiff1d(np.arange(plant.num_positions()), arm_position_indices)
     prog.AddBoundingBoxConstraint(q_seed_full[others], q_seed_full[others], q_vars[others])
-    prog.AddQuadraticErrorCost(np.eye(len(arm_position_indices)), q_seed_full[arm_position_indices], q_vars[arm_position_indices])
+    prog.AddQuadraticErrorCost(np.eye(len(arm_position_indices)), q_seed_full[arm_position_indices],
+                               q_vars[arm_position_indices])
     prog.SetInitialGuess(q_vars, q_seed_full)
     result = Solve(prog)
     if not result.is_success():

@@ -14,11 +14,11 @@ from typing import Iterable
 
 import numpy as np
 
-from tamp.sim.skill import Scene
 from tamp.planning.structs import PickPlace
+from tamp.planning.validate import check_scene
+from tamp.sim.skill import Scene
 from tamp.sim.structs import StepInfo, StepStatus, WorldConfig
 from tamp.sim.trajectory import FailureStage, RefinedPlan, RefinementFailure, concatenate, refined_action
-from tamp.planning.validate import check_scene
 from tamp.sim.world import World, validate_action
 
 FAILURE_STAGES = {  # StepInfo.status of a failed action -> refinement stage

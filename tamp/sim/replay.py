@@ -20,10 +20,10 @@ from typing import Sequence
 import numpy as np
 from pydrake.math import RigidTransform
 
-from tamp.sim.kinematics import V_MAX, tcp_pose
-from tamp.sim.observer import Carried, PhysicsFrame, WorldObserver
 from tamp.planning.structs import BLOCK_SIZES
 from tamp.records import atomic_write_text
+from tamp.sim.kinematics import V_MAX, tcp_pose
+from tamp.sim.observer import Carried, PhysicsFrame, WorldObserver
 
 REPLAY_FPS = 30.0
 _REPLAY_SPEED = 0.5  # fraction of the joint velocity limits used to time kinematic motions
@@ -157,7 +157,8 @@ class Timeline(WorldObserver):
         builder = DiagramBuilder()
         builder.AddSystem(scene.diagram)
         params = MeshcatVisualizerParams(role=Role.kIllustration)
-        visualizer = MeshcatVisualizer.AddToBuilder(builder, scene.diagram.GetOutputPort("scene_graph_query"), meshcat, params)
+        visualizer = MeshcatVisualizer.AddToBuilder(builder, scene.diagram.GetOutputPort("scene_graph_query"),
+                                                    meshcat, params)
         diagram = builder.Build()
         context = diagram.CreateDefaultContext()
         robot_ctx = scene.diagram.GetMyMutableContextFromRoot(context)

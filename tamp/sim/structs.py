@@ -13,6 +13,7 @@ import numpy as np
 from tamp.errors import UserError
 from tamp.planning.structs import PickPlace
 
+
 @dataclass(frozen=True)
 class WorldConfig:
     """Configuration of the block world. All lengths in metres, times in seconds."""

@@ -16,8 +16,8 @@ import numpy as np
 from pydrake.math import RigidTransform
 from pydrake.trajectories import PiecewisePolynomial
 
-from tamp.sim.kinematics import V_MAX
 from tamp.planning.structs import PickPlace
+from tamp.sim.kinematics import V_MAX
 
 # Joint acceleration limits (rad/s^2): the data sheet gives none; a conservative value that the
 # arm tracks closely under the PD controller with a carried block.

@@ -20,15 +20,15 @@ import numpy as np
 from pydrake.math import RigidTransform
 
 from tamp.errors import UserError
+from tamp.planning.structs import BLOCK_SIZES, LARGE, OFFSETS, SMALL, PickPlace
+from tamp.planning.validate import MAX_OBJECTS, check_scene
 from tamp.sim.kinematics import Q_HOME, drake_ik, solve_chain
 from tamp.sim.motion import MotionPlanner
 from tamp.sim.observer import Carried, PhysicsFrame, WorldObserver
 from tamp.sim.physics import BlockPhysics
 from tamp.sim.plants import X_FlangeTcp, build_motion_scene, build_physics_scene
 from tamp.sim.skill import Scene, Waypoints, approach_poses, held_block, pick_place_waypoints, topdown
-from tamp.planning.structs import BLOCK_SIZES, LARGE, OFFSETS, SMALL, PickPlace
 from tamp.sim.structs import StepInfo, StepStatus, WorldConfig
-from tamp.planning.validate import MAX_OBJECTS, check_scene
 
 if TYPE_CHECKING:
     from tamp.sim.execute import Executor
@@ -194,7 +194,8 @@ class World:
             return self._unchanged(info, t_start)
         t_motion = time.perf_counter()
         paths = {}
-        if not self._plan(planner, [("approach", self.q, qs["pregrasp"]), ("descend", qs["pregrasp"], qs["grasp"])], info, paths):
+        segments = [("approach", self.q, qs["pregrasp"]), ("descend", qs["pregrasp"], qs["grasp"])]
+        if not self._plan(planner, segments, info, paths):
             return self._unchanged(info, t_start, t_motion)
         info.timings["motion"] = time.perf_counter() - t_motion
 
@@ -353,7 +354,8 @@ def validate_action(action, n: int) -> PickPlace:
         if any(float(v) != int(v) for v in action):
             raise TypeError
     except (TypeError, ValueError):
-        raise UserError(f"an action is 4 integers (pick, grasp_offset, place, release_offset), got {action!r}") from None
+        raise UserError(f"an action is 4 integers (pick, grasp_offset, place, release_offset), "
+                        f"got {action!r}") from None
     if len(values) != 4:
         raise UserError(f"an action is 4 integers (pick, grasp_offset, place, release_offset), got {action!r}")
     pick, grasp_offset, place, release_offset = values
