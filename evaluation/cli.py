@@ -37,10 +37,10 @@ def cmd_problems(args: argparse.Namespace) -> int:
     path = write_problems(args.out, problems)
     last = args.seed + args.runs - 1
     seeds = f"seed {args.seed}" if args.runs == 1 else f"{args.runs} runs, seeds {args.seed}..{last}"
-    moved = sum(p.moved for p in problems)
+    moved = sum(p.moved for p in problems if p.moved is not None)  # generated problems all count it
     print(f"wrote {len(problems)} problems to {path} (objects {','.join(map(str, args.objects))}, actions "
           f"{','.join(map(str, args.actions))}, {args.per_cell} per cell, {seeds}, {args.protocol} protocol: "
-          f"{moved} of {sum(p.k for p in problems)} actions moved a block)")
+          f"{moved} of {sum(p.k for p in problems if p.k is not None)} actions moved a block)")
     return 0
 
 

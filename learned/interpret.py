@@ -105,7 +105,9 @@ def interpret_symbols(symbols: Callable[[np.ndarray], tuple[np.ndarray, np.ndarr
     (a Symbolic Model's `symbols(X) -> (unary (n, d_z), relations (K, n, n))`) on `scenes`."""
     if not len(scenes):
         raise ValueError("no scenes to read the symbols on")
-    unary_bits, unary_f, rel_bits, rel_f, self_bits = [], {}, [], {}, []
+    unary_f: dict[str, list[np.ndarray]] = {}
+    rel_f: dict[str, list[np.ndarray]] = {}
+    unary_bits, rel_bits, self_bits = [], [], []
     for X in scenes:
         X = np.asarray(X, dtype=float)
         u, r = symbols(X)

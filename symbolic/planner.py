@@ -146,6 +146,7 @@ class SymbolicPlanner:
             if r.status is not PlannerStatus.SOLVED:
                 continue
             if id(r) not in parsed:
+                assert r.plan is not None  # solved
                 steps = tuple(_strip_variant(r.plan))
                 parsed[id(r)] = (steps, tuple(steps_to_actions(self.ops, list(steps), n)))
             steps, key = parsed[id(r)]
@@ -257,8 +258,8 @@ class SymbolicPlanner:
         names = self.ops.by_name()
         variant = []
         for line in sas.names:
-            base, _, e = line.split()[0].partition("__e")
-            variant.append((names[base], int(e)))
+            base, _, effect = line.split()[0].partition("__e")
+            variant.append((names[base], int(effect)))
         var_op = np.array([v[0] for v in variant], np.int64)
         var_eff = np.array([v[1] for v in variant], np.int64)
         relevant = np.unique(var_op) if variant else np.empty(0, np.int64)

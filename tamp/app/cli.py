@@ -144,6 +144,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
                   f"{t.get('motion', 0) * 1e3:.0f}, physics {t.get('physics', 0) * 1e3:.0f})")
         X = X_next
     if args.replay:
+        assert timeline is not None  # made for --replay
         path = timeline.write_html(args.replay)
         print(f"replay written to {path} ({path.stat().st_size / 1e6:.1f} MB); open it in a browser",
               file=sys.stderr if args.json else sys.stdout)
@@ -286,6 +287,7 @@ def symbol_scenes(problems: Path | None, data: Path | None, max_scenes: int, see
         return [X for p in read_problem_set(problems) for X in (p.X_init, p.X_goal)][:max_scenes]
     from learned import load_transitions
 
+    assert data is not None  # exactly one of problems and data (checked above)
     t = load_transitions(data)
     if len(t) == 0:
         raise UserError(f"{data}: the dataset holds no transitions")

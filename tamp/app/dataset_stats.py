@@ -200,7 +200,7 @@ def dataset_stats(directory: str | Path, png: str | Path | None = None) -> Datas
         displacement.append(np.where(executed, np.take_along_axis(dist, g, axis=1)[:, 0], np.nan))
         is_grasped = (np.arange(X.shape[1])[None] == part.grasped[:, None])
         others.append(np.any((dist > MOVE_TOL) & ~is_grasped, axis=1))
-    outcome, displacement, others = map(np.concatenate, (outcome, displacement, others))
-    stats = DatasetStats(directory, meta, n, outcome.astype(str), displacement, others, skipped, missing)
+    stats = DatasetStats(directory, meta, n, np.concatenate(outcome).astype(str), np.concatenate(displacement),
+                         np.concatenate(others), skipped, missing)
     stats.png = stats.write_png(Path(png) if png is not None else directory / "stats.png")
     return stats

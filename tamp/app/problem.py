@@ -204,7 +204,8 @@ def random_problem(n: int, k: int, seed: int, world: "World | None" = None, name
             break
         X = world.X
         candidates = world.actions()
-        action = tuple(int(v) for v in candidates[rng.integers(len(candidates))])
+        pick, grasp_offset, place, release_offset = (int(v) for v in candidates[rng.integers(len(candidates))])
+        action = (pick, grasp_offset, place, release_offset)
         X_next, info = world.step(action)
         changed = info.status == "ok" and np.max(np.linalg.norm(X_next[:, :3] - X[:, :3], axis=1)) >= MOVED_M
         if changed or protocol == "paper":

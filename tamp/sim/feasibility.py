@@ -67,8 +67,10 @@ class FeasibilityChecker:
         """Observe the scene X_init places upright, as `tamp.sim.refine.refine(plan, X_init)` starts."""
         self.world.rng = np.random.default_rng(0)
         self.world.reset(X=X_init)
-        self.scene, self.q = self.world.scene, self.world.q.copy()
-        return self.scene
+        scene = self.world.scene
+        assert scene is not None  # reset placed the blocks
+        self.scene, self.q = scene, self.world.q.copy()
+        return scene
 
     def observe(self, scene: Scene, q: np.ndarray | None = None) -> None:
         """Plan from an exact simulator state (block poses with orientation, arm joints)."""
@@ -149,6 +151,7 @@ class FeasibilityChecker:
             if failure is not None:
                 stage, where, reason = failure
                 return RefinementOutcome(k, REFINE_REASONS[stage], f"{stage} [{where}]: {reason}")
+            assert self.world.scene is not None  # set_scene above
             scene, q = self.world.scene, self.world.q
         return RefinementOutcome()
 
