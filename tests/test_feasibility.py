@@ -8,6 +8,8 @@ import pytest
 from tamp.planning.structs import Infeasible, PickPlace
 from tamp.sim.feasibility import FeasibilityChecker
 
+pytestmark = pytest.mark.sim  # every test here builds Drake plants
+
 CUBE, BAR = [1, 0], [0, 1]
 
 

@@ -6,6 +6,8 @@ from pydrake.math import RigidTransform, RotationMatrix
 from tamp.sim.kinematics import Q_HOME, Q_LOWER, Q_UPPER, analytic_ik, on_branch, tcp_pose
 from tamp.sim.plants import build_motion_scene
 
+pytestmark = pytest.mark.sim  # every test here builds Drake plants
+
 
 @pytest.fixture(scope="module")
 def scene():

@@ -9,6 +9,8 @@ from tamp.sim.kinematics import Q_LOWER, Q_UPPER, tcp_pose
 from tamp.sim.motion import MotionPlanner
 from tamp.sim.plants import X_FlangeTcp, build_motion_scene
 
+pytestmark = pytest.mark.sim  # every test here builds Drake plants
+
 SMALL, LARGE = [1.0, 0.0], [0.0, 1.0]
 BAR_HEIGHT = BLOCK_SIZES[1][2]
 
