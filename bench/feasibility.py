@@ -5,9 +5,10 @@
 Random (scene, action) pairs: a random scene of 2-4 blocks, then 0-2 random actions executed in the
 `fast` world (so that stacks, shifted and turned blocks occur), then one uniformly random action of
 the 9 n^2. Each action is checked by `tamp.sim.feasibility.FeasibilityChecker` on the scene (positions
-from X, orientations from the observed scene, as in planning) and fully refined from the same scene twice: as the planners refine (`FeasibilityChecker.refine`: IK,
-OMPL motions, grasp, no physics) and as execution does (`tamp.sim.refine`: the same, with physics after
-release for the retreat), the ground truth. A false accept is an action the check passes and refinement fails: the planner would
+from X, orientations from the observed scene, as in planning) and fully refined from the same scene
+twice: as the planners refine (`FeasibilityChecker.refine`: IK, OMPL motions, grasp, no physics) and
+as execution does (`tamp.sim.refine`: the same, with physics after release for the retreat), the
+ground truth. A false accept is an action the check passes and refinement fails: the planner would
 return a plan that does not refine (target <= 2 % of pairs). A false reject is an action the check
 rejects and refinement carries out: a plan the planner misses. Baseline in the same run: full
 refinement's cost, of which the check should be a small fraction.
@@ -21,15 +22,15 @@ from collections import Counter
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
-import dataclasses  # noqa: E402
+import dataclasses
 
-import numpy as np  # noqa: E402
+import numpy as np
 
-from tamp.sim import World, WorldConfig
-from tamp.sim.feasibility import FeasibilityChecker  # noqa: E402
-from tamp.sim.kinematics import Q_HOME  # noqa: E402
-from tamp.sim.refine import refine  # noqa: E402
 from tamp.planning.structs import PickPlace
+from tamp.sim import World, WorldConfig
+from tamp.sim.feasibility import FeasibilityChecker
+from tamp.sim.kinematics import Q_HOME
+from tamp.sim.refine import refine
 
 
 def main() -> None:
@@ -42,7 +43,7 @@ def main() -> None:
     checker = FeasibilityChecker()
     executor = World(dataclasses.replace(WorldConfig(), fidelity="fast", simplify_paths=True))
     verdicts, check_s, refine_s, plan_refine_s, reasons, failures = [], [], [], [], Counter(), Counter()
-    for b in range(args.pairs):
+    for _ in range(args.pairs):
         n = int(rng.integers(2, 5))
         X = scenes.reset(n_objects=n, seed=int(rng.integers(2**31 - 1)))
         for _ in range(int(rng.integers(0, 3))):

@@ -37,6 +37,7 @@ or run this benchmark with --synthetic DIR (toy data, models trained in a few mi
 def make_synthetic_models(out: Path, samples: int = 30000, seconds: float = 100.0, seed: int = 0) -> None:
     """Dynamics + Symbolic Model trained on toy transitions for `seconds` each, and their domain."""
     import torch
+
     from learned import ModelConfig, TrainConfig, train_model
     from learned.synthetic import generate
     from symbolic import build_domain
@@ -88,8 +89,8 @@ _DRAKE_WORLD = None
 
 def drake_executed_ok(X, G, plan) -> bool:
     """Execute the plan in the fast Drake world from X; success = every object within eps of G."""
-    from tamp.sim import World, WorldConfig
     from tamp.planning.verify import at_goal
+    from tamp.sim import World, WorldConfig
 
     global _DRAKE_WORLD
     _DRAKE_WORLD = _DRAKE_WORLD or World(WorldConfig())
@@ -167,7 +168,8 @@ def main() -> int:
         rs = [r for r in rows if r["n"] == n]
         b, c = [r["bilevel"]["time"] for r in rs], [r["cfs"]["time"] for r in rs]
         level1 = sum(r["bilevel"]["level"] == 1 for r in rs)
-        print(f"| {n} | {sum(r['bilevel']['ok'] for r in rs)}/{len(rs)} | {sum(r['cfs']['ok'] for r in rs)}/{len(rs)} | "
+        print(f"| {n} | {sum(r['bilevel']['ok'] for r in rs)}/{len(rs)} | "
+              f"{sum(r['cfs']['ok'] for r in rs)}/{len(rs)} | "
               f"{statistics.median(b):.3f} / {statistics.mean(b):.3f} | {statistics.median(c):.3f} / "
               f"{statistics.mean(c):.3f} | {statistics.mean(c) / statistics.mean(b):.2f} | {level1}/{len(rs)} | "
               f"{statistics.mean(r['bilevel']['level1'] for r in rs):.3f} |")
@@ -195,8 +197,10 @@ def main() -> int:
               f"{mean(rest, 'cfs')} | {mean(rest, 'bilevel')} | {bound} |")
 
     print(f"\nbatched vs unbatched successor prediction (continuous search, the problems with most expansions, "
-          f"each search capped at {args.compare_expansions} expansions and no time limit, so that both do the same work)")
-    print("| n | problems | expansions | batched (s) | unbatched (s) | speedup | ms/expansion batched / unbatched | same plan | same length |")
+          f"each search capped at {args.compare_expansions} expansions and no time limit, "
+          "so that both do the same work)")
+    print("| n | problems | expansions | batched (s) | unbatched (s) | speedup | "
+          "ms/expansion batched / unbatched | same plan | same length |")
     print("|---|---|---|---|---|---|---|---|---|")
     for n in (2, 3, 4):
         rs = sorted((r for r in rows if r["n"] == n), key=lambda r: -r["cfs"]["expanded"])[:args.unbatched]
@@ -216,7 +220,8 @@ def main() -> int:
             length += (out[True].plan is None) == (out[False].plan is None) and \
                 len(out[True].plan or []) == len(out[False].plan or [])
         print(f"| {n} | {len(rs)} | {exp} | {tb:.3f} | {tu:.3f} | {tu / max(tb, 1e-9):.1f}x | "
-              f"{1e3 * tb / max(exp, 1):.2f} / {1e3 * tu / max(exp_u, 1):.2f} | {same}/{len(rs)} | {length}/{len(rs)} |")
+              f"{1e3 * tb / max(exp, 1):.2f} / {1e3 * tu / max(exp_u, 1):.2f} | "
+              f"{same}/{len(rs)} | {length}/{len(rs)} |")
     print("(the network's batched and single-row forward passes differ by ~1e-8 m of float rounding, which "
           "can reorder near-tied nodes; with an exact model the searches are identical, see the tests)")
     return 0

@@ -17,11 +17,11 @@ import sys
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
-import numpy as np  # noqa: E402
+import numpy as np
 
 from tamp.sim import World, WorldConfig
-from tamp.sim.execute import execute  # noqa: E402
-from tamp.sim.refine import refine  # noqa: E402
+from tamp.sim.execute import execute
+from tamp.sim.refine import refine
 
 
 def main() -> None:
@@ -64,13 +64,15 @@ def main() -> None:
         print(f"\r{n}/{args.actions} feasible actions refined", end="", file=sys.stderr)
     print(file=sys.stderr)
     times, base_times = np.array(times), np.array(base_times)
-    print(f"refinement per pick-place: median {np.median(times) * 1e3:.0f} ms, p90 {np.percentile(times, 90) * 1e3:.0f} ms"
+    print(f"refinement per pick-place: median {np.median(times) * 1e3:.0f} ms, "
+          f"p90 {np.percentile(times, 90) * 1e3:.0f} ms"
           f"  (target median <= 300 ms)")
     print(f"refinement success on feasible actions: {ok}/{n} = {ok / n * 100:.1f} %  (target >= 99 %)")
     for f in failures:
         print(f"  failed: {f}")
     print(f"baseline (RRTConnect for every motion), {len(base_times)} actions: median "
-          f"{np.median(base_times) * 1e3:.0f} ms -> speed-up {np.median(base_times) / np.median(times[:len(base_times)]):.1f}x")
+          f"{np.median(base_times) * 1e3:.0f} ms -> "
+          f"speed-up {np.median(base_times) / np.median(times[:len(base_times)]):.1f}x")
     if exec_wall:
         w, s = np.array(exec_wall), np.array(exec_sim)
         print(f"full-physics execution, {len(w)} actions: median {np.median(w):.2f} s wall for "

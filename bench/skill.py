@@ -17,7 +17,7 @@ import time
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
-import numpy as np  # noqa: E402
+import numpy as np
 
 from tamp.sim import World, WorldConfig
 
@@ -68,7 +68,8 @@ def print_summary(name: str, s: dict) -> None:
     print(f"  total, released actions {ms(s['total_released'])}")
     print(f"  IK                      {ms(s['ik'])}")
     print(f"  motion planning         {ms(s['motion'])}")
-    print(f"  physics (released)      {ms(s['physics'])}   simulated {s['settle_time'][0]:.2f} / {s['settle_time'][1]:.2f} s")
+    print(f"  physics (released)      {ms(s['physics'])}   "
+          f"simulated {s['settle_time'][0]:.2f} / {s['settle_time'][1]:.2f} s")
     print(f"  kinematically feasible  {s['kinematic_success'] * 100:5.1f} %   outcomes {s['statuses']}")
 
 

@@ -23,12 +23,12 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from symbolic import blocksworld as bw  # noqa: E402
-from symbolic import fast_downward as fd  # noqa: E402
-from symbolic.operators import learn_operators, stats  # noqa: E402
-from symbolic.pddl import DomainWriter, problem_pddl  # noqa: E402
-from symbolic.planner import SymbolicPlanner  # noqa: E402
-from symbolic.sampling import sample_choices  # noqa: E402
+from symbolic import blocksworld as bw
+from symbolic import fast_downward as fd
+from symbolic.operators import learn_operators, stats
+from symbolic.pddl import DomainWriter, problem_pddl
+from symbolic.planner import SymbolicPlanner
+from symbolic.sampling import sample_choices
 
 
 def pct(xs, q):
@@ -132,7 +132,8 @@ def main() -> None:
             summary.append((n, st["n_operators"], pct(total, 50), pct(total, 90),
                             pct(fd_total, 50) if fd_rows else float("nan"), naive_problem))
     print("\n=== summary: Level-1 seconds per problem at N = %d (median; python p90)" % N)
-    print(f"{'n':>2} {'ops':>5} {'python':>9} {'p90':>9} {'fd':>9} {'fd-naive*':>10} {'naive/python':>13} {'naive/fd':>9}")
+    print(f"{'n':>2} {'ops':>5} {'python':>9} {'p90':>9} {'fd':>9} {'fd-naive*':>10} "
+          f"{'naive/python':>13} {'naive/fd':>9}")
     for n, nops, med, p90, fdm, nv in summary:
         print(f"{n:>2} {nops:>5} {med:9.4f} {p90:9.4f} {fdm:9.3f} {nv:10.2f} {nv / med:12.0f}x {nv / fdm:8.1f}x")
     print("* fd-naive scaled linearly from --naive-domains calls per problem to N.")

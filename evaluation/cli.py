@@ -5,12 +5,12 @@ import argparse
 import sys
 from pathlib import Path
 
-from tamp.errors import UserError
-from tamp.app.cli import positive_int
 from evaluation.methods import SYMBOLIC_BACKENDS
+from tamp.app.cli import positive_int
 from tamp.app.parallel import add_arguments as add_parallel_arguments
 from tamp.app.plan_command import add_planner_arguments
 from tamp.app.problem import PROTOCOLS
+from tamp.errors import UserError
 
 
 def _int_list(text: str) -> tuple[int, ...]:
@@ -36,11 +36,12 @@ def cmd_problems(args: argparse.Namespace) -> int:
     problems = generate_problems(args.objects, args.actions, args.per_cell, args.seed, progress=not args.quiet,
                                  protocol=args.protocol, runs=args.runs, workers=args.workers)
     path = write_problems(args.out, problems)
-    seeds = f"seed {args.seed}" if args.runs == 1 else f"{args.runs} runs, seeds {args.seed}..{args.seed + args.runs - 1}"
-    moved = sum(p.moved for p in problems)
+    last = args.seed + args.runs - 1
+    seeds = f"seed {args.seed}" if args.runs == 1 else f"{args.runs} runs, seeds {args.seed}..{last}"
+    moved = sum(p.moved for p in problems if p.moved is not None)  # generated problems all count it
     print(f"wrote {len(problems)} problems to {path} (objects {','.join(map(str, args.objects))}, actions "
           f"{','.join(map(str, args.actions))}, {args.per_cell} per cell, {seeds}, {args.protocol} protocol: "
-          f"{moved} of {sum(p.k for p in problems)} actions moved a block)")
+          f"{moved} of {sum(p.k for p in problems if p.k is not None)} actions moved a block)")
     return 0
 
 
@@ -53,7 +54,6 @@ def _write_report(directory: Path, ablation: Path | None = None) -> Path:
 def cmd_evaluate(args: argparse.Namespace) -> int:
     """Every method on every problem: plan, refine, execute; rows to OUT/rows.jsonl, then the report."""
     from evaluation.run import EvalConfig, evaluate, read_rows
-
     from tamp.app.plan_command import planner_config
 
     config = EvalConfig(planner=planner_config(args), fidelity=args.fidelity, workers=args.workers,
@@ -166,17 +166,15 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--scale", choices=("quick", "paper"), default="quick", help="sizes (default quick)")
     p.add_argument("--out", type=Path, required=True, help="output directory (new, or the one to resume)")
-    p.add_argument("--workers", type=positive_int, default=None,
-                   help="worker processes or Ray actors (default: all CPUs)")
-    p.add_argument("--backend", choices=("local", "ray"), default="local",
-                   help="collection and evaluation on a local process pool (default) or Ray")
+    add_parallel_arguments(p)
     p.add_argument("--fidelity", choices=("fast", "full"), default="fast",
                    help="execute the plans in the fast world (default) or with the arm under physics")
     p.add_argument("--protocol", choices=PROTOCOLS, default="strict",
                    help="problem sets: strict (every random action moves something, default) or paper (actions "
                    "kept whatever their outcome, as the paper's authors do)")
     p.add_argument("--runs", type=positive_int, default=1,
-                   help="problem sets of consecutive seeds, reported as mean ± std over runs (default 1; the paper: 10)")
+                   help="problem sets of consecutive seeds, reported as mean ± std over runs "
+                        "(default 1; the paper: 10)")
     p.add_argument("--models", type=Path, default=None,
                    help="evaluate this models directory (e.g. tamp/pretrained) instead of collecting and training")
     p.add_argument("--symbolic-backend", choices=SYMBOLIC_BACKENDS, default="python",
@@ -191,7 +189,7 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     try:
         report = reproduce(args.out, args.scale, workers=args.workers, backend=args.backend, fidelity=args.fidelity,
                            protocol=args.protocol, runs=args.runs, models=args.models,
-                           symbolic_backend=args.symbolic_backend)
+                           symbolic_backend=args.symbolic_backend, address=args.address)
     except TrainingUnfinished as e:
         print(f"unfinished: {e}", file=sys.stderr)
         return 3

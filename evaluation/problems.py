@@ -23,11 +23,10 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from tamp.errors import UserError
 from tamp.app.problem import PROTOCOLS, Problem, StuckScene, random_problem
-from tamp.records import atomic_write_text
 from tamp.app.problem import read_problem_set as read_problems  # noqa: F401 (the set reader, here by its old name)
-
+from tamp.errors import UserError
+from tamp.records import atomic_write_text
 
 MAX_ATTEMPTS = 10  # scenes drawn per problem before giving up (see `generate_problems`)
 

@@ -18,11 +18,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Iterable, Sequence
 
-from . import paper, plots
 from tamp.errors import UserError
 from tamp.planning.structs import OUTCOMES, Outcome
 from tamp.records import atomic_write_text
 
+from . import paper, plots
 from .stats import IDENTICAL, confusion, mean_std, median, paired_ttest, percentile, rate_pct
 
 METHOD_ORDER = ("deterministic", "probabilistic", "probabilistic_oracle", "cfs", "bilevel", "bilevel_alg1",
@@ -79,6 +79,7 @@ def fmt_p(p: float | str | None) -> str:
         return DASH
     if p == IDENTICAL:
         return IDENTICAL
+    assert not isinstance(p, str)  # IDENTICAL is paired_ttest's only text
     return "< 0.0001" if p < paper.P_BELOW else f"{p:.4f}"
 
 
@@ -127,7 +128,9 @@ def _read_rows(path: Path) -> tuple[list[dict], int | None]:
     """(rows, number of an incomplete last line that was left out, or None)."""
     if not path.is_file():
         raise UserError(f"{path}: no rows file (expected the JSONL written by `tamp evaluate`)")
-    rows, seen, cells, dropped = [], {}, {}, None
+    seen: dict[tuple[str, str], int] = {}  # (problem, method) -> line
+    cells: dict[str, tuple[int, int, int]] = {}  # problem -> (n, k, line)
+    rows, dropped = [], None
     try:
         lines = path.read_text().split("\n")
     except UnicodeDecodeError as error:
@@ -284,15 +287,33 @@ class Results:
         return [rows[p] for p in sorted(rows) if keep(*self.cells[p])]
 
 
-def _by_n(res: Results) -> list[tuple[str, Callable[[int, int], bool]]]:
-    return [(str(n), lambda n_, k_, n=n: n_ == n) for n in res.ns] + [("all", lambda n, k: True)]
+Keep = Callable[[int, int], bool]  # (n, k) of a problem -> whether a group holds it
+
+
+def _n_is(n: int) -> Keep:
+    return lambda n_, k_: n_ == n
+
+
+def _k_in(ks: Sequence[int]) -> Keep:
+    return lambda n_, k_: k_ in ks
+
+
+def _cell_is(n: int, k: int) -> Keep:
+    return lambda n_, k_: (n_, k_) == (n, k)
+
+
+def _everything(n: int, k: int) -> bool:
+    return True
+
+
+def _by_n(res: Results) -> list[tuple[str, Keep]]:
+    return [(str(n), _n_is(n)) for n in res.ns] + [("all", _everything)]
 
 
 def _by_k(res: Results, ks: Sequence[int] | None = None, all_label: str = "all"
-          ) -> list[tuple[str, Callable[[int, int], bool]]]:
+          ) -> list[tuple[str, Keep]]:
     ks = res.ks if ks is None else ks
-    return [(str(k), lambda n_, k_, k=k: k_ == k) for k in ks] + \
-        [(all_label, lambda n_, k_, ks=tuple(ks): k_ in ks)]
+    return [(str(k), _k_in((k,))) for k in ks] + [(all_label, _k_in(tuple(ks)))]
 
 
 def _success(rows: Sequence[dict]) -> float | None:
@@ -562,7 +583,8 @@ def section_verifier(res: Results, figures: Path) -> Section:
               _protocol_note(res) + _backend_note(res, ("probabilistic",)), ""]
     kinds = [("non-empty plans", [r for r in planned if r.get("plan")]),
              ("empty plans", [r for r in planned if r.get("plan") == []]), ("all plans", planned)]
-    split, srows = {}, []
+    split: dict[str, dict[str, Any]] = {}
+    srows = []
     for label, rs in kinds:
         c = confusion([r["predicted_error_m"] for r in rs], [r["success"] for r in rs], tau)
         split[label] = {"confusion": c.to_dict()}
@@ -581,7 +603,7 @@ def section_verifier(res: Results, figures: Path) -> Section:
               "alone:", ""]
     lines += md_table(["plans", "count", "TP", "FP", "TN", "FN", "verified: success (%)", "unverified: failure (%)",
                        "accuracy", "F1"] + (["accuracy runs", "F1 runs"] if len(res.runs) > 1 else []), srows)
-    sweep = {g: {"accuracy": [], "f1": []} for g, _ in groups}
+    sweep: dict[str, dict[str, list[float | None]]] = {g: {"accuracy": [], "f1": []} for g, _ in groups}
     for tau_cm in TAUS_CM:
         for g, rs in groups:
             c = confusion([r["predicted_error_m"] for r in rs], [r["success"] for r in rs], tau_cm / 100)
@@ -606,13 +628,14 @@ def section_success(res: Results, figures: Path) -> Section:
     title = "6. Success per (n, k) (Fig. 5) and failure breakdown"
     methods = res.methods
     split = "bilevel" in res.by_method
-    cells = [(str(n), str(k), lambda n_, k_, n=n, k=k: (n_, k_) == (n, k)) for n in res.ns for k in res.ks]
-    cells += [(str(n), "all", lambda n_, k_, n=n: n_ == n) for n in res.ns] + [("all", "all", lambda n, k: True)]
+    cells = [(str(n), str(k), _cell_is(n, k)) for n in res.ns for k in res.ks]
+    cells += [(str(n), "all", _n_is(n)) for n in res.ns] + [("all", "all", _everything)]
     header = ["n", "k", "problems"] + [f"`{m}` (%)" for m in methods]
     if split:
         header += ["`bilevel` Level 1 (%)", "`bilevel` Level 2 (%)"]
     rows, data = [], []
     for n, k, keep in cells:
+        entry: dict[str, Any]
         entry = {"n": n, "k": k, "problems": sum(1 for c in res.cells.values() if keep(*c)), "success_pct": {}}
         for m in methods:
             entry["success_pct"][m] = rate_pct([r["success"] for r in res.select(m, keep)])
@@ -672,9 +695,10 @@ def section_table3(res: Results, figures: Path) -> Section:
         pairs = res.paired("bilevel", "cfs", keep)
         tb, tc = _times(pairs)
         mb, mc = mean_std(tb), mean_std(tc)
-        speedup = mc[0] / mb[0] if pairs and mb[0] > 0 else None
+        speedup = mc[0] / mb[0] if pairs and mc[0] is not None and mb[0] is not None and mb[0] > 0 else None
         p3 = paper.TABLE3_TIME_S.get(int(label)) if label != "all" else None
         ps = paper.TABLE3_SPEEDUP.get(int(label)) if label != "all" else None
+        g: dict[str, Any]
         g = {"group": label, "problems": len(pairs), "bilevel_s": mb, "bilevel_median_s": median(tb), "cfs_s": mc,
              "cfs_median_s": median(tc), "speedup": speedup, "p": paired_ttest(tb, tc)}
         run_cols = []
@@ -701,7 +725,7 @@ def section_table3(res: Results, figures: Path) -> Section:
             everything = res.paired("bilevel", "cfs", keep)
             pairs = [(a, b) for a, b in everything if (a.get("level") == 1) == want]
             tb, tc = _times(pairs)
-            s = {"subset": subset, "group": label, "problems": len(pairs),
+            s: dict[str, Any] = {"subset": subset, "group": label, "problems": len(pairs),
                  "share_pct": 100.0 * len(pairs) / len(everything) if everything else None,
                  "bilevel_s": mean_std(tb), "cfs_s": mean_std(tc),
                  "bilevel_success_pct": rate_pct([a["success"] for a, _ in pairs]),
@@ -718,7 +742,8 @@ def section_table3(res: Results, figures: Path) -> Section:
               "no plan), with both methods' planning time (s) and success on the same problems:", ""]
     lines += md_table(["subset", "n", "problems", "share (%)", "`bilevel` (s)", "`cfs` (s)", "`bilevel` success (%)",
                        "`cfs` success (%)"], split_rows)
-    series, errors = {}, {}
+    series: dict[str, list[float | None]] = {}
+    errors: dict[str, list[float | None]] = {}
     for m in ("bilevel", "cfs"):  # one bar per n and method, ours and the paper's
         ours = [g[f"{m}_s"] for g in groups[:-1]]
         theirs = [paper.TABLE3_TIME_S.get(n, {}).get(m, (None, None)) for n in res.ns]
@@ -773,6 +798,7 @@ def section_refinement(res: Results, figures: Path) -> Section:
         stages = Counter((r.get("refine_failure") or {}).get("stage") for r in rs if r.get("refine_failure"))
         times = [t for r in rs for t in (r.get("refine_time_s") or [])]
         executed = [r.get("executed_actions") or 0 for r in plans]
+        d: dict[str, Any]
         d = {"rows": len(rs), "plans": len(plans), "refined_pct": rate_pct([r["refined"] for r in plans]),
              "failures": {s: stages.get(s, 0) for s in STAGES}, "refine_time_median_s": median(times),
              "refine_time_p90_s": percentile(times, 90), "refined_actions": len(times),
@@ -807,6 +833,7 @@ def section_feasibility(res: Results, figures: Path) -> Section:
         plans = {m: [r for r in (ra if m == a else rb for ra, rb in both) if r.get("refined") is not None]
                  for m in (a, b)}
         sa, sb = [ra["success"] for ra, _ in both], [rb["success"] for _, rb in both]
+        entry: dict[str, Any]
         entry = {"problems": len(both), "refined_pct": {m: rate_pct([r["refined"] for r in plans[m]]) for m in (a, b)},
                  "success_pct": {a: rate_pct(sa), b: rate_pct(sb)}, "p": paired_ttest(sa, sb), "time": {}}
         srows.append([f"`{a}`", str(len(both)), fmt_pct(entry["refined_pct"][b]), fmt_pct(entry["refined_pct"][a]),

@@ -176,7 +176,7 @@ def _ablation_job(data: str, out: str, scale: Scale) -> dict:
 # --- the pipeline ----------------------------------------------------------------------------------
 def reproduce(out: str | Path, scale_name: str = "quick", workers: int | None = None, backend: str = "local",
               fidelity: str = "fast", protocol: str = "strict", runs: int = 1, models: str | Path | None = None,
-              symbolic_backend: str = "python") -> Path:
+              symbolic_backend: str = "python", address: str | None = None) -> Path:
     """Run (or resume) every stage; returns the path of report.md. `models`: evaluate this models
     directory instead of collecting and training (stages collect, train and domains skipped)."""
     from tamp.app.parallel import available_cpus
@@ -203,7 +203,7 @@ def reproduce(out: str | Path, scale_name: str = "quick", workers: int | None = 
          + ("" if models is None else f", evaluating the models of {models}"))
     if models is not None:
         return _evaluate_stages(out, stages, scale, models, workers, backend, fidelity, protocol, runs,
-                                symbolic_backend, t_all)
+                                symbolic_backend, t_all, address)
     models = out / "models"
 
     if not stages.done("collect"):
@@ -211,12 +211,13 @@ def reproduce(out: str | Path, scale_name: str = "quick", workers: int | None = 
 
         _say(f"collect: {scale.samples} random pick-place transitions, {','.join(map(str, scale.objects))} objects")
         t = time.perf_counter()
-        report = collect(data, CollectConfig(samples=scale.samples, objects=scale.objects, seed=scale.seed),
-                         workers=workers, backend=backend, progress=True)
-        stages.finish("collect", time.perf_counter() - t, samples=report.samples)
+        collected = collect(data, CollectConfig(samples=scale.samples, objects=scale.objects, seed=scale.seed),
+                            workers=workers, backend=backend, address=address, progress=True)
+        stages.finish("collect", time.perf_counter() - t, samples=collected.samples)
 
     if not stages.done("train"):
-        limit = "no time limit" if scale.train_time_limit_s is None else f"at most {scale.train_time_limit_s} s per call"
+        limit = ("no time limit" if scale.train_time_limit_s is None
+                 else f"at most {scale.train_time_limit_s} s per call")
         epochs = (f"{scale.epochs} epochs" if scale.patience_epochs is None else
                   f"to convergence, patience {scale.patience_epochs}, at most {scale.epochs} epochs")
         _say(f"train: {len(scale.models)} models ({epochs} each, batch {scale.batch_size}, lr {scale.lr:g}, "
@@ -248,11 +249,12 @@ def reproduce(out: str | Path, scale_name: str = "quick", workers: int | None = 
         stages.finish("domains", time.perf_counter() - t, results=results)
 
     return _evaluate_stages(out, stages, scale, models, workers, backend, fidelity, protocol, runs, symbolic_backend,
-                            t_all)
+                            t_all, address)
 
 
 def _evaluate_stages(out: Path, stages: Stages, scale: Scale, models: Path, workers: int, backend: str,
-                     fidelity: str, protocol: str, runs: int, symbolic_backend: str, t_all: float) -> Path:
+                     fidelity: str, protocol: str, runs: int, symbolic_backend: str, t_all: float,
+                     address: str | None = None) -> Path:
     """The problem set, the evaluation of every method and the report."""
     problems = out / "problems.jsonl"
     if not stages.done("problems"):
@@ -275,7 +277,8 @@ def _evaluate_stages(out: Path, stages: Stages, scale: Scale, models: Path, work
         t = time.perf_counter()
         planner = PlanConfig(backend=symbolic_backend, search=SearchConfig(time_limit=scale.search_time_limit_s))
         evaluate(models, problems, results_dir,
-                 config=EvalConfig(planner=planner, fidelity=fidelity, workers=workers, backend=backend))
+                 config=EvalConfig(planner=planner, fidelity=fidelity, workers=workers, backend=backend,
+                                   address=address))
         stages.finish("evaluate", time.perf_counter() - t)
 
     from evaluation.report import write_report

@@ -38,19 +38,22 @@ import traceback
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Any, Sequence
+from typing import TYPE_CHECKING, Any, Sequence
 
 import numpy as np
 
 from evaluation.methods import METHODS, SYMBOLIC_BACKENDS, Method, load_method_models, required_files, resolve_methods
 from evaluation.problems import read_problems
-from tamp.planning.bilevel import PlanConfig
 from tamp.app.parallel import BACKENDS, run_tasks
 from tamp.app.problem import Problem
 from tamp.errors import UserError
+from tamp.planning.bilevel import PlanConfig
 from tamp.planning.structs import OUTCOMES, Outcome
 from tamp.planning.verify import goal_error
 from tamp.records import atomic_write_text, exclusive, package_versions
+
+if TYPE_CHECKING:
+    from tamp.sim.feasibility import FeasibilityChecker
 
 ROWS_NAME, META_NAME, LOCK_NAME, SYMBOLS_NAME = "rows.jsonl", "meta.json", ".evaluate.lock", "symbols.json"
 FORMAT = "tamp-evaluation/1"
@@ -151,13 +154,14 @@ def _feasibility_fields(results: list) -> dict:
     """Row fields of kinematics in the planning loop, summed over planning calls (closed loop: rounds):
     rejections per level and reason, refinements tried and failed, check, search and refinement time."""
     used = [r for r in results if r.rejected is not None]
+    fields: dict[str, Any]
     fields = {"feasibility": None, "search_time_s": _round(sum(r.timings.get("search", 0.0) for r in results)),
               "feasibility_time_s": None, "plan_refine_time_s": None}
     if not used:
         return fields
     rejected: dict[str, dict[str, int]] = {}
     for r in used:
-        for level, counts in r.rejected_dict().items():
+        for level, counts in (r.rejected_dict() or {}).items():  # not None: r.rejected is set
             for reason, c in counts.items():
                 rejected.setdefault(level, {})[reason] = rejected.get(level, {}).get(reason, 0) + c
     refinements = [x for r in used for x in r.refinements]
@@ -183,7 +187,7 @@ class Evaluator:
         self.models, self.config = models, config
         self._warm: set[tuple[int, int]] = set()
         self._worlds: dict[str, Any] = {}
-        self._checker = None
+        self._checker: FeasibilityChecker | None = None
         self._warm_layouts: set[tuple[int, ...]] = set()
 
     def checker(self, problem: Problem):
@@ -195,8 +199,8 @@ class Evaluator:
 
             self._checker = FeasibilityChecker()
         checker = self._checker
-        checker.reset(problem.X_init)
-        layout = tuple(int(t) for t in checker.scene.types)
+        scene = checker.reset(problem.X_init)
+        layout = tuple(int(t) for t in scene.types)
         if layout not in self._warm_layouts:
             from tamp.planning.search import all_actions
 
@@ -239,6 +243,7 @@ class Evaluator:
         except Exception as error:  # one pair's failure must not end the run: an error row with the traceback
             return self.error_row(problem, method_name, error)
         c = self.config
+        row: dict[str, Any]
         row = {"problem": problem.name, "n": problem.n, "k": problem.k, "run": problem.run or 0,
                "protocol": problem.protocol, "moved": problem.moved, "method": method_name, **fields,
                "fidelity": c.fidelity, "eps_m": c.eps, "tau_verify_m": c.tau_verify,
@@ -251,13 +256,15 @@ class Evaluator:
         """The row of a pair that raised: outcome "error", the message in `error`, the traceback in
         `traceback`; the report lists it and leaves it out of the statistics."""
         c = self.config
+        row: dict[str, Any]
         row = {"problem": problem.name, "n": problem.n, "k": problem.k, "run": problem.run or 0,
                "protocol": problem.protocol, "moved": problem.moved, "method": method_name, "solved": False,
                "level": None, "plan": None, "planning_time_s": 0.0, "level1_time_s": None,
                "predicted_error_m": None, "candidates": [], "refined": None, "refine_failure": None,
                "refine_time_s": [], "executed_actions": 0, "executed_plans": None, "final_error_m": None,
                "success": False, "outcome": Outcome.ERROR, "rounds": None, "fidelity": c.fidelity, "eps_m": c.eps,
-               "tau_verify_m": c.tau_verify, "symbolic_backend": c.symbolic_backend if METHODS[method_name].symbolic else None}
+               "tau_verify_m": c.tau_verify,
+               "symbolic_backend": c.symbolic_backend if METHODS[method_name].symbolic else None}
         row = {k: row.get(k) for k in ROW_KEYS}  # fields an error row cannot have are None
         row["error"] = f"{type(error).__name__}: {error}"
         row["traceback"] = "".join(traceback.format_exception(type(error), error, error.__traceback__))
@@ -270,7 +277,8 @@ class Evaluator:
         extra = {} if kinematics is None else {"kinematics": kinematics}
         result = plan(method.planner, models, problem.X_init, problem.X_goal,
                       self.config.plan_config(problem.seed, method.feasibility), **extra)
-        fields = {**_feasibility_fields([result]), "solved": result.solved, "level": result.level, "plan": _actions(result.plan),
+        fields = {**_feasibility_fields([result]), "solved": result.solved, "level": result.level,
+                  "plan": _actions(result.plan),
                   "planning_time_s": _round(result.timings["total"]), "level1_time_s": _round(_level1_time(result)),
                   "predicted_error_m": _round(result.predicted_error), "candidates": _candidates(result),
                   "refined": None, "refine_failure": None, "refine_time_s": [], "executed_actions": 0,

@@ -11,7 +11,6 @@ from typing import Sequence
 import numpy as np
 from scipy import stats as _scipy
 
-
 IDENTICAL = "identical"  # the paired samples agree on every problem: no test to make
 
 
@@ -43,16 +42,16 @@ def paired_ttest(a: Sequence[float], b: Sequence[float]) -> float | str | None:
     IDENTICAL when every difference is zero (the test is undefined, nan in scipy); None with fewer
     than two pairs. Constant non-zero differences give scipy's p = 0.
     """
-    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
-    if a.shape != b.shape:
-        raise ValueError(f"paired samples differ in length: {a.size} and {b.size}")
-    if a.size < 2:
+    x, y = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    if x.shape != y.shape:
+        raise ValueError(f"paired samples differ in length: {x.size} and {y.size}")
+    if x.size < 2:
         return None
-    if np.all(a == b):
+    if np.all(x == y):
         return IDENTICAL
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # scipy warns on (near-)constant differences
-        return float(_scipy.ttest_rel(a, b).pvalue)
+        return float(_scipy.ttest_rel(x, y).pvalue)
 
 
 @dataclass(frozen=True)

@@ -5,8 +5,7 @@ No Drake, no imports from tamp/, symbolic/ or evaluation/: actions cross the bor
 """
 from .ablation import ablate_activations, format_ablation_markdown, write_ablation_report
 from .checkpoint import load_model, save_checkpoint
-from .dataset import (DatasetWriter, ShardError, TransitionDataset, Transitions, load_transitions,
-                      read_meta)
+from .dataset import DatasetWriter, ShardError, TransitionDataset, Transitions, load_transitions, read_meta
 from .effects import arm_displacement, effect_targets, encode_actions, moved_picks
 from .model import ACTIVATIONS, EffectModel, ModelConfig
 from .train import TrainConfig, TrainResult, evaluate, train_model
@@ -14,7 +13,6 @@ from .train import TrainConfig, TrainResult, evaluate, train_model
 __all__ = [
     "ACTIVATIONS", "DatasetWriter", "EffectModel", "ModelConfig", "ShardError", "TrainConfig", "TrainResult",
     "TransitionDataset", "Transitions", "ablate_activations", "arm_displacement", "effect_targets",
-    "encode_actions", "evaluate", "format_ablation_markdown", "load_model", "load_transitions", "moved_picks", "read_meta",
-    "save_checkpoint",
-    "train_model", "write_ablation_report",
+    "encode_actions", "evaluate", "format_ablation_markdown", "load_model", "load_transitions", "moved_picks",
+    "read_meta", "save_checkpoint", "train_model", "write_ablation_report",
 ]

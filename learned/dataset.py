@@ -86,8 +86,8 @@ class Transitions:
     def concatenate(parts: Sequence["Transitions"], meta: dict | None = None) -> "Transitions":
         if not parts:
             raise ValueError("no transitions to concatenate")
-        return Transitions(**{k: np.concatenate([getattr(p, k) for p in parts]) for k in KEYS},
-                           meta=dict(meta or parts[0].meta))
+        arrays: dict[str, Any] = {k: np.concatenate([getattr(p, k) for p in parts]) for k in KEYS}
+        return Transitions(**arrays, meta=dict(meta or parts[0].meta))
 
 
 class TransitionDataset(torch.utils.data.Dataset):
@@ -219,11 +219,11 @@ def write_meta(directory: Path, meta: Mapping[str, Any]) -> None:
 def write_shard(path: Path, arrays: Mapping[str, np.ndarray], n_max: int | None = None,
                 status_values: Sequence[int] | None = None) -> None:
     """Validate and atomically write one shard file."""
-    arrays = {k: np.ascontiguousarray(arrays[k], dtype=_DTYPES[k]) for k in KEYS}
-    reason = validate_arrays(arrays, n_max, status_values)
+    packed: dict[str, Any] = {k: np.ascontiguousarray(arrays[k], dtype=_DTYPES[k]) for k in KEYS}
+    reason = validate_arrays(packed, n_max, status_values)
     if reason:
         raise ValueError(f"refusing to write invalid shard {path}: {reason}")
-    atomic_write_bytes(Path(path), lambda f: np.savez(f, **arrays))
+    atomic_write_bytes(Path(path), lambda f: np.savez(f, **packed))
 
 
 def shard_paths(directory: str | Path) -> list[Path]:
@@ -268,7 +268,8 @@ class DatasetWriter:
         for stale in self.directory.glob(".shard-*.tmp-*"):
             stale.unlink()
         existing = shard_paths(self.directory)
-        self._next = int(SHARD_RE.match(existing[-1].name).group(1)) + 1 if existing else 0
+        last = SHARD_RE.match(existing[-1].name) if existing else None
+        self._next = int(last.group(1)) + 1 if last is not None else 0
         self._stored = sum(len(read_shard(p, self.n_max, self.status_values)) for p in existing)
         self._buffer: list[dict[str, Any]] = []
 

@@ -59,7 +59,8 @@ def relation_facts(X: np.ndarray) -> dict[str, np.ndarray]:
             "z_i <= z_j (vertical order)": z[:, None] <= z[None, :] + 0.02,
             "y_i < y_j": y[:, None] < y[None, :], "x_i < x_j": x[:, None] < x[None, :],
             "near (< 10 cm)": dist < NEAR_M, "same type": t[:, None] == t[None, :],
-            "i large": np.broadcast_to(t[:, None] == 1, on.shape), "j large": np.broadcast_to(t[None, :] == 1, on.shape)}
+            "i large": np.broadcast_to(t[:, None] == 1, on.shape),
+            "j large": np.broadcast_to(t[None, :] == 1, on.shape)}
 
 
 @dataclass
@@ -104,7 +105,9 @@ def interpret_symbols(symbols: Callable[[np.ndarray], tuple[np.ndarray, np.ndarr
     (a Symbolic Model's `symbols(X) -> (unary (n, d_z), relations (K, n, n))`) on `scenes`."""
     if not len(scenes):
         raise ValueError("no scenes to read the symbols on")
-    unary_bits, unary_f, rel_bits, rel_f, self_bits = [], {}, [], {}, []
+    unary_f: dict[str, list[np.ndarray]] = {}
+    rel_f: dict[str, list[np.ndarray]] = {}
+    unary_bits, rel_bits, self_bits = [], [], []
     for X in scenes:
         X = np.asarray(X, dtype=float)
         u, r = symbols(X)

@@ -96,6 +96,12 @@ class Bottleneck(nn.Module):
 class EffectModel(nn.Module):
     """Predicts per-object effects of a pick-place from (X, action); see module docstring."""
 
+    # buffers (register_buffer in __init__)
+    pos_mean: torch.Tensor
+    pos_std: torch.Tensor
+    effect_scale: torch.Tensor
+    arm_scale: torch.Tensor
+
     def __init__(self, config: ModelConfig):
         super().__init__()
         c = self.config = config
@@ -254,13 +260,13 @@ class EffectModel(nn.Module):
 
         For converting whole datasets; padded objects get all-zero bits (in both roles).
         """
-        X = torch.as_tensor(np.asarray(X), dtype=torch.float32)
+        Xt = torch.as_tensor(np.asarray(X), dtype=torch.float32)
         m = torch.as_tensor(np.asarray(mask), dtype=torch.bool)
         S, N = m.shape
         us = [torch.zeros(0, N, self.config.d_z, dtype=torch.bool)]
         rs = [torch.zeros(0, self.config.heads, N, N, dtype=torch.bool)]
         for s in range(0, S, batch_size):
-            Xb, mb = X[s:s + batch_size], m[s:s + batch_size]
+            Xb, mb = Xt[s:s + batch_size], m[s:s + batch_size]
             us.append((self.unary_logits(Xb) > 0) & mb[..., None])
             pair = mb[:, None, :, None] & mb[:, None, None, :]
             rs.append((self.relation_logits(Xb) > 0) & pair)

@@ -10,6 +10,7 @@ onto the highest block under its centre (or the table). A little Gaussian noise 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -109,7 +110,8 @@ def generate(num_samples: int, seed: int = 0, n_choices=(2, 3, 4), n_max: int = 
                         "status": status})
     meta = {"format": "tamp-transitions/1", "n_max": n_max, "seed": seed,
             "status_codes": STATUS_CODES, "world_config": {"synthetic": True}}
-    return Transitions(**pack_samples(samples, n_max), meta=meta)
+    arrays: dict[str, Any] = pack_samples(samples, n_max)
+    return Transitions(**arrays, meta=meta)
 
 
 def write_synthetic_dataset(directory: str | Path, num_samples: int, seed: int = 0,

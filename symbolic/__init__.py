@@ -12,15 +12,31 @@ Pure Python + numpy (Fast Downward is called as a subprocess). Main entry points
 
 from symbolic.build import build_domain, load_domain, make_problem
 from symbolic.dataset import make_dataset, split_dataset
-from symbolic.fast_downward import (PlannerCrashed, PlannerError, PlannerTimeout, PlannerUnsolvable,
-                                    raise_for_status, run_fast_downward)
+from symbolic.fast_downward import (
+                                    PlannerCrashed,
+                                    PlannerError,
+                                    PlannerTimeout,
+                                    PlannerUnsolvable,
+                                    raise_for_status,
+                                    run_fast_downward,
+)
 from symbolic.grounding import replay, steps_to_actions
 from symbolic.operators import coverage, learn_operators, load_operators, save_operators, stats
 from symbolic.pddl import DomainWriter, problem_pddl, write_domains
 from symbolic.planner import SymbolicPlanner, plan_deterministic, plan_probabilistic
 from symbolic.sampling import dedup_choices, sample_choices, write_sampled_domains
-from symbolic.structs import (Action, Effect, Operator, OperatorSet, PlannerResult, PlannerStatus,
-                              ProbabilisticPlanResult, RankedPlan, SymbolicDataset, SymbolicProblem)
+from symbolic.structs import (
+                                    Action,
+                                    Effect,
+                                    Operator,
+                                    OperatorSet,
+                                    PlannerResult,
+                                    PlannerStatus,
+                                    ProbabilisticPlanResult,
+                                    RankedPlan,
+                                    SymbolicDataset,
+                                    SymbolicProblem,
+)
 
 __all__ = [
     "Action", "DomainWriter", "Effect", "Operator", "OperatorSet", "PlannerCrashed", "PlannerError",

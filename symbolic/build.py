@@ -34,6 +34,7 @@ def build_domain(unary_pre, rel_pre, actions, unary_post, rel_post, n_per_transi
         data = restrict_to_involved(data)
         if isinstance(holdout, SymbolicDataset):
             holdout = restrict_to_involved(holdout)
+    held: SymbolicDataset | None
     if isinstance(holdout, SymbolicDataset):
         train, held = data, holdout
     else:

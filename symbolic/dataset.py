@@ -57,7 +57,8 @@ def make_dataset(unary_pre, rel_pre, actions, unary_post, rel_post, n_per_transi
                            rq.astype(np.uint8), n)
 
 
-def split_dataset(data: SymbolicDataset, holdout: float, seed: int = 0) -> tuple[SymbolicDataset, SymbolicDataset | None]:
+def split_dataset(data: SymbolicDataset, holdout: float,
+                  seed: int = 0) -> tuple[SymbolicDataset, SymbolicDataset | None]:
     """Random train / held-out split; holdout is the held-out fraction in [0, 1)."""
     if not 0.0 <= holdout < 1.0:
         raise ValueError(f"holdout fraction must be in [0, 1), got {holdout}")

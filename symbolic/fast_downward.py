@@ -23,6 +23,7 @@ from pathlib import Path
 
 from symbolic.structs import PlannerResult, PlannerStatus, PlanStep
 
+
 def _find_fd() -> Path:
     import importlib.util
 
@@ -111,7 +112,7 @@ def _run(cmd: list[str], cwd: str, time_limit: float | None, stdin_path: str | N
             out, err = proc.communicate()
             rc = None
     finally:
-        if stdin_path:
+        if not isinstance(stdin, int):  # a file we opened, not DEVNULL
             stdin.close()
     return rc, out.decode(errors="replace"), err.decode(errors="replace"), time.perf_counter() - start
 

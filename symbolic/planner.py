@@ -32,8 +32,16 @@ from symbolic.grounding import GroundTask, check_problem, problem_states, steps_
 from symbolic.pddl import DomainWriter, effect_probabilities, problem_pddl
 from symbolic.sampling import dedup_choices, sample_choices
 from symbolic.search import action_costs, bfs, most_likely
-from symbolic.structs import (Action, OperatorSet, PlannerResult, PlannerStatus, PlanStep, ProbabilisticPlanResult,
-                              RankedPlan, SymbolicProblem)
+from symbolic.structs import (
+    Action,
+    OperatorSet,
+    PlannerResult,
+    PlannerStatus,
+    PlanStep,
+    ProbabilisticPlanResult,
+    RankedPlan,
+    SymbolicProblem,
+)
 
 BACKENDS = ("python", "fd", "fd-naive")
 # python backend: "shortest" = breadth-first search, the first shortest plan in ground-action order
@@ -138,6 +146,7 @@ class SymbolicPlanner:
             if r.status is not PlannerStatus.SOLVED:
                 continue
             if id(r) not in parsed:
+                assert r.plan is not None  # solved
                 steps = tuple(_strip_variant(r.plan))
                 parsed[id(r)] = (steps, tuple(steps_to_actions(self.ops, list(steps), n)))
             steps, key = parsed[id(r)]
@@ -249,8 +258,8 @@ class SymbolicPlanner:
         names = self.ops.by_name()
         variant = []
         for line in sas.names:
-            base, _, e = line.split()[0].partition("__e")
-            variant.append((names[base], int(e)))
+            base, _, effect = line.split()[0].partition("__e")
+            variant.append((names[base], int(effect)))
         var_op = np.array([v[0] for v in variant], np.int64)
         var_eff = np.array([v[1] for v in variant], np.int64)
         relevant = np.unique(var_op) if variant else np.empty(0, np.int64)

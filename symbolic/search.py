@@ -56,10 +56,11 @@ def bfs(task: GroundTask, choice: np.ndarray, init: int, goal: int,
         for g, oi in zip(gs, opis):
             t = s ^ flips[g][ch[oi]]
             if t == goal:  # tested before the duplicate check: the goal may be init (nonempty)
-                plan, u = [g], s
-                while parent[u] is not None:
-                    u, g2 = parent[u]
+                plan, step = [g], parent[s]
+                while step is not None:
+                    u, g2 = step
                     plan.append(g2)
+                    step = parent[u]
                 return SearchOutcome(PlannerStatus.SOLVED, plan[::-1],
                                      np.array(sorted(touched), np.int64), expanded)
             if t in parent:
@@ -97,10 +98,11 @@ def most_likely(task: GroundTask, choice: np.ndarray, init: int, goal: int, cost
     while heap:
         cost, _, node, s_from, g_via = heapq.heappop(heap)
         if node == GOAL:
-            plan, u = [g_via], s_from
-            while parent[u] is not None:
-                u, g2 = parent[u]
+            plan, step = [g_via], parent[s_from]
+            while step is not None:
+                u, g2 = step
                 plan.append(g2)
+                step = parent[u]
             return SearchOutcome(PlannerStatus.SOLVED, plan[::-1], np.array(sorted(touched), np.int64), expanded)
         if node in closed:
             continue

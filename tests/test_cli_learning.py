@@ -21,6 +21,7 @@ def tiny_dataset(tmp_path_factory):
     return out
 
 
+@pytest.mark.slow
 def test_train_then_domain_end_to_end(tiny_dataset, tmp_path, capsys):
     model = tmp_path / "symbolic.pt"
     assert main(["train", "--data", str(tiny_dataset), "--bottleneck", "gumbel_sigmoid", "--epochs", "2",

@@ -6,6 +6,7 @@ import pytest
 from tamp.app.cli import main
 
 
+@pytest.mark.sim
 def test_simulate_prints_one_line_per_action_and_writes_replay(tmp_path, capsys):
     out = tmp_path / "replay.html"
     assert main(["simulate", "--objects", "3", "--seed", "1", "--steps", "3", "--replay", str(out)]) == 0
@@ -19,6 +20,7 @@ def test_simulate_prints_one_line_per_action_and_writes_replay(tmp_path, capsys)
     assert "localhost" not in html.split("<script", 1)[0]  # nothing loaded from a server
 
 
+@pytest.mark.sim
 def test_simulate_json_is_reproducible(capsys):
     assert main(["simulate", "--objects", "2", "--seed", "4", "--steps", "3", "--json"]) == 0
     first = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
@@ -30,6 +32,7 @@ def test_simulate_json_is_reproducible(capsys):
     assert {r["status"] for r in first[1:]} <= {"ok", "ik_failure", "motion_failure", "nothing_grasped"}
 
 
+@pytest.mark.sim
 @pytest.mark.parametrize("argv, message", [
     (["simulate", "--objects", "9"], "n_objects must be an integer in 1..6"),
 ])

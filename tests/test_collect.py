@@ -49,6 +49,8 @@ def reference(tmp_path_factory) -> Path:
     return out
 
 
+@pytest.mark.sim
+@pytest.mark.slow
 def test_reference_layout_and_content(reference):
     data = load_transitions(reference)
     assert len(data) == 58
@@ -68,6 +70,8 @@ def test_reference_layout_and_content(reference):
     assert (cfg.n_scenes, cfg.n_shards, cfg.shard_samples(7), cfg.scene_samples(14)) == (15, 8, 2, 2)
 
 
+@pytest.mark.sim
+@pytest.mark.slow
 def test_workers_1_and_2_give_the_same_dataset(reference, tmp_path):
     assert main(collect_cli(tmp_path / "w2", "--workers", "2")) == 0
     assert_same_dataset(reference, tmp_path / "w2")
@@ -85,6 +89,8 @@ def _children(pid: int) -> list[int]:
     return out
 
 
+@pytest.mark.sim
+@pytest.mark.slow
 def test_kill_9_mid_way_then_resume_equals_uninterrupted_run(reference, tmp_path, capsys):
     out = tmp_path / "killed"
     proc = subprocess.Popen([sys.executable, "-m", "tamp.app.cli", *collect_cli(out, "--workers", "2")],
@@ -114,6 +120,8 @@ def test_kill_9_mid_way_then_resume_equals_uninterrupted_run(reference, tmp_path
     assert not [p for p in out.iterdir() if ".tmp" in p.name]
 
 
+@pytest.mark.sim
+@pytest.mark.slow
 def test_ray_backend_gives_the_same_dataset(reference, tmp_path):
     pytest.importorskip("ray", reason="ray is not installed (optional extra: pip install ray)")
     out = tmp_path / "ray"
@@ -124,6 +132,8 @@ def test_ray_backend_gives_the_same_dataset(reference, tmp_path):
     assert_same_dataset(reference, out)
 
 
+@pytest.mark.sim
+@pytest.mark.slow
 def test_corrupt_and_truncated_shards_are_named_skipped_and_recollected(reference, tmp_path, capsys):
     out = tmp_path / "damaged"
     shutil.copytree(reference, out)
@@ -164,6 +174,7 @@ def test_bad_arguments_exit_2_with_one_line(argv, message, tmp_path, capsys):
     assert not (tmp_path / "d").exists()
 
 
+@pytest.mark.sim
 def test_existing_directory_with_other_parameters_is_refused(reference, tmp_path, capsys):
     out = tmp_path / "other"
     shutil.copytree(reference, out)
@@ -180,6 +191,7 @@ def test_existing_directory_with_other_parameters_is_refused(reference, tmp_path
     assert "is not empty and has no meta.json" in capsys.readouterr().err
 
 
+@pytest.mark.sim
 def test_dataset_stats_table_and_png(reference, tmp_path, capsys):
     png = tmp_path / "stats.png"
     assert main(["dataset-stats", str(reference), "--png", str(png)]) == 0

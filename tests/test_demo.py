@@ -9,7 +9,6 @@ import pytest
 
 from tamp.app.cli import main
 from tamp.planning.models import DOMAIN_DIR, DYNAMICS_FILE, SYMBOLIC_FILE, load_models, pretrained_dir
-from tamp.sim.replay import Timeline
 
 
 def _scene_paths(html_file) -> bytes:
@@ -18,11 +17,12 @@ def _scene_paths(html_file) -> bytes:
     return b"".join(base64.b64decode(b) for b in blobs)
 
 
+@pytest.mark.sim
 def test_the_shipped_models_are_small_load_and_plan():
     import torch
 
-    from tamp.planning.bilevel import PlanConfig, plan
     from tamp.app.problem import random_problem
+    from tamp.planning.bilevel import PlanConfig, plan
 
     torch.set_num_threads(1)
     directory = pretrained_dir()
@@ -38,6 +38,8 @@ def test_the_shipped_models_are_small_load_and_plan():
     assert result.predicted_error < PlanConfig().tau_verify
 
 
+@pytest.mark.sim
+@pytest.mark.slow
 @pytest.mark.parametrize("fidelity, candidates, loop", [("fast", 1, "open"), ("fast", 0, "closed"),
                                                       ("full", 0, "open")])
 def test_demo_prints_the_summary_and_writes_replays_with_ghosts(tmp_path, capsys, fidelity, candidates, loop):
@@ -71,6 +73,7 @@ def test_demo_prints_the_summary_and_writes_replays_with_ghosts(tmp_path, capsys
         assert candidate.is_file() and b"/ghosts/predicted/block_0" in _scene_paths(candidate)
 
 
+@pytest.mark.sim  # `tamp demo` loads the simulator before it reads the models
 def test_demo_with_a_bad_models_directory_is_a_one_line_error(tmp_path, capsys):
     missing = tmp_path / "no-such-models"
     assert main(["demo", "--models", str(missing), "--replay", str(tmp_path / "r.html")]) == 2
@@ -84,7 +87,10 @@ def test_demo_with_a_bad_models_directory_is_a_one_line_error(tmp_path, capsys):
     assert not (tmp_path / "r.html").exists()
 
 
+@pytest.mark.sim
 def test_predictions_are_tied_to_the_start_of_each_action():
+    from tamp.sim.replay import Timeline  # loads Drake: here, not when a session without sim tests collects
+
     timeline = Timeline()
     for t in (0.0, 1.0, 2.0):  # action 0 starts at 0 s, action 1 at 1 s; action 2 never starts
         timeline._add(t, np.zeros(6), np.zeros((2, 7)))

@@ -17,15 +17,15 @@ import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
-from planning_stubs import StubModel, two_block_domain  # noqa: E402
+from planning_stubs import StubModel, two_block_domain
 
-from evaluation.problems import generate_problems, read_problems, write_problems  # noqa: E402
+from evaluation.problems import generate_problems, read_problems, write_problems
+from evaluation.run import OUTCOMES, ROW_KEYS, EvalConfig, evaluate, read_rows, strip_timings
+from tamp.app.problem import Problem
 from tamp.planning.bilevel import PlanConfig
+from tamp.planning.models import Models
 from tamp.planning.search import SearchConfig
-from evaluation.run import OUTCOMES, ROW_KEYS, EvalConfig, evaluate, read_rows, strip_timings  # noqa: E402
-from tamp.planning.models import Models  # noqa: E402
-from tamp.app.problem import Problem  # noqa: E402
-from tamp.planning.verify import goal_error  # noqa: E402
+from tamp.planning.verify import goal_error
 
 SET = dict(ns=(2,), ks=(1, 2, 3), per_cell=1, seed=0)
 METHODS = ("deterministic", "probabilistic", "probabilistic_oracle", "cfs", "bilevel", "bilevel_alg1",
@@ -65,6 +65,7 @@ def _by_key(rows: list[dict]) -> dict:
     return {(r["problem"], r["method"]): strip_timings(r) for r in rows}
 
 
+@pytest.mark.sim
 def test_problem_sets_are_regenerated_byte_for_byte(problems_file, tmp_path):
     again = write_problems(tmp_path / "again.jsonl", generate_problems(**SET, progress=False))
     first = problems_file.read_bytes().splitlines(keepends=True)[:3]
@@ -78,6 +79,7 @@ def test_problem_sets_are_regenerated_byte_for_byte(problems_file, tmp_path):
     assert other.read_bytes() != first[0]
 
 
+@pytest.mark.sim
 def test_a_stuck_scene_is_replaced_by_the_next_seed_of_its_problem(monkeypatch):
     import evaluation.problems as ep
 
@@ -98,11 +100,12 @@ def test_a_stuck_scene_is_replaced_by_the_next_seed_of_its_problem(monkeypatch):
         ep.generate_problems(ns=(2,), ks=(1,), per_cell=1, seed=5, progress=False)
 
 
+@pytest.mark.sim
 def test_the_paper_protocol_keeps_actions_that_move_nothing():
     """`paper`: the first k drawn actions whatever they do (replayed, they give the goal and move
     exactly `moved` times); `strict` redraws until every one moves a block."""
-    from tamp.sim import World, WorldConfig
     from tamp.app.problem import MOVED_M
+    from tamp.sim import World, WorldConfig
 
     args = dict(ns=(2,), ks=(1, 3), per_cell=3, seed=2, progress=False)
     paper = generate_problems(**args, protocol="paper")
@@ -121,6 +124,7 @@ def test_the_paper_protocol_keeps_actions_that_move_nothing():
     assert any(p.k == 1 and p.moved == 0 and goal_error(p.X_init, p.X_goal) < MOVED_M for p in paper)
 
 
+@pytest.mark.sim
 def test_several_runs_are_the_sets_of_consecutive_seeds():
     runs = generate_problems(ns=(2,), ks=(1,), per_cell=2, seed=4, runs=2, progress=False, protocol="paper")
     assert [(p.name, p.run) for p in runs] == [("r0-n2-k1-000", 0), ("r0-n2-k1-001", 0), ("r1-n2-k1-000", 1),
@@ -129,6 +133,7 @@ def test_several_runs_are_the_sets_of_consecutive_seeds():
     assert [p.seed for p in runs[2:]] == [p.seed for p in single] and single[0].run is None
 
 
+@pytest.mark.sim
 @pytest.mark.parametrize("edit, message", [
     (lambda lines: lines[:1] + ["{not json"] + lines[2:], "line 2: not valid JSON"),
     (lambda lines: lines[:2] + [lines[2].replace('"X_goal"', '"X_gaol"')] + lines[3:],
@@ -145,6 +150,8 @@ def test_a_malformed_problem_set_names_the_line_and_field(problems_file, tmp_pat
     assert str(bad) in str(info.value) and message in str(info.value)
 
 
+@pytest.mark.sim
+@pytest.mark.slow
 def test_rows_follow_the_schema_and_their_outcomes_agree(serial, problems_file):
     rows = read_rows(serial)
     problems = {p.name: p for p in read_problems(problems_file)}
@@ -193,6 +200,7 @@ def test_rows_follow_the_schema_and_their_outcomes_agree(serial, problems_file):
         r["solved"] for r in rows if r["method"] == "cfs")
 
 
+@pytest.mark.sim
 def test_the_oracle_succeeds_iff_one_executed_plan_succeeds(serial):
     """probabilistic_oracle executes the ranked plans, top first, and stops at the first success."""
     rows = {(r["problem"], r["method"]): r for r in read_rows(serial)}
@@ -220,9 +228,9 @@ def test_the_oracle_succeeds_iff_one_executed_plan_succeeds(serial):
 def test_the_oracle_counts_success_iff_some_plan_reaches_the_goal(monkeypatch):
     """Three ranked plans of which only the last reaches the goal: success after three executions;
     with a cap of two plans, failure after two."""
-    from tamp.planning.bilevel import Candidate, PlanResult
-    from evaluation.run import Evaluator
     import evaluation.run as er
+    from evaluation.run import Evaluator
+    from tamp.planning.bilevel import Candidate, PlanResult
 
     problem = Problem(np.zeros((2, 5)), np.ones((2, 5)), k=1, seed=0, name="p")
     ranked = [Candidate(((0, 0, 1, 0),), 5, 0.5), Candidate(((0, 1, 1, 0),), 3, 0.3),
@@ -254,9 +262,12 @@ def test_the_oracle_counts_success_iff_some_plan_reaches_the_goal(monkeypatch):
         assert row["plan"] == [list(a) for a in executed[-1]]
         executed.clear()
         top = evaluator.run(problem, "probabilistic")  # the unverified planner executes its top plan only
-        assert not top["success"] and top["executed_plans"] == 1 and [tuple(map(tuple, e)) for e in executed] == [ranked[0].actions]
+        assert not top["success"] and top["executed_plans"] == 1
+        assert [tuple(map(tuple, e)) for e in executed] == [ranked[0].actions]
 
 
+@pytest.mark.sim
+@pytest.mark.slow
 def test_an_evaluation_killed_midway_resumes_without_redoing_or_losing_rows(serial, problems_file, tmp_path):
     (tmp_path / "models").mkdir()
     out = tmp_path / "results"
@@ -292,14 +303,18 @@ def test_an_evaluation_killed_midway_resumes_without_redoing_or_losing_rows(seri
     assert rows_path.read_bytes() == after
 
 
+@pytest.mark.sim
+@pytest.mark.slow
 def test_two_workers_give_the_same_rows_as_one(serial, problems_file, tmp_path):
     (tmp_path / "models").mkdir()
     rows = read_rows(evaluate(tmp_path / "models", problems_file, tmp_path / "results",
-                              config=EvalConfig(planner=PlanConfig(search=SearchConfig(max_expansions=300)), progress=False, workers=2),
+                              config=EvalConfig(planner=PlanConfig(search=SearchConfig(max_expansions=300)),
+                                                progress=False, workers=2),
                               models=stub_models()))
     assert _by_key(rows) == _by_key(read_rows(serial))
 
 
+@pytest.mark.sim
 def test_fast_downward_plans_like_the_in_process_search(serial, problems_file, tmp_path):
     """--symbolic-backend fd: recorded in meta.json and the rows, and the symbolic planners reach the
     same success on every problem as with the in-process search (both find shortest plans)."""
@@ -317,6 +332,7 @@ def test_fast_downward_plans_like_the_in_process_search(serial, problems_file, t
             (other["solved"], other["success"], len(other["plan"] or []))
 
 
+@pytest.mark.sim
 def test_a_results_directory_refuses_other_inputs(serial, problems_file, tmp_path):
     other = tmp_path / "other.jsonl"
     write_problems(other, read_problems(problems_file)[:2])
@@ -327,7 +343,8 @@ def test_a_results_directory_refuses_other_inputs(serial, problems_file, tmp_pat
         evaluate(tmp_path / "models", problems_file, serial.parent, config=CONFIG, models=stub_models())
     with pytest.raises(ValueError, match='config.fidelity: "fast" there, "full" now'):
         evaluate(serial.parents[1] / "models", problems_file, serial.parent, models=stub_models(),
-                 config=EvalConfig(planner=PlanConfig(search=SearchConfig(max_expansions=300)), progress=False, fidelity="full"))
+                 config=EvalConfig(planner=PlanConfig(search=SearchConfig(max_expansions=300)), progress=False,
+                                   fidelity="full"))
 
 
 # --------------------------------------------------------------------------- the CLI, real model files
@@ -358,6 +375,7 @@ def models_dir(tmp_path_factory) -> Path:
     return out
 
 
+@pytest.mark.sim
 def test_cli_evaluates_with_model_files_and_keeps_the_rows_when_the_report_fails(models_dir, tmp_path, capsys,
                                                                                monkeypatch):
     from evaluation import cli
@@ -387,6 +405,7 @@ def test_cli_evaluates_with_model_files_and_keeps_the_rows_when_the_report_fails
     assert meta["models_dir"] == str(models_dir.resolve()) and "variants/dynamics_gumbel.pt" in meta["model_files"]
 
 
+@pytest.mark.sim
 def test_cli_names_a_missing_variant_and_a_bad_method(problems_file, tmp_path, capsys):
     from tamp.app.cli import main
 
@@ -402,6 +421,8 @@ def test_cli_names_a_missing_variant_and_a_bad_method(problems_file, tmp_path, c
         assert err.count("\n") == 0 and message in err
 
 
+@pytest.mark.sim
+@pytest.mark.slow
 def test_reproduce_evaluates_given_models_under_the_paper_protocol_over_runs(models_dir, tmp_path, monkeypatch):
     """`tamp reproduce --models DIR --protocol paper --runs 2`: no collection or training, two problem
     sets of consecutive seeds kept whatever their actions did, a report with mean ± std over runs;

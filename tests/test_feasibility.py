@@ -5,8 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tamp.sim.feasibility import FeasibilityChecker
 from tamp.planning.structs import Infeasible, PickPlace
+from tamp.sim.feasibility import FeasibilityChecker
+
+pytestmark = pytest.mark.sim  # every test here builds Drake plants
 
 CUBE, BAR = [1, 0], [0, 1]
 

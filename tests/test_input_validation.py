@@ -15,12 +15,12 @@ import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
-from planning_stubs import StubModel, two_block_domain  # noqa: E402
+from planning_stubs import StubModel, two_block_domain
 
-from tamp.app.cli import main  # noqa: E402
-from tamp.planning.models import Models, pretrained_dir  # noqa: E402
-from tamp.app.problem import Problem, random_problem  # noqa: E402
-from tamp.planning.validate import ARM_REACH_M, check_problem, check_scene  # noqa: E402
+from tamp.app.cli import main
+from tamp.app.problem import Problem, random_problem
+from tamp.planning.models import Models, pretrained_dir
+from tamp.planning.validate import ARM_REACH_M, check_problem, check_scene
 
 INIT = [[0.60, 0.15, 0.025, 1, 0], [0.70, -0.10, 0.025, 0, 1]]
 GOAL = [[0.70, -0.10, 0.075, 1, 0], [0.70, -0.10, 0.025, 0, 1]]
@@ -34,6 +34,7 @@ def _one_line_error(capsys, *needles: str) -> str:
     return err
 
 
+@pytest.mark.sim  # `tamp view` loads the simulator before it reads the plan file
 @pytest.mark.parametrize("row, message", [
     ([5.0, 0.15, 0.025, 1, 0], "off the table"),
     ([1.25, 0.5, 0.025, 1, 0], "out of the arm's reach"),
@@ -54,6 +55,7 @@ def test_impossible_scenes_are_refused_naming_the_file_field_and_row(tmp_path, c
     assert not (tmp_path / "r.html").exists()
 
 
+@pytest.mark.sim
 def test_the_python_api_checks_its_scenes():
     from tamp.planning.bilevel import plan
     from tamp.sim.refine import refine
@@ -91,6 +93,7 @@ def test_tilted_and_standing_blocks_after_physics_are_accepted():
         check_scene(np.array([[0.6, 0.0, 0.5, 1, 0], [0.6, 0.0, 0.55, 1, 0]]))
 
 
+@pytest.mark.sim
 def test_arm_reach_matches_the_ik():
     from tamp.sim.kinematics import Q_HOME, analytic_ik
     from tamp.sim.skill import topdown
@@ -102,6 +105,7 @@ def test_arm_reach_matches_the_ik():
         assert analytic_ik(topdown(np.r_[direction * (ARM_REACH_M + 0.03), 0.025], 0.0), Q_HOME) is None
 
 
+@pytest.mark.sim
 @pytest.mark.parametrize("n, k, seed, protocol", [(n, k, 1000 + 10 * n + k, p) for n in (2, 3, 4, 6)
                                                   for k in (1, 3, 5) for p in ("strict", "paper")]
                          + [(3, 3, 0, "strict")])  # the last: the bundled demo's problem
@@ -150,6 +154,7 @@ class _Failing(StubModel):
         return super().predict_effect(X, actions)
 
 
+@pytest.mark.sim
 def test_a_pair_that_fails_mid_run_is_an_error_row_and_the_run_goes_on(tmp_path):
     from evaluation.report import write_report
     from evaluation.run import EvalConfig, evaluate, read_rows
@@ -176,6 +181,7 @@ def test_a_pair_that_fails_mid_run_is_an_error_row_and_the_run_goes_on(tmp_path)
 
 # --- output paths ----------------------------------------------------------------------------------
 
+@pytest.mark.sim  # `tamp view` loads the simulator before it checks --out
 def test_unwritable_outputs_are_refused_before_the_work(tmp_path, capsys):
     folder = tmp_path / "folder.html"
     folder.mkdir()

@@ -6,6 +6,8 @@ from pydrake.math import RigidTransform, RotationMatrix
 from tamp.sim.kinematics import Q_HOME, Q_LOWER, Q_UPPER, analytic_ik, on_branch, tcp_pose
 from tamp.sim.plants import build_motion_scene
 
+pytestmark = pytest.mark.sim  # every test here builds Drake plants
+
 
 @pytest.fixture(scope="module")
 def scene():
@@ -39,7 +41,8 @@ def test_topdown_ik_round_trip_on_branch():
     rng = np.random.default_rng(1)
     for _ in range(100):
         p = [rng.uniform(0.4, 0.95), rng.uniform(-0.45, 0.45), rng.uniform(0.0, 0.4)]
-        X = RigidTransform(RotationMatrix.MakeZRotation(rng.uniform(-np.pi, np.pi)) @ RotationMatrix.MakeXRotation(np.pi), p)
+        R = RotationMatrix.MakeZRotation(rng.uniform(-np.pi, np.pi)) @ RotationMatrix.MakeXRotation(np.pi)
+        X = RigidTransform(R, p)
         q = analytic_ik(X, Q_HOME)
         assert q is not None, p
         assert on_branch(q)

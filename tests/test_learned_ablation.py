@@ -11,6 +11,7 @@ from learned.synthetic import write_synthetic_dataset
 torch.set_num_threads(1)
 
 
+@pytest.mark.slow
 def test_ablation_table_from_a_dataset_dir(tmp_path):
     data_dir = write_synthetic_dataset(tmp_path / "ds", 400, seed=4, shard_size=128)
     cfg = ModelConfig(hidden=16, d_msg=8, d_z=4, heads=2)

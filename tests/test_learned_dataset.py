@@ -6,8 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from learned.dataset import (DatasetWriter, ShardError, TransitionDataset, load_transitions,
-                             read_meta, shard_paths)
+from learned.dataset import DatasetWriter, ShardError, TransitionDataset, load_transitions, read_meta, shard_paths
 from learned.effects import arm_displacement, arm_shift, effect_targets
 from learned.synthetic import STATUS_CODES, apply_action, generate, write_synthetic_dataset
 

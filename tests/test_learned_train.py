@@ -11,6 +11,11 @@ torch.set_num_threads(1)
 SMALL = dict(hidden=64, d_msg=32, d_z=8, heads=4)
 
 
+def untimed(history: list[dict]) -> list[dict]:
+    """A training history without its wall-clock field."""
+    return [{k: v for k, v in h.items() if k != "elapsed_s"} for h in history]
+
+
 def fit(data, config, epochs, out, *, resume=False, progress=False, **train):
     """train_model with TrainConfig(epochs=epochs, **train)."""
     return train_model(data, config, TrainConfig(epochs=epochs, **train), out, resume=resume, progress=progress)
@@ -62,7 +67,6 @@ def test_resume_continues_exactly(tmp_path):
     fit(data, cfg, 2, tmp_path / "b.pt", **kw)
     resumed = fit(data, cfg, 4, tmp_path / "b.pt", resume=True, **kw)
     assert [h["epoch"] for h in resumed.history] == [0, 1, 2, 3]
-    untimed = lambda hist: [{k: v for k, v in h.items() if k != "elapsed_s"} for h in hist]
     assert untimed(resumed.history) == untimed(straight.history)
     a, b = straight.model.state_dict(), resumed.model.state_dict()
     assert all(torch.equal(a[k], b[k]) for k in a)
@@ -133,7 +137,6 @@ def test_k_epochs_then_resume_equals_one_sitting(tmp_path, precision):
     assert resumed.best_val_cm == straight.best_val_cm and resumed.best_epoch == straight.best_epoch
     assert resumed.epochs_reached == straight.epochs_reached == 6 and resumed.steps == straight.steps
     assert _same_weights(resumed, straight)
-    untimed = lambda hist: [{k: v for k, v in h.items() if k != "elapsed_s"} for h in hist]
     assert untimed(resumed.history) == untimed(straight.history)
     assert [h.get("stop_reason") for h in resumed.history] == [None] * 5 + ["max_epochs"]
     with pytest.raises(ValueError, match="different config/options"):  # the precision is part of the result

@@ -11,12 +11,12 @@ import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
-from planning_stubs import StubModel, two_block_domain, world_step  # noqa: E402
+from planning_stubs import StubModel, two_block_domain, world_step
 
-from tamp.planning.bilevel import PlanConfig, plan, plan_closed_loop  # noqa: E402
-from tamp.planning.models import Models  # noqa: E402
-from tamp.planning.search import SearchConfig  # noqa: E402
-from tamp.planning.verify import goal_error, verify  # noqa: E402
+from tamp.planning.bilevel import PlanConfig, plan, plan_closed_loop
+from tamp.planning.models import Models
+from tamp.planning.search import SearchConfig
+from tamp.planning.verify import goal_error, verify
 
 X_INIT = np.array([[0.6, 0.0, 0.025, 1, 0], [0.7, 0.1, 0.025, 1, 0]])
 A_ON_B = np.array([[0.7, 0.1, 0.075, 1, 0], [0.7, 0.1, 0.025, 1, 0]])

@@ -87,6 +87,7 @@ def _problem_reachable_by_the_model(models_dir, tmp_path):
     return path
 
 
+@pytest.mark.sim
 def test_cli_plans_without_execution(models_dir, tmp_path, capsys):
     path = _problem_reachable_by_the_model(models_dir, tmp_path)
     for method in ("bilevel", "cfs"):
@@ -99,6 +100,7 @@ def test_cli_plans_without_execution(models_dir, tmp_path, capsys):
     assert "missing model file(s)" in capsys.readouterr().err
 
 
+@pytest.mark.sim
 def test_cli_plans_with_fast_downward_and_algorithm_1(models_dir, tmp_path, capsys):
     path = _problem_reachable_by_the_model(models_dir, tmp_path)
     lengths = {}
@@ -115,6 +117,7 @@ def test_cli_plans_with_fast_downward_and_algorithm_1(models_dir, tmp_path, caps
     assert "bilevel_alg1: plan of" in out and "same symbols as plan" not in out  # no look-alike alternatives
 
 
+@pytest.mark.sim
 def test_cli_executes_and_writes_the_replay(models_dir, tmp_path, capsys):
     path = _problem_reachable_by_the_model(models_dir, tmp_path)
     replay = tmp_path / "out.html"
@@ -126,6 +129,7 @@ def test_cli_executes_and_writes_the_replay(models_dir, tmp_path, capsys):
     assert replay.is_file() and replay.stat().st_size > 10_000
 
 
+@pytest.mark.sim
 def test_cli_replans_in_a_world(models_dir, tmp_path, capsys):
     path = _problem_reachable_by_the_model(models_dir, tmp_path)
     assert main(["plan", "--problem", str(path), "--models", str(models_dir), "--replan", "--execute", "none"]) == 2

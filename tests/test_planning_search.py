@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
-from planning_stubs import StubModel, world_step  # noqa: E402
+from planning_stubs import StubModel, world_step
 
-from tamp.planning.search import SearchConfig, continuous_search, goal_oriented_actions  # noqa: E402
-from tamp.planning.verify import goal_error, rollout  # noqa: E402
+from tamp.planning.search import SearchConfig, continuous_search, goal_oriented_actions
+from tamp.planning.verify import goal_error, rollout
 
 # three blocks: a large bar 0 and small cubes 1, 2
 X = np.array([[0.55, -0.15, 0.025, 0, 1], [0.7, 0.1, 0.025, 1, 0], [0.8, -0.2, 0.025, 1, 0]])

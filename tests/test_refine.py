@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 from pydrake.math import RigidTransform
 
-from tamp.planning.structs import PickPlace
+from tamp.planning.structs import BLOCK_SIZES, PickPlace
 from tamp.sim import World, WorldConfig
 from tamp.sim.execute import execute
 from tamp.sim.kinematics import Q_LOWER, Q_UPPER, V_MAX, tcp_pose
@@ -11,8 +11,9 @@ from tamp.sim.motion import MotionPlanner
 from tamp.sim.plants import X_FlangeTcp, build_motion_scene
 from tamp.sim.refine import refine
 from tamp.sim.skill import Scene
-from tamp.planning.structs import BLOCK_SIZES
 from tamp.sim.trajectory import A_MAX, segment_profile
+
+pytestmark = pytest.mark.sim  # every test here builds Drake plants
 
 SMALL, LARGE = [1.0, 0.0], [0.0, 1.0]
 X_STACK = np.array([[0.6, 0.15, 0.025] + SMALL, [0.7, -0.1, 0.025] + LARGE, [0.5, -0.2, 0.025] + SMALL])
@@ -95,6 +96,7 @@ def test_segment_profile_matches_drake_toppra():
         assert ours <= s.end_time() * 1.001  # ours is the exact optimum of the same problem
 
 
+@pytest.mark.slow
 def test_full_fidelity_stacking_plan_ends_near_the_fast_result():
     fast = World(WorldConfig(), seed=0)
     full = World(WorldConfig(fidelity="full"), seed=0)
@@ -141,6 +143,7 @@ def test_refine_rejects_bad_input():
     assert refine([], scene=scene).success
 
 
+@pytest.mark.slow
 def test_an_executor_built_once_runs_plans_as_a_fresh_one_would():
     """The diagram is reused across plans (the grasp is a context parameter): the second plan on it
     must not inherit the first one's state, grasp or weld."""

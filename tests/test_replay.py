@@ -7,6 +7,8 @@ from tamp.sim import World, WorldConfig
 from tamp.sim.observer import WorldObserver
 from tamp.sim.replay import Timeline
 
+pytestmark = pytest.mark.sim  # every test here builds Drake plants
+
 SMALL, LARGE = [1.0, 0.0], [0.0, 1.0]
 X_TWO = np.array([[0.6, 0.15, 0.025] + SMALL, [0.7, -0.1, 0.025] + LARGE])
 PLAN = [PickPlace(0, 0, 1, 0), PickPlace(1, 1, 1, -1)]  # the cube onto the bar, then the bar with it on

@@ -204,7 +204,8 @@ def test_pack_unpack_and_atoms():
 
 @pytest.mark.parametrize("mutate, message", [
     (lambda a: {**a, "unary_pre": a["unary_pre"][:0], "rel_pre": a["rel_pre"][:0], "actions": a["actions"][:0],
-                "unary_post": a["unary_post"][:0], "rel_post": a["rel_post"][:0], "n_per_transition": a["n_per_transition"][:0]},
+                "unary_post": a["unary_post"][:0], "rel_post": a["rel_post"][:0],
+                "n_per_transition": a["n_per_transition"][:0]},
      "empty"),
     (lambda a: {**a, "unary_pre": a["unary_pre"][:, :, 0]}, "unary_pre must have shape"),
     (lambda a: {**a, "rel_pre": a["rel_pre"][:, :, :2]}, "rel_pre must have shape"),
@@ -213,7 +214,8 @@ def test_pack_unpack_and_atoms():
     (lambda a: {**a, "unary_pre": a["unary_pre"] * 2}, "binary"),
     (lambda a: {**a, "n_per_transition": a["n_per_transition"] + 5}, "n_per_transition"),
     (lambda a: {**a, "actions": a["actions"] + np.array([0, 2, 0, 0])}, "grasp_offset"),
-    (lambda a: {**a, "actions": np.where(np.arange(4) == 2, 3, a["actions"]), "n_per_transition": np.full(len(a["actions"]), 3)},
+    (lambda a: {**a, "actions": np.where(np.arange(4) == 2, 3, a["actions"]),
+                "n_per_transition": np.full(len(a["actions"]), 3)},
      "object 3 outside 0..2"),
 ])
 def test_bad_input_gives_clear_value_error(mutate, message):

@@ -24,6 +24,7 @@ def problem():
     return bw.random_problem(3, 2, seed=1, p_large=0.2)[0]
 
 
+@pytest.mark.slow
 def test_every_written_pddl_is_accepted_by_the_translator(ops, problem, tmp_path):
     paths = write_domains(ops, tmp_path)
     sampled = write_sampled_domains(ops, tmp_path / "sampled", n_domains=6, seed=0)

@@ -47,6 +47,7 @@ def test_python_plans_replay_in_their_domain(ops, problems):
     assert solved >= 20
 
 
+@pytest.mark.slow
 def test_fd_and_python_agree_on_outcome_and_plan_length(ops, problems):
     py = SymbolicPlanner(ops, backend="python")
     fdp = SymbolicPlanner(ops, backend="fd-naive", search="astar(lmcut())", time_limit=20)
@@ -97,6 +98,7 @@ def test_fd_backend_gives_valid_ranked_plans(ops, problems):
         assert any(replay(ops, problem, list(p.steps), c)[0] for c in choices)
 
 
+@pytest.mark.slow
 def test_planner_outcomes_are_distinguishable(ops, problems):
     py = SymbolicPlanner(ops, backend="python", max_expansions=1)
     assert py.plan(problems[2]).status is PlannerStatus.TIMEOUT  # needs three steps

@@ -2,13 +2,14 @@
 import numpy as np
 import pytest
 
-from tamp.planning.structs import PickPlace
+from tamp.planning import structs
+from tamp.planning.structs import BLOCK_SIZES, PickPlace
 from tamp.sim import World, WorldConfig
 from tamp.sim.kinematics import Q_LOWER, Q_UPPER, tcp_pose
 from tamp.sim.motion import MotionPlanner
 from tamp.sim.plants import X_FlangeTcp, build_motion_scene
-from tamp.planning import structs
-from tamp.planning.structs import BLOCK_SIZES
+
+pytestmark = pytest.mark.sim  # every test here builds Drake plants
 
 SMALL, LARGE = [1.0, 0.0], [0.0, 1.0]
 BAR_HEIGHT = BLOCK_SIZES[1][2]
@@ -140,7 +141,8 @@ def test_every_planned_motion_is_collision_free_at_fine_resolution():
         after = list(world.scene.X_WB)
         X_WGrasp = tcp_pose(info.paths["descend"][-1])
         carried = tuple(info.carried)
-        attached = [(BLOCK_SIZES[int(world.scene.types[c])], X_FlangeTcp @ X_WGrasp.inverse() @ before[c]) for c in carried]
+        attached = [(BLOCK_SIZES[int(world.scene.types[c])], X_FlangeTcp @ X_WGrasp.inverse() @ before[c])
+                    for c in carried]
         checker.detach()
         checker.set_block_poses(before)
         for m in ("approach", "descend"):

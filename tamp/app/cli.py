@@ -13,7 +13,6 @@ import numpy as np
 from tamp.app.parallel import add_arguments as add_parallel_arguments
 from tamp.errors import UserError, is_user_error
 
-
 # learned.ACTIVATIONS, spelled out so that `tamp --help` does not import torch (tests check they agree).
 BOTTLENECKS = ("gumbel_sigmoid", "sigmoid", "tanh", "none")
 TRAIN_PATIENCE = 100  # learned.TrainConfig.fast().patience_epochs, for the same reason
@@ -147,6 +146,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
                   f"{t.get('motion', 0) * 1e3:.0f}, physics {t.get('physics', 0) * 1e3:.0f})")
         X = X_next
     if args.replay:
+        assert timeline is not None  # made for --replay
         path = timeline.write_html(args.replay)
         print(f"replay written to {path} ({path.stat().st_size / 1e6:.1f} MB); open it in a browser",
               file=sys.stderr if args.json else sys.stdout)
@@ -155,8 +155,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
 def cmd_view(args: argparse.Namespace) -> int:
     """Refine a plan file, execute it with the arm under physics and write the replay."""
-    from tamp.sim.execute import execute
     from tamp.app.plan_file import load_plan_file
+    from tamp.sim.execute import execute
     from tamp.sim.refine import refine
     from tamp.sim.replay import Timeline
 
@@ -317,6 +317,7 @@ def symbol_scenes(problems: Path | None, data: Path | None, max_scenes: int, see
         return [X for p in read_problem_set(problems) for X in (p.X_init, p.X_goal)][:max_scenes]
     from learned import load_transitions
 
+    assert data is not None  # exactly one of problems and data (checked above)
     t = load_transitions(data)
     if len(t) == 0:
         raise UserError(f"{data}: the dataset holds no transitions")

@@ -99,7 +99,7 @@ class CollectConfig:
 
     def meta(self) -> dict[str, Any]:
         """meta.json content (format of learned.dataset), normalised through JSON."""
-        from learned.dataset import FORMAT  # noqa: PLC0415  (parent only; learned imports torch)
+        from learned.dataset import FORMAT  # parent only; learned imports torch
 
         meta = {
             "format": FORMAT, "n_max": self.n_max, "world_config": self.world.to_dict(),
@@ -180,7 +180,7 @@ def shard_name(j: int) -> str:
 
 
 def _warn(message: str) -> None:
-    from tqdm import tqdm  # noqa: PLC0415
+    from tqdm import tqdm
 
     tqdm.write(f"warning: {message}", file=sys.stderr)
 
@@ -207,7 +207,7 @@ def prepare_directory(out: Path, cfg: CollectConfig, meta: dict) -> tuple[set[in
     Raises ValueError if `out` holds anything but a dataset of exactly these parameters.
     Bad shards (unreadable, invalid, wrong size) are deleted so they are recomputed.
     """
-    from learned.dataset import META_NAME, SHARD_RE, ShardError, read_meta, read_shard, write_meta  # noqa: PLC0415
+    from learned.dataset import META_NAME, SHARD_RE, ShardError, read_meta, read_shard, write_meta
 
     meta_path = out / META_NAME
     if meta_path.exists():
@@ -302,8 +302,9 @@ def collect(out: str | Path, cfg: CollectConfig, workers: int | None = None, bac
     workers: local processes, or Ray actors (default: the CPUs of this machine, or of the Ray
     cluster at `address`). Returns what was done; the data do not depend on workers or backend.
     """
-    from tqdm import tqdm  # noqa: PLC0415
-    from learned.dataset import write_shard  # noqa: PLC0415
+    from tqdm import tqdm
+
+    from learned.dataset import write_shard
 
     if backend not in BACKENDS:
         raise UserError(f"--backend must be one of {', '.join(BACKENDS)}, got {backend!r}")

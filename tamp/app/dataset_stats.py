@@ -43,7 +43,8 @@ def resting_flat(X: np.ndarray, mask: np.ndarray | None = None) -> tuple[np.ndar
     level = np.rint((z - HEIGHT / 2) / HEIGHT).astype(int)
     on_level = (np.abs(z - HEIGHT / 2 - level * HEIGHT) < LEVEL_TOL) & (level >= 0) & mask
     reach = np.where(X[..., 4] == 1, REACH[LARGE], REACH[SMALL])
-    near = np.linalg.norm(X[..., :, None, :2] - X[..., None, :, :2], axis=-1) < reach[..., :, None] + reach[..., None, :]
+    distance = np.linalg.norm(X[..., :, None, :2] - X[..., None, :, :2], axis=-1)
+    near = distance < reach[..., :, None] + reach[..., None, :]
     below = on_level[..., None, :] & (level[..., None, :] == level[..., :, None] - 1)  # [i, j]: j one level under i
     supported = (level == 0) | np.any(below & near, axis=-1)
     return on_level & supported, level
@@ -94,11 +95,13 @@ class DatasetStats:
         nothing = np.isin(self.outcome, ("unchanged",) + tuple(s for s in STATUSES if s != "ok"))
 
         lines += ["", "| n | samples | changed nothing | moved | stacked | toppled |", "|---|---|---|---|---|---|"]
+        def frac(mask: np.ndarray, sel: np.ndarray) -> str:
+            return f"{mask[sel].mean():.1%}"
+
         for n in np.unique(self.n):
             sel = self.n == n
-            frac = lambda mask: f"{mask[sel].mean():.1%}"  # noqa: E731
-            lines.append(f"| {n} | {sel.sum()} | {frac(nothing)} | {frac(self.outcome == 'moved')} | "
-                         f"{frac(self.outcome == 'stacked')} | {frac(self.outcome == 'toppled')} |")
+            lines.append(f"| {n} | {sel.sum()} | {frac(nothing, sel)} | {frac(self.outcome == 'moved', sel)} | "
+                         f"{frac(self.outcome == 'stacked', sel)} | {frac(self.outcome == 'toppled', sel)} |")
 
         lines += ["", f"changed nothing: {nothing.sum()} of {S} ({nothing.mean():.1%}), why:", "",
                   "| why | samples | fraction of all |", "|---|---|---|"]
@@ -127,10 +130,10 @@ class DatasetStats:
         return "\n".join(lines)
 
     def write_png(self, path: Path) -> Path:
-        import matplotlib  # noqa: PLC0415
+        import matplotlib
 
         matplotlib.use("Agg")
-        import matplotlib.pyplot as plt  # noqa: PLC0415
+        import matplotlib.pyplot as plt
 
         fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4))
         executed = np.isin(self.outcome, CLASSES) & np.isfinite(self.displacement)
@@ -164,7 +167,7 @@ def dataset_stats(directory: str | Path, png: str | Path | None = None) -> Datas
 
     Writes the PNG histogram to `png` (default DIR/stats.png).
     """
-    from learned.dataset import ShardError, read_meta, read_shard, shard_paths  # noqa: PLC0415
+    from learned.dataset import ShardError, read_meta, read_shard, shard_paths
 
     directory = Path(directory)
     if not directory.is_dir():
@@ -197,7 +200,7 @@ def dataset_stats(directory: str | Path, png: str | Path | None = None) -> Datas
         displacement.append(np.where(executed, np.take_along_axis(dist, g, axis=1)[:, 0], np.nan))
         is_grasped = (np.arange(X.shape[1])[None] == part.grasped[:, None])
         others.append(np.any((dist > MOVE_TOL) & ~is_grasped, axis=1))
-    outcome, displacement, others = map(np.concatenate, (outcome, displacement, others))
-    stats = DatasetStats(directory, meta, n, outcome.astype(str), displacement, others, skipped, missing)
+    stats = DatasetStats(directory, meta, n, np.concatenate(outcome).astype(str), np.concatenate(displacement),
+                         np.concatenate(others), skipped, missing)
     stats.png = stats.write_png(Path(png) if png is not None else directory / "stats.png")
     return stats

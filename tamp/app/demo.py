@@ -16,10 +16,10 @@ from pathlib import Path
 
 import numpy as np
 
-from tamp.errors import UserError
 from tamp.app.plan_command import LEVELS, fmt_action, print_result
 from tamp.app.problem import Problem, random_problem
 from tamp.app.runner import Execution, execute_plan, kinematics_for, run_closed_loop
+from tamp.errors import UserError
 from tamp.planning.bilevel import ClosedLoopResult, PlanConfig, PlanResult, plan, replan_rounds
 from tamp.planning.structs import TYPE_NAMES, Outcome, PickPlace
 from tamp.planning.verify import goal_error, goal_errors, rollout
@@ -108,6 +108,7 @@ def run_demo(cfg: DemoConfig = DemoConfig()) -> DemoResult:
             timeline.caption = [f"tamp demo --seed {cfg.seed}: {problem.n} blocks, goal from {problem.k} random "
                                 f"actions, closed loop", _verdict(out)]
             timeline.show_goal(problem.X_goal)
+            assert cfg.replay is not None  # the timeline exists for it
             path = timeline.write_html(cfg.replay)
             out.replays.append(path)
             print(f"replay written to {path} ({path.stat().st_size / 1e6:.1f} MB): open it in a browser", flush=True)
@@ -115,6 +116,7 @@ def run_demo(cfg: DemoConfig = DemoConfig()) -> DemoResult:
             _replay_candidates(out, models, cfg)
         return out
     if result.solved:
+        assert result.plan is not None  # solved
         what = "the arm under physics" if cfg.fidelity == "full" else "the fast world"
         print(f"\nrefining and executing {len(result.plan)} action(s) with {what}:", flush=True)
         out.execution = execute_plan(result.plan, problem.X_init, problem.X_goal, cfg.fidelity, timeline=timeline)
@@ -128,6 +130,7 @@ def run_demo(cfg: DemoConfig = DemoConfig()) -> DemoResult:
 
     _print_summary(out, cfg)
     if timeline is not None:
+        assert cfg.replay is not None  # the timeline exists for it
         timeline.caption = [f"tamp demo --seed {cfg.seed}: {problem.n} blocks, goal from {problem.k} random actions",
                             _verdict(out)]
         _write_replay(timeline, problem.X_goal, None if out.execution is None else result.predicted, cfg.replay, out)
@@ -147,6 +150,7 @@ def _write_replay(timeline: Timeline, X_goal, predicted, path: Path, out: DemoRe
 
 def _replay_candidates(out: DemoResult, models, cfg: DemoConfig) -> None:
     """Execute the first `cfg.candidates` candidates that failed verification, one replay each."""
+    assert cfg.replay is not None  # candidates need a replay path (checked in demo())
     problem, rejected = out.problem, [(i, c) for i, c in enumerate(out.result.candidates, 1) if c.verified is False]
     if not rejected:
         print("\nno symbolic candidate failed verification; no candidate replays")
@@ -155,6 +159,7 @@ def _replay_candidates(out: DemoResult, models, cfg: DemoConfig) -> None:
     print(f"\nreplaying {len(shown)} of the {len(rejected)} candidate(s) that failed verification "
           f"(numbers as in the list above):", flush=True)
     for rank, c in shown:
+        assert c.error is not None  # verified (and rejected): its error is known
         actions = [PickPlace(*a) for a in c.actions]
         predicted = rollout(models.require_dynamics(), problem.X_init, c.actions)
         timeline = Timeline()
@@ -222,6 +227,7 @@ def _print_summary(out: DemoResult, cfg: DemoConfig) -> None:
     result, ex = out.result, out.execution
     print(f"\nsummary (seed {cfg.seed}, {cfg.fidelity} execution):")
     if result.solved:
+        assert result.plan is not None and result.level is not None and result.predicted_error is not None  # solved
         print(f"  plan        {len(result.plan)} action(s) from {LEVELS[result.level]}; predicted error "
               f"{result.predicted_error * 100:.1f} cm")
         for reason in result.reasons:  # why Level 1 did not give the plan
@@ -290,19 +296,27 @@ def _show_loop_predictions(timeline: Timeline, planned: list[tuple[int, PlanResu
     for r, (first, result) in enumerate(planned):
         end = planned[r + 1][0] if r + 1 < len(planned) else len(starts)
         for i in range(end - first):
-            if result.predicted is not None and i + 1 < len(result.predicted) and starts[first + i] is not None:
+            start = starts[first + i]
+            if result.predicted is not None and i + 1 < len(result.predicted) and start is not None:
                 states.append(result.predicted[i + 1])
-                times.append(starts[first + i])
+                times.append(start)
     if states:
         timeline.ghosts.append(Ghosts("predicted", np.stack(states), times, PREDICTED_RGBA,
                                       "Dynamics Model's prediction after the current action"))
 
 
+def _round_summary(r: PlanResult) -> str:
+    if r.level is None:
+        return "no plan"
+    assert r.predicted_error is not None  # solved
+    return f"level {r.level} (predicted {r.predicted_error * 100:.1f} cm from the goal)"
+
+
 def _print_loop_summary(out: DemoResult, cfg: DemoConfig) -> None:
     loop = out.loop
+    assert loop is not None  # closed loop: set before the summary
     print(f"\nsummary (seed {cfg.seed}, {cfg.fidelity} execution, closed loop):")
-    levels = ", ".join("no plan" if r.level is None else
-                       f"level {r.level} (predicted {r.predicted_error * 100:.1f} cm from the goal)" for r in loop.rounds)
+    levels = ", ".join(_round_summary(r) for r in loop.rounds)
     print(f"  plans       {len(loop.rounds)} round(s): {levels}; {len(loop.executed)} action(s) executed")
     for a in loop.executed:
         print(f"              {fmt_action(a)}")

@@ -49,6 +49,7 @@ def _rank(result: PlanResult, ranked_index: int) -> int:
 def print_result(result: PlanResult, tau: float, indent: str = "") -> None:
     p = indent
     if result.solved:
+        assert result.plan is not None and result.level is not None and result.predicted_error is not None  # solved
         print(f"{p}{result.method}: plan of {len(result.plan)} action(s) from {LEVELS[result.level]}; "
               f"predicted final error {result.predicted_error * 100:.1f} cm")
     else:
@@ -71,8 +72,9 @@ def print_result(result: PlanResult, tau: float, indent: str = "") -> None:
         print(f"{p}  action {k}: {fmt_action(a)}")
     for reason in result.reasons if not result.solved else []:
         print(f"{p}  {reason}")
-    if result.rejected is not None:
-        for level, counts in result.rejected_dict().items():
+    rejected = result.rejected_dict()
+    if rejected is not None:
+        for level, counts in rejected.items():
             what = "candidate plans" if level == "level 1" else "successors"
             text = ", ".join(f"{reason} {count}" for reason, count in counts.items()) or "none"
             print(f"{p}  kinematic feasibility, {level}: {what} rejected: {text}")
@@ -139,8 +141,8 @@ def run_plan(problem_path: Path, models_dir: Path, options: PlanOptions) -> int:
     """The `tamp plan` command; returns the exit code (0: solved, and reached the goal if executed)."""
     import torch
 
-    from tamp.planning.models import load_models
     from tamp.app.problem import load_problem
+    from tamp.planning.models import load_models
 
     # Planning runs many small forward passes: one thread is faster, and much faster when another
     # process keeps the second core busy (a 2-thread pass then waits for it: 20-40x slower, measured).
@@ -170,6 +172,7 @@ def run_plan(problem_path: Path, models_dir: Path, options: PlanOptions) -> int:
     code = run(problem, models, options, cfg, timeline)
     if timeline is not None:
         if timeline.times:
+            assert options.replay is not None  # the timeline exists for it
             path = timeline.write_html(options.replay)
             print(f"replay written to {path} ({path.stat().st_size / 1e6:.1f} MB)")
         else:
@@ -189,7 +192,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    "bilevel_alg1: the paper's Algorithm 1 without our Level-1 extensions)")
     p.add_argument("--replan", action="store_true",
                    help="closed loop: execute the first action, observe, replan (up to k - 1 rounds)")
-    p.add_argument("--rounds", type=non_negative_int, default=None, help="replanning rounds (default: k - 1 of the problem)")
+    p.add_argument("--rounds", type=non_negative_int, default=None,
+                   help="replanning rounds (default: k - 1 of the problem)")
     p.add_argument("--execute", choices=("none", "fast", "full"), default="fast",
                    help="refine and execute the plan in the fast world (default) or with the arm under "
                    "physics (full), or not at all")

@@ -53,7 +53,8 @@ def load_plan_file(path: str | Path) -> tuple[np.ndarray, list[PickPlace]]:
     plan = []
     for k, a in enumerate(actions):
         if not (isinstance(a, list) and len(a) == 4 and all(isinstance(v, int) and not isinstance(v, bool) for v in a)):
-            raise UserError(f"{path}: actions[{k}] must be 4 integers [pick, grasp_offset, place, release_offset], got {a!r}")
+            raise UserError(f"{path}: actions[{k}] must be 4 integers "
+                            f"[pick, grasp_offset, place, release_offset], got {a!r}")
         plan.append(PickPlace(*a))
     return X, plan
 

@@ -13,7 +13,8 @@ integer) seeds the sampled symbolic domains. `name` (optional string) names the 
 `actions` (optional) are the actions that generated the goal. Generated problems also say how they
 were made: `protocol` ("strict" or "paper", see `PROTOCOLS`), `moved` (how many of the k actions
 moved a block) and `run` (which of several problem sets of one file). Errors name the file and the
-field; the scenes are checked by `tamp.planning.validate.check_problem` (reach, resting, no overlap). `random_problem(n, k, seed)` makes one from a random scene and k random actions in the fast world.
+field; the scenes are checked by `tamp.planning.validate.check_problem` (reach, resting, no overlap).
+`random_problem(n, k, seed)` makes one from a random scene and k random actions in the fast world.
 """
 from __future__ import annotations
 
@@ -24,8 +25,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from tamp.errors import UserError
 from tamp.app.plan_file import read_json_file
+from tamp.errors import UserError
 from tamp.planning.validate import check_problem
 
 if TYPE_CHECKING:
@@ -203,7 +204,8 @@ def random_problem(n: int, k: int, seed: int, world: "World | None" = None, name
             break
         X = world.X
         candidates = world.actions()
-        action = tuple(int(v) for v in candidates[rng.integers(len(candidates))])
+        pick, grasp_offset, place, release_offset = (int(v) for v in candidates[rng.integers(len(candidates))])
+        action = (pick, grasp_offset, place, release_offset)
         X_next, info = world.step(action)
         changed = info.status == "ok" and np.max(np.linalg.norm(X_next[:, :3] - X[:, :3], axis=1)) >= MOVED_M
         if changed or protocol == "paper":

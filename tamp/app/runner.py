@@ -106,7 +106,8 @@ class ClosedLoopRun:
     loop: ClosedLoopResult
     infos: list[StepInfo] = field(default_factory=list)  # per executed action
     step_times: list[tuple[float, float]] = field(default_factory=list)  # (refine, execute) wall s per action
-    action_starts: list[float | None] = field(default_factory=list)  # replay time each action began (None: arm never moved)
+    # replay time each action began (None: the arm never moved)
+    action_starts: list[float | None] = field(default_factory=list)
 
     @property
     def first_failure(self) -> RefinementFailure | None:
@@ -137,7 +138,9 @@ def run_closed_loop(method: str, models: Models, X_init: np.ndarray, X_goal: np.
     X0 = world.reset(X=X_init)
     if kinematics is not None:
         kinematics.observe(world.scene, world.q)
-    run = ClosedLoopRun(loop=None)  # type: ignore[arg-type]  (set below, once the loop has run)
+    infos: list[StepInfo] = []
+    step_times: list[tuple[float, float]] = []
+    action_starts: list[float | None] = []
 
     def step(action: PickPlace) -> np.ndarray:
         t, marks = time.perf_counter(), len(timeline.action_starts) if timeline is not None else 0
@@ -146,17 +149,17 @@ def run_closed_loop(method: str, models: Models, X_init: np.ndarray, X_goal: np.
         if kinematics is not None:
             kinematics.observe(world.scene, world.q)
         started = timeline is not None and len(timeline.action_starts) > marks  # it moved the arm
-        run.action_starts.append(timeline.action_starts[marks] if started else None)
+        action_starts.append(timeline.action_starts[marks] if timeline is not None and started else None)
         execute = info.timings.get("execute", 0.0)  # full fidelity; the fast world's step is all refinement
-        run.step_times.append((seconds - execute, execute))
-        run.infos.append(info)
+        step_times.append((seconds - execute, execute))
+        infos.append(info)
         if on_step is not None:
             on_step(action, X, info, seconds)
         return X
 
     try:
-        run.loop = plan_closed_loop(method, models, X0, X_goal, step, rounds, config, on_round=on_round,
-                                    planner=planner, kinematics=kinematics)
+        loop = plan_closed_loop(method, models, X0, X_goal, step, rounds, config, on_round=on_round,
+                                planner=planner, kinematics=kinematics)
     finally:
         world.observer = None
-    return run
+    return ClosedLoopRun(loop, infos, step_times, action_starts)

@@ -34,9 +34,17 @@ from tamp.planning.models import Models
 from tamp.planning.search import SearchConfig, SearchResult, SearchStatus, continuous_search, state_key
 from tamp.planning.structs import Infeasible, KinematicFeasibility, PickPlace, RefinementOutcome
 from tamp.planning.validate import check_problem
-from tamp.planning.verify import (EPS_SUCCESS, TAU_VERIFY, Verification, at_goal, goal_error, refine_skeleton, states_pair, verify,
-                         verify_many)
-
+from tamp.planning.verify import (
+    EPS_SUCCESS,
+    TAU_VERIFY,
+    Verification,
+    at_goal,
+    goal_error,
+    refine_skeleton,
+    states_pair,
+    verify,
+    verify_many,
+)
 
 SYMBOLIC_BACKENDS = ("python", "fd", "fd-naive")  # in-process search; Fast Downward, batched or one call per domain
 
@@ -138,6 +146,7 @@ def _symbolic_problem(models: Models, X_init: np.ndarray, X_goal: np.ndarray, cf
     (X_init itself is not within tau of X_goal although the symbols may agree)."""
     from symbolic import make_problem
 
+    assert models.symbolic is not None  # models.symbolic_planner() checked it
     ui, ri = models.symbolic.symbols(X_init)
     ug, rg = models.symbolic.symbols(X_goal)
     return make_problem(ui, ri, ug, rg, nonempty=cfg.nonempty and goal_error(X_init, X_goal) >= cfg.tau_verify)
@@ -176,8 +185,9 @@ def _level1_plans(models: Models, X_init, X_goal, cfg: PlanConfig, result: PlanR
         return []
     from symbolic import steps_to_actions
 
+    assert models.domain is not None  # models.symbolic_planner() checked it
     actions = steps_to_actions(models.domain, out.plan, len(X_init))
-    return [Candidate(tuple(tuple(a) for a in actions), 1, 1.0)]
+    return [Candidate(tuple(actions), 1, 1.0)]
 
 
 def _verify(models: Models, X_init, X_goal, candidate: Candidate, cfg: PlanConfig):
@@ -201,7 +211,8 @@ class _Feasibility:
         self.resolution = cfg.search.resolution
         self.cache: dict[tuple[bytes, tuple], Infeasible | None] = {}
         self.pruned: set[tuple[bytes, tuple]] = set()  # (state key, action) that failed refinement
-        result.rejected = {1: Counter(), 2: Counter()}
+        self.rejected: dict[int, Counter] = {1: Counter(), 2: Counter()}
+        result.rejected = self.rejected
         result.timings.setdefault("feasibility", 0.0)
         result.timings.setdefault("refine", 0.0)
 
@@ -248,7 +259,7 @@ class _Feasibility:
             key = (state_key(trajectory[k], self.resolution), tuple(int(v) for v in actions[k]))
             self.pruned.add(key)
             self.cache[key] = outcome.reason
-            self.result.rejected[level][outcome.reason] += 1
+            self.rejected[level][outcome.reason] += 1
         return outcome
 
 
@@ -264,7 +275,7 @@ def _level2(models: Models, X_init, X_goal, cfg: PlanConfig, result: PlanResult,
         out = continuous_search(models.require_dynamics(), X_init, X_goal, search_cfg, check,
                                 frozenset() if feas is None else feas.pruned)
         if feas is not None:
-            result.rejected[2].update(out.rejected)
+            feas.rejected[2].update(out.rejected)
             if result.search is not None:  # a search again after a refinement failure: count all
                 for name in ("expanded", "generated", "duplicates", "predict_calls"):
                     setattr(out, name, getattr(out, name) + getattr(result.search, name))
@@ -277,6 +288,7 @@ def _level2(models: Models, X_init, X_goal, cfg: PlanConfig, result: PlanResult,
             result.search.status = SearchStatus.REFINEMENT_BUDGET
             result.search.reason = "refinement budget used up"
             break
+        assert out.trajectory is not None  # a solved search has its predicted trajectory
         outcome = feas.refine(2, out.trajectory, out.plan)
         if outcome.success:
             break
@@ -285,6 +297,7 @@ def _level2(models: Models, X_init, X_goal, cfg: PlanConfig, result: PlanResult,
     # search time: the searches with their checks, not the refinements between them
     result.timings["search"] = time.perf_counter() - t - (result.timings.get("refine", 0.0) - refine_before)
     if out.solved:
+        assert out.plan is not None and out.trajectory is not None  # solved: both set
         return _take(result, out.plan, 2, out.trajectory, X_goal)
     result.reasons.append(f"level 2: {out.reason}")
     return result
@@ -325,7 +338,7 @@ def _feasible_choice(verified: list[Verification], feas: _Feasibility | None) ->
     for v in verified:
         reason = feas.plan(v.trajectory, v.actions)
         if reason is not None:
-            feas.result.rejected[1][reason] += 1
+            feas.rejected[1][reason] += 1
             continue
         if not v.actions:
             return v
@@ -345,7 +358,8 @@ def plan_bilevel(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig(),
     def body(result: PlanResult) -> PlanResult:
         feas = _Feasibility.of(kinematics, cfg, result)
         ranked = _level1_plans(models, X_init, X_goal, cfg, result)
-        t, chosen, checked, any_verified = time.perf_counter(), None, [], False
+        checked: list[Candidate] = []
+        t, chosen, any_verified = time.perf_counter(), None, False
         for i, c in enumerate(ranked):  # decreasing frequency
             left = cfg.alternatives_total - sum(c.alternative_of is not None for c in checked)
             group, verified = _verify_group(models, X_init, X_goal, i, c, cfg, min(cfg.alternatives, left))
@@ -368,8 +382,10 @@ def plan_bilevel(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig(),
             best = min(c.error for c in checked if c.error is not None)
             alts = sum(c.alternative_of is not None for c in checked)
             if any_verified and feas is not None:
+                rejected = result.rejected_dict()
+                assert rejected is not None  # counted while feasibility is on
                 result.reasons.append(f"level 1: no verified plan was kinematically feasible "
-                                      f"(rejected: {result.rejected_dict()['level 1']})")
+                                      f"(rejected: {rejected['level 1']})")
             else:
                 result.reasons.append(f"level 1: none of the {len(ranked)} symbolic plans verified"
                                       + (f" (nor {alts} alternatives through the same symbols)" if alts else "")
@@ -510,5 +526,5 @@ def replan_rounds(k: int | None, default: int = 4) -> int:
 
 
 __all__: Sequence[str] = ["Candidate", "ClosedLoopResult", "METHODS", "PlanConfig", "PlanResult", "Planner",
-                          "plan", "plan_bilevel", "plan_bilevel_alg1", "plan_cfs", "plan_closed_loop", "plan_deterministic",
-                          "plan_probabilistic", "replan_rounds"]
+                          "plan", "plan_bilevel", "plan_bilevel_alg1", "plan_cfs", "plan_closed_loop",
+                          "plan_deterministic", "plan_probabilistic", "replan_rounds"]

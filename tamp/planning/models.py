@@ -12,12 +12,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
 from tamp.errors import UserError
 from tamp.planning.verify import DynamicsModel
+
+if TYPE_CHECKING:
+    from symbolic import OperatorSet
 
 SYMBOLIC_FILE, DYNAMICS_FILE, DOMAIN_DIR = "symbolic.pt", "dynamics.pt", "domain"
 
@@ -37,7 +40,7 @@ class SymbolModel(Protocol):
 class Models:
     dynamics: DynamicsModel | None
     symbolic: SymbolModel | None = None
-    domain: object = None  # symbolic.OperatorSet
+    domain: OperatorSet | None = None
     planners: dict = field(default_factory=dict)  # SymbolicPlanner per (backend, time limit), reused
 
     def symbolic_planner(self, backend: str = "python", time_limit: float = 10.0):
@@ -56,8 +59,8 @@ class Models:
     def n_max(self) -> int | None:
         """The most objects the loaded networks take (None for models without a config, e.g. stubs)."""
         limits = [getattr(getattr(m, "config", None), "n_max", None) for m in (self.dynamics, self.symbolic)]
-        limits = [n for n in limits if n is not None]
-        return min(limits) if limits else None
+        known: list[int] = [n for n in limits if n is not None]
+        return min(known) if known else None
 
     def require_objects(self, n: int, what: str) -> None:
         """UserError if `what` (a problem, a scene) has more objects than the networks take."""

@@ -23,7 +23,7 @@ import time
 from collections import Counter
 from dataclasses import dataclass, field
 from enum import StrEnum
-from typing import Callable, Hashable
+from typing import AbstractSet, Callable, Hashable
 
 import numpy as np
 
@@ -97,7 +97,7 @@ def goal_oriented_actions(X: np.ndarray, X_goal: np.ndarray, misplaced: float = 
         wrong = np.flatnonzero(np.linalg.norm(X[:, :3] - X_goal[:, :3], axis=1) >= eps)
     n, rows = len(X), []
     for i in wrong:
-        targets = [i]
+        targets = [int(i)]
         if n > 1:
             dist = np.linalg.norm(X[:, :2] - X_goal[i, :2], axis=1)
             dist[i] = np.inf
@@ -129,7 +129,7 @@ def state_key(P: np.ndarray, resolution: float) -> bytes:
 
 def continuous_search(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarray,
                       config: SearchConfig = SearchConfig(), feasible: FeasibilityFn | None = None,
-                      pruned: set[tuple[bytes, tuple]] = frozenset()) -> SearchResult:
+                      pruned: AbstractSet[tuple[bytes, tuple]] = frozenset()) -> SearchResult:
     """Weighted A* from X_init to X_goal with the Dynamics Model as the transition.
 
     `feasible` (optional, e.g. the kinematic check of tamp.sim.feasibility) prunes successors whose action
@@ -166,7 +166,7 @@ def continuous_search(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarr
     # nodes[i] = (positions (n, 3), parent index, action, g)
     nodes: list[tuple[np.ndarray, int, tuple | None, int]] = [(X_init[:, :3].copy(), -1, None, 0)]
     d0 = np.linalg.norm(X_init[:, :3] - goal, axis=1)
-    out = SearchResult("exhausted", None, None, "", best_error=float(d0.max(initial=0.0)))
+    out = SearchResult(SearchStatus.EXHAUSTED, None, None, "", best_error=float(d0.max(initial=0.0)))
 
     def finish(status: SearchStatus, reason: str, index: int | None = None) -> SearchResult:
         out.status, out.reason, out.time = status, reason, time.perf_counter() - t0

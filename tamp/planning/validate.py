@@ -141,7 +141,8 @@ def _supported(p: np.ndarray, types: np.ndarray, upright: bool, tolerance_m: flo
                     near = bool(np.all(np.abs(p[i, :2] - p[j, :2]) < _HALF[types[i]][:2] + _HALF[types[j]][:2]))
                     top_lo = top_hi = p[j, 2] + _HALF[types[j]][2]
                 else:
-                    near = bool(np.hypot(*(p[i, :2] - p[j, :2])) < _footprint_radius(types[i]) + _footprint_radius(types[j]))
+                    radii = _footprint_radius(types[i]) + _footprint_radius(types[j])
+                    near = bool(np.hypot(*(p[i, :2] - p[j, :2])) < radii)
                     _, j_high = _half_heights(types[j], upright)
                     top_lo, top_hi = p[j, 2] - j_high, p[j, 2] + j_high
                 if near and bottoms[i][0] <= top_hi and top_lo <= bottoms[i][1]:

@@ -99,10 +99,10 @@ def verify_many(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarray, pl
     a k-step plan cost at most k forward passes instead of M k.
     """
     X_init, X_goal = np.asarray(X_init, dtype=float), np.asarray(X_goal, dtype=float)
-    plans = [tuple(tuple(int(v) for v in a) for a in plan) for plan in plans]
+    keyed = [tuple(tuple(int(v) for v in a) for a in plan) for plan in plans]
     states: dict[tuple, np.ndarray] = {(): X_init}
-    for t in range(max((len(p) for p in plans), default=0)):
-        new = list(dict.fromkeys(plan[:t + 1] for plan in plans if len(plan) > t and plan[:t + 1] not in states))
+    for t in range(max((len(p) for p in keyed), default=0)):
+        new = list(dict.fromkeys(plan[:t + 1] for plan in keyed if len(plan) > t and plan[:t + 1] not in states))
         if not new:
             continue
         Xs = np.stack([states[prefix[:t]] for prefix in new])
@@ -112,7 +112,7 @@ def verify_many(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarray, pl
             X_next[:, :3] += e
             states[prefix] = X_next
     out = []
-    for plan in plans:
+    for plan in keyed:
         trajectory = np.stack([states[plan[:t]] for t in range(len(plan) + 1)])
         out.append(Verification(plan, trajectory, goal_errors(trajectory[-1], X_goal), tau))
     return out

@@ -121,11 +121,13 @@ class Executor:
         self._welds = [plant.AddWeldConstraint(grasp_body, RigidTransform(), body, RigidTransform())
                        for body in self._block_bodies]
         plant.Finalize()
-        self._source = builder.AddSystem(TrajectorySource(PiecewisePolynomial(np.zeros((6, 1))),
-                                                          output_derivative_order=1,
-                                                          zero_derivatives_beyond_limits=True))
+        # (pydrake's stubs type arrays as ndarray[float64[...]], which no array matches: ignored below)
+        source = TrajectorySource(PiecewisePolynomial(np.zeros((6, 1))),  # type: ignore[arg-type]
+                                  output_derivative_order=1, zero_derivatives_beyond_limits=True)
+        builder.AddSystem(source)
+        self._source = source
         builder.Connect(self._source.get_output_port(), plant.get_desired_state_input_port(arm))
-        zero = builder.AddSystem(ConstantVectorSource(np.zeros(6)))
+        zero = builder.AddSystem(ConstantVectorSource(np.zeros(6)))  # type: ignore[arg-type]  # pydrake stubs
         builder.Connect(zero.get_output_port(), plant.get_actuation_input_port(arm))
         self.plant, self.arm, self.gripper_body = plant, arm, gripper_body
         self.diagram = builder.Build()

@@ -26,11 +26,11 @@ from typing import Sequence
 import numpy as np
 from pydrake.math import RigidTransform
 
+from tamp.planning.structs import BLOCK_SIZES, Infeasible, PickPlace, RefinementOutcome
 from tamp.sim.kinematics import Q_HOME, solve_chain
 from tamp.sim.plants import X_FlangeTcp
 from tamp.sim.refine import step_failure
 from tamp.sim.skill import Scene, approach_poses, held_block, pick_place_waypoints
-from tamp.planning.structs import BLOCK_SIZES, Infeasible, PickPlace, RefinementOutcome
 from tamp.sim.structs import WorldConfig
 from tamp.sim.world import World
 
@@ -67,8 +67,10 @@ class FeasibilityChecker:
         """Observe the scene X_init places upright, as `tamp.sim.refine.refine(plan, X_init)` starts."""
         self.world.rng = np.random.default_rng(0)
         self.world.reset(X=X_init)
-        self.scene, self.q = self.world.scene, self.world.q.copy()
-        return self.scene
+        scene = self.world.scene
+        assert scene is not None  # reset placed the blocks
+        self.scene, self.q = scene, self.world.q.copy()
+        return scene
 
     def observe(self, scene: Scene, q: np.ndarray | None = None) -> None:
         """Plan from an exact simulator state (block poses with orientation, arm joints)."""
@@ -82,7 +84,8 @@ class FeasibilityChecker:
         X = np.asarray(X, dtype=float)
         if len(X) != self.scene.n:
             raise ValueError(f"X has {len(X)} objects, the observed scene {self.scene.n}")
-        return Scene(self.scene.types, [RigidTransform(X_WB.rotation(), p) for X_WB, p in zip(self.scene.X_WB, X[:, :3])])
+        return Scene(self.scene.types,
+                     [RigidTransform(X_WB.rotation(), p) for X_WB, p in zip(self.scene.X_WB, X[:, :3])])
 
     # --- the cheap check ---------------------------------------------------------------------------
     def check(self, X: np.ndarray, actions) -> list[Infeasible | None]:
@@ -148,6 +151,7 @@ class FeasibilityChecker:
             if failure is not None:
                 stage, where, reason = failure
                 return RefinementOutcome(k, REFINE_REASONS[stage], f"{stage} [{where}]: {reason}")
+            assert self.world.scene is not None  # set_scene above
             scene, q = self.world.scene, self.world.q
         return RefinementOutcome()
 

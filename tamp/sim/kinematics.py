@@ -108,7 +108,8 @@ def drake_ik(
     ik = InverseKinematics(plant)
     p = X_WTcp.translation()
     tol = np.full(3, position_tolerance)
-    ik.AddPositionConstraint(tcp_frame, np.zeros(3), plant.world_frame(), p - tol, p + tol)
+    # (pydrake's stubs type arrays as ndarray[float64[...]], which no array matches)
+    ik.AddPositionConstraint(tcp_frame, np.zeros(3), plant.world_frame(), p - tol, p + tol)  # type: ignore[arg-type]
     ik.AddOrientationConstraint(
         plant.world_frame(), X_WTcp.rotation(), tcp_frame, RotationMatrix(), angle_tolerance
     )
@@ -117,8 +118,9 @@ def drake_ik(
     # Other bodies (free blocks) stay where they are.
     others = np.setdiff1d(np.arange(plant.num_positions()), arm_position_indices)
     prog.AddBoundingBoxConstraint(q_seed_full[others], q_seed_full[others], q_vars[others])
-    prog.AddQuadraticErrorCost(np.eye(len(arm_position_indices)), q_seed_full[arm_position_indices], q_vars[arm_position_indices])
-    prog.SetInitialGuess(q_vars, q_seed_full)
+    prog.AddQuadraticErrorCost(np.eye(len(arm_position_indices)),  # type: ignore[arg-type]  # pydrake stubs, as above
+                               q_seed_full[arm_position_indices], q_vars[arm_position_indices])
+    prog.SetInitialGuess(q_vars, q_seed_full)  # type: ignore[arg-type]  # pydrake stubs, as above
     result = Solve(prog)
     if not result.is_success():
         return None

@@ -108,12 +108,14 @@ class MotionPlanner:
         self.num_checks += 1
         q = self._q_full
         q[self._arm_idx] = [q_arm[i] for i in range(6)]
-        return bool(self.scene.checker.CheckConfigCollisionFree(q))
+        # (pydrake's stubs type arrays as ndarray[float64[...]], which no array matches)
+        return bool(self.scene.checker.CheckConfigCollisionFree(q))  # type: ignore[arg-type]
 
     def collisions(self, q_arm: np.ndarray) -> list[str]:
         """Names of the colliding body pairs at q_arm, e.g. 'gripper_base / object 2'."""
         checker, plant = self.scene.checker, self.scene.plant
-        clearance = checker.CalcRobotClearance(self.full_configuration(q_arm), 0.01)
+        # (pydrake's stubs type arrays as ndarray[float64[...]], which no array matches)
+        clearance = checker.CalcRobotClearance(self.full_configuration(q_arm), 0.01)  # type: ignore[arg-type]
         names = {plant.GetBodyIndices(b)[0]: f"object {i}" for i, b in enumerate(self.scene.blocks)}
         pairs = []
         for r, o, d in zip(clearance.robot_indices(), clearance.other_indices(), clearance.distances()):

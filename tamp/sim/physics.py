@@ -75,4 +75,5 @@ def blocks_at_rest(plant, context, bodies, speed: float, angular_speed: float) -
 def _zero_velocity():
     from pydrake.multibody.math import SpatialVelocity
 
-    return SpatialVelocity(np.zeros(3), np.zeros(3))
+    # (pydrake's stubs type arrays as ndarray[float64[...]], which no array matches)
+    return SpatialVelocity(np.zeros(3), np.zeros(3))  # type: ignore[arg-type]

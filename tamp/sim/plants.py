@@ -11,8 +11,10 @@ from __future__ import annotations
 import logging
 from dataclasses import dataclass
 from pathlib import Path
+from typing import cast
 
 import numpy as np
+from pydrake.common import Parallelism
 from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import (
@@ -21,9 +23,8 @@ from pydrake.multibody.plant import (
     MultibodyPlant,
 )
 from pydrake.multibody.tree import ModelInstanceIndex
-from pydrake.common import Parallelism
 from pydrake.planning import RobotDiagramBuilder, SceneGraphCollisionChecker
-from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.framework import Diagram, DiagramBuilder
 
 from tamp.planning.structs import LARGE, SMALL
 
@@ -36,9 +37,11 @@ TABLE_FILE = MODEL_DIR / "table.sdf"
 BLOCK_FILES = {SMALL: MODEL_DIR / "small_block.sdf", LARGE: MODEL_DIR / "large_block.sdf"}
 
 # The arm's base on the table, yawed so that the UR10e's DH frame 0 (arm along -x at q = 0) faces +x.
-X_WBase = RigidTransform(RotationMatrix.MakeZRotation(np.pi), [0.0, 0.0, 0.0])
+# (pydrake's stubs type vectors as ndarray[float64[3, 1]], which neither a list nor an array matches)
+X_WBase = RigidTransform(RotationMatrix.MakeZRotation(np.pi), [0.0, 0.0, 0.0])  # type: ignore[call-overload]
 # Grasp point (tcp) in the flange frame: see drake_models/gripper.sdf.
-X_FlangeTcp = RigidTransform([0.0, 0.0, 0.125])
+# (pydrake's stubs type vectors as ndarray[float64[3, 1]], which neither a list nor an array matches)
+X_FlangeTcp = RigidTransform([0.0, 0.0, 0.125])  # type: ignore[call-overload]
 ARM_JOINTS = (
     "shoulder_pan_joint",
     "shoulder_lift_joint",
@@ -50,9 +53,9 @@ ARM_JOINTS = (
 
 
 def add_arm_gripper_table(plant: MultibodyPlant, parser: Parser) -> tuple[ModelInstanceIndex, ModelInstanceIndex]:
-    (arm,) = parser.AddModels(str(ARM_FILE))
-    (gripper,) = parser.AddModels(str(GRIPPER_FILE))
-    (table,) = parser.AddModels(str(TABLE_FILE))
+    (arm,) = parser.AddModels(ARM_FILE)
+    (gripper,) = parser.AddModels(GRIPPER_FILE)
+    (table,) = parser.AddModels(TABLE_FILE)
     plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("base_link", arm), X_WBase)
     plant.WeldFrames(plant.GetFrameByName("tool0", arm), plant.GetFrameByName("gripper_base", gripper))
     plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("table_top", table))
@@ -63,7 +66,7 @@ def add_blocks(parser: Parser, types: np.ndarray) -> list[ModelInstanceIndex]:
     parser.SetAutoRenaming(True)
     blocks = []
     for t in types:
-        (block,) = parser.AddModels(str(BLOCK_FILES[int(t)]))
+        (block,) = parser.AddModels(BLOCK_FILES[int(t)])
         blocks.append(block)
     return blocks
 
@@ -72,7 +75,7 @@ def add_blocks(parser: Parser, types: np.ndarray) -> list[ModelInstanceIndex]:
 class MotionScene:
     """Arm, gripper, table and free blocks, with a collision checker over the full plant state."""
 
-    diagram: object
+    diagram: Diagram
     plant: MultibodyPlant
     checker: SceneGraphCollisionChecker
     arm: ModelInstanceIndex
@@ -95,8 +98,8 @@ def build_motion_scene(types: np.ndarray, padding: float, edge_step: float = 0.0
     arm, gripper = add_arm_gripper_table(plant, parser)
     blocks = add_blocks(parser, types)
     plant.Finalize()
-    diagram = builder.Build()
-    checker = SceneGraphCollisionChecker(
+    diagram = cast(Diagram, builder.Build())  # pydrake's stubs type Build() as object
+    checker = SceneGraphCollisionChecker(  # type: ignore[call-arg]  # the stubs lack its keyword constructor
         model=diagram,
         robot_model_instances=[arm, gripper],
         edge_step_size=edge_step,
@@ -111,7 +114,7 @@ def build_motion_scene(types: np.ndarray, padding: float, edge_step: float = 0.0
 class PhysicsScene:
     """Table and free blocks under hydroelastic contact."""
 
-    diagram: object
+    diagram: Diagram
     plant: MultibodyPlant
     blocks: list[ModelInstanceIndex]
 
@@ -125,7 +128,7 @@ def build_physics_scene(types: np.ndarray, time_step: float) -> PhysicsScene:
 
     plant.set_contact_model(ContactModel.kHydroelasticWithFallback)
     parser = Parser(plant)
-    (table,) = parser.AddModels(str(TABLE_FILE))
+    (table,) = parser.AddModels(TABLE_FILE)
     plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("table_top", table))
     blocks = add_blocks(parser, types)
     plant.Finalize()

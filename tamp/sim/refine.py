@@ -14,11 +14,11 @@ from typing import Iterable
 
 import numpy as np
 
-from tamp.sim.skill import Scene
 from tamp.planning.structs import PickPlace
+from tamp.planning.validate import check_scene
+from tamp.sim.skill import Scene
 from tamp.sim.structs import StepInfo, StepStatus, WorldConfig
 from tamp.sim.trajectory import FailureStage, RefinedPlan, RefinementFailure, concatenate, refined_action
-from tamp.planning.validate import check_scene
 from tamp.sim.world import World, validate_action
 
 FAILURE_STAGES = {  # StepInfo.status of a failed action -> refinement stage
@@ -46,12 +46,14 @@ def refine(
         world = World(dataclasses.replace(config or WorldConfig(), fidelity="fast", simplify_paths=True))
     if scene is None:
         # the scene the world can hold; a block out of reach is the IK failure of the action picking it
+        assert X_init is not None  # exactly one of X_init and scene (checked above)
         check_scene(X_init, where="refine()", field="X_init", upright=True, within_reach=False)
         world.reset(X=X_init)
     else:
         world.set_scene(scene, world.q if q_start is None else q_start)
     if q_start is not None:
         world.q = np.array(q_start, dtype=float)
+    assert world.scene is not None  # reset or set_scene above
     actions = [validate_action(a, world.scene.n) for a in plan]
     result = RefinedPlan(X_init=world.X, actions=actions, scene_init=world.scene, q_init=world.q.copy())
     t_plan = time.perf_counter()

@@ -20,10 +20,10 @@ from typing import Sequence
 import numpy as np
 from pydrake.math import RigidTransform
 
-from tamp.sim.kinematics import V_MAX, tcp_pose
-from tamp.sim.observer import Carried, PhysicsFrame, WorldObserver
 from tamp.planning.structs import BLOCK_SIZES
 from tamp.records import atomic_write_text
+from tamp.sim.kinematics import V_MAX, tcp_pose
+from tamp.sim.observer import Carried, PhysicsFrame, WorldObserver
 
 REPLAY_FPS = 30.0
 _REPLAY_SPEED = 0.5  # fraction of the joint velocity limits used to time kinematic motions
@@ -150,14 +150,16 @@ class Timeline(WorldObserver):
         plant = scene.plant
         meshcat = Meshcat()
         camera, target = self.camera()
-        meshcat.SetCameraPose(camera_in_world=camera, target_in_world=target)
+        # (pydrake's stubs type arrays as ndarray[float64[...]], which no array matches)
+        meshcat.SetCameraPose(camera_in_world=camera, target_in_world=target)  # type: ignore[arg-type]
         from pydrake.systems.framework import DiagramBuilder
 
         # A visualizer on the motion scene's scene graph, driven by hand.
         builder = DiagramBuilder()
         builder.AddSystem(scene.diagram)
         params = MeshcatVisualizerParams(role=Role.kIllustration)
-        visualizer = MeshcatVisualizer.AddToBuilder(builder, scene.diagram.GetOutputPort("scene_graph_query"), meshcat, params)
+        visualizer = MeshcatVisualizer.AddToBuilder(builder, scene.diagram.GetOutputPort("scene_graph_query"),
+                                                    meshcat, params)
         diagram = builder.Build()
         context = diagram.CreateDefaultContext()
         robot_ctx = scene.diagram.GetMyMutableContextFromRoot(context)
@@ -171,7 +173,8 @@ class Timeline(WorldObserver):
             q[planner_idx[0]] = q_arm
             for i, s in enumerate(planner_idx[1]):
                 q[s:s + 7] = poses[i]
-            plant.SetPositions(plant_ctx, q)
+            # (pydrake's stubs type arrays as ndarray[float64[...]], which no array matches)
+            plant.SetPositions(plant_ctx, q)  # type: ignore[arg-type]
             visualizer.ForcedPublish(vis_ctx)
         for ghosts in self.ghosts:
             _draw_ghosts(meshcat, recording, ghosts)
@@ -190,6 +193,7 @@ class Timeline(WorldObserver):
         as it can be with that box and the gripper's whole path inside the view."""
         centres = np.concatenate([poses[:, 4:] for poses in self.blocks]
                                  + [g.states[:, :, :3].reshape(-1, 3) for g in self.ghosts])
+        assert self.types is not None, "the timeline is empty"
         reach = max(max(BLOCK_SIZES[int(t)]) for t in self.types) / 2  # of a block from its centre
         lo, hi = centres.min(axis=0) - reach, centres.max(axis=0) + reach
         target = (lo + hi) / 2

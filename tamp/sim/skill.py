@@ -103,7 +103,8 @@ class Scene:
 
 def topdown(p_W: np.ndarray, yaw: float) -> RigidTransform:
     """Tcp pose at p_W pointing down, with y_G along yaw + 90 degrees (the block's y axis)."""
-    return RigidTransform(RotationMatrix.MakeZRotation(yaw) @ RotationMatrix.MakeXRotation(np.pi), p_W)
+    # (pydrake's stubs type arrays as ndarray[float64[...]], which no array matches)
+    return RigidTransform(RotationMatrix.MakeZRotation(yaw) @ RotationMatrix.MakeXRotation(np.pi), p_W)  # type: ignore[arg-type]
 
 
 @dataclass
@@ -146,7 +147,7 @@ def held_block(scene: Scene, X_WG: RigidTransform) -> int:
     its width across the jaws fits the opening."""
     p = X_WG.translation()
     for j in range(scene.n):
-        if scene.contains(j, p, tolerance=_GRASP_TOLERANCE):
+        if scene.contains(j, p, tolerance=_GRASP_TOLERANCE):  # type: ignore[arg-type]  # pydrake stubs: translation()
             across = np.abs((X_WG.inverse() @ scene.corners(j).T)[0]).max() * 2
             if across < JAW_OPENING:
                 return j

@@ -7,11 +7,16 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass, field
 from enum import StrEnum
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from tamp.errors import UserError
 from tamp.planning.structs import PickPlace
+
+if TYPE_CHECKING:
+    from tamp.sim.execute import ExecutedAction
+
 
 @dataclass(frozen=True)
 class WorldConfig:
@@ -92,7 +97,7 @@ class StepInfo:
     X_GC: list = field(default_factory=list)  # carried blocks' poses in the tcp frame (RigidTransform)
     X_release: np.ndarray | None = None  # scene at the moment of release (before physics)
     X_predicted: np.ndarray | None = None  # full fidelity: the fast world's outcome of the same plan
-    execution: object = None  # full fidelity: tamp.execute.ExecutedAction
+    execution: ExecutedAction | None = None  # full fidelity: what the action did under physics
 
     @property
     def changed(self) -> bool:

@@ -11,13 +11,17 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from enum import StrEnum
+from typing import TYPE_CHECKING
 
 import numpy as np
 from pydrake.math import RigidTransform
 from pydrake.trajectories import PiecewisePolynomial
 
-from tamp.sim.kinematics import V_MAX
 from tamp.planning.structs import PickPlace
+from tamp.sim.kinematics import V_MAX
+
+if TYPE_CHECKING:
+    from tamp.sim.skill import Scene
 
 # Joint acceleration limits (rad/s^2): the data sheet gives none; a conservative value that the
 # arm tracks closely under the PD controller with a carried block.
@@ -166,8 +170,8 @@ class RefinedPlan:
 
     X_init: np.ndarray
     actions: list[PickPlace]
-    scene_init: object = None  # the exact initial Scene (block poses with orientation)
-    q_init: np.ndarray | None = None  # arm joints at the start
+    scene_init: Scene  # the exact initial scene (block poses with orientation)
+    q_init: np.ndarray  # arm joints at the start
     steps: list[RefinedAction] = field(default_factory=list)
     failure: RefinementFailure | None = None
     trajectory: PiecewisePolynomial | None = None

@@ -20,15 +20,15 @@ import numpy as np
 from pydrake.math import RigidTransform
 
 from tamp.errors import UserError
+from tamp.planning.structs import BLOCK_SIZES, LARGE, OFFSETS, SMALL, PickPlace
+from tamp.planning.validate import MAX_OBJECTS, check_scene
 from tamp.sim.kinematics import Q_HOME, drake_ik, solve_chain
 from tamp.sim.motion import MotionPlanner
 from tamp.sim.observer import Carried, PhysicsFrame, WorldObserver
 from tamp.sim.physics import BlockPhysics
 from tamp.sim.plants import X_FlangeTcp, build_motion_scene, build_physics_scene
 from tamp.sim.skill import Scene, Waypoints, approach_poses, held_block, pick_place_waypoints, topdown
-from tamp.planning.structs import BLOCK_SIZES, LARGE, OFFSETS, SMALL, PickPlace
 from tamp.sim.structs import StepInfo, StepStatus, WorldConfig
-from tamp.planning.validate import MAX_OBJECTS, check_scene
 
 if TYPE_CHECKING:
     from tamp.sim.execute import Executor
@@ -193,8 +193,9 @@ class World:
         if qs is None:
             return self._unchanged(info, t_start)
         t_motion = time.perf_counter()
-        paths = {}
-        if not self._plan(planner, [("approach", self.q, qs["pregrasp"]), ("descend", qs["pregrasp"], qs["grasp"])], info, paths):
+        paths: dict[str, np.ndarray] = {}
+        segments = [("approach", self.q, qs["pregrasp"]), ("descend", qs["pregrasp"], qs["grasp"])]
+        if not self._plan(planner, segments, info, paths):
             return self._unchanged(info, t_start, t_motion)
         info.timings["motion"] = time.perf_counter() - t_motion
 
@@ -248,7 +249,8 @@ class World:
         # block that moved while settling may lean on them: those are not obstacles to lifting away.
         t_motion = time.perf_counter()
         moved = [k for k in range(scene.n) if k in wp.carried
-                 or np.linalg.norm(self.scene.X_WB[k].translation() - scene.X_WB[k].translation()) > 1e-3]
+                 or np.linalg.norm(self.scene.X_WB[k].translation()  # type: ignore[misc]  # pydrake stubs, as above
+                                   - scene.X_WB[k].translation()) > 1e-3]
         planner.set_block_poses(self.scene.X_WB, parked=tuple(moved))
         seed = self.motion_seeds.of("retreat")
         retreat = planner.plan(qs["place"], qs["retreat"], self.config.planning_time,
@@ -276,7 +278,8 @@ class World:
         `motion_seeds`), then execute the timed trajectory under physics."""
         from tamp.sim.trajectory import RefinedPlan, refined_action
 
-        scene, q = self.scene, self.q.copy()
+        assert self._predictor is not None  # the full fidelity builds its predictor in __init__
+        scene, q = self._require_scene(), self.q.copy()
         self._predictor.set_scene(scene, q)
         X_predicted, info = self._predictor.step(action)
         info.X_predicted = X_predicted
@@ -305,7 +308,7 @@ class World:
 
     def _solve_ik(self, waypoints, info: StepInfo, q_start=None, skip=(), known=None) -> dict | None:
         t0 = time.perf_counter()
-        planner, _ = self._layout(self.scene.types)
+        planner, _ = self._layout(self._require_scene().types)
         todo = [(name, X_WG) for name, X_WG in waypoints if name not in skip]
         found, failed = solve_chain(todo, self.q if q_start is None else q_start,
                                     lambda X_WG, q_ref: self._numerical_ik(planner, X_WG, q_ref))
@@ -343,7 +346,7 @@ class World:
         if t_motion is not None:
             info.timings["motion"] = info.timings.get("motion", 0.0) + time.perf_counter() - t_motion
         info.timings["total"] = time.perf_counter() - t_start
-        return self.scene.X(), info
+        return self.X, info
 
 
 def validate_action(action, n: int) -> PickPlace:
@@ -353,7 +356,8 @@ def validate_action(action, n: int) -> PickPlace:
         if any(float(v) != int(v) for v in action):
             raise TypeError
     except (TypeError, ValueError):
-        raise UserError(f"an action is 4 integers (pick, grasp_offset, place, release_offset), got {action!r}") from None
+        raise UserError(f"an action is 4 integers (pick, grasp_offset, place, release_offset), "
+                        f"got {action!r}") from None
     if len(values) != 4:
         raise UserError(f"an action is 4 integers (pick, grasp_offset, place, release_offset), got {action!r}")
     pick, grasp_offset, place, release_offset = values
