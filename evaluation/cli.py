@@ -6,7 +6,7 @@ import sys
 from pathlib import Path
 
 from evaluation.methods import SYMBOLIC_BACKENDS
-from tamp.app.cli import positive_int
+from tamp.app.args import check_output_file, positive_int
 from tamp.app.parallel import add_arguments as add_parallel_arguments
 from tamp.app.plan_command import add_planner_arguments
 from tamp.app.problem import PROTOCOLS
@@ -30,8 +30,6 @@ def _name_list(text: str) -> list[str]:
 def cmd_problems(args: argparse.Namespace) -> int:
     """Generate a problem set (JSONL) of random Drake scenes and goals."""
     from evaluation.problems import generate_problems, write_problems
-    from tamp.app.cli import check_output_file
-
     check_output_file(args.out, "--out")
     problems = generate_problems(args.objects, args.actions, args.per_cell, args.seed, progress=not args.quiet,
                                  protocol=args.protocol, runs=args.runs, workers=args.workers)

@@ -44,6 +44,7 @@ import numpy as np
 
 from evaluation.methods import METHODS, SYMBOLIC_BACKENDS, Method, load_method_models, required_files, resolve_methods
 from evaluation.problems import read_problems
+from tamp.app.args import check_output_dir
 from tamp.app.parallel import BACKENDS, run_tasks
 from tamp.app.problem import Problem
 from tamp.errors import UserError
@@ -459,9 +460,6 @@ def evaluate(models_dir: str | Path, problems_path: str | Path, out_dir: str | P
     tamp.planning.models.Models) replaces loading them from `models_dir`, for tests with stub models.
     """
     from tqdm import tqdm
-
-    from tamp.app.cli import check_output_dir
-
     # Every input is checked before anything is written: the output folder, the problems (each scene,
     # by tamp.planning.validate), the models (loaded once here) and every problem's size against them.
     models_dir, problems_path, out = Path(models_dir).resolve(), Path(problems_path).resolve(), Path(out_dir)

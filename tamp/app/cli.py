@@ -3,111 +3,28 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 import sys
 from pathlib import Path
 
 import numpy as np
 
+from tamp.app.args import (
+    _html_path,
+    check_output_dir,
+    check_output_file,
+    fraction,
+    non_negative_int,
+    positive_float,
+    positive_int,
+    probability,
+)
 from tamp.app.parallel import add_arguments as add_parallel_arguments
 from tamp.errors import UserError, is_user_error
 
 # learned.ACTIVATIONS, spelled out so that `tamp --help` does not import torch (tests check they agree).
 BOTTLENECKS = ("gumbel_sigmoid", "sigmoid", "tanh", "none")
 TRAIN_PATIENCE = 100  # learned.TrainConfig.fast().patience_epochs, for the same reason
-
-
-def _number(text: str, parse, ok, expected: str):
-    """argparse type helper: `parse(text)` if it succeeds and satisfies `ok`, else an error naming `expected`."""
-    try:
-        value = parse(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected {expected}, got {text!r}") from None
-    if not ok(value):
-        raise argparse.ArgumentTypeError(f"expected {expected}, got {text!r}")
-    return value
-
-
-def positive_int(text: str) -> int:
-    """argparse type: an integer >= 1."""
-    return _number(text, int, lambda v: v >= 1, "a positive integer")
-
-
-def non_negative_int(text: str) -> int:
-    """argparse type: an integer >= 0."""
-    return _number(text, int, lambda v: v >= 0, "an integer >= 0")
-
-
-def positive_float(text: str) -> float:
-    """argparse type: a finite number > 0 (nan and inf refused)."""
-    return _number(text, float, lambda v: math.isfinite(v) and v > 0, "a finite number > 0")
-
-
-def fraction(text: str) -> float:
-    """argparse type: a number in [0, 1)."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number in [0, 1), got {text!r}") from None
-    if not 0.0 <= value < 1.0:
-        raise argparse.ArgumentTypeError(f"expected a number in [0, 1), got {text!r}")
-    return value
-
-
-def probability(text: str) -> float:
-    """argparse type: a number in [0, 1]."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number in [0, 1], got {text!r}") from None
-    if not 0.0 <= value <= 1.0:
-        raise argparse.ArgumentTypeError(f"expected a number in [0, 1], got {text!r}")
-    return value
-
-
-def _writable_folder(folder: Path, flag: str, target: Path) -> None:
-    """The nearest existing folder of `folder` (itself or an ancestor) must be a writable folder."""
-    existing = folder
-    while not existing.exists() and existing != existing.parent:
-        existing = existing.parent
-    if not existing.is_dir():
-        raise UserError(f"{flag} {target}: {existing} is not a folder")
-    if not os.access(existing, os.W_OK | os.X_OK):
-        raise UserError(f"{flag} {target}: {existing} is not writable")
-
-
-def check_output_file(path: str | Path, flag: str = "--out") -> Path:
-    """Check before any work that the output file `path` can be written (not a folder, its folder
-    writable); missing parent folders are created. ValueError naming the flag otherwise."""
-    path = Path(path)
-    if path.is_dir():
-        raise UserError(f"{flag} {path}: is a folder; give a file path")
-    if path.exists() and not os.access(path, os.W_OK):
-        raise UserError(f"{flag} {path}: the file is not writable")
-    _writable_folder(path.parent, flag, path)
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-    except OSError as error:
-        raise UserError(f"{flag} {path}: cannot create its folder ({error.strerror})") from None
-    return path
-
-
-def check_output_dir(path: str | Path, flag: str = "--out") -> Path:
-    """Check before any work that the output folder `path` is a folder or can be made one, writable;
-    nothing is created. ValueError naming the flag otherwise."""
-    path = Path(path)
-    if path.exists() and not path.is_dir():
-        raise UserError(f"{flag} {path}: exists and is not a folder")
-    _writable_folder(path, flag, path)
-    return path
-
-
-def _html_path(text: str) -> Path:
-    path = Path(text)
-    if path.suffix.lower() not in (".html", ".htm"):
-        raise argparse.ArgumentTypeError(f"the replay is an HTML file; give a path ending in .html, got {text!r}")
-    return path
 
 
 def cmd_simulate(args: argparse.Namespace) -> int:

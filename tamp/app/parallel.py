@@ -14,6 +14,7 @@ import threading
 import time
 from typing import Any, Callable, Iterator, Protocol, Sequence
 
+from tamp.app.args import positive_int
 from tamp.errors import UserError
 
 BACKENDS = ("local", "ray")
@@ -136,8 +137,6 @@ def _run_ray(tasks: Sequence[Any], make: Callable[..., Worker], args: tuple, wor
 
 def add_arguments(p, workers_default: int | None = None) -> None:
     """--workers, --backend and --address, the same for collect, evaluate and reproduce."""
-    from tamp.app.cli import positive_int
-
     default = "all CPUs, of the cluster with --address" if workers_default is None else str(workers_default)
     p.add_argument("--workers", type=positive_int, default=workers_default,
                    help=f"worker processes or Ray actors (default: {default})")

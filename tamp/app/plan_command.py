@@ -12,6 +12,7 @@ import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
+from tamp.app.args import check_output_file, non_negative_int, positive_float, positive_int
 from tamp.errors import UserError
 from tamp.planning.bilevel import METHODS, SYMBOLIC_BACKENDS, PlanConfig, PlanResult, plan, replan_rounds
 from tamp.planning.search import SearchConfig
@@ -153,8 +154,6 @@ def run_plan(problem_path: Path, models_dir: Path, options: PlanOptions) -> int:
     if options.replay is not None and options.execute == "none":
         raise UserError("--replay needs an execution (--execute fast or full)")
     if options.replay is not None:
-        from tamp.app.cli import check_output_file
-
         check_output_file(options.replay, "--replay")
     models = load_models(models_dir, need_symbolic=options.method != "cfs")
     cfg = dataclasses.replace(options.planner, seed=problem.seed)
@@ -182,8 +181,6 @@ def run_plan(problem_path: Path, models_dir: Path, options: PlanOptions) -> int:
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """The flags of `tamp plan`."""
-    from tamp.app.cli import non_negative_int
-
     p.add_argument("--problem", type=Path, required=True, help="problem file (JSON: X_init, X_goal, k, seed)")
     p.add_argument("--models", type=Path, required=True,
                    help="models directory: symbolic.pt, dynamics.pt and the learned domain in domain/")
@@ -205,8 +202,6 @@ def add_planner_arguments(p: argparse.ArgumentParser, backends: tuple[str, ...] 
                           feasibility: bool = True) -> None:
     """The planner's flags, the same for `tamp plan` and `tamp evaluate`; `planner_config` reads them.
     `feasibility`: offer --no-feasibility (evaluate chooses it per method instead)."""
-    from tamp.app.cli import positive_float, positive_int
-
     default = PlanConfig()
     p.add_argument("--n-domains", type=positive_int, default=default.n_domains,
                    help=f"N sampled symbolic domains (default {default.n_domains})")

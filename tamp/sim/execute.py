@@ -37,43 +37,13 @@ from tamp.sim.observer import PhysicsFrame, WorldObserver
 from tamp.sim.physics import blocks_at_rest
 from tamp.sim.plants import X_FlangeTcp, add_arm_gripper_table, add_blocks
 from tamp.sim.skill import Scene
-from tamp.sim.structs import WorldConfig
+from tamp.sim.structs import ExecutedAction, WorldConfig
 from tamp.sim.trajectory import RefinedAction, RefinedPlan
 
 KP = np.array([4000.0, 4000.0, 2000.0, 500.0, 500.0, 300.0])  # N m / rad
 KD = np.array([400.0, 400.0, 200.0, 50.0, 50.0, 30.0])  # N m s / rad
 GRASP_TOLERANCE = 0.015  # metres between the planned and the actual grasped block position
 FRAME_PERIOD = 1.0 / 30.0  # seconds between the physics frames reported to an observer
-
-
-@dataclass
-class ExecutedAction:
-    """What one action did under full physics."""
-
-    index: int
-    X_before: np.ndarray
-    X_after: np.ndarray  # at rest after the action
-    X_predicted: np.ndarray  # what refinement (the fast world) predicted
-    grasped: bool  # the weld engaged
-    max_tracking_error: float  # radians, max over joints and time
-    settle_time: float  # simulated seconds after the trajectory until at rest
-    settled: bool
-    sim_time: float  # simulated seconds, trajectory plus settling
-    wall_time: float  # seconds
-    note: str = ""
-
-    @property
-    def prediction_error(self) -> float:
-        """Largest per-object distance between executed and predicted positions (metres)."""
-        return float(np.max(np.linalg.norm(self.X_after[:, :3] - self.X_predicted[:, :3], axis=1)))
-
-    def to_dict(self) -> dict:
-        return {"index": self.index, "grasped": self.grasped, "note": self.note,
-                "prediction_error_m": round(self.prediction_error, 4),
-                "max_tracking_error_rad": round(self.max_tracking_error, 5),
-                "settle_time_s": round(self.settle_time, 3), "settled": self.settled,
-                "sim_time_s": round(self.sim_time, 3), "wall_time_s": round(self.wall_time, 3),
-                "X_after": np.round(self.X_after, 4).tolist()}
 
 
 @dataclass

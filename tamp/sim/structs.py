@@ -7,15 +7,11 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass, field
 from enum import StrEnum
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from tamp.errors import UserError
 from tamp.planning.structs import PickPlace
-
-if TYPE_CHECKING:
-    from tamp.sim.execute import ExecutedAction
 
 
 @dataclass(frozen=True)
@@ -73,6 +69,36 @@ class StepStatus(StrEnum):
 
 # Outcome codes, stable across versions (datasets store the integer).
 STATUSES = tuple(s.value for s in StepStatus)
+
+
+@dataclass
+class ExecutedAction:
+    """What one action did under full physics."""
+
+    index: int
+    X_before: np.ndarray
+    X_after: np.ndarray  # at rest after the action
+    X_predicted: np.ndarray  # what refinement (the fast world) predicted
+    grasped: bool  # the weld engaged
+    max_tracking_error: float  # radians, max over joints and time
+    settle_time: float  # simulated seconds after the trajectory until at rest
+    settled: bool
+    sim_time: float  # simulated seconds, trajectory plus settling
+    wall_time: float  # seconds
+    note: str = ""
+
+    @property
+    def prediction_error(self) -> float:
+        """Largest per-object distance between executed and predicted positions (metres)."""
+        return float(np.max(np.linalg.norm(self.X_after[:, :3] - self.X_predicted[:, :3], axis=1)))
+
+    def to_dict(self) -> dict:
+        return {"index": self.index, "grasped": self.grasped, "note": self.note,
+                "prediction_error_m": round(self.prediction_error, 4),
+                "max_tracking_error_rad": round(self.max_tracking_error, 5),
+                "settle_time_s": round(self.settle_time, 3), "settled": self.settled,
+                "sim_time_s": round(self.sim_time, 3), "wall_time_s": round(self.wall_time, 3),
+                "X_after": np.round(self.X_after, 4).tolist()}
 
 
 @dataclass
