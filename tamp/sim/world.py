@@ -14,7 +14,7 @@ from __future__ import annotations
 import dataclasses
 import time
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Iterable
+from typing import Iterable
 
 import numpy as np
 from pydrake.math import RigidTransform
@@ -22,6 +22,7 @@ from pydrake.math import RigidTransform
 from tamp.errors import UserError
 from tamp.planning.structs import BLOCK_SIZES, LARGE, OFFSETS, SMALL, PickPlace
 from tamp.planning.validate import MAX_OBJECTS, check_scene
+from tamp.sim.execute import Executor
 from tamp.sim.kinematics import Q_HOME, drake_ik, solve_chain
 from tamp.sim.motion import MotionPlanner
 from tamp.sim.observer import Carried, PhysicsFrame, WorldObserver
@@ -29,9 +30,7 @@ from tamp.sim.physics import BlockPhysics
 from tamp.sim.plants import X_FlangeTcp, build_motion_scene, build_physics_scene
 from tamp.sim.skill import Scene, Waypoints, approach_poses, held_block, pick_place_waypoints, topdown
 from tamp.sim.structs import StepInfo, StepStatus, WorldConfig
-
-if TYPE_CHECKING:
-    from tamp.sim.execute import Executor
+from tamp.sim.trajectory import RefinedPlan, refined_action
 
 MOTIONS = ("approach", "descend", "liftoff", "lift", "transfer", "lower", "retreat")
 
@@ -276,8 +275,6 @@ class World:
     def _step_full(self, action: PickPlace) -> tuple[np.ndarray, StepInfo]:
         """Plan and predict with the fast world (which takes the step's motion seeds from the shared
         `motion_seeds`), then execute the timed trajectory under physics."""
-        from tamp.sim.trajectory import RefinedPlan, refined_action
-
         assert self._predictor is not None  # the full fidelity builds its predictor in __init__
         scene, q = self._require_scene(), self.q.copy()
         self._predictor.set_scene(scene, q)
@@ -299,8 +296,6 @@ class World:
 
     def _executor(self, types: np.ndarray) -> Executor:
         """The full fidelity's executor (Drake diagram) of a block layout, built once."""
-        from tamp.sim.execute import Executor
-
         key = tuple(int(t) for t in types)
         if key not in self._executors:
             self._executors[key] = Executor(types, self.config)
