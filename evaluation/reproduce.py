@@ -165,12 +165,16 @@ def _train_job(data: str, out: str, spec: ModelSpec, scale: Scale) -> dict:
             "epochs": result.epochs_reached, "stop": result.stop_reason.value, "finished": result.finished}
 
 
-def _ablation_job(data: str, out: str, scale: Scale) -> dict:
-    from learned import ablate_activations
+def _ablation_job(data: str, out: str, scale: Scale, activation: str, run: int) -> dict:
+    """One (activation, run) of Table I, resumed from OUT/ablation/models/ if it began before."""
+    import torch
 
-    result = ablate_activations(data, runs=scale.ablation_runs, train=scale.train_config(epochs=scale.ablation_epochs),
-                                out_dir=out, progress=False)
-    return {"model": "ablation", "mean_cm": {a: round(r["mean_cm"], 3) for a, r in result["activations"].items()}}
+    from learned.ablation import ablation_run
+
+    torch.set_num_threads(1)
+    result = ablation_run(data, activation, run, scale.train_config(epochs=scale.ablation_epochs), out_dir=out,
+                          resume=True)
+    return {**result, "model": f"ablation/{activation}-run{run}"}
 
 
 # --- the pipeline ----------------------------------------------------------------------------------
@@ -222,11 +226,15 @@ def reproduce(out: str | Path, scale_name: str = "quick", workers: int | None = 
                   f"to convergence, patience {scale.patience_epochs}, at most {scale.epochs} epochs")
         _say(f"train: {len(scale.models)} models ({epochs} each, batch {scale.batch_size}, lr {scale.lr:g}, "
              f"{scale.precision}, {limit}) and the Table I ablation, {workers} at a time")
+        from learned import ModelConfig
+        from learned.ablation import PAPER_ORDER, summarize_ablation, write_ablation_report
+
         t = time.perf_counter()
         results = []
         with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
             jobs = [pool.submit(_train_job, str(data), str(models), spec, scale) for spec in scale.models]
-            jobs.append(pool.submit(_ablation_job, str(data), str(out / "ablation"), scale))
+            jobs += [pool.submit(_ablation_job, str(data), str(out / "ablation"), scale, activation, run)
+                     for run in range(scale.ablation_runs) for activation in PAPER_ORDER]
             for job in as_completed(jobs):
                 results.append(job.result())
                 _say(f"  trained {json.dumps(results[-1])}")
@@ -235,7 +243,15 @@ def reproduce(out: str | Path, scale_name: str = "quick", workers: int | None = 
             raise TrainingUnfinished(f"train: {', '.join(unfinished)} stopped at the time limit "
                                      f"({scale.train_time_limit_s} s) before finishing; rerun the same command "
                                      "to resume training")
-        stages.finish("train", time.perf_counter() - t, results=results)
+        cells = [r for r in results if r["model"].startswith("ablation/")]
+        summary = [r for r in results if r not in cells]
+        if cells:  # Table I from its cells, as `tamp ablate-activations` writes it
+            table = summarize_ablation(cells, str(data), scale.train_config(epochs=scale.ablation_epochs),
+                                       ModelConfig(n_max=max(scale.objects)))
+            write_ablation_report(table, out / "ablation")
+            summary.append({"model": "ablation",
+                            "mean_cm": {a: round(v["mean_cm"], 3) for a, v in table["activations"].items()}})
+        stages.finish("train", time.perf_counter() - t, results=summary)
 
     if not stages.done("domains"):
         from tamp.planning.domain import learn_domain

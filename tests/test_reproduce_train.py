@@ -2,6 +2,7 @@
 import json
 
 import pytest
+import torch
 
 import evaluation.reproduce as rep
 from learned.synthetic import write_synthetic_dataset
@@ -45,3 +46,26 @@ def test_the_legacy_training_settings_stay_out_of_stages_json(tmp_path):
     rep.Stages(tmp_path / "b", "quick", _scale(batch_size=1024, patience_epochs=100))
     config = json.loads((tmp_path / "b" / "stages.json").read_text())["setup"]["config"]
     assert (config["batch_size"], config["patience_epochs"]) == (1024, 100) and "precision" not in config
+
+
+def test_the_ablation_cells_make_table_i_and_a_finished_cell_is_not_trained_again(tmp_path, monkeypatch):
+    """Table I's (activation, run) cells are separate jobs of the train stage; the stage writes the table from
+    them, and a rerun of a cell that finished reads its model back instead of training it."""
+    out = tmp_path / "repro"
+    write_synthetic_dataset(out / "data", num_samples=300, seed=0)
+    monkeypatch.setitem(rep.SCALES, "quick", _scale(ablation_runs=2))
+    monkeypatch.setattr(rep, "_evaluate_stages", lambda *args, **kwargs: out / "not evaluated")
+    rep.Stages(out, "quick", rep.SCALES["quick"]).finish("collect", 0.0)
+    rep.reproduce(out, "quick", workers=1)
+    table = json.loads((out / "ablation" / "ablation.json").read_text())
+    assert list(table["activations"]) == ["gumbel_sigmoid", "tanh", "none", "sigmoid"] and table["runs"] == 2
+    assert all(len(row["runs_cm"]) == 2 for row in table["activations"].values())
+    last = last_path(out / "ablation" / "models" / "tanh-run1.pt")
+    before = torch.load(last, weights_only=True)
+    cell = rep._ablation_job(str(out / "data"), str(out / "ablation"), rep.SCALES["quick"], "tanh", 1)
+    assert cell["finished"] and cell["test_cm"] == table["activations"]["tanh"]["runs_cm"][1]
+    after = torch.load(last, weights_only=True)  # read back, not trained again: same steps, same weights
+    assert after["train"]["step"] == before["train"]["step"] and cell["epochs"] == 1
+    assert all(torch.equal(after["state_dict"][k], v) for k, v in before["state_dict"].items())
+    stages = json.loads((out / "stages.json").read_text())
+    assert "train" in stages["finished"] and stages["finished"]["train"]["results"][-1]["model"] == "ablation"
