@@ -236,27 +236,21 @@ def train_model(data: "str | Path | Transitions", config: ModelConfig | None = N
     records carry ``elapsed_s``.
     ``only_moved`` keeps the transitions that moved their picked block (`effects.moved_picks`),
     in training and validation alike: what the Symbolic Model learns its symbols from.
-    `train` (default `TrainConfig()`, the paper's settings) says how; the names below are its fields.
+    `train` (default `TrainConfig()`, the paper's settings) says how; the names above are its fields.
     """
     train = train or TrainConfig()
-    epochs, batch_size, lr, precision, threads = (train.epochs, train.batch_size, train.lr, train.precision,
-                                                  train.threads)
-    patience_epochs, min_delta_cm, val_fraction, seed = (train.patience_epochs, train.min_delta_cm,
-                                                         train.val_fraction, train.seed)
-    only_moved, max_steps, target_val_cm, time_limit_s = (train.only_moved, train.max_steps, train.target_val_cm,
-                                                          train.time_limit_s)
-    if threads:
-        torch.set_num_threads(threads)
+    if train.threads:
+        torch.set_num_threads(train.threads)
     if not isinstance(data, Transitions):
         data = load_transitions(data)
-    if only_moved:
+    if train.only_moved:
         data = data.subset(np.flatnonzero(moved_picks(data.X, data.X_next, data.action)))
         if val_data is not None:
             val_data = val_data.subset(np.flatnonzero(moved_picks(val_data.X, val_data.X_next, val_data.action)))
         if len(data) == 0:
             raise ValueError("no transition moved its picked block: nothing to train on with only_moved")
     if val_data is None:
-        train_idx, val_idx = split_indices(len(data), (val_fraction,), seed)
+        train_idx, val_idx = split_indices(len(data), (train.val_fraction,), train.seed)
         data, val_data = data.subset(train_idx), data.subset(val_idx)
     if len(val_data) == 0:
         raise ValueError("empty validation split")
@@ -264,18 +258,19 @@ def train_model(data: "str | Path | Transitions", config: ModelConfig | None = N
     if data.n_max > config.n_max:
         raise ValueError(f"dataset n_max {data.n_max} exceeds model n_max {config.n_max}")
     # Settings that change the result; the defaults are left out so that older runs stay resumable.
-    options = {"batch_size": batch_size, "lr": lr, "val_fraction": val_fraction, "seed": seed,
-               "num_train": len(data), "num_val": len(val_data), **({"only_moved": True} if only_moved else {}),
-               **({"precision": precision} if precision != "float32" else {}),
-               **({"patience_epochs": patience_epochs, "min_delta_cm": min_delta_cm}
-                  if patience_epochs is not None else {})}
+    options = {"batch_size": train.batch_size, "lr": train.lr, "val_fraction": train.val_fraction,
+               "seed": train.seed, "num_train": len(data), "num_val": len(val_data),
+               **({"only_moved": True} if train.only_moved else {}),
+               **({"precision": train.precision} if train.precision != "float32" else {}),
+               **({"patience_epochs": train.patience_epochs, "min_delta_cm": train.min_delta_cm}
+                  if train.patience_epochs is not None else {})}
     tr, va = prepare(data), prepare(val_data)
 
-    torch.manual_seed(seed)
+    torch.manual_seed(train.seed)
     model = EffectModel(config)
     stats = normalisation(tr)
     model.set_normalisation(**stats)
-    opt = torch.optim.Adam(model.parameters(), lr=lr)
+    opt = torch.optim.Adam(model.parameters(), lr=train.lr)
     epoch0, step, history = 0, 0, []
     best: dict[str, Any] = {"val_cm": float("inf"), "epoch": -1, "state": None}
 
@@ -292,7 +287,7 @@ def train_model(data: "str | Path | Transitions", config: ModelConfig | None = N
                 raise ValueError(f"{lp}: was trained with a different config/options/data; "
                                  f"refusing to resume ({payload['config']}, {st['options']})")
             model = model_from_payload(payload, lp).train()
-            opt = torch.optim.Adam(model.parameters(), lr=lr)
+            opt = torch.optim.Adam(model.parameters(), lr=train.lr)
             opt.load_state_dict(st["optimizer"])
             epoch0, step = int(st["epoch"]) + 1, int(st["step"])
             history = [{k: v for k, v in h.items() if k != "stop_reason"} for h in st["history"]]
@@ -303,12 +298,14 @@ def train_model(data: "str | Path | Transitions", config: ModelConfig | None = N
     model.train()
 
     N = len(data)
-    steps_per_epoch = (N + batch_size - 1) // batch_size
-    total = epochs * steps_per_epoch if max_steps is None else min(max_steps, epochs * steps_per_epoch)
+    steps_per_epoch = (N + train.batch_size - 1) // train.batch_size
+    total = train.epochs * steps_per_epoch
+    if train.max_steps is not None:
+        total = min(train.max_steps, total)
     bar = tqdm(total=total, initial=min(step, total), disable=not progress, unit="step",
                dynamic_ncols=True)
     scale = float(model.effect_scale)
-    plateau = _Plateau(min_delta_cm, history)
+    plateau = _Plateau(train.min_delta_cm, history)
     train_time, trained = 0.0, 0
     start = time.perf_counter()
     elapsed0 = history[-1]["elapsed_s"] if history else 0.0
@@ -317,28 +314,30 @@ def train_model(data: "str | Path | Transitions", config: ModelConfig | None = N
     def stop_reason() -> StopReason | None:
         """Why not to train epoch ``epoch``. The wall-clock cap comes last, so that it never hides another
         reason, and lets every call train an epoch, so that resuming time-limited calls always progresses."""
-        if patience_epochs is not None and plateau.epoch >= 0 and epoch - 1 - plateau.epoch >= patience_epochs:
+        patience = train.patience_epochs
+        if patience is not None and plateau.epoch >= 0 and epoch - 1 - plateau.epoch >= patience:
             return StopReason.CONVERGED
-        if target_val_cm is not None and best["val_cm"] <= target_val_cm:
+        if train.target_val_cm is not None and best["val_cm"] <= train.target_val_cm:
             return StopReason.TARGET_REACHED
-        if max_steps is not None and step >= max_steps:
+        if train.max_steps is not None and step >= train.max_steps:
             return StopReason.MAX_STEPS
-        if epoch >= epochs:
+        if epoch >= train.epochs:
             return StopReason.MAX_EPOCHS
-        if time_limit_s is not None and epoch > epoch0 and time.perf_counter() - start > time_limit_s:
+        if train.time_limit_s is not None and epoch > epoch0 and time.perf_counter() - start > train.time_limit_s:
             return StopReason.TIME_LIMIT
         return None
 
     while (reason := stop_reason()) is None:
-        perm = torch.randperm(N, generator=torch.Generator().manual_seed(seed * 100003 + epoch))
+        perm = torch.randperm(N, generator=torch.Generator().manual_seed(train.seed * 100003 + epoch))
         # One gather per epoch; the steps then slice contiguous views.
         Xe, Ae, Me, Te = (tr[k][perm] for k in ("X", "action", "mask", "target"))
         run_loss, run_err = torch.zeros((), dtype=torch.float64), torch.zeros((), dtype=torch.float64)
         run_b = 0
         t0 = time.perf_counter()
-        for s in range(0, N, batch_size):
-            X, A, M, T = Xe[s:s + batch_size], Ae[s:s + batch_size], Me[s:s + batch_size], Te[s:s + batch_size]
-            with torch.autocast("cpu", dtype=torch.bfloat16, enabled=precision == "bfloat16"):
+        for s in range(0, N, train.batch_size):
+            batch = slice(s, s + train.batch_size)
+            X, A, M, T = Xe[batch], Ae[batch], Me[batch], Te[batch]
+            with torch.autocast("cpu", dtype=torch.bfloat16, enabled=train.precision == "bfloat16"):
                 pred = model(X, A, M)
             d = pred.float() - T
             loss = (d / scale).pow(2).sum(dim=(1, 2)).mean()
@@ -353,7 +352,7 @@ def train_model(data: "str | Path | Transitions", config: ModelConfig | None = N
                 run_err += d.detach().norm(dim=-1).mul(M).sum()
             run_b += n
             bar.update(1)
-            if max_steps is not None and step >= max_steps:
+            if train.max_steps is not None and step >= train.max_steps:
                 break
         train_time += time.perf_counter() - t0
         run_n = int(Me[:run_b].sum())  # real objects trained on this epoch

@@ -26,6 +26,7 @@ from tamp.planning.models import Models
 from tamp.planning.structs import PickPlace
 from tamp.planning.verify import goal_error
 from tamp.sim import World, WorldConfig
+from tamp.sim.execute import execute
 from tamp.sim.feasibility import FeasibilityChecker
 from tamp.sim.refine import FAILURE_STAGES, failed_at, refine
 from tamp.sim.replay import Timeline
@@ -83,16 +84,14 @@ def execute_plan(actions: Sequence[PickPlace | Sequence[int]], X_init: np.ndarra
         X_final, execute_time, notes = refined.X_predicted, 0.0, []
         sim_time = sum(s.duration for s in refined.steps)
     else:
-        from tamp.sim.execute import execute
-
         t = time.perf_counter()
         executed = execute(refined, observer=timeline, partial=True)
         execute_time = time.perf_counter() - t
         X_after = [a.X_after for a in executed.log]
         X_final, sim_time = executed.X_final, executed.sim_time
         notes = [f"action {a.index}: {a.note}" for a in executed.log if a.note]
-    if not refined.steps:
-        X_final = refined.X_init
+    if not refined.steps:  # nothing ran: the scene as given
+        X_final = np.asarray(X_init, dtype=float)
     if timeline is not None and not timeline.times:  # nothing ran: show the initial scene
         timeline.scene_started(refined.scene_init, refined.q_init)
     return Execution(refined, X_after, X_final, goal_error(X_final, X_goal), refined.refine_time,
