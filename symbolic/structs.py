@@ -83,12 +83,16 @@ class OperatorSet:
     operators: list[Operator]
     n_unary: int  # d_z
     n_relations: int  # K
+    _names: dict[str, int] | None = field(default=None, init=False, repr=False, compare=False)
 
     def __len__(self) -> int:
         return len(self.operators)
 
     def by_name(self) -> dict[str, int]:
-        return {op.name: i for i, op in enumerate(self.operators)}
+        """Operator name -> index; built once (the planner looks names up for every ranked plan)."""
+        if self._names is None or len(self._names) != len(self.operators):
+            self._names = {op.name: i for i, op in enumerate(self.operators)}
+        return self._names
 
 
 @dataclass
