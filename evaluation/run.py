@@ -68,8 +68,9 @@ TIMING_KEYS = ("planning_time_s", "level1_time_s", "refine_time_s", "search_time
                "plan_refine_time_s")
 ERROR_OUTCOME = Outcome.ERROR.value  # a pair that raised (see Evaluator.error_row); not one of OUTCOMES
 MAX_CANDIDATES = 20
-# meta.json fields that define the rows: a results directory is resumed only if all of them match
-DEFINING_KEYS = ("models_dir", "model_files", "problems", "problems_sha256", "config")
+# meta.json fields that define the rows: a results directory is resumed only if all of them match.
+# The inputs' contents, not their paths: moved models or a copied problem set resume the same rows.
+DEFINING_KEYS = ("model_files", "problems_sha256", "config")
 LEVEL1_STAGES = ("symbols", "symbolic", "verify")
 
 
@@ -419,6 +420,7 @@ def _prepare(out: Path, meta: dict) -> None:
 
         tqdm.write(f"warning: {out} was started with other package versions ({old.get('versions')}); "
                    "resuming anyway", file=sys.stderr)
+    old["models_dir"], old["problems"] = meta["models_dir"], meta["problems"]  # where the inputs are now
     old["methods"] = [m for m in METHODS if m in set(old.get("methods", [])) | set(meta["methods"])]
     old["runs"] = old.get("runs", []) + meta["runs"]
     atomic_write_text(path, json.dumps(old, indent=2) + "\n")

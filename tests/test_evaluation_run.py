@@ -7,6 +7,7 @@ networks saved as a models directory, so that `tamp evaluate` loads models as us
 from __future__ import annotations
 
 import json
+import shutil
 import signal
 import subprocess
 import sys
@@ -298,9 +299,15 @@ def test_an_evaluation_killed_midway_resumes_without_redoing_or_losing_rows(seri
     keys = [(r["problem"], r["method"]) for r in rows]
     assert len(keys) == len(set(keys)) == total
     assert _by_key(rows) == _by_key(read_rows(serial))
-    # running again computes nothing
+    # running again computes nothing, also with the results and the problem set moved elsewhere
     evaluate(tmp_path / "models", problems_file, out, config=CONFIG, models=stub_models())
     assert rows_path.read_bytes() == after
+    moved = tmp_path / "moved"
+    shutil.copytree(out, moved / "results")
+    shutil.copy(problems_file, moved / "problems.jsonl")
+    evaluate(tmp_path / "models", moved / "problems.jsonl", moved / "results", config=CONFIG, models=stub_models())
+    assert (moved / "results" / "rows.jsonl").read_bytes() == after
+    assert json.loads((moved / "results" / "meta.json").read_text())["problems"] == str(moved / "problems.jsonl")
 
 
 @pytest.mark.sim
@@ -339,7 +346,8 @@ def test_a_results_directory_refuses_other_inputs(serial, problems_file, tmp_pat
     with pytest.raises(ValueError, match="problems_sha256: "):
         evaluate(serial.parents[1] / "models", other, serial.parent, config=CONFIG, models=stub_models())
     (tmp_path / "models").mkdir()
-    with pytest.raises(ValueError, match="models_dir: "):
+    (tmp_path / "models" / "dynamics.pt").write_bytes(b"other weights")
+    with pytest.raises(ValueError, match="model_files.dynamics.pt: "):
         evaluate(tmp_path / "models", problems_file, serial.parent, config=CONFIG, models=stub_models())
     with pytest.raises(ValueError, match='config.fidelity: "fast" there, "full" now'):
         evaluate(serial.parents[1] / "models", problems_file, serial.parent, models=stub_models(),
