@@ -104,8 +104,12 @@ class SymbolicPlanner:
             task = self.ground(problem.n)
             init, goal = problem_states(problem)
             start = time.perf_counter()
-            out = self._search(task, ch, init, goal, self.max_expansions, self.time_limit, problem.nonempty)
-            return self._result(task, ch, init, out, time.perf_counter() - start)
+            task.clear_cache()  # per problem, as in `_run_python`; and freed after it (it can hold GBs)
+            try:
+                out = self._search(task, ch, init, goal, self.max_expansions, self.time_limit, problem.nonempty)
+                return self._result(task, ch, init, out, time.perf_counter() - start)
+            finally:
+                task.clear_cache()
         result = fd.run_fast_downward(self._domain_text(ch, problem.n), problem_pddl(self.ops, problem),
                                       self.search, self.time_limit)
         return result
@@ -127,8 +131,11 @@ class SymbolicPlanner:
         choices = sample_choices(self.ops, n_domains, seed, min_prob)
         timings = {"sampling": time.perf_counter() - t0}
         if self.backend == "python":
-            per_domain, n_unique, n_searches = self._run_python(problem, choices, timings, deadline,
-                                                                expansion_budget)
+            try:
+                per_domain, n_unique, n_searches = self._run_python(problem, choices, timings, deadline,
+                                                                    expansion_budget)
+            finally:  # the state cache, shared by the N domains' searches, is not kept between problems
+                self.ground(problem.n).clear_cache()
         elif self.backend == "fd":
             per_domain, n_unique, n_searches = self._run_fd(problem, choices, timings)
         else:

@@ -193,3 +193,15 @@ def test_level1_expansion_budget_is_shared_by_all_domains_and_deterministic(ops,
                                                                       expansion_budget=3) for _ in range(2)]
     assert tight[0].statuses == tight[1].statuses and tight[0].statuses.get("timeout", 0) > 0
     assert [(p.actions, p.count) for p in tight[0].plans] == [(p.actions, p.count) for p in tight[1].plans]
+
+
+def test_no_search_state_is_kept_between_problems(ops, problems):
+    """A long evaluation plans thousands of problems with one planner: the states its searches cached
+    (GBs at 4 objects with a paper-scale domain) must not pile up from one problem to the next."""
+    planner = SymbolicPlanner(ops)
+    for problem in problems[:3] + [_unsolvable(problems[0])]:
+        task = planner.ground(problem.n)
+        planner.plan_deterministic(problem)
+        assert len(task._succ) == 0
+        planner.plan_probabilistic(problem, n_domains=10, seed=0)
+        assert len(task._succ) == 0
