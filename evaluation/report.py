@@ -454,16 +454,28 @@ def section_table1(ablation: dict | None, source: Path) -> Section:
     order = [a for a in paper.TABLE1_ERROR_CM if a in acts] + [a for a in acts if a not in paper.TABLE1_ERROR_CM]
     rows, data = [], {}
     for a in order:
-        ours = (acts[a]["mean_cm"], acts[a]["std_cm"])
+        row = acts[a]
+        n = row.get("runs", len(row.get("runs_cm", [])) or ablation.get("runs"))
+        ours = (row["mean_cm"], row["std_cm"] if n != 1 else None)
         p = paper.TABLE1_ERROR_CM.get(a)
-        rows.append([acts[a].get("label", a), fmt_pm(ours, 2), _paper_pm(p) if p else DASH])
-        data[a] = {"ours_cm": {"mean": ours[0], "std": ours[1]},
+        shown = DASH if ours[0] is None else f"{ours[0]:.2f}" + ("" if ours[1] is None else f" ± {ours[1]:.2f}")
+        training = [f"{p_['test_cm']:.2f} after {p_['epochs']} epochs, run {p_['run']}"
+                    for p_ in row.get("in_progress", [])]
+        rows.append([row.get("label", a), shown, str(n), ", ".join(map(str, row.get("epochs", []))) or DASH,
+                     "; ".join(training) or DASH, _paper_pm(p) if p else DASH])
+        data[a] = {"ours_cm": {"mean": ours[0], "std": ours[1]}, "runs": n, "epochs": row.get("epochs"),
+                   "in_progress": row.get("in_progress", []),
                    "paper_cm": None if p is None else {"mean": p[0], "std": p[1]}}
-    lines = md_table(["activation", "ours (cm)", "paper (cm)"], rows)
-    lines += [f"Ours: mean ± sample std over {ablation.get('runs', '?')} run(s) of {ablation.get('epochs', '?')} "
-              f"epochs, {ablation.get('num_test', '?')} held-out test transitions ({source}). Paper: ten runs.", ""]
+    lines = md_table(["activation", "ours (cm)", "runs", "epochs per run", "still training (best so far, cm)",
+                      "paper (cm)"], rows)
+    trained = ablation.get("trained") or f"{ablation.get('epochs', '?')} epochs"
+    lines += [f"Ours: mean ± sample std over the finished runs, {trained}, {ablation.get('num_test', '?')} "
+              f"held-out test transitions ({source}). Paper: ten runs."
+              + ("" if ablation.get("complete", True) else " Runs still training are not in the means."), ""]
     return Section("table1", title, lines, {"activations": data, "runs": ablation.get("runs"),
-                                            "epochs": ablation.get("epochs"), "num_test": ablation.get("num_test")})
+                                            "epochs": ablation.get("epochs"), "trained": ablation.get("trained"),
+                                            "complete": ablation.get("complete", True),
+                                            "num_test": ablation.get("num_test")})
 
 
 def section_dual_model(res: Results, figures: Path) -> Section:

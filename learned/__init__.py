@@ -3,7 +3,7 @@
 No Drake, no imports from tamp/, symbolic/ or evaluation/: actions cross the border as
 4-tuples or (B, 4) int arrays, states as (n, 5) float arrays (see ``learned.effects``).
 """
-from .ablation import ablate_activations, format_ablation_markdown, write_ablation_report
+from .ablation import ablate_activations, format_ablation_markdown, summarize_ablation_dir, write_ablation_report
 from .checkpoint import load_model, save_checkpoint
 from .dataset import DatasetWriter, ShardError, TransitionDataset, Transitions, load_transitions, read_meta
 from .effects import arm_displacement, effect_targets, encode_actions, moved_picks
@@ -14,5 +14,5 @@ __all__ = [
     "ACTIVATIONS", "DatasetWriter", "EffectModel", "ModelConfig", "ShardError", "TrainConfig", "TrainResult",
     "TransitionDataset", "Transitions", "ablate_activations", "arm_displacement", "effect_targets",
     "encode_actions", "evaluate", "format_ablation_markdown", "load_model", "load_transitions", "moved_picks",
-    "read_meta", "save_checkpoint", "train_model", "write_ablation_report",
+    "read_meta", "save_checkpoint", "summarize_ablation_dir", "train_model", "write_ablation_report",
 ]

@@ -4,7 +4,8 @@ One held-out test split (fixed by the training seed) is shared by every run; eac
 fresh model per activation (seed + r, which also draws the validation split from the remaining
 data), keeps its best-by-validation weights, and reports the mean effect error (cm) on the test
 split. `ablation_run` is one (activation, run), so that a caller can run the cells in parallel and
-resume them one by one (`tamp reproduce`); `summarize_ablation` makes the table of their results.
+resume them one by one (`tamp reproduce`); `ablation_cell` reads a cell as it stands, without training
+(a finished run, or the best model so far of a run still training); `summarize_ablation` makes the table.
 """
 from __future__ import annotations
 
@@ -18,13 +19,29 @@ from typing import Any
 import numpy as np
 import torch
 
+from .checkpoint import load_model, read_checkpoint
 from .dataset import Transitions, load_transitions
 from .model import ACTIVATIONS, ModelConfig
-from .train import TrainConfig, evaluate, last_path, split_indices, train_model
+from .train import TrainConfig, evaluate, last_path, split_indices, train_model, train_options
 
 LABELS = {"gumbel_sigmoid": "Gumbel-Sigmoid", "tanh": "Tanh", "none": "No activation",
           "sigmoid": "Sigmoid"}
 PAPER_ORDER = ("gumbel_sigmoid", "tanh", "none", "sigmoid")
+
+
+def _splits(data: Transitions, run: int, train: TrainConfig, test_fraction: float
+            ) -> tuple[Transitions, Transitions, Transitions]:
+    """(train, validation, test) of run `run`: the test split is fixed by `train.seed`, the validation
+    split drawn from the rest at seed `train.seed + run`."""
+    rest_idx, test_idx = split_indices(len(data), (test_fraction,), train.seed)
+    rest, test = data.subset(rest_idx), data.subset(test_idx)
+    tr_idx, va_idx = split_indices(len(rest), (train.val_fraction,), train.seed + run)
+    return rest.subset(tr_idx), rest.subset(va_idx), test
+
+
+def cell_path(out_dir: str | Path, activation: str, run: int) -> Path:
+    """Where the best model of Table I's cell (activation, run) is kept under `out_dir`."""
+    return Path(out_dir) / "models" / f"{activation}-run{run}.pt"
 
 
 def ablation_run(data: "str | Path | Transitions", activation: str, run: int, train: TrainConfig | None = None, *,
@@ -32,51 +49,89 @@ def ablation_run(data: "str | Path | Transitions", activation: str, run: int, tr
                  resume: bool = False, progress: bool = False) -> dict[str, Any]:
     """One cell of Table I: a model of `activation` trained at seed `train.seed + run` (which also
     draws its validation split), tested on the test split fixed by `train.seed`. With `out_dir` the
-    model goes to `out_dir/models/{activation}-run{run}.pt`, and `resume` continues (or, when it
-    finished, just re-reads) that run. Returns its test and validation errors (cm)."""
+    model goes to `cell_path(out_dir, activation, run)`, and `resume` continues (or, when it
+    finished, just re-reads) that run. Returns its test and validation errors (cm) and epochs."""
     if activation not in ACTIVATIONS:
         raise ValueError(f"activation {activation!r} not in {ACTIVATIONS}")
     train = train or TrainConfig()
     if not isinstance(data, Transitions):
         data = load_transitions(data)
-    rest_idx, test_idx = split_indices(len(data), (test_fraction,), train.seed)
-    rest, test = data.subset(rest_idx), data.subset(test_idx)
-    tr_idx, va_idx = split_indices(len(rest), (train.val_fraction,), train.seed + run)
-    out = (Path(out_dir) / "models" / f"{activation}-run{run}.pt") if out_dir else None
+    tr, va, test = _splits(data, run, train, test_fraction)
+    out = cell_path(out_dir, activation, run) if out_dir else None
     if out:
         out.parent.mkdir(parents=True, exist_ok=True)
     base = config or ModelConfig(n_max=data.n_max)
-    res = train_model(rest.subset(tr_idx), replace(base, activation=activation), replace(train, seed=train.seed + run),
-                      out, val_data=rest.subset(va_idx), resume=resume and out is not None and last_path(out).is_file(),
-                      progress=progress)
+    res = train_model(tr, replace(base, activation=activation), replace(train, seed=train.seed + run), out,
+                      val_data=va, resume=resume and out is not None and last_path(out).is_file(), progress=progress)
     ev = evaluate(res.model, test)
     return {"activation": activation, "run": run, "test_cm": ev["err_cm"], "val_cm": res.best_val_cm,
             "zero_cm": ev["zero_cm"], "finished": res.finished, "epochs": res.epochs_reached,
-            "num_train_val": len(rest), "num_test": len(test)}
+            "best_epoch": res.best_epoch, "num_train_val": len(tr) + len(va), "num_test": len(test)}
+
+
+def ablation_cell(data: "str | Path | Transitions", activation: str, run: int, train: TrainConfig, out_dir: str | Path,
+                  *, config: ModelConfig | None = None, test_fraction: float = 0.2) -> dict[str, Any] | None:
+    """Cell (activation, run) of Table I as it stands in `out_dir`, without training: None if it has not
+    begun; else `ablation_run`'s result, where a run still training (interrupted, or stopped by a time
+    limit) gives the test error of its best model so far and `"finished": False`. ValueError if the
+    cell was trained with other settings than `train` and `config`."""
+    if not isinstance(data, Transitions):
+        data = load_transitions(data)
+    best = cell_path(out_dir, activation, run)
+    if not (best.is_file() and last_path(best).is_file()):
+        return None
+    tr, va, test = _splits(data, run, train, test_fraction)
+    state = read_checkpoint(last_path(best)).get("train", {})
+    want = train_options(replace(train, seed=train.seed + run), len(tr), len(va))
+    config = replace(config or ModelConfig(n_max=data.n_max), activation=activation)
+    model = load_model(best)
+    if state.get("options") != want or model.config != config:
+        raise ValueError(f"{best}: trained with other settings than these (options {state.get('options')} "
+                         f"against {want}); give the settings it was trained with")
+    ev = evaluate(model, test)
+    return {"activation": activation, "run": run, "test_cm": ev["err_cm"], "val_cm": float(state["best_val_cm"]),
+            "zero_cm": ev["zero_cm"], "finished": bool(state.get("finished", False)),
+            "epochs": int(state.get("epochs_reached", len(state.get("history", [])))),
+            "best_epoch": int(state["best_epoch"]), "num_train_val": len(tr) + len(va), "num_test": len(test)}
 
 
 def summarize_ablation(runs: Sequence[dict[str, Any]], source: str, train: TrainConfig,
                        config: ModelConfig) -> dict[str, Any]:
-    """Table I from the `ablation_run` results of every (activation, run): mean +- sample std."""
+    """Table I from the `ablation_run` / `ablation_cell` results of every (activation, run): mean +-
+    sample std over the finished runs; runs still training are listed apart, under `in_progress`."""
     order = [a for a in PAPER_ORDER if any(r["activation"] == a for r in runs)] + \
             sorted({r["activation"] for r in runs} - set(PAPER_ORDER))
     per_act: dict[str, dict[str, Any]] = {}
     for act in order:
         mine = sorted((r for r in runs if r["activation"] == act), key=lambda r: r["run"])
-        errs = [r["test_cm"] for r in mine]
-        per_act[act] = {"label": LABELS.get(act, act), "mean_cm": float(np.mean(errs)),
+        done = [r for r in mine if r.get("finished", True)]
+        errs = [r["test_cm"] for r in done]
+        per_act[act] = {"label": LABELS.get(act, act), "runs": len(done),
+                        "mean_cm": float(np.mean(errs)) if errs else None,
                         "std_cm": float(np.std(errs, ddof=1)) if len(errs) > 1 else 0.0,
-                        "runs_cm": errs, "val_cm": [r["val_cm"] for r in mine]}
+                        "runs_cm": errs, "val_cm": [r["val_cm"] for r in done],
+                        "epochs": [r.get("epochs") for r in done],
+                        "in_progress": [{"run": r["run"], "epochs": r.get("epochs"), "test_cm": r["test_cm"],
+                                         "val_cm": r["val_cm"]} for r in mine if not r.get("finished", True)]}
     first = runs[0]
-    return {"source": source, "runs": len(runs) // len(order), "epochs": train.epochs, "max_steps": train.max_steps,
-            "seed": train.seed, "num_train_val": first["num_train_val"], "num_test": first["num_test"],
-            "zero_effect_cm": first["zero_cm"], "config": config.to_dict(),
-            "training": {"batch_size": train.batch_size, "lr": train.lr, "val_fraction": train.val_fraction,
-                         **({"precision": train.precision} if train.precision != "float32" else {}),
-                         **({"patience_epochs": train.patience_epochs} if train.patience_epochs else {})},
-            "machine": {"python": platform.python_version(), "torch": torch.__version__,
-                        "threads": torch.get_num_threads()},
-            "activations": per_act}
+    summary = {"source": source, "runs": max(a["runs"] for a in per_act.values()),
+               "complete": all(not a["in_progress"] for a in per_act.values()),
+               "epochs": train.epochs, "max_steps": train.max_steps,
+               "seed": train.seed, "num_train_val": first["num_train_val"], "num_test": first["num_test"],
+               "zero_effect_cm": first["zero_cm"], "config": config.to_dict(),
+               "training": {"batch_size": train.batch_size, "lr": train.lr, "val_fraction": train.val_fraction,
+                            **({"precision": train.precision} if train.precision != "float32" else {}),
+                            **({"patience_epochs": train.patience_epochs} if train.patience_epochs else {})},
+               "machine": {"python": platform.python_version(), "torch": torch.__version__,
+                           "threads": torch.get_num_threads()},
+               "activations": per_act}
+    return {**summary, "trained": training_phrase(summary)}
+
+
+def _check_activations(activations: Sequence[str]) -> None:
+    for a in activations:
+        if a not in ACTIVATIONS:
+            raise ValueError(f"activation {a!r} not in {ACTIVATIONS}")
 
 
 def ablate_activations(data: "str | Path | Transitions", runs: int = 10, *,
@@ -91,9 +146,7 @@ def ablate_activations(data: "str | Path | Transitions", runs: int = 10, *,
     train = train or TrainConfig()
     if train.threads:
         torch.set_num_threads(train.threads)
-    for a in activations:
-        if a not in ACTIVATIONS:
-            raise ValueError(f"activation {a!r} not in {ACTIVATIONS}")
+    _check_activations(activations)
     source = str(data) if not isinstance(data, Transitions) else "<in-memory>"
     if not isinstance(data, Transitions):
         data = load_transitions(data)
@@ -106,17 +159,57 @@ def ablate_activations(data: "str | Path | Transitions", runs: int = 10, *,
     return summary
 
 
+def summarize_ablation_dir(data: "str | Path | Transitions", out_dir: str | Path, runs: int, *,
+                           activations: Sequence[str] = PAPER_ORDER, train: TrainConfig | None = None,
+                           config: ModelConfig | None = None, test_fraction: float = 0.2) -> dict[str, Any]:
+    """Table I from the runs already in `out_dir` (`ablation_cell`), without training, written by
+    `write_ablation_report`: what an interrupted `ablate_activations` has so far. `train` and `config`
+    must be those the runs were trained with. ValueError when no run has begun there."""
+    train = train or TrainConfig()
+    _check_activations(activations)
+    source = str(data) if not isinstance(data, Transitions) else "<in-memory>"
+    if not isinstance(data, Transitions):
+        data = load_transitions(data)
+    base = config or ModelConfig(n_max=data.n_max)
+    cells = [c for a in activations for r in range(runs)
+             if (c := ablation_cell(data, a, r, train, out_dir, config=base, test_fraction=test_fraction))]
+    if not cells:
+        raise ValueError(f"{out_dir}: no Table I run has begun there (no models/<activation>-run<k>.pt)")
+    summary = summarize_ablation(cells, source, train, base)
+    write_ablation_report(summary, out_dir)
+    return summary
+
+
+def training_phrase(results: dict[str, Any]) -> str:
+    """How Table I's models were trained, in words: a fixed number of epochs, or to convergence with
+    the range of epochs the runs reached."""
+    patience = results.get("training", {}).get("patience_epochs")
+    if not patience:
+        return f"{results['epochs']} epochs" + (f", at most {results['max_steps']} steps"
+                                                 if results.get("max_steps") else "")
+    reached = sorted(e for a in results["activations"].values() for e in a.get("epochs", []) if e is not None)
+    span = "" if not reached else f"; {reached[0]}" + (f"-{reached[-1]}" if reached[-1] != reached[0] else "") + \
+        " epochs reached"
+    return f"trained to convergence (validation patience {patience} epochs, at most {results['epochs']}{span})"
+
+
 def format_ablation_markdown(results: dict[str, Any]) -> str:
-    """Markdown version of Table I for the given results."""
+    """Markdown version of Table I: mean ± std over the finished runs, then each run's test error
+    and epochs, and the runs still training (not in the means)."""
     acts = [a for a in PAPER_ORDER if a in results["activations"]] + \
            [a for a in results["activations"] if a not in PAPER_ORDER]
     rows = results["activations"]
-    best = min(acts, key=lambda a: rows[a]["mean_cm"])
-    cells = [f"{rows[a]['mean_cm']:.2f} ± {rows[a]['std_cm']:.2f}" for a in acts]
-    cells = [f"**{c}**" if a == best else c for a, c in zip(acts, cells)]
+    scored = [a for a in acts if rows[a]["mean_cm"] is not None]
+    best = min(scored, key=lambda a: rows[a]["mean_cm"]) if scored else None
+    cells = []
+    for a in acts:
+        row, n = rows[a], rows[a].get("runs", len(rows[a]["runs_cm"]))
+        cell = "—" if row["mean_cm"] is None else f"{row['mean_cm']:.2f}" + (f" ± {row['std_cm']:.2f}" if n > 1 else "")
+        cell = f"**{cell}**" if a == best else cell
+        cells.append(cell + (f" ({n} run{'s' * (n != 1)})" if n != results["runs"] else ""))
     lines = [
-        f"## Mean effect prediction error (cm) across bottleneck activations over "
-        f"{results['runs']} runs",
+        f"## Mean effect prediction error (cm) across bottleneck activations over {results['runs']} "
+        f"run{'s' * (results['runs'] != 1)}",
         "",
         "| " + " | ".join(rows[a]["label"] for a in acts) + " |",
         "|" + "---|" * len(acts),
@@ -124,10 +217,18 @@ def format_ablation_markdown(results: dict[str, Any]) -> str:
         "",
         f"Test split: {results['num_test']} transitions held out from {results['source']} "
         f"(zero-effect baseline {results['zero_effect_cm']:.2f} cm); "
-        f"{results['num_train_val']} for training/validation; {results['epochs']} epochs"
-        + (f", at most {results['max_steps']} steps" if results.get("max_steps") else "")
-        + f"; seed {results['seed']}.",
+        f"{results['num_train_val']} for training/validation; {results.get('trained') or training_phrase(results)}; "
+        f"seed {results['seed']}.",
     ]
+    if all("epochs" in rows[a] for a in acts):
+        lines += ["", "Each run's test error in cm (epochs trained):", ""]
+        for a in acts:
+            runs = [f"{cm:.3f} ({ep})" for cm, ep in zip(rows[a]["runs_cm"], rows[a]["epochs"])]
+            runs += [f"{p['test_cm']:.3f} (run {p['run']}: still training, best model after {p['epochs']} epochs)"
+                     for p in rows[a].get("in_progress", [])]
+            lines.append(f"- {rows[a]['label']}: " + ", ".join(runs))
+    if not results.get("complete", True):
+        lines += ["", "Runs still training are not in the means: resume them to complete the table."]
     return "\n".join(lines) + "\n"
 
 

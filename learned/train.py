@@ -139,6 +139,17 @@ class TrainResult:
         return self.stop_reason is not StopReason.TIME_LIMIT
 
 
+def train_options(train: TrainConfig, num_train: int, num_val: int) -> dict[str, Any]:
+    """The settings of `train` that change a run's result, as its checkpoints record them: a run resumes
+    only under the same ones. The defaults are left out, so that older runs stay resumable."""
+    return {"batch_size": train.batch_size, "lr": train.lr, "val_fraction": train.val_fraction,
+            "seed": train.seed, "num_train": num_train, "num_val": num_val,
+            **({"only_moved": True} if train.only_moved else {}),
+            **({"precision": train.precision} if train.precision != "float32" else {}),
+            **({"patience_epochs": train.patience_epochs, "min_delta_cm": train.min_delta_cm}
+               if train.patience_epochs is not None else {})}
+
+
 def last_path(out_path: str | Path) -> Path:
     """Where the resumable latest-epoch checkpoint of ``out_path`` lives."""
     p = Path(out_path)
@@ -257,13 +268,7 @@ def train_model(data: "str | Path | Transitions", config: ModelConfig | None = N
     config = config or ModelConfig(n_max=data.n_max)
     if data.n_max > config.n_max:
         raise ValueError(f"dataset n_max {data.n_max} exceeds model n_max {config.n_max}")
-    # Settings that change the result; the defaults are left out so that older runs stay resumable.
-    options = {"batch_size": train.batch_size, "lr": train.lr, "val_fraction": train.val_fraction,
-               "seed": train.seed, "num_train": len(data), "num_val": len(val_data),
-               **({"only_moved": True} if train.only_moved else {}),
-               **({"precision": train.precision} if train.precision != "float32" else {}),
-               **({"patience_epochs": train.patience_epochs, "min_delta_cm": train.min_delta_cm}
-                  if train.patience_epochs is not None else {})}
+    options = train_options(train, len(data), len(val_data))
     tr, va = prepare(data), prepare(val_data)
 
     torch.manual_seed(train.seed)

@@ -80,3 +80,10 @@ def test_train_bad_settings_are_one_line_errors(tmp_path, capsys, flag, value):
     assert e.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert flag in err[-1] and "Traceback" not in "\n".join(err)
+
+
+def test_ablation_summary_of_an_empty_folder_is_a_clear_error(tiny_dataset, tmp_path, capsys):
+    assert main(["ablate-activations", "--data", str(tiny_dataset), "--out-dir", str(tmp_path / "none"),
+                 "--summarize"]) == 2
+    err = capsys.readouterr().err
+    assert "--summarize" in err and "no Table I run has begun" in err and "Traceback" not in err

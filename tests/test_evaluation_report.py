@@ -6,6 +6,7 @@ pairing or formatting fails.
 """
 import json
 import random
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -250,6 +251,23 @@ def test_setup_and_table1(full_report):
         close(m, act["mean_cm"], 2)
         close(sd, act["std_cm"], 2)
     assert t1["Gumbel-Sigmoid"]["paper (cm)"] == "3.34 ± 0.18" and t1["Sigmoid"]["paper (cm)"] == "2.01 ± 0.13"
+
+
+def test_table1_shows_the_runs_still_training_apart_from_the_means():
+    from evaluation.report import section_table1
+
+    table = {**ABLATION, "runs": 3, "complete": False, "trained": "trained to convergence (patience 100)",
+             "activations": {"tanh": {"label": "Tanh", "runs": 3, "mean_cm": 0.6, "std_cm": 0.02,
+                                      "epochs": [691, 700, 650], "in_progress": []},
+                             "none": {"label": "No activation", "runs": 0, "mean_cm": None, "std_cm": 0.0,
+                                      "epochs": [], "in_progress": [{"run": 0, "epochs": 1300, "test_cm": 0.375,
+                                                                     "val_cm": 0.38}]}}}
+    section = section_table1(table, Path("ablation.json"))
+    text = "\n".join(section.lines)
+    assert "| Tanh | 0.60 ± 0.02 | 3 | 691, 700, 650 | — | 2.24 ± 0.12 |" in text
+    assert "| No activation | — | 0 | — | 0.38 after 1300 epochs, run 0 | 2.19 ± 0.08 |" in text
+    assert "trained to convergence (patience 100)" in text and "not in the means" in text
+    assert section.data["complete"] is False and section.data["activations"]["none"]["ours_cm"]["mean"] is None
 
 
 def test_dual_model_and_table2(full_report):

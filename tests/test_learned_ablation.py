@@ -1,11 +1,13 @@
 """Activation ablation (Table I): runs per activation on a shared held-out test split, report files."""
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
 import torch
 
-from learned import ModelConfig, TrainConfig, ablate_activations
+from learned import ModelConfig, TrainConfig, ablate_activations, summarize_ablation_dir
+from learned.ablation import ablation_run
 from learned.synthetic import write_synthetic_dataset
 
 torch.set_num_threads(1)
@@ -36,3 +38,37 @@ def test_ablation_table_from_a_dataset_dir(tmp_path):
 def test_unknown_activation_is_rejected(tmp_path):
     with pytest.raises(ValueError, match="relu"):
         ablate_activations(tmp_path, runs=1, activations=["relu"])
+
+
+def test_table_i_so_far_averages_the_finished_runs_and_lists_those_still_training(tmp_path):
+    """An interrupted ablation can be summarized without training: finished runs make the means, a run
+    stopped early is shown apart with its best model so far, and resuming it completes the table."""
+    data_dir = write_synthetic_dataset(tmp_path / "ds", 300, seed=4, shard_size=128)
+    cfg = ModelConfig(hidden=16, d_msg=8, d_z=4, heads=2)
+    train, out = TrainConfig(epochs=3, lr=1e-3, patience_epochs=50), tmp_path / "out"
+    done = [ablation_run(data_dir, "sigmoid", r, train, config=cfg, out_dir=out) for r in range(2)]
+    stopped = ablation_run(data_dir, "tanh", 0, replace(train, time_limit_s=1e-9), config=cfg, out_dir=out)
+    assert not stopped["finished"] and stopped["epochs"] == 1
+
+    table = summarize_ablation_dir(data_dir, out, 2, activations=("tanh", "sigmoid"), train=train, config=cfg)
+    sig, tanh = table["activations"]["sigmoid"], table["activations"]["tanh"]
+    assert sig["runs_cm"] == pytest.approx([d["test_cm"] for d in done]) and sig["epochs"] == [3, 3]
+    assert sig["mean_cm"] == pytest.approx(np.mean(sig["runs_cm"]))
+    assert tanh["mean_cm"] is None and tanh["runs"] == 0
+    assert tanh["in_progress"] == [{"run": 0, "epochs": 1, "test_cm": pytest.approx(stopped["test_cm"]),
+                                    "val_cm": pytest.approx(stopped["val_cm"])}]
+    assert table["runs"] == 2 and not table["complete"]
+    assert table["trained"] == "trained to convergence (validation patience 50 epochs, at most 3; 3 epochs reached)"
+    md = (out / "ablation.md").read_text()
+    assert "run 0: still training, best model after 1 epochs" in md and "not in the means" in md
+    assert "| — (0 runs) |" in md
+
+    resumed = ablation_run(data_dir, "tanh", 0, train, config=cfg, out_dir=out, resume=True)
+    table = summarize_ablation_dir(data_dir, out, 2, activations=("tanh", "sigmoid"), train=train, config=cfg)
+    assert table["complete"] and table["activations"]["tanh"]["runs_cm"] == pytest.approx([resumed["test_cm"]])
+    assert table["activations"]["tanh"]["epochs"] == [3]
+
+    with pytest.raises(ValueError, match="sigmoid-run0.pt: trained with other settings"):
+        summarize_ablation_dir(data_dir, out, 2, activations=("sigmoid",), train=replace(train, lr=1e-2), config=cfg)
+    with pytest.raises(ValueError, match="no Table I run has begun"):
+        summarize_ablation_dir(data_dir, tmp_path / "empty", 2, train=train, config=cfg)

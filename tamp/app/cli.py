@@ -190,10 +190,17 @@ def _train_config(args: argparse.Namespace, **changes):
 
 def cmd_ablate(args: argparse.Namespace) -> int:
     """Table I of the paper: effect error per bottleneck activation over several seeds."""
-    from learned import ablate_activations, format_ablation_markdown
+    from learned import ablate_activations, format_ablation_markdown, summarize_ablation_dir
 
     check_output_dir(args.out_dir, "--out-dir")
-    result = ablate_activations(args.data, runs=args.runs, train=_train_config(args), out_dir=args.out_dir)
+    if args.summarize:
+        try:
+            result = summarize_ablation_dir(args.data, args.out_dir, args.runs, train=_train_config(args))
+        except ValueError as e:
+            raise UserError(f"--summarize: {e}") from e
+    else:
+        result = ablate_activations(args.data, runs=args.runs, train=_train_config(args), out_dir=args.out_dir,
+                                    resume=args.resume)
     print(format_ablation_markdown(result))
     print(f"written to {args.out_dir}/ablation.md and ablation.json")
     return 0
@@ -387,6 +394,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--runs", type=positive_int, default=3, help="seeds per activation (default 3; the paper: 10)")
     p.add_argument("--epochs", type=positive_int, default=20, help="epochs per run (default 20)")
     p.add_argument("--out-dir", default="runs/ablation", help="where ablation.md / ablation.json go")
+    p.add_argument("--resume", action="store_true",
+                   help="continue the runs begun in --out-dir (a finished run is read back, not trained again)")
+    p.add_argument("--summarize", action="store_true",
+                   help="train nothing: write the table from the runs already in --out-dir (the finished runs are "
+                   "averaged; a run still training is listed with its best model so far). Give the flags the runs "
+                   "were trained with; `tamp reproduce --scale paper` keeps its runs in OUT/ablation, trained with "
+                   "--epochs 4000 --lr 0.0008 --precision bfloat16")
     _add_train_arguments(p)
     p.set_defaults(func=cmd_ablate)
 
