@@ -469,8 +469,10 @@ def section_table1(ablation: dict | None, source: Path) -> Section:
     lines = md_table(["activation", "ours (cm)", "runs", "epochs per run", "still training (best so far, cm)",
                       "paper (cm)"], rows)
     trained = ablation.get("trained") or f"{ablation.get('epochs', '?')} epochs"
+    zero = ablation.get("zero_effect_cm")
+    zero_text = "" if zero is None else f"; predicting no effect: {zero:.2f} cm"
     lines += [f"Ours: mean ± sample std over the finished runs, {trained}, {ablation.get('num_test', '?')} "
-              f"held-out test transitions ({source}). Paper: ten runs."
+              f"held-out test transitions ({source}){zero_text}. Paper: ten runs."
               + ("" if ablation.get("complete", True) else " Runs still training are not in the means."), ""]
     return Section("table1", title, lines, {"activations": data, "runs": ablation.get("runs"),
                                             "epochs": ablation.get("epochs"), "trained": ablation.get("trained"),

@@ -257,6 +257,7 @@ def test_table1_shows_the_runs_still_training_apart_from_the_means():
     from evaluation.report import section_table1
 
     table = {**ABLATION, "runs": 3, "complete": False, "trained": "trained to convergence (patience 100)",
+             "zero_effect_cm": 2.5101,
              "activations": {"tanh": {"label": "Tanh", "runs": 3, "mean_cm": 0.6, "std_cm": 0.02,
                                       "epochs": [691, 700, 650], "in_progress": []},
                              "none": {"label": "No activation", "runs": 0, "mean_cm": None, "std_cm": 0.0,
@@ -267,6 +268,7 @@ def test_table1_shows_the_runs_still_training_apart_from_the_means():
     assert "| Tanh | 0.60 ± 0.02 | 3 | 691, 700, 650 | — | 2.24 ± 0.12 |" in text
     assert "| No activation | — | 0 | — | 0.38 after 1300 epochs, run 0 | 2.19 ± 0.08 |" in text
     assert "trained to convergence (patience 100)" in text and "not in the means" in text
+    assert "predicting no effect: 2.51 cm" in text
     assert section.data["complete"] is False and section.data["activations"]["none"]["ours_cm"]["mean"] is None
 
 
