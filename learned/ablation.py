@@ -20,7 +20,7 @@ import numpy as np
 import torch
 
 from .checkpoint import load_model, read_checkpoint
-from .dataset import Transitions, load_transitions
+from .dataset import Transitions, atomic_write_bytes, load_transitions
 from .model import ACTIVATIONS, ModelConfig
 from .train import TrainConfig, evaluate, last_path, split_indices, train_model, train_options
 
@@ -233,10 +233,10 @@ def format_ablation_markdown(results: dict[str, Any]) -> str:
 
 
 def write_ablation_report(results: dict[str, Any], out_dir: str | Path) -> tuple[Path, Path]:
-    """Write ``ablation.md`` and ``ablation.json`` into ``out_dir``; returns both paths."""
+    """Write ``ablation.md`` and ``ablation.json`` into ``out_dir`` (each atomically); returns both paths."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     md, js = out / "ablation.md", out / "ablation.json"
-    md.write_text(format_ablation_markdown(results))
-    js.write_text(json.dumps(results, indent=2) + "\n")
+    for path, text in ((md, format_ablation_markdown(results)), (js, json.dumps(results, indent=2) + "\n")):
+        atomic_write_bytes(path, lambda f, text=text: f.write(text.encode()))
     return md, js
