@@ -128,10 +128,17 @@ def summarize_ablation(runs: Sequence[dict[str, Any]], source: str, train: Train
     return {**summary, "trained": training_phrase(summary)}
 
 
-def _check_activations(activations: Sequence[str]) -> None:
+def _inputs(data: "str | Path | Transitions", activations: Sequence[str], config: ModelConfig | None
+            ) -> tuple[Transitions, str, ModelConfig]:
+    """The transitions, how the table names their source, and the model config (default: sized to the
+    data), once the activations are checked."""
     for a in activations:
         if a not in ACTIVATIONS:
             raise ValueError(f"activation {a!r} not in {ACTIVATIONS}")
+    source = str(data) if not isinstance(data, Transitions) else "<in-memory>"
+    if not isinstance(data, Transitions):
+        data = load_transitions(data)
+    return data, source, config or ModelConfig(n_max=data.n_max)
 
 
 def ablate_activations(data: "str | Path | Transitions", runs: int = 10, *,
@@ -146,11 +153,7 @@ def ablate_activations(data: "str | Path | Transitions", runs: int = 10, *,
     train = train or TrainConfig()
     if train.threads:
         torch.set_num_threads(train.threads)
-    _check_activations(activations)
-    source = str(data) if not isinstance(data, Transitions) else "<in-memory>"
-    if not isinstance(data, Transitions):
-        data = load_transitions(data)
-    base = config or ModelConfig(n_max=data.n_max)
+    data, source, base = _inputs(data, activations, config)
     results = [ablation_run(data, act, r, train, config=base, test_fraction=test_fraction, out_dir=out_dir,
                             resume=resume, progress=progress) for act in activations for r in range(runs)]
     summary = summarize_ablation(results, source, train, base)
@@ -166,11 +169,7 @@ def summarize_ablation_dir(data: "str | Path | Transitions", out_dir: str | Path
     `write_ablation_report`: what an interrupted `ablate_activations` has so far. `train` and `config`
     must be those the runs were trained with. ValueError when no run has begun there."""
     train = train or TrainConfig()
-    _check_activations(activations)
-    source = str(data) if not isinstance(data, Transitions) else "<in-memory>"
-    if not isinstance(data, Transitions):
-        data = load_transitions(data)
-    base = config or ModelConfig(n_max=data.n_max)
+    data, source, base = _inputs(data, activations, config)
     cells = [c for a in activations for r in range(runs)
              if (c := ablation_cell(data, a, r, train, out_dir, config=base, test_fraction=test_fraction))]
     if not cells:
