@@ -229,7 +229,7 @@ class Evaluator:
             return
         cfg = self.config.plan_config(problem.seed)
         if models.symbolic is not None and models.domain is not None:
-            models.symbolic_planner(cfg.backend, cfg.symbolic_time_limit).ground(problem.n)
+            models.symbolic_planner(cfg.backend, cfg.symbolic_time_limit).task(problem.n)
             models.symbolic.symbols(problem.X_init)
         if models.dynamics is not None:
             models.dynamics.predict_effect(problem.X_init, np.zeros((1, 4), dtype=np.int64))

@@ -5,11 +5,10 @@ number of domains that produced it, rank by normalised frequency (ties: shorter 
 the action tuples), so the ranking is a deterministic function of (operators, problem, N, seed).
 
 Backends:
-- ``python``   in-process search over the grounded task (`search.py`): by default the first shortest
-               plan of a breadth-first search, or with objective="likely" the most probable plan
-               (uniform-cost search, cost 1 - ln p(effect) per step). Ground actions
-               are built once per (operator set, n) and a search is reused for every domain that
-               agrees with it on the operators it touched. Fast path for Level 1.
+- ``python``   in-process: one breadth-first search serves all N domains (`search.search_domains`),
+               each domain getting its own first shortest plan in ground-action order; successors
+               come from the lifted operators (`lifted.LiftedTask`), effects are drawn only for the
+               operators the search meets (`sampling.DomainSet`). Fast path for Level 1.
 - ``fd``       Fast Downward: one translation per problem of the *union* domain (each effect
                variant is an action), then the search binary alone on the SAS task restricted to
                each distinct domain (distinct on the operators that survived translation), run in
@@ -28,10 +27,11 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 
 from symbolic import fast_downward as fd
-from symbolic.grounding import GroundTask, check_problem, problem_states, steps_to_actions
-from symbolic.pddl import DomainWriter, effect_probabilities, problem_pddl
-from symbolic.sampling import dedup_choices, sample_choices
-from symbolic.search import action_costs, bfs, most_likely
+from symbolic.grounding import check_problem, problem_states, steps_to_actions
+from symbolic.lifted import LiftedTask
+from symbolic.pddl import DomainWriter, problem_pddl
+from symbolic.sampling import DomainSet, EffectSampler, dedup_choices
+from symbolic.search import SearchOutcome, search_domains
 from symbolic.structs import (
     Action,
     OperatorSet,
@@ -44,11 +44,6 @@ from symbolic.structs import (
 )
 
 BACKENDS = ("python", "fd", "fd-naive")
-# python backend: "shortest" = breadth-first search, the first shortest plan in ground-action order
-# (as Fast Downward's optimal searches); "likely" = most probable plan (cost 1 - ln p per step,
-# `search.most_likely`). On learned Drake-world domains "likely" did not help: 1 instead of 4 of 60
-# unverified symbolic plans succeeded (the symbols, not the choice among plans, limit them).
-OBJECTIVES = ("likely", "shortest")
 
 
 def _strip_variant(steps: list[PlanStep]) -> list[PlanStep]:
@@ -60,13 +55,9 @@ class SymbolicPlanner:
 
     def __init__(self, ops: OperatorSet, backend: str = "python", search: str = fd.DEFAULT_SEARCH,
                  time_limit: float = 10.0, scope: str = "subset", workers: int | None = None,
-                 max_expansions: int = 200_000, objective: str = "shortest"):
+                 max_expansions: int = 200_000):
         if backend not in BACKENDS:
             raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
-        if objective not in OBJECTIVES:
-            raise ValueError(f"objective must be one of {OBJECTIVES}, got {objective!r}")
-        self.objective = objective
-        self._costs = action_costs([effect_probabilities(op) for op in ops.operators])
         if scope not in ("subset", "exact"):
             raise ValueError(f"scope must be 'subset' or 'exact', got {scope!r}")
         if len(ops) == 0:
@@ -75,12 +66,14 @@ class SymbolicPlanner:
         self.scope, self.max_expansions = scope, max_expansions
         self.workers = workers or os.cpu_count() or 1
         self.writer = DomainWriter(ops)
-        self._tasks: dict[int, GroundTask] = {}
+        self.sampler = EffectSampler(ops)  # cumulative effect tables, once per operator set
+        self._tasks: dict[int, LiftedTask] = {}
 
     # ---- helpers -------------------------------------------------------------------------------
-    def ground(self, n: int) -> GroundTask:
+    def task(self, n: int) -> LiftedTask:
+        """The lifted task of n-object scenes (built once per n: index tables, no grounding)."""
         if n not in self._tasks:
-            self._tasks[n] = GroundTask(self.ops, n, self.scope)
+            self._tasks[n] = LiftedTask(self.ops, n, self.scope)
         return self._tasks[n]
 
     def _allowed(self, n: int) -> np.ndarray:
@@ -101,15 +94,9 @@ class SymbolicPlanner:
         check_problem(self.ops, problem)
         ch = np.zeros(len(self.ops), np.int64) if choice is None else np.asarray(choice)
         if self.backend == "python":
-            task = self.ground(problem.n)
-            init, goal = problem_states(problem)
             start = time.perf_counter()
-            task.clear_cache()  # per problem, as in `_run_python`; and freed after it (it can hold GBs)
-            try:
-                out = self._search(task, ch, init, goal, self.max_expansions, self.time_limit, problem.nonempty)
-                return self._result(task, ch, init, out, time.perf_counter() - start)
-            finally:
-                task.clear_cache()
+            out = self._search(problem, DomainSet.of_choices(self.ops, ch[None]), self.max_expansions, None)
+            return self._result(problem.n, out, 0, time.perf_counter() - start)
         result = fd.run_fast_downward(self._domain_text(ch, problem.n), problem_pddl(self.ops, problem),
                                       self.search, self.time_limit)
         return result
@@ -120,23 +107,18 @@ class SymbolicPlanner:
 
     # ---- probabilistic -------------------------------------------------------------------------
     def plan_probabilistic(self, problem: SymbolicProblem, n_domains: int = 100, seed: int = 0,
-                           min_prob: float = 0.0, time_budget: float | None = None,
+                           time_budget: float | None = None,
                            expansion_budget: int | None = None) -> ProbabilisticPlanResult:
         """Plan in N sampled domains and rank the plans by frequency. Python backend: with
-        `expansion_budget` (search expansions over all domains; machine-independent) or `time_budget`
-        (seconds), the domains not searched when either runs out count as timed out."""
+        `expansion_budget` (expanded states of the shared search; machine-independent) or `time_budget`
+        (seconds), the domains without a plan when either runs out count as timed out."""
         check_problem(self.ops, problem)
-        deadline = None if time_budget is None else time.perf_counter() + time_budget
-        t0 = time.perf_counter()
-        choices = sample_choices(self.ops, n_domains, seed, min_prob)
-        timings = {"sampling": time.perf_counter() - t0}
         if self.backend == "python":
-            try:
-                per_domain, n_unique, n_searches = self._run_python(problem, choices, timings, deadline,
-                                                                    expansion_budget)
-            finally:  # the state cache, shared by the N domains' searches, is not kept between problems
-                self.ground(problem.n).clear_cache()
-        elif self.backend == "fd":
+            return self._probabilistic_python(problem, n_domains, seed, time_budget, expansion_budget)
+        t0 = time.perf_counter()
+        choices = self.sampler.choices(n_domains, seed)
+        timings = {"sampling": time.perf_counter() - t0}
+        if self.backend == "fd":
             per_domain, n_unique, n_searches = self._run_fd(problem, choices, timings)
         else:
             per_domain, n_unique, n_searches = self._run_fd_naive(problem, choices, timings)
@@ -145,6 +127,42 @@ class SymbolicPlanner:
         timings["parsing"] = timings.get("parsing", 0.0) + time.perf_counter() - t0
         statuses = Counter(r.status.value for r in per_domain)
         return ProbabilisticPlanResult(ranked, n_domains, n_unique, n_searches, dict(statuses), timings)
+
+    def _search(self, problem: SymbolicProblem, domains: DomainSet, max_expansions: int,
+                deadline: float | None) -> SearchOutcome:
+        task = self.task(problem.n)
+        init, goal = problem_states(problem)
+        try:
+            return search_domains(task, domains, init, goal, max_expansions, deadline, problem.nonempty)
+        finally:  # expansions are not kept between problems (honest per-problem cost, bounded memory)
+            task.clear_cache()
+
+    def _probabilistic_python(self, problem: SymbolicProblem, n_domains: int, seed: int,
+                              time_budget: float | None, expansion_budget: int | None) -> ProbabilisticPlanResult:
+        start = time.perf_counter()
+        deadline = None if time_budget is None else start + time_budget
+        deadline = min(deadline or np.inf, start + self.time_limit)
+        domains = DomainSet.sampled(self.sampler, n_domains, seed)
+        budget = self.max_expansions if expansion_budget is None else expansion_budget
+        out = self._search(problem, domains, budget, deadline)
+        searched = time.perf_counter() - start
+        t0 = time.perf_counter()
+        task = self.task(problem.n)
+        found: dict[tuple, list] = {}
+        for k in range(n_domains):  # domain order: the first domain to produce a plan names its steps
+            i = out.plan_of[k]
+            if i < 0:
+                continue
+            key = tuple(task.action(g) for g in out.plans[i])
+            if key in found:
+                found[key][1] += 1
+            else:
+                found[key] = [tuple(task.step(g) for g in out.plans[i]), 1, out.states[i]]
+        ranked = _ranked(found)
+        timings = {"sampling": domains.seconds, "planner": searched - domains.seconds,
+                   "backward": out.timings.get("backward", 0.0), "parsing": time.perf_counter() - t0}
+        statuses = Counter(s.value for s in out.status)
+        return ProbabilisticPlanResult(ranked, n_domains, None, 1, dict(statuses), timings, out.expanded)
 
     def _rank(self, per_domain: list[PlannerResult], n: int) -> list[RankedPlan]:
         found: dict[tuple, list] = {}
@@ -161,74 +179,25 @@ class SymbolicPlanner:
                 found[key][1] += 1
             else:
                 found[key] = [steps, 1, None if r.states is None else tuple(r.states)]
-        total = sum(v[1] for v in found.values())
-        order = sorted(found.items(), key=lambda kv: (-kv[1][1], len(kv[0]), kv[0]))
-        return [RankedPlan(k, s, c, c / total, states) for k, (s, c, states) in order]
+        return _ranked(found)
 
-    def _run_python(self, problem, choices, timings, deadline: float | None = None,
-                    expansion_budget: int | None = None):
-        t0 = time.perf_counter()
-        task = self.ground(problem.n)
-        task.clear_cache()  # no state cache carried over between problems (honest per-problem cost)
-        init, goal = problem_states(problem)
-        timings["grounding"] = time.perf_counter() - t0
-        t0 = time.perf_counter()
-        reps, counts, group = dedup_choices(choices[:, self._probabilistic_columns()])
-        timings["sampling"] += time.perf_counter() - t0
-        t0 = time.perf_counter()
-        memo: list[tuple[np.ndarray, np.ndarray, PlannerResult]] = []
-        results: list[PlannerResult] = []
-        out_of_time = PlannerResult(PlannerStatus.TIMEOUT, None, "Level-1 time budget used up")
-        out_of_expansions = PlannerResult(PlannerStatus.TIMEOUT, None, "Level-1 expansion budget used up")
-        left = self.max_expansions * len(reps) if expansion_budget is None else expansion_budget
-        for k in reps:
-            c = choices[k]
-            hit = next((res for touched, vals, res in memo if np.array_equal(c[touched], vals)), None)
-            if hit is None and deadline is not None and time.perf_counter() > deadline:
-                hit = out_of_time
-            if hit is None and left <= 0:
-                hit = out_of_expansions
-            if hit is None:
-                start = time.perf_counter()
-                limit = self.time_limit if deadline is None else \
-                    max(0.0, min(self.time_limit, deadline - time.perf_counter()))
-                out = self._search(task, c, init, goal, min(self.max_expansions, left), limit, problem.nonempty)
-                left -= out.expanded
-                hit = self._result(task, c, init, out, time.perf_counter() - start)
-                if out.status is not PlannerStatus.TIMEOUT:
-                    memo.append((out.touched, c[out.touched], hit))
-            results.append(hit)
-        timings["planner"] = time.perf_counter() - t0
-        return [results[g] for g in group], len(reps), len(memo)
-
-    def _search(self, task: GroundTask, choice, init: int, goal: int, max_expansions: int,
-                time_limit: float | None, nonempty: bool):
-        if self.objective == "shortest":
-            return bfs(task, choice, init, goal, max_expansions, time_limit, nonempty)
-        return most_likely(task, choice, init, goal, self._costs, max_expansions, time_limit, nonempty)
-
-    @staticmethod
-    def _result(task: GroundTask, choice: np.ndarray, init: int, out, seconds: float) -> PlannerResult:
-        """A PlannerResult of the python search, with the plan's ground actions and symbolic states."""
-        if out.plan is None:
-            return PlannerResult(out.status, None, out.message, seconds)
-        states = [init]
-        for g in out.plan:
-            states.append(states[-1] ^ task.flips[g][int(choice[task.op_index[g]])])
-        return PlannerResult(out.status, [task.step(g) for g in out.plan], out.message, seconds,
-                             ground=list(out.plan), states=states)
+    def _result(self, n: int, out: SearchOutcome, domain: int, seconds: float) -> PlannerResult:
+        """The PlannerResult of one domain of a python search, with its plan's symbolic states."""
+        i = out.plan_of[domain]
+        if i < 0:
+            return PlannerResult(out.status[domain], None, out.message, seconds)
+        task = self.task(n)
+        return PlannerResult(out.status[domain], [task.step(g) for g in out.plans[i]], out.message, seconds,
+                             states=list(out.states[i]))
 
     def skeleton_options(self, n: int, states: tuple[int, ...]) -> list[list[Action]]:
         """Per step of a plan through the symbolic `states` (a RankedPlan's), every ground action
         applicable in that state one of whose learned effects leads to the next state: the plan's
         skeleton, with the choices the symbols cannot tell apart (typically the grasp and release
         offsets, or which of two symbolically alike blocks is used)."""
-        task = self.ground(n)
-        options = []
-        for s, t in zip(states[:-1], states[1:]):
-            gs, _ = task.applicable(s)
-            options.append(list(dict.fromkeys(task.action(g) for g in gs if any(s ^ f == t for f in task.flips[g]))))
-        return options
+        task = self.task(n)
+        return [list(dict.fromkeys(task.action(g) for g in task.actions_to(s, t)))
+                for s, t in zip(states[:-1], states[1:])]
 
     def alternatives(self, n: int, actions: tuple[Action, ...], states: tuple[int, ...] | None,
                      limit: int = 64) -> list[tuple[Action, ...]]:
@@ -243,9 +212,6 @@ class SymbolicPlanner:
                 if len(out) == limit:
                     break
         return out
-
-    def _probabilistic_columns(self) -> np.ndarray:
-        return np.flatnonzero([len(op.effects) > 1 for op in self.ops.operators])
 
     def _run_fd(self, problem, choices, timings):
         t0 = time.perf_counter()
@@ -289,6 +255,14 @@ class SymbolicPlanner:
         results = [fd.run_fast_downward(d, prob, self.search, self.time_limit) for d in domains]
         timings["planner"] = time.perf_counter() - t0
         return results, len({d for d in domains}), len(domains)
+
+
+def _ranked(found: dict[tuple, list]) -> list[RankedPlan]:
+    """{actions: [steps, count, states]} -> plans by decreasing count, then length, then actions."""
+    total = sum(v[1] for v in found.values())
+    order = sorted(found.items(), key=lambda kv: (-kv[1][1], len(kv[0]), kv[0]))
+    return [RankedPlan(k, s, c, c / total, None if states is None else tuple(states))
+            for k, (s, c, states) in order]
 
 
 def plan_probabilistic(ops: OperatorSet, problem: SymbolicProblem, n_domains: int = 100, seed: int = 0,

@@ -1,136 +1,209 @@
-"""In-process breadth-first search over a grounded task (the fast Level-1 backend).
+"""One breadth-first search for all N sampled domains (the fast Level-1 backend).
 
-Unit action costs, so BFS with the goal test at generation returns a shortest plan, the same length
-as Fast Downward's optimal configurations (e.g. astar(lmcut())). Successors are generated in ground
-action order, which makes the returned plan a deterministic function of the task and the effect
-choice. The search records which operators it looked at (`touched`): any other domain that chooses
-the same effects for those operators yields exactly the same search, so its result is reused.
+What it computes is the paper's "plan in each of the N domains" with a breadth-first search per
+domain: for every domain, the first shortest plan in ground-action order (Fast Downward's optimal
+configurations return plans of the same length). How it computes it is shared:
+
+- **Domains as bit masks.** A search node carries the set of domains (an int, bit k = domain k) in
+  which its state is first reached at its depth. Expanding it once serves all of them: a ground
+  action's effect e of operator o leads to the successor in the domains `node & masks(o)[e]`, new
+  only in those that have not reached the successor before. Nodes are expanded layer by layer, in
+  the order each domain's own search would generate them, so every domain gets exactly its own plan
+  (`tests/test_symbolic_search.py` checks this against N separate searches).
+- **Distance bounds.** Distances to the goal in the all-outcomes domain (any effect of any operator)
+  are lower bounds in every sampled domain. They are computed backwards from the goal by regression
+  (`LiftedTask.predecessors`) up to a radius; beyond it R + 1 is a bound. Searching with a depth bound
+  D, a state at depth g whose bound exceeds D - g is on no plan of length D and is not generated;
+  D grows from 1 until every domain has its plan. Pruning keeps every state on every shortest plan,
+  so the plans are those of the unbounded search.
+- **Lifted successors.** States are expanded by `LiftedTask`, without grounding the task.
+
+Budgets: `max_expansions` counts expanded states (forward nodes and backward states), a deterministic
+measure; `deadline` (seconds, `time.perf_counter`) is a safety net. Domains without a plan when either
+runs out are TIMEOUT; a domain whose bounded search was not cut anywhere has no plan (UNSOLVABLE).
 """
 
 from __future__ import annotations
 
 import time
-from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
-from symbolic.grounding import GroundTask
+from symbolic.lifted import GroundAction, LiftedTask
+from symbolic.sampling import DomainSet
 from symbolic.structs import PlannerStatus
+
+INFINITE = 1 << 30
 
 
 @dataclass
 class SearchOutcome:
-    status: PlannerStatus
-    plan: list[int] | None  # ground action ids
-    touched: np.ndarray  # operator ids whose effect choice the search depended on
-    expanded: int
+    """Per domain, its plan (index into `plans`, -1 for none) and status."""
+
+    plans: list[tuple[GroundAction, ...]]
+    states: list[tuple[int, ...]]  # packed states along each plan (len + 1)
+    plan_of: list[int]
+    status: list[PlannerStatus]
+    expanded: int = 0  # forward nodes and backward states expanded
+    depth: int = 0  # the last depth bound searched
     message: str = ""
+    timings: dict[str, float] = field(default_factory=dict)  # seconds: forward, backward
 
 
-def bfs(task: GroundTask, choice: np.ndarray, init: int, goal: int,
-        max_expansions: int = 200_000, time_limit: float | None = None,
-        nonempty: bool = False) -> SearchOutcome:
-    """Shortest plan from `init` to the full goal state `goal` with effect choice[op] per operator.
+class _Distances:
+    """Exact distances to the goal in the all-outcomes domain up to `radius`; a lower bound beyond."""
+
+    def __init__(self, task: LiftedTask, goal: int):
+        self.task, self.dist, self.frontier = task, {goal: 0}, [goal]
+        self.radius, self.complete = 0, False
+
+    def grow(self, radius: int, budget: int) -> int:
+        """Extend to `radius` (whole layers only, while `budget` expansions last); returns expansions."""
+        used = 0
+        while self.radius < radius and not self.complete and used + len(self.frontier) <= budget:
+            layer, nxt = self.radius + 1, []
+            for t in self.frontier:
+                for s in self.task.predecessors(t):
+                    if s not in self.dist:
+                        self.dist[s] = layer
+                        nxt.append(s)
+            used += len(self.frontier)
+            self.radius, self.frontier = layer, nxt
+            self.complete = not nxt
+        return used
+
+    @property
+    def beyond(self) -> int:
+        """The bound of a state outside the distances computed so far."""
+        return INFINITE if self.complete else self.radius + 1
+
+    def bound(self, state: int) -> int:
+        """A lower bound on the number of actions from `state` to the goal (INFINITE: unreachable)."""
+        return self.dist.get(state, self.beyond)
+
+
+def search_domains(task: LiftedTask, domains: DomainSet, init: int, goal: int, max_expansions: int = 200_000,
+                   deadline: float | None = None, nonempty: bool = False) -> SearchOutcome:
+    """For each of the domains, its first shortest plan from `init` to the full goal state `goal`.
 
     With `nonempty`, a goal equal to `init` needs a plan of at least one action (a shortest cycle).
     """
-    deadline = None if time_limit is None else time.perf_counter() + time_limit
-    touched: set[int] = set()
+    N, full = domains.n, domains.full
+    out = SearchOutcome([], [], [-1] * N, [PlannerStatus.TIMEOUT] * N)
     if init == goal and not nonempty:
-        return SearchOutcome(PlannerStatus.SOLVED, [], np.empty(0, np.int64), 0)
-    parent: dict[int, tuple[int, int] | None] = {init: None}
-    frontier = deque([init])
-    flips = task.flips
-    ch = np.asarray(choice).tolist()
-    expanded = 0
-    while frontier:
-        s = frontier.popleft()
-        expanded += 1
-        if expanded > max_expansions or (deadline is not None and expanded % 256 == 0
-                                         and time.perf_counter() > deadline):
-            return SearchOutcome(PlannerStatus.TIMEOUT, None, np.fromiter(touched, np.int64), expanded,
-                                 f"search limit reached after {expanded} expansions")
-        gs, opis = task.applicable(s)
-        touched.update(opis)
-        for g, oi in zip(gs, opis):
-            t = s ^ flips[g][ch[oi]]
-            if t == goal:  # tested before the duplicate check: the goal may be init (nonempty)
-                plan, step = [g], parent[s]
-                while step is not None:
-                    u, g2 = step
-                    plan.append(g2)
-                    step = parent[u]
-                return SearchOutcome(PlannerStatus.SOLVED, plan[::-1],
-                                     np.array(sorted(touched), np.int64), expanded)
-            if t in parent:
-                continue
-            parent[t] = (s, g)
-            frontier.append(t)
-    return SearchOutcome(PlannerStatus.UNSOLVABLE, None, np.array(sorted(touched), np.int64), expanded,
-                         f"goal unreachable: {len(parent)} states explored")
+        out.plans, out.states = [()], [(init,)]
+        out.plan_of, out.status = [0] * N, [PlannerStatus.SOLVED] * N
+        return out
+    distances = _Distances(task, goal)
+    active = full  # domains without a plan yet
+    prepared: set[int] = set()
+    t_back = 0.0
+    D = 1
+    while active:
+        t = time.perf_counter()
+        out.expanded += distances.grow(_radius(D), max_expansions - out.expanded)
+        t_back += time.perf_counter() - t
+        if distances.bound(init) >= INFINITE:
+            break  # the goal cannot be reached from init in any domain
+        out.depth = D
+        # forward, depth bound D; nodes are (state, domains, parent node, ground action)
+        node_state, node_parent, node_action = [init], [-1], [-1]
+        layer = [(0, active)]
+        seen: dict[int, int] = {init: active}
+        cut = 0  # domains in which some state was left out for the bound (not proven unsolvable)
+        for depth in range(D):
+            remaining = D - depth - 1  # actions left after the successor
+            bounded = remaining <= distances.radius or distances.complete
+            nxt: list[tuple[int, int]] = []
+            for e, mask in layer:
+                here = mask & active
+                if not here:
+                    continue
+                if out.expanded >= max_expansions or (deadline is not None and out.expanded % 64 == 0
+                                                      and time.perf_counter() > deadline):
+                    out.message = f"search limit reached after {out.expanded} expansions (depth bound {D})"
+                    out.timings.update(backward=t_back)
+                    return out
+                out.expanded += 1
+                s = node_state[e]
+                x = task.expand(s)
+                if s not in prepared:
+                    domains.prepare(x.event_op)
+                    prepared.add(s)
+                events: range | list[int] = range(len(x.event_action))
+                if bounded and x.successors:
+                    dist, beyond = distances.dist, distances.beyond
+                    bounds = np.array([dist.get(u, beyond) for u in x.successors])
+                    allowed = bounds <= remaining
+                    if not allowed.all():
+                        if (~allowed & (bounds < INFINITE)).any():
+                            cut |= here
+                        events = np.flatnonzero(allowed[x.successor_of_event]).tolist()
+                succ, ev_op, ev_eff, ev_act, ev_succ = (x.successors, x.event_op, x.event_effect,
+                                                         x.event_action, x.event_successor)
+                for i in events:
+                    o = ev_op[i]
+                    m = here if o < 0 else here & domains.masks(o)[ev_eff[i]]
+                    if not m:
+                        continue
+                    u = succ[ev_succ[i]]
+                    if u == goal:  # tested before the duplicate check: the goal may be init (nonempty)
+                        _solved(out, node_state, node_parent, node_action, e, ev_act[i], goal, m)
+                        active &= ~m
+                        here &= ~m
+                        if not here:
+                            break
+                        continue
+                    new = m & ~seen.get(u, 0)
+                    if new:
+                        seen[u] = seen.get(u, 0) | new
+                        node_state.append(u)
+                        node_parent.append(e)
+                        node_action.append(ev_act[i])
+                        nxt.append((len(node_state) - 1, new))
+            layer = nxt
+            if not layer:
+                break
+        unsolvable = active & ~cut
+        for k in _bits(unsolvable):
+            out.status[k] = PlannerStatus.UNSOLVABLE
+        active &= ~unsolvable
+        D += 1
+    for k in _bits(active):
+        out.status[k] = PlannerStatus.UNSOLVABLE  # the goal is unreachable from init
+    out.timings.update(backward=t_back)
+    return out
 
 
-def most_likely(task: GroundTask, choice: np.ndarray, init: int, goal: int, costs: list[list[float]],
-                max_expansions: int = 200_000, time_limit: float | None = None,
-                nonempty: bool = False) -> SearchOutcome:
-    """The cheapest plan from `init` to `goal` (uniform-cost search), costs[op][effect] per action.
-
-    With cost = 1 - log p(effect | operator) (`action_costs`), the plan is the most probable one
-    per step taken: among plans that reach Sigma_goal in this domain it prefers operators that were
-    seen to do what the plan needs, where breadth-first search takes whichever it generates first
-    (e.g. a release offset that mostly lets the block fall). Ties go to the earlier-generated plan,
-    so the result is a deterministic function of the task, the effect choice and the costs.
-    """
-    import heapq
-
-    deadline = None if time_limit is None else time.perf_counter() + time_limit
-    touched: set[int] = set()
-    if init == goal and not nonempty:
-        return SearchOutcome(PlannerStatus.SOLVED, [], np.empty(0, np.int64), 0)
-    GOAL = -1  # the goal as a node of its own, so a nonempty plan back to init = goal can be found
-    parent: dict[int, tuple[int, int] | None] = {init: None}
-    best: dict[int, float] = {init: 0.0}
-    heap: list[tuple[float, int, int, int, int]] = [(0.0, 0, init, -1, -1)]  # cost, tie, node, from, via
-    flips = task.flips
-    ch = np.asarray(choice).tolist()
-    tie, expanded, closed = 1, 0, set()
-    while heap:
-        cost, _, node, s_from, g_via = heapq.heappop(heap)
-        if node == GOAL:
-            plan, step = [g_via], parent[s_from]
-            while step is not None:
-                u, g2 = step
-                plan.append(g2)
-                step = parent[u]
-            return SearchOutcome(PlannerStatus.SOLVED, plan[::-1], np.array(sorted(touched), np.int64), expanded)
-        if node in closed:
-            continue
-        closed.add(node)
-        if s_from >= 0:
-            parent[node] = (s_from, g_via)
-        expanded += 1
-        if expanded > max_expansions or (deadline is not None and expanded % 256 == 0
-                                         and time.perf_counter() > deadline):
-            return SearchOutcome(PlannerStatus.TIMEOUT, None, np.fromiter(touched, np.int64), expanded,
-                                 f"search limit reached after {expanded} expansions")
-        gs, opis = task.applicable(node)
-        touched.update(opis)
-        for g, oi in zip(gs, opis):
-            e = ch[oi]
-            t, c = node ^ flips[g][e], cost + costs[oi][e]
-            key = GOAL if t == goal else t
-            if key != GOAL and (t in closed or c >= best.get(t, np.inf)):
-                continue
-            if key == GOAL and c >= best.get(GOAL, np.inf):
-                continue
-            best[key] = c
-            heapq.heappush(heap, (c, tie, key, node, g))
-            tie += 1
-    return SearchOutcome(PlannerStatus.UNSOLVABLE, None, np.array(sorted(touched), np.int64), expanded,
-                         f"goal unreachable: {len(closed)} states explored")
+def _radius(depth_bound: int) -> int:
+    """How far the backward distances reach for a depth bound D: D - 1 up to D = 3 (the forward
+    search then expands only states on shortest plans: regression is cheaper per state than a
+    forward expansion, which serves every domain), about D / 2 beyond (a backward layer grows with
+    the branching factor, as a forward one)."""
+    return depth_bound - 1 if depth_bound <= 3 else (depth_bound + 1) // 2
 
 
-def action_costs(probabilities: list[np.ndarray]) -> list[list[float]]:
-    """costs[op][effect] = 1 - ln p(effect | op): one per step plus the step's surprisal."""
-    return [[1.0 - float(np.log(p)) if p > 0 else np.inf for p in ps] for ps in probabilities]
+def _solved(out: SearchOutcome, node_state, node_parent, node_action, e: int, last: GroundAction,
+            goal: int, domains: int) -> None:
+    actions, states = [last], [goal]
+    while e >= 0:
+        states.append(node_state[e])
+        if node_parent[e] >= 0:
+            actions.append(node_action[e])
+        e = node_parent[e]
+    out.plans.append(tuple(actions[::-1]))
+    out.states.append(tuple(states[::-1]))
+    index = len(out.plans) - 1
+    for k in _bits(domains):
+        out.plan_of[k] = index
+        out.status[k] = PlannerStatus.SOLVED
+
+
+def _bits(mask: int) -> list[int]:
+    out = []
+    while mask:
+        low = mask & -mask
+        out.append(low.bit_length() - 1)
+        mask ^= low
+    return out

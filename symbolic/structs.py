@@ -164,7 +164,6 @@ class PlannerResult:
     wall_time: float = 0.0
     returncode: int | None = None
     stderr_tail: str = ""
-    ground: list[int] | None = None  # python backend: the plan's ground action ids
     states: list[int] | None = None  # python backend: packed symbolic states along the plan (len + 1)
 
     @property
@@ -187,7 +186,8 @@ class RankedPlan:
 class ProbabilisticPlanResult:
     plans: list[RankedPlan]
     n_domains: int
-    n_unique_domains: int  # distinct sampled domains
-    n_searches: int  # planner calls actually made (after dedup / reuse)
+    n_unique_domains: int | None  # distinct sampled domains (Fast Downward backends; None: not needed)
+    n_searches: int  # planner calls actually made (after dedup; the python backend: one shared search)
     statuses: dict[str, int]  # outcome -> number of domains (weighted)
-    timings: dict[str, float] = field(default_factory=dict)  # seconds: sampling, planning, parsing
+    timings: dict[str, float] = field(default_factory=dict)  # seconds: sampling, planner, parsing, ...
+    expanded: int = 0  # python backend: states expanded by the shared search (forward and backward)

@@ -230,21 +230,18 @@ def test_verify_many_predicts_all_prefixes_of_one_length_in_one_pass_when_the_mo
         assert v.actions == one.actions and np.allclose(v.trajectory, one.trajectory)
 
 
-def test_the_symbolic_search_prefers_the_operator_more_likely_to_give_the_needed_effect():
+def test_the_symbolic_search_returns_the_first_shortest_plan_in_ground_action_order():
     from symbolic import SymbolicPlanner, make_problem, steps_to_actions
 
     stub = StubModel()
     problem = make_problem(*stub.symbols(X_INIT), *stub.symbols(A_ON_B))
-    # both releases usually stack, so both are in the deterministic domain; breadth-first search
-    # takes the first one it generates, (0, 0, 1, 0), whichever is more reliable
-    for p_plus, p_zero, likely in ((0.9, 0.6, (0, 0, 1, 1)), (0.6, 0.9, (0, 0, 1, 0))):
+    # both releases usually stack, so both are in the deterministic domain; breadth-first search takes
+    # the first one in ground-action order, (0, 0, 1, 0), whichever is more reliable (the ranking by
+    # frequency over sampled domains and the verification choose among plans, not the search)
+    for p_plus, p_zero in ((0.9, 0.6), (0.6, 0.9)):
         domain = two_block_domain(p_bad=p_plus, p_good=p_zero)
-        plans = {}
-        for objective in ("likely", "shortest"):
-            out = SymbolicPlanner(domain, objective=objective).plan_deterministic(problem)
-            plans[objective] = steps_to_actions(domain, out.plan, 2)
-        assert plans["likely"] == [likely]
-        assert plans["shortest"] == [(0, 0, 1, 0)]
+        out = SymbolicPlanner(domain).plan_deterministic(problem)
+        assert steps_to_actions(domain, out.plan, 2) == [(0, 0, 1, 0)]
 
 
 class StubKinematics:

@@ -1,0 +1,175 @@
+"""Level 1's symbolic search: one search for N domains gives each domain its own breadth-first plan;
+lifted successors equal grounded ones; the bundled domain's ranked plans stay what they were.
+
+tests/data/level1_golden.json holds symbolic problems of the bundled models (30: n = 2, 3, 4) with the
+ranked plans Level 1 gave them. A change of the search, the sampler or the ranking that changes any of
+them fails `test_ranked_plans_of_the_bundled_domain_are_unchanged`; if the change is meant, say so in
+the closing note and rewrite the file:
+
+    tamp problems --per-cell 2 --seed 1 --out /tmp/golden.jsonl
+    .venv/bin/python tests/test_symbolic_search.py --write /tmp/golden.jsonl
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from reference_search import GroundTask, bfs  # noqa: E402
+
+from symbolic import blocksworld as bw  # noqa: E402
+from symbolic.atoms import pack_state, unpack_state  # noqa: E402
+from symbolic.build import load_domain, make_problem  # noqa: E402
+from symbolic.grounding import problem_states  # noqa: E402
+from symbolic.lifted import LiftedTask  # noqa: E402
+from symbolic.operators import learn_operators  # noqa: E402
+from symbolic.planner import SymbolicPlanner  # noqa: E402
+from symbolic.sampling import DomainSet, EffectSampler  # noqa: E402
+from symbolic.search import search_domains  # noqa: E402
+from symbolic.structs import SymbolicProblem  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+GOLDEN = Path(__file__).resolve().parent / "data" / "level1_golden.json"
+BUNDLED_DOMAIN = ROOT / "tamp" / "pretrained" / "domain"
+
+
+@pytest.fixture(scope="module")
+def bundled():
+    return load_domain(BUNDLED_DOMAIN)
+
+
+@pytest.fixture(scope="module")
+def golden():
+    return json.loads(GOLDEN.read_text())
+
+
+def _problem(entry: dict, ops) -> SymbolicProblem:
+    n, d, K = entry["n"], ops.n_unary, ops.n_relations
+    return make_problem(*unpack_state(int(entry["init"]), n, d, K), *unpack_state(int(entry["goal"]), n, d, K),
+                        nonempty=entry["nonempty"])
+
+
+def _ranked(result) -> list:
+    return [[[list(a) for a in p.actions], p.count] for p in result.plans]
+
+
+def test_ranked_plans_of_the_bundled_domain_are_unchanged(bundled, golden):
+    planner = SymbolicPlanner(bundled)
+    for entry in golden["problems"]:
+        out = planner.plan_probabilistic(_problem(entry, bundled), golden["n_domains"], entry["seed"],
+                                         expansion_budget=golden["expansion_budget"])
+        assert _ranked(out) == entry["ranked"], entry["name"]
+        assert out.statuses == entry["statuses"], entry["name"]
+
+
+def _check_against_one_bfs_per_domain(ops, problems, n_domains: int) -> int:
+    planner = SymbolicPlanner(ops)
+    compared = 0
+    for problem, seed in problems:
+        task, ground = planner.task(problem.n), GroundTask(ops, problem.n)
+        init, goal = problem_states(problem)
+        choices = planner.sampler.choices(n_domains, seed)
+        out = search_domains(task, DomainSet.of_choices(ops, choices), init, goal, 10**6, None, problem.nonempty)
+        for k in range(n_domains):
+            status, plan, states = bfs(ground, choices[k], init, goal, problem.nonempty)
+            assert status is out.status[k]
+            if plan is not None:
+                i = out.plan_of[k]
+                assert [(task.operator(g), task.binding(g)) for g in out.plans[i]] == plan
+                assert list(out.states[i]) == states
+            compared += 1
+    return compared
+
+
+def test_one_search_gives_every_domain_its_own_breadth_first_plan(bundled, golden):
+    """Same plan (operators and bindings), same outcome, domain by domain, as a breadth-first search
+    per domain over a grounded task: the blocks world (probabilistic, unsolvable goals included) and
+    the bundled learned domain at n = 2, 3."""
+    ops = learn_operators(bw.random_dataset(3000, (2, 3), seed=21, p_large=0.0))
+    problems = [(bw.random_problem(3, k, seed=s, p_large=0.0)[0], s) for s, k in ((1, 1), (2, 2), (3, 3), (4, 4))]
+    blocked = problems[3][0].goal_unary.copy()
+    blocked[0, 2] = 1 - blocked[0, 2]  # block type never changes: no plan in any domain
+    problems.append((SymbolicProblem(problems[3][0].init_unary, problems[3][0].init_rel, blocked,
+                                     problems[3][0].goal_rel), 9))
+    assert _check_against_one_bfs_per_domain(ops, problems, 30) == 150
+    learned = [(_problem(e, bundled), e["seed"]) for e in golden["problems"] if e["n"] <= 3][:12]
+    assert _check_against_one_bfs_per_domain(bundled, learned, 20) == 240
+
+
+def test_lifted_successors_are_the_grounded_ones_in_ground_action_order(bundled, golden):
+    for n in (2, 3):
+        task, ground = LiftedTask(bundled, n), GroundTask(bundled, n)
+        for entry in [e for e in golden["problems"] if e["n"] == n][:4]:
+            for s in (int(entry["init"]), int(entry["goal"])):
+                gs = ground.applicable(s)
+                successors = list(dict.fromkeys(s ^ f for g in gs for f in ground.flips[g]))
+                x = task.expand(s)
+                assert x.successors == successors
+                # the ground actions that lead to a successor, in ground-action order
+                for t in successors[:10]:
+                    want = [(ground.op_index[g], ground.binding[g]) for g in gs
+                            if any(s ^ f == t for f in ground.flips[g])]
+                    assert [(task.operator(g), task.binding(g)) for g in task.actions_to(s, t)] == want
+                    if t != s:
+                        assert s in task.predecessors(t)
+
+
+def test_sampled_domains_do_not_depend_on_n_and_masks_match_choices(bundled):
+    sampler = EffectSampler(bundled)
+    a, b = sampler.choices(100, seed=7), sampler.choices(30, seed=7)
+    assert np.array_equal(a[:30], b)  # domain k is the same whatever N is
+    assert not np.array_equal(a, sampler.choices(100, seed=8))
+    domains = DomainSet.sampled(sampler, 100, seed=7)
+    for o in sampler.probabilistic[:50].tolist():
+        masks = domains.masks(o)
+        assert sum(masks) == domains.full  # every domain takes exactly one effect
+        for j, m in enumerate(masks):
+            assert [k for k in range(100) if m >> k & 1] == np.flatnonzero(a[:, o] == j).tolist()
+
+
+def test_the_expansion_budget_decides_and_no_state_is_kept(bundled, golden):
+    planner = SymbolicPlanner(bundled)
+    entry = max(golden["problems"], key=lambda e: max((len(p[0]) for p in e["ranked"]), default=0))
+    problem = _problem(entry, bundled)
+    runs = [planner.plan_probabilistic(problem, 100, entry["seed"], expansion_budget=3) for _ in range(2)]
+    assert runs[0].statuses == runs[1].statuses and runs[0].statuses.get("timeout", 0) > 0
+    assert _ranked(runs[0]) == _ranked(runs[1])
+    assert planner.task(problem.n).cached_states == 0
+
+
+def _write(problems_file: str) -> None:
+    """Regenerate the golden file from a problem set with the bundled models (needs torch)."""
+    import torch
+
+    from tamp.app.problem import read_problem_set
+    from tamp.planning.bilevel import PlanConfig, _symbolic_problem
+    from tamp.planning.models import load_models, pretrained_dir
+
+    torch.set_num_threads(1)
+    models = load_models(pretrained_dir())
+    cfg = PlanConfig()
+    planner = SymbolicPlanner(models.domain)
+    entries = []
+    for p in read_problem_set(problems_file):
+        sp = _symbolic_problem(models, p.X_init, p.X_goal, cfg)
+        out = planner.plan_probabilistic(sp, cfg.n_domains, p.seed, expansion_budget=cfg.level1_expansions)
+        entries.append({"name": p.name, "n": sp.n, "seed": p.seed, "nonempty": sp.nonempty,
+                        "init": str(pack_state(sp.init_unary, sp.init_rel)),
+                        "goal": str(pack_state(sp.goal_unary, sp.goal_rel)),
+                        "ranked": _ranked(out), "statuses": out.statuses})
+    GOLDEN.write_text(json.dumps({"source": f"{Path(problems_file).name} with the bundled models",
+                                  "n_domains": cfg.n_domains, "expansion_budget": cfg.level1_expansions,
+                                  "problems": entries}, indent=0) + "\n")
+    print(f"wrote {len(entries)} problems to {GOLDEN}")
+
+
+if __name__ == "__main__":
+    if len(sys.argv) != 3 or sys.argv[1] != "--write":
+        sys.exit("usage: python tests/test_symbolic_search.py --write PROBLEMS.jsonl")
+    _write(sys.argv[2])
