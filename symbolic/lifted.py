@@ -122,7 +122,8 @@ class LiftedTask:
         self.effect_local = np.full((len(self.effect_op), max(F, 1)), -1, dtype=np.int64)
         pre_groups: dict[int, list[int]] = {}  # key -> effect rows in (operator, effect) order
         post_groups: dict[int, dict[bytes, int]] = {}  # key -> one row per distinct local flip
-        local_flip: list[bytes] = []
+        local_flip: list[bytes] = []  # per effect row: its arity and sorted local flip positions
+        flip_ids: dict[bytes, int] = {}
         for oi, (op, ok) in enumerate(zip(ops.operators, allowed)):
             a = op.arity
             pre = np.concatenate([op.pre_unary.ravel(), op.pre_rel.ravel()]).astype(np.int64)
@@ -131,13 +132,16 @@ class LiftedTask:
                         [a * d + k * a * a + i * a + jj for k, i, jj in e.rel_flips]
                 row = int(self.effect_start[oi]) + j
                 self.effect_local[row, : len(local)] = local
-                local_flip.append(bytes(sorted(local)))
+                local_flip.append(bytes([a]) + bytes(sorted(local)))
+                flip_ids.setdefault(local_flip[-1], len(flip_ids))
                 if not ok:
                     continue
                 pre_groups.setdefault(_key(pre, a), []).append(row)
                 post = pre.copy()
                 post[local] ^= 1
                 post_groups.setdefault(_key(post, a), {}).setdefault(local_flip[-1], row)
+        self.flip_id = np.array([flip_ids[f] for f in local_flip], dtype=np.int64)
+        self._n_flip_ids = max(len(flip_ids), 1)
         # The first rows: per pre-state and distinct local flip, the rows up to the first deterministic
         # one (a later row of the same tuple and flip never comes first in any domain).
         first_groups: dict[int, list[int]] = {}
@@ -168,23 +172,35 @@ class LiftedTask:
         local = self.effect_local[rows]
         return np.stack([table[tuple_idx[:, None], local].sum(axis=1) for table in self._bit_value], axis=1)
 
-    def _apply(self, state: int, flips: np.ndarray) -> tuple[list[int], np.ndarray, np.ndarray]:
-        """Distinct states `state ^ flip` in order of first occurrence, with (first rows, inverse)."""
+    def _successors(self, state: int, tuple_idx: np.ndarray, rows: np.ndarray) -> tuple[list[int], np.ndarray]:
+        """Distinct states reached by effect rows applied to tuples, in order of the first row that
+        reaches each, and the successor index of every row. Global flips are computed once per
+        distinct (tuple, local flip): operators that differ only in their offsets share effects."""
+        pair = tuple_idx * self._n_flip_ids + self.flip_id[rows]
+        upair, first_row, pair_of_row = np.unique(pair, return_index=True, return_inverse=True)
+        flips = self._flips(tuple_idx[first_row], rows[first_row])
+        # distinct global flips (several tuples can flip the same bits)
+        order = np.lexsort(flips.T[::-1]) if self.words > 1 else np.argsort(flips[:, 0], kind="stable")
+        ordered = flips[order]
+        new = np.ones(len(order), bool)
+        new[1:] = (ordered[1:] != ordered[:-1]).any(axis=1)
+        flip_of_pair = np.empty(len(order), np.int64)
+        flip_of_pair[order] = np.cumsum(new) - 1
+        flip_of_row = flip_of_pair[pair_of_row.ravel()]
+        # number the successors by their first row
+        n_flips = int(new.sum())
+        first = np.full(n_flips, len(rows), np.int64)
+        np.minimum.at(first, flip_of_row, np.arange(len(rows)))
+        by_first = np.argsort(first, kind="stable")
+        rank = np.empty(n_flips, np.int64)
+        rank[by_first] = np.arange(n_flips)
+        chosen = flips[first_row_pair(pair_of_row.ravel(), first[by_first])]
         if self.words == 1:
-            _, first, inverse = np.unique(flips[:, 0], return_index=True, return_inverse=True)
+            states = [state ^ f for f in chosen[:, 0].tolist()]
         else:
-            view = np.ascontiguousarray(flips).view(np.dtype((np.void, 8 * self.words))).ravel()
-            _, first, inverse = np.unique(view, return_index=True, return_inverse=True)
-        order = np.argsort(first, kind="stable")
-        rank = np.empty(len(first), np.int64)
-        rank[order] = np.arange(len(first))
-        first = first[order]
-        if self.words == 1:
-            states = [state ^ f for f in flips[first, 0].tolist()]
-        else:
-            cols = [flips[first, w].tolist() for w in range(self.words)]
-            states = [state ^ sum(c << (64 * w) for w, c in enumerate(ws)) for ws in zip(*cols)]
-        return states, first, rank[inverse.ravel()]
+            raw, width = chosen.tobytes(), 8 * self.words
+            states = [state ^ int.from_bytes(raw[i: i + width], "little") for i in range(0, len(raw), width)]
+        return states, rank[flip_of_row]
 
     # ---- forward and backward --------------------------------------------------------------------
     def expand(self, state: int) -> Expansion:
@@ -200,7 +216,7 @@ class LiftedTask:
             action = op * self.n_tuples + tuple_idx
             order = np.argsort(action, kind="stable")  # ground-action order; effects stay in order
             tuple_idx, rows, op, action = tuple_idx[order], rows[order], op[order], action[order]
-            successors, _, succ = self._apply(state, self._flips(tuple_idx, rows))
+            successors, succ = self._successors(state, tuple_idx, rows)
             # per successor, the events up to its first deterministic one
             det = self.deterministic[rows]
             first_det = np.full(len(successors), len(rows), dtype=np.int64)
@@ -217,7 +233,7 @@ class LiftedTask:
         tuple_idx, rows = self._post.match(self._keys(state))
         if len(rows) == 0:
             return []
-        states, _, _ = self._apply(state, self._flips(tuple_idx, rows))
+        states, _ = self._successors(state, tuple_idx, rows)
         return [s for s in states if s != state]
 
     def actions_to(self, state: int, target: int) -> list[GroundAction]:
@@ -254,6 +270,11 @@ class LiftedTask:
         row = int(self.effect_start[self.operator(g)]) + effect
         flip = self._flips(np.array([g % self.n_tuples]), np.array([row]))[0]
         return state ^ sum(int(c) << (64 * w) for w, c in enumerate(flip.tolist()))
+
+
+def first_row_pair(pair_of_row: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """The (tuple, local flip) pair of each given row."""
+    return pair_of_row[rows]
 
 
 def _key(bits: np.ndarray, arity: int) -> int:

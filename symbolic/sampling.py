@@ -54,18 +54,19 @@ class EffectSampler:
             self.cumulative[i, : len(c)] = c
             self.cumulative[i, len(c) - 1:] = np.inf  # round-off guard: the last effect takes the rest
         self.probabilistic = np.flatnonzero(self.n_effects > 1)
+        # every operator's inner cumulative bounds, shifted by 2 * operator into one sorted array: one
+        # searchsorted draws the effects of any set of operators at once
+        inner = [2.0 * i + self.cumulative[i, : n - 1] for i, n in enumerate(self.n_effects.tolist())]
+        self._bounds = np.concatenate(inner) if inner else np.zeros(0)
+        self._first_bound = np.searchsorted(self._bounds, 2.0 * np.arange(len(ops)), side="left")
 
     def choices(self, n_domains: int, seed: int, operators: np.ndarray | None = None) -> np.ndarray:
         """(n_domains, len(operators)) effect indices (all operators by default)."""
         if n_domains < 1:
             raise ValueError(f"n_domains must be >= 1, got {n_domains}")
         ops = np.arange(len(self.ops)) if operators is None else np.asarray(operators, np.int64)
-        out = np.zeros((n_domains, len(ops)), np.int64)
-        prob = np.flatnonzero(self.n_effects[ops] > 1)
-        if len(prob):
-            u = uniforms(seed, np.arange(n_domains), ops[prob])  # (N, P)
-            out[:, prob] = (u[:, :, None] >= self.cumulative[ops[prob]][None]).sum(axis=2)
-        return out
+        u = uniforms(seed, np.arange(n_domains), ops)  # (N, len(ops))
+        return np.searchsorted(self._bounds, 2.0 * ops + u, side="right") - self._first_bound[ops]
 
 
 def sample_choices(ops: OperatorSet, n_domains: int, seed: int = 0, min_prob: float = 0.0) -> np.ndarray:
@@ -88,7 +89,7 @@ class DomainSet:
         self.n, self.n_effects = n_domains, n_effects
         self.full = (1 << n_domains) - 1
         self._sampler, self._seed, self._choices = sampler, seed, choices
-        self._masks: dict[int, tuple[int, ...]] = {}
+        self.table: dict[int, tuple[int, ...]] = {}  # operator -> mask per effect (prepared ones)
         self.seconds = 0.0  # spent drawing effects
 
     @classmethod
@@ -107,7 +108,7 @@ class DomainSet:
 
     def prepare(self, operators) -> None:
         """Draw the effects of these operators (those not drawn yet; -1 ignored) for all N domains."""
-        new = [o for o in dict.fromkeys(operators) if o >= 0 and o not in self._masks]
+        new = [o for o in dict.fromkeys(operators) if o >= 0 and o not in self.table]
         if not new:
             return
         start = time.perf_counter()
@@ -116,20 +117,23 @@ class DomainSet:
         else:
             assert self._sampler is not None
             columns = self._sampler.choices(self.n, self._seed, np.array(new, np.int64))
-        weights = [1 << k for k in range(self.n)]
-        for o, col in zip(new, columns.T.tolist()):
-            masks = [0] * int(self.n_effects[o])
-            for w, j in zip(weights, col):
-                masks[j] |= w
-            self._masks[o] = tuple(masks)
+        width = int(self.n_effects[new].max())
+        chosen = columns[:, :, None] == np.arange(width)  # (N, ops, effects)
+        packed = np.packbits(chosen, axis=0, bitorder="little").transpose(1, 2, 0)  # (ops, effects, bytes)
+        size = packed.shape[2]
+        raw = np.ascontiguousarray(packed).tobytes()
+        for i, o in enumerate(new):
+            base = i * width * size
+            self.table[o] = tuple(int.from_bytes(raw[base + j * size: base + (j + 1) * size], "little")
+                                  for j in range(int(self.n_effects[o])))
         self.seconds += time.perf_counter() - start
 
     def masks(self, operator: int) -> tuple[int, ...]:
         """Per effect of a (prepared or not) operator, the mask of the domains that use it."""
-        hit = self._masks.get(operator)
+        hit = self.table.get(operator)
         if hit is None:
             self.prepare([operator])
-            hit = self._masks[operator]
+            hit = self.table[operator]
         return hit
 
 

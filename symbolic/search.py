@@ -97,12 +97,13 @@ def search_domains(task: LiftedTask, domains: DomainSet, init: int, goal: int, m
         return out
     distances = _Distances(task, goal)
     active = full  # domains without a plan yet
-    prepared: set[int] = set()
+    masks = domains.table  # operator -> domains per effect, filled by `prepare` for each new state
     t_back = 0.0
     D = 1
     while active:
         t = time.perf_counter()
         out.expanded += distances.grow(_radius(D), max_expansions - out.expanded)
+        bounds_of: dict[int, np.ndarray] = {}  # per state, its successors' bounds at this radius
         t_back += time.perf_counter() - t
         if distances.bound(init) >= INFINITE:
             break  # the goal cannot be reached from init in any domain
@@ -128,13 +129,12 @@ def search_domains(task: LiftedTask, domains: DomainSet, init: int, goal: int, m
                 out.expanded += 1
                 s = node_state[e]
                 x = task.expand(s)
-                if s not in prepared:
-                    domains.prepare(x.event_op)
-                    prepared.add(s)
                 events: range | list[int] = range(len(x.event_action))
                 if bounded and x.successors:
-                    dist, beyond = distances.dist, distances.beyond
-                    bounds = np.array([dist.get(u, beyond) for u in x.successors])
+                    bounds = bounds_of.get(s)
+                    if bounds is None:
+                        dist, beyond = distances.dist, distances.beyond
+                        bounds = bounds_of[s] = np.array([dist.get(u, beyond) for u in x.successors])
                     allowed = bounds <= remaining
                     if not allowed.all():
                         if (~allowed & (bounds < INFINITE)).any():
@@ -144,7 +144,12 @@ def search_domains(task: LiftedTask, domains: DomainSet, init: int, goal: int, m
                                                          x.event_action, x.event_successor)
                 for i in events:
                     o = ev_op[i]
-                    m = here if o < 0 else here & domains.masks(o)[ev_eff[i]]
+                    if o < 0:
+                        m = here
+                    else:
+                        if o not in masks:  # draw effects only for the operators met, all N domains at once
+                            domains.prepare([ev_op[i] for i in events])
+                        m = here & masks[o][ev_eff[i]]
                     if not m:
                         continue
                     u = succ[ev_succ[i]]
