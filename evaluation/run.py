@@ -62,10 +62,10 @@ ROW_KEYS = ("problem", "n", "k", "run", "protocol", "moved", "method", "solved",
             "level1_time_s", "predicted_error_m", "candidates", "refined", "refine_failure", "refine_time_s",
             "executed_actions", "executed_plans", "final_error_m", "success", "outcome", "rounds", "fidelity",
             "eps_m", "tau_verify_m", "symbolic_backend", "feasibility", "search_time_s", "feasibility_time_s",
-            "plan_refine_time_s")
+            "plan_refine_time_s", "level1_stages_s", "search_expanded")
 # the only fields that vary between runs
 TIMING_KEYS = ("planning_time_s", "level1_time_s", "refine_time_s", "search_time_s", "feasibility_time_s",
-               "plan_refine_time_s")
+               "plan_refine_time_s", "level1_stages_s")
 ERROR_OUTCOME = Outcome.ERROR.value  # a pair that raised (see Evaluator.error_row); not one of OUTCOMES
 MAX_CANDIDATES = 20
 # meta.json fields that define the rows: a results directory is resumed only if all of them match.
@@ -117,7 +117,7 @@ class EvalConfig:
         p = self.planner
         out = {"fidelity": self.fidelity, "eps_m": p.eps, "tau_verify_m": p.tau_verify, "n_domains": p.n_domains,
                "search_time_limit_s": p.search.time_limit, "search_max_expansions": p.search.max_expansions,
-               "level1_expansions": p.level1_expansions, "level1_time_budget_s": p.level1_time_budget,
+               "level1_budget": p.level1_budget, "level1_time_budget_s": p.level1_time_budget,
                "symbolic_backend": p.backend, "oracle_max_plans": self.oracle_max_plans}
         if p.symbolic_time_limit != PlanConfig.symbolic_time_limit:  # older results directories stay resumable
             out["symbolic_time_limit_s"] = p.symbolic_time_limit
@@ -144,6 +144,20 @@ def _actions(plan) -> list[list[int]] | None:
 
 def _level1_time(result) -> float:
     return sum(result.timings.get(k, 0.0) for k in LEVEL1_STAGES)
+
+
+def _level1_stages(results: list) -> dict[str, float] | None:
+    """Seconds per Level-1 stage (symbols, symbolic, verify), summed over planning calls; None without
+    a symbolic level."""
+    if not any("symbols" in r.timings for r in results):
+        return None
+    return {k: _round(sum(r.timings.get(k, 0.0) for r in results)) for k in LEVEL1_STAGES}
+
+
+def _search_expanded(results: list) -> int | None:
+    """Continuous-search expansions summed over planning calls; None when no call searched."""
+    searched = [r.search.expanded for r in results if r.search is not None]
+    return sum(searched) if searched else None
 
 
 def _candidates(result) -> list[dict]:
@@ -279,7 +293,8 @@ class Evaluator:
         extra = {} if kinematics is None else {"kinematics": kinematics}
         result = plan(method.planner, models, problem.X_init, problem.X_goal,
                       self.config.plan_config(problem.seed, method.feasibility), **extra)
-        fields = {**_feasibility_fields([result]), "solved": result.solved, "level": result.level,
+        fields = {**_feasibility_fields([result]), "level1_stages_s": _level1_stages([result]),
+                  "search_expanded": _search_expanded([result]), "solved": result.solved, "level": result.level,
                   "plan": _actions(result.plan),
                   "planning_time_s": _round(result.timings["total"]), "level1_time_s": _round(_level1_time(result)),
                   "predicted_error_m": _round(result.predicted_error), "candidates": _candidates(result),
@@ -323,7 +338,9 @@ class Evaluator:
         executed = len(out.executed)
         X_final = out.X_final if executed else problem.X_init
         failure = run.first_failure
-        return {**_feasibility_fields(out.rounds), "solved": solved, "level": None if first is None else first.level,
+        return {**_feasibility_fields(out.rounds), "level1_stages_s": _level1_stages(out.rounds),
+                "search_expanded": _search_expanded(out.rounds),
+                "solved": solved, "level": None if first is None else first.level,
                 "plan": _actions(out.executed) if solved else None,
                 "planning_time_s": _round(sum(r.timings["total"] for r in out.rounds)),
                 "level1_time_s": _round(sum(_level1_time(r) for r in out.rounds)),

@@ -238,7 +238,15 @@ class EffectModel(nn.Module):
         with self._eval_mode():
             Xt, at = torch.as_tensor(Xs, dtype=torch.float32), torch.from_numpy(a)
             mask = torch.ones(B, n, dtype=torch.bool)
-            u, r = self.encode(Xt, mask)
+            # one encoding per run of identical scenes (beam searches and rollouts repeat each scene
+            # for its actions): the symbols of a scene do not depend on the action
+            new = np.ones(B, bool)
+            new[1:] = np.any(Xs[1:] != Xs[:-1], axis=(1, 2))
+            first = torch.from_numpy(np.flatnonzero(new))
+            u, r = self.encode(Xt[first], mask[first])
+            if len(first) < B:
+                scene = torch.from_numpy(np.cumsum(new) - 1)
+                u, r = u[scene], r[scene]
             e = self.decode(Xt, at, mask, u, r).double()
             shift = arm_shift(torch.as_tensor(Xs), at)
         return (e + shift).numpy()

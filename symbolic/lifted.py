@@ -239,10 +239,9 @@ class LiftedTask:
     def actions_to(self, state: int, target: int) -> list[GroundAction]:
         """The ground actions applicable in `state` one of whose effects leads to `target`, in order."""
         tuple_idx, rows = self._all.match(self._keys(state))
-        flips = self._flips(tuple_idx, rows)
-        want = state ^ target
-        hits = [i for i, ws in enumerate(flips.tolist()) if sum(c << (64 * w) for w, c in enumerate(ws)) == want]
-        return sorted({int(self.effect_op[rows[i]]) * self.n_tuples + int(tuple_idx[i]) for i in hits})
+        want = np.frombuffer((state ^ target).to_bytes(8 * self.words, "little"), dtype=np.uint64)
+        hit = (self._flips(tuple_idx, rows) == want).all(axis=1)
+        return sorted(set((self.effect_op[rows[hit]] * self.n_tuples + tuple_idx[hit]).tolist()))
 
     def clear_cache(self) -> None:
         """Forget the expansions cached per state."""

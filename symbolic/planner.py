@@ -55,7 +55,7 @@ class SymbolicPlanner:
 
     def __init__(self, ops: OperatorSet, backend: str = "python", search: str = fd.DEFAULT_SEARCH,
                  time_limit: float = 10.0, scope: str = "subset", workers: int | None = None,
-                 max_expansions: int = 200_000):
+                 budget: int = 1_000_000):
         if backend not in BACKENDS:
             raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
         if scope not in ("subset", "exact"):
@@ -63,7 +63,7 @@ class SymbolicPlanner:
         if len(ops) == 0:
             raise ValueError("no operators to plan with")
         self.ops, self.backend, self.search, self.time_limit = ops, backend, search, time_limit
-        self.scope, self.max_expansions = scope, max_expansions
+        self.scope, self.budget = scope, budget  # states generated per search (python backend)
         self.workers = workers or os.cpu_count() or 1
         self.writer = DomainWriter(ops)
         self.sampler = EffectSampler(ops)  # cumulative effect tables, once per operator set
@@ -95,7 +95,7 @@ class SymbolicPlanner:
         ch = np.zeros(len(self.ops), np.int64) if choice is None else np.asarray(choice)
         if self.backend == "python":
             start = time.perf_counter()
-            out = self._search(problem, DomainSet.of_choices(self.ops, ch[None]), self.max_expansions, None)
+            out = self._search(problem, DomainSet.of_choices(self.ops, ch[None]), self.budget, None)
             return self._result(problem.n, out, 0, time.perf_counter() - start)
         result = fd.run_fast_downward(self._domain_text(ch, problem.n), problem_pddl(self.ops, problem),
                                       self.search, self.time_limit)
@@ -107,14 +107,13 @@ class SymbolicPlanner:
 
     # ---- probabilistic -------------------------------------------------------------------------
     def plan_probabilistic(self, problem: SymbolicProblem, n_domains: int = 100, seed: int = 0,
-                           time_budget: float | None = None,
-                           expansion_budget: int | None = None) -> ProbabilisticPlanResult:
-        """Plan in N sampled domains and rank the plans by frequency. Python backend: with
-        `expansion_budget` (expanded states of the shared search; machine-independent) or `time_budget`
-        (seconds), the domains without a plan when either runs out count as timed out."""
+                           time_budget: float | None = None, budget: int | None = None) -> ProbabilisticPlanResult:
+        """Plan in N sampled domains and rank the plans by frequency. Python backend: with `budget`
+        (states the shared search may generate; machine-independent, default the planner's) or
+        `time_budget` (seconds), the domains without a plan when either runs out count as timed out."""
         check_problem(self.ops, problem)
         if self.backend == "python":
-            return self._probabilistic_python(problem, n_domains, seed, time_budget, expansion_budget)
+            return self._probabilistic_python(problem, n_domains, seed, time_budget, budget)
         t0 = time.perf_counter()
         choices = self.sampler.choices(n_domains, seed)
         timings = {"sampling": time.perf_counter() - t0}
@@ -128,23 +127,22 @@ class SymbolicPlanner:
         statuses = Counter(r.status.value for r in per_domain)
         return ProbabilisticPlanResult(ranked, n_domains, n_unique, n_searches, dict(statuses), timings)
 
-    def _search(self, problem: SymbolicProblem, domains: DomainSet, max_expansions: int,
+    def _search(self, problem: SymbolicProblem, domains: DomainSet, budget: int,
                 deadline: float | None) -> SearchOutcome:
         task = self.task(problem.n)
         init, goal = problem_states(problem)
         try:
-            return search_domains(task, domains, init, goal, max_expansions, deadline, problem.nonempty)
+            return search_domains(task, domains, init, goal, budget, deadline, problem.nonempty)
         finally:  # expansions are not kept between problems (honest per-problem cost, bounded memory)
             task.clear_cache()
 
     def _probabilistic_python(self, problem: SymbolicProblem, n_domains: int, seed: int,
-                              time_budget: float | None, expansion_budget: int | None) -> ProbabilisticPlanResult:
+                              time_budget: float | None, budget: int | None) -> ProbabilisticPlanResult:
         start = time.perf_counter()
         deadline = None if time_budget is None else start + time_budget
         deadline = min(deadline or np.inf, start + self.time_limit)
         domains = DomainSet.sampled(self.sampler, n_domains, seed)
-        budget = self.max_expansions if expansion_budget is None else expansion_budget
-        out = self._search(problem, domains, budget, deadline)
+        out = self._search(problem, domains, self.budget if budget is None else budget, deadline)
         searched = time.perf_counter() - start
         t0 = time.perf_counter()
         task = self.task(problem.n)
@@ -162,7 +160,8 @@ class SymbolicPlanner:
         timings = {"sampling": domains.seconds, "planner": searched - domains.seconds,
                    "backward": out.timings.get("backward", 0.0), "parsing": time.perf_counter() - t0}
         statuses = Counter(s.value for s in out.status)
-        return ProbabilisticPlanResult(ranked, n_domains, None, 1, dict(statuses), timings, out.expanded)
+        return ProbabilisticPlanResult(ranked, n_domains, None, 1, dict(statuses), timings, out.expanded,
+                                       out.generated)
 
     def _rank(self, per_domain: list[PlannerResult], n: int) -> list[RankedPlan]:
         found: dict[tuple, list] = {}

@@ -191,3 +191,4 @@ class ProbabilisticPlanResult:
     statuses: dict[str, int]  # outcome -> number of domains (weighted)
     timings: dict[str, float] = field(default_factory=dict)  # seconds: sampling, planner, parsing, ...
     expanded: int = 0  # python backend: states expanded by the shared search (forward and backward)
+    generated: int = 0  # python backend: states those expansions generated (the budget's unit)

@@ -88,16 +88,18 @@ def test_refine_skeleton_finds_the_concrete_actions_the_symbols_cannot_tell_apar
     stub = StubModel()
     # one step "put 0 on 1" with every grasp and release offset: only (0, 0, 1, 0) lands centred
     options = [[(0, g, 1, r) for g in (-1, 0, 1) for r in (-1, 0, 1)]]
-    plans = refine_skeleton(stub, X_INIT, A_ON_B, options, width=4)
+    checked = refine_skeleton(stub, X_INIT, A_ON_B, options, width=4)
+    plans = [v.actions for v in checked]
     assert plans[0] == ((0, 0, 1, 0),) and len(plans) == 4 and len(set(plans)) == 4
     errors = [goal_error(execute(X_INIT, p), A_ON_B) for p in plans]
     assert errors == sorted(errors) and errors[0] < 1e-9  # best first, by the verification measure
+    assert [v.error for v in checked] == pytest.approx(errors)  # the search's rollouts verify the plans
     # two steps: first any move of 1 along its own y (shift), then 0 on 1; the goal has 1 shifted
     goal = A_ON_B.copy()
     goal[:, 1] += 0.075
     options = [[(1, g, 1, r) for g in (-1, 0, 1) for r in (-1, 0, 1)], options[0]]
     best = refine_skeleton(stub, X_INIT, goal, options, width=3)[0]
-    assert goal_error(execute(X_INIT, best), goal) < 1e-9
+    assert goal_error(execute(X_INIT, best.actions), goal) < 1e-9 and best.verified
     assert refine_skeleton(stub, X_INIT, goal, [[], options[1]], width=3) == []  # a step nothing can take
 
 

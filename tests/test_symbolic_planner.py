@@ -100,7 +100,7 @@ def test_fd_backend_gives_valid_ranked_plans(ops, problems):
 
 @pytest.mark.slow
 def test_planner_outcomes_are_distinguishable(ops, problems):
-    py = SymbolicPlanner(ops, backend="python", max_expansions=1)
+    py = SymbolicPlanner(ops, backend="python", budget=1)
     assert py.plan(problems[2]).status is PlannerStatus.TIMEOUT  # needs three steps
     py = SymbolicPlanner(ops, backend="python")
     assert py.plan(_unsolvable(problems[3])).status is PlannerStatus.UNSOLVABLE
@@ -180,17 +180,17 @@ def test_level1_time_budget_bounds_probabilistic_planning(ops, problems):
     assert spent.statuses == {"timeout": 60} and spent.plans == []
 
 
-def test_level1_expansion_budget_is_shared_by_all_domains_and_deterministic(ops, problems):
+def test_level1_budget_is_shared_by_all_domains_and_deterministic(ops, problems):
     problem = problems[2]
     unbounded = SymbolicPlanner(ops, backend="python").plan_probabilistic(problem, n_domains=60, seed=4)
     ample = SymbolicPlanner(ops, backend="python").plan_probabilistic(problem, n_domains=60, seed=4,
-                                                                     expansion_budget=10**9)
+                                                                     budget=10**9)
     assert [(p.actions, p.count) for p in ample.plans] == [(p.actions, p.count) for p in unbounded.plans]
     spent = SymbolicPlanner(ops, backend="python").plan_probabilistic(problem, n_domains=60, seed=4,
-                                                                     expansion_budget=0)
+                                                                     budget=0)
     assert spent.statuses == {"timeout": 60} and spent.plans == []
     tight = [SymbolicPlanner(ops, backend="python").plan_probabilistic(problem, n_domains=60, seed=4,
-                                                                      expansion_budget=3) for _ in range(2)]
+                                                                      budget=3) for _ in range(2)]
     assert tight[0].statuses == tight[1].statuses and tight[0].statuses.get("timeout", 0) > 0
     assert [(p.actions, p.count) for p in tight[0].plans] == [(p.actions, p.count) for p in tight[1].plans]
 

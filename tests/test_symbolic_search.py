@@ -63,7 +63,7 @@ def test_ranked_plans_of_the_bundled_domain_are_unchanged(bundled, golden):
     planner = SymbolicPlanner(bundled)
     for entry in golden["problems"]:
         out = planner.plan_probabilistic(_problem(entry, bundled), golden["n_domains"], entry["seed"],
-                                         expansion_budget=golden["expansion_budget"])
+                                         budget=golden["budget"])
         assert _ranked(out) == entry["ranked"], entry["name"]
         assert out.statuses == entry["statuses"], entry["name"]
 
@@ -133,11 +133,11 @@ def test_sampled_domains_do_not_depend_on_n_and_masks_match_choices(bundled):
             assert [k for k in range(100) if m >> k & 1] == np.flatnonzero(a[:, o] == j).tolist()
 
 
-def test_the_expansion_budget_decides_and_no_state_is_kept(bundled, golden):
+def test_the_budget_decides_and_no_state_is_kept(bundled, golden):
     planner = SymbolicPlanner(bundled)
     entry = max(golden["problems"], key=lambda e: max((len(p[0]) for p in e["ranked"]), default=0))
     problem = _problem(entry, bundled)
-    runs = [planner.plan_probabilistic(problem, 100, entry["seed"], expansion_budget=3) for _ in range(2)]
+    runs = [planner.plan_probabilistic(problem, 100, entry["seed"], budget=3) for _ in range(2)]
     assert runs[0].statuses == runs[1].statuses and runs[0].statuses.get("timeout", 0) > 0
     assert _ranked(runs[0]) == _ranked(runs[1])
     assert planner.task(problem.n).cached_states == 0
@@ -158,13 +158,13 @@ def _write(problems_file: str) -> None:
     entries = []
     for p in read_problem_set(problems_file):
         sp = _symbolic_problem(models, p.X_init, p.X_goal, cfg)
-        out = planner.plan_probabilistic(sp, cfg.n_domains, p.seed, expansion_budget=cfg.level1_expansions)
+        out = planner.plan_probabilistic(sp, cfg.n_domains, p.seed, budget=cfg.level1_budget)
         entries.append({"name": p.name, "n": sp.n, "seed": p.seed, "nonempty": sp.nonempty,
                         "init": str(pack_state(sp.init_unary, sp.init_rel)),
                         "goal": str(pack_state(sp.goal_unary, sp.goal_rel)),
                         "ranked": _ranked(out), "statuses": out.statuses})
     GOLDEN.write_text(json.dumps({"source": f"{Path(problems_file).name} with the bundled models",
-                                  "n_domains": cfg.n_domains, "expansion_budget": cfg.level1_expansions,
+                                  "n_domains": cfg.n_domains, "budget": cfg.level1_budget,
                                   "problems": entries}, indent=0) + "\n")
     print(f"wrote {len(entries)} problems to {GOLDEN}")
 

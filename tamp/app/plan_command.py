@@ -212,10 +212,16 @@ def add_planner_arguments(p: argparse.ArgumentParser, backends: tuple[str, ...] 
     p.add_argument("--symbolic-time-limit", type=positive_float, default=default.symbolic_time_limit,
                    help=f"wall-clock limit per symbolic planner call, s (default {default.symbolic_time_limit:g}; "
                    "Fast Downward needs more at 4 objects)")
+    p.add_argument("--level1-budget", type=positive_int, default=default.level1_budget,
+                   help="symbolic states Level 1's search (one for all N domains) may generate per planning call "
+                   f"(default {default.level1_budget}: well under 1 s at 2 to 6 objects); deterministic, "
+                   "whatever the machine's load")
     p.add_argument("--max-expansions", type=positive_int, default=default.search.max_expansions,
-                   help=f"continuous search node limit per planning call (default {default.search.max_expansions})")
+                   help="continuous search node limit per planning call: it decides when the search gives up, "
+                   f"whatever the machine's load (default {default.search.max_expansions}, about 10 s at 4 objects)")
     p.add_argument("--time-limit", type=positive_float, default=default.search.time_limit,
-                   help=f"continuous search time limit per planning call, s (default {default.search.time_limit:g})")
+                   help="continuous search wall-clock limit per planning call, s: a safety net behind "
+                   f"--max-expansions (default {default.search.time_limit:g})")
     if feasibility:
         p.add_argument("--no-feasibility", dest="feasibility", action="store_false",
                        help="cfs and bilevel without kinematics in the planning loop (no feasibility check of "
@@ -224,7 +230,7 @@ def add_planner_arguments(p: argparse.ArgumentParser, backends: tuple[str, ...] 
 
 def planner_config(args: argparse.Namespace) -> PlanConfig:
     """The PlanConfig of the flags of `add_planner_arguments` (seed 0: callers set the problem's)."""
-    return PlanConfig(n_domains=args.n_domains, backend=args.symbolic_backend,
+    return PlanConfig(n_domains=args.n_domains, backend=args.symbolic_backend, level1_budget=args.level1_budget,
                       symbolic_time_limit=args.symbolic_time_limit, feasibility=getattr(args, "feasibility", True),
                       search=SearchConfig(max_expansions=args.max_expansions, time_limit=args.time_limit))
 

@@ -59,7 +59,8 @@ class PlanConfig:
     eps: float = EPS_SUCCESS  # metres: success tolerance (goal test of the search, closed loop)
     backend: str = "python"  # symbolic planner backend, one of SYMBOLIC_BACKENDS
     symbolic_time_limit: float = 10.0  # seconds per symbolic planner call
-    level1_expansions: int | None = 10_000  # search expansions for all N domains of one problem (deterministic)
+    level1_budget: int | None = 300_000  # symbolic states the search for all N domains may generate
+    #                                      (deterministic; about 3-4 microseconds each on this machine)
     level1_time_budget: float | None = None  # seconds for all N symbolic planner calls (machine-dependent)
     verify_all: bool = False  # verify every candidate (default: stop at the first verified one, Alg. 1)
     # Beyond the paper, bilevel only (0 and False give its Algorithm 1 exactly; the unverified
@@ -168,7 +169,7 @@ def _level1_plans(models: Models, X_init, X_goal, cfg: PlanConfig, result: PlanR
     if probabilistic:
         out = planner.plan_probabilistic(problem, n_domains=cfg.n_domains, seed=cfg.seed,
                                          time_budget=cfg.level1_time_budget,
-                                         expansion_budget=cfg.level1_expansions)
+                                         budget=cfg.level1_budget)
         result.timings["symbolic"] = time.perf_counter() - t
         result.symbolic_stats = {"n_domains": out.n_domains, "unique_plans": len(out.plans),
                                  "outcomes": dict(out.statuses)}
@@ -311,23 +312,127 @@ def _timed(method: str, body: Callable[[PlanResult], PlanResult]) -> PlanResult:
 
 
 # --- the methods ------------------------------------------------------------------------------
-def _verify_group(models: Models, X_init, X_goal, index: int, candidate: Candidate, cfg: PlanConfig,
-                  limit: int) -> tuple[list[Candidate], list[Verification]]:
-    """Verify a ranked symbolic plan and its alternatives (plans through the same symbolic states, the
-    best of a beam search over its skeleton) in one shared rollout; returns them and their verified
-    plans, smallest predicted error first (the symbols cannot rank plans through the same symbolic
-    states; the Dynamics Model can)."""
-    group = [candidate]
-    if limit > 0 and candidate.states is not None and candidate.actions:
-        planner = models.symbolic_planner(cfg.backend, cfg.symbolic_time_limit)
-        options = planner.skeleton_options(len(X_init), candidate.states)
-        plans = refine_skeleton(models.require_dynamics(), X_init, X_goal, options, limit + 1)
-        group += [Candidate(alt, candidate.count, candidate.probability, alternative_of=index)
-                  for alt in plans if alt != candidate.actions][:limit]
-    checks = verify_many(models.require_dynamics(), X_init, X_goal, [c.actions for c in group], cfg.tau_verify)
-    for c, v in zip(group, checks):
-        c.error, c.verified = v.error, v.verified
-    return group, sorted((v for v in checks if v.verified), key=lambda v: v.error)
+def plan_bilevel(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig(),
+                 kinematics: KinematicFeasibility | None = None) -> PlanResult:
+    """Algorithm 1 of the paper: a verified plan of Level 1, else Level 2's continuous search.
+
+    With `kinematics` (and cfg.feasibility) a verified plan must also pass the kinematic check on its
+    predicted states and refine, else the next one is tried; Level 2 then prunes infeasible
+    successors and the (state, action) pairs that failed refinement."""
+    def body(result: PlanResult) -> PlanResult:
+        feas = _Feasibility.of(kinematics, cfg, result)
+        chosen = _level1(models, X_init, X_goal, cfg, result, feas)
+        if chosen is not None:
+            return _take(result, chosen.actions, 1, chosen.trajectory, X_goal)
+        return _level2(models, X_init, X_goal, cfg, result, feas)  # line 16: continuous search fallback
+    return _timed("bilevel", body)
+
+
+def _level1(models: Models, X_init, X_goal, cfg: PlanConfig, result: PlanResult,
+            feas: _Feasibility | None) -> Verification | None:
+    """Level 1 of Algorithm 1 (lines 4-14): Sigma_init, Sigma_goal -> plans of N sampled domains, ranked
+    by frequency -> the first plan whose Dynamics Model rollout ends within tau of X_goal.
+
+    Our extensions live in `_Verifier.check`: a ranked plan is verified together with the plans through
+    the same symbolic states (`cfg.alternatives`), and a verified plan must pass the kinematic check and
+    refine (`feas`)."""
+    ranked = _level1_plans(models, X_init, X_goal, cfg, result)  # lines 5-7
+    verifier = _Verifier(models, X_init, X_goal, cfg, result, feas, ranked)
+    for i in range(len(ranked)):  # line 9: in decreasing order of probability
+        verifier.check(i)  # lines 10-11
+        if verifier.chosen is not None and not cfg.verify_all:
+            break  # line 12
+        if verifier.out_of_refinements:
+            break
+    verifier.finish()
+    return verifier.chosen
+
+
+class _Verifier:
+    """Verification of Level 1's ranked plans (Alg. 1, lines 9-14) with our extensions, and its record.
+
+    - The ranked plans' own rollouts are computed in growing chunks (1, 2, 4, ... plans), all prefixes
+      of one length in one forward pass (`verify_many`): the same numbers as one plan at a time.
+    - Alternatives (cfg.alternatives > 0, states known): the best plans of a beam search over the
+      plan's skeleton (`refine_skeleton`), whose rollouts verify them; the group's verified plans are
+      tried smallest predicted error first.
+    - Kinematics (`feas`): a verified plan is taken only if it passes the check and refines.
+    """
+
+    def __init__(self, models: Models, X_init, X_goal, cfg: PlanConfig, result: PlanResult,
+                 feas: _Feasibility | None, ranked: list[Candidate]):
+        self.models, self.X_init, self.X_goal, self.cfg, self.result, self.feas, self.ranked = \
+            models, X_init, X_goal, cfg, result, feas, ranked
+        self.model = models.require_dynamics()
+        self.checked: list[Candidate] = []  # verified so far: ranked plans and their alternatives
+        self.chosen: Verification | None = None
+        self.any_verified = False
+        self.alternatives_left = cfg.alternatives_total
+        self._rollouts: dict[int, Verification] = {}
+        self._done = 0  # ranked plans checked
+        self._start = time.perf_counter()
+
+    @property
+    def out_of_refinements(self) -> bool:
+        if self.feas is None or self.feas.refinements_left > 0 or self.chosen is not None:
+            return False
+        self.result.reasons.append(f"level 1: refinement budget ({self.cfg.max_refinements}) used up")
+        return True
+
+    def _rollout(self, i: int) -> Verification:
+        if i not in self._rollouts:
+            chunk = self.ranked[i: i + max(1, len(self._rollouts))]
+            for j, v in enumerate(verify_many(self.model, self.X_init, self.X_goal, [c.actions for c in chunk],
+                                              self.cfg.tau_verify)):
+                self._rollouts[i + j] = v
+        return self._rollouts[i]
+
+    def check(self, i: int) -> None:
+        """Verify ranked plan i (and its alternatives); take the first acceptable verified plan."""
+        candidate = self.ranked[i]
+        self._done += 1
+        own = self._rollout(i)
+        group, checks = [candidate], [own]
+        limit = min(self.cfg.alternatives, self.alternatives_left)
+        if limit > 0 and candidate.states is not None and candidate.actions:
+            planner = self.models.symbolic_planner(self.cfg.backend, self.cfg.symbolic_time_limit)
+            options = planner.skeleton_options(len(self.X_init), candidate.states)
+            alternatives = [v for v in refine_skeleton(self.model, self.X_init, self.X_goal, options, limit + 1,
+                                                       self.cfg.tau_verify) if v.actions != candidate.actions]
+            alternatives = alternatives[:limit]
+            self.alternatives_left -= len(alternatives)
+            group += [Candidate(v.actions, candidate.count, candidate.probability, alternative_of=i)
+                      for v in alternatives]
+            checks += alternatives
+        for c, v in zip(group, checks):
+            c.error, c.verified = v.error, v.verified
+        self.checked += group
+        verified = sorted((v for v in checks if v.verified), key=lambda v: v.error)
+        self.any_verified = self.any_verified or bool(verified)
+        if self.chosen is None:
+            self.chosen = _feasible_choice(verified, self.feas)
+
+    def finish(self) -> None:
+        """Record the candidates (checked ones, then the rest), the verification time and, without a
+        chosen plan, why."""
+        result, feas, ranked = self.result, self.feas, self.ranked
+        result.candidates = self.checked + ranked[self._done:]
+        if ranked:
+            result.timings["verify"] = time.perf_counter() - self._start - (
+                0.0 if feas is None else result.timings["feasibility"] + result.timings["refine"])
+        if self.chosen is not None or not ranked:
+            return
+        if self.any_verified and feas is not None:
+            rejected = result.rejected_dict()
+            assert rejected is not None  # counted while feasibility is on
+            result.reasons.append(f"level 1: no verified plan was kinematically feasible "
+                                  f"(rejected: {rejected['level 1']})")
+            return
+        best = min(c.error for c in self.checked if c.error is not None)
+        alts = sum(c.alternative_of is not None for c in self.checked)
+        result.reasons.append(f"level 1: none of the {len(ranked)} symbolic plans verified"
+                              + (f" (nor {alts} alternatives through the same symbols)" if alts else "")
+                              + f" (best predicted error {best * 100:.1f} cm, tau {self.cfg.tau_verify * 100:g} cm)")
 
 
 def _feasible_choice(verified: list[Verification], feas: _Feasibility | None) -> Verification | None:
@@ -347,51 +452,6 @@ def _feasible_choice(verified: list[Verification], feas: _Feasibility | None) ->
         if feas.refine(1, v.trajectory, v.actions).success:
             return v
     return None
-
-
-def plan_bilevel(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig(),
-                 kinematics: KinematicFeasibility | None = None) -> PlanResult:
-    """Algorithm 1: verified probabilistic symbolic plan, else continuous search. With `kinematics`
-    (and cfg.feasibility) a verified plan must also pass the kinematic check on its predicted states
-    and refine, else the next one is tried; Level 2 then prunes infeasible successors and the
-    (state, action) pairs that failed refinement."""
-    def body(result: PlanResult) -> PlanResult:
-        feas = _Feasibility.of(kinematics, cfg, result)
-        ranked = _level1_plans(models, X_init, X_goal, cfg, result)
-        checked: list[Candidate] = []
-        t, chosen, any_verified = time.perf_counter(), None, False
-        for i, c in enumerate(ranked):  # decreasing frequency
-            left = cfg.alternatives_total - sum(c.alternative_of is not None for c in checked)
-            group, verified = _verify_group(models, X_init, X_goal, i, c, cfg, min(cfg.alternatives, left))
-            checked += group
-            any_verified = any_verified or bool(verified)
-            if chosen is None:
-                chosen = _feasible_choice(verified, feas)
-                if chosen is not None and not cfg.verify_all:
-                    break
-            if feas is not None and feas.refinements_left <= 0 and chosen is None:
-                result.reasons.append(f"level 1: refinement budget ({cfg.max_refinements}) used up")
-                break
-        result.candidates = checked + ranked[sum(c.alternative_of is None for c in checked):]  # + unchecked
-        if ranked:
-            result.timings["verify"] = time.perf_counter() - t - (
-                0.0 if feas is None else result.timings["feasibility"] + result.timings["refine"])
-        if chosen is not None:
-            return _take(result, chosen.actions, 1, chosen.trajectory, X_goal)
-        if ranked:
-            best = min(c.error for c in checked if c.error is not None)
-            alts = sum(c.alternative_of is not None for c in checked)
-            if any_verified and feas is not None:
-                rejected = result.rejected_dict()
-                assert rejected is not None  # counted while feasibility is on
-                result.reasons.append(f"level 1: no verified plan was kinematically feasible "
-                                      f"(rejected: {rejected['level 1']})")
-            else:
-                result.reasons.append(f"level 1: none of the {len(ranked)} symbolic plans verified"
-                                      + (f" (nor {alts} alternatives through the same symbols)" if alts else "")
-                                      + f" (best predicted error {best * 100:.1f} cm, tau {cfg.tau_verify * 100:g} cm)")
-        return _level2(models, X_init, X_goal, cfg, result, feas)
-    return _timed("bilevel", body)
 
 
 def plan_bilevel_alg1(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig(),

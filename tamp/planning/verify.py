@@ -119,8 +119,8 @@ def verify_many(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarray, pl
 
 
 def refine_skeleton(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarray,
-                    options: Sequence[Sequence], width: int) -> list[tuple]:
-    """Concrete plans for a symbolic skeleton, best first: a beam search with the Dynamics Model.
+                    options: Sequence[Sequence], width: int, tau: float = TAU_VERIFY) -> list[Verification]:
+    """Concrete plans for a symbolic skeleton, best first, verified: a beam search with the Dynamics Model.
 
     `options[t]` are the actions that can take step t of the skeleton (every action that leads
     from its symbolic state to the next: `SymbolicPlanner.skeleton_options`). Step by step, every
@@ -129,17 +129,18 @@ def refine_skeleton(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarray
     search's heuristic) after an intermediate step, by the largest per-object distance (the
     verification measure) after the last; plans that predict the same state (to 1 mm) count once.
     Which offsets and which of several symbolically alike objects a plan uses decides where the
-    blocks end, and symbols of a few bits cannot say; the Dynamics Model can.
+    blocks end, and symbols of a few bits cannot say; the Dynamics Model can. The rollouts of the
+    search are the plans' verifications (the same predictions as `verify`).
     """
     X_init, X_goal = np.asarray(X_init, dtype=float), np.asarray(X_goal, dtype=float)
-    beam: list[tuple[tuple, np.ndarray]] = [((), X_init)]
+    beam: list[tuple[tuple, list[np.ndarray]]] = [((), [X_init])]
     for t, step in enumerate(options):
         step = [tuple(int(v) for v in a) for a in step]
         if not step or width < 1:
             return []
-        plans = [plan + (a,) for plan, _ in beam for a in step]
-        Xs = np.repeat(np.stack([X for _, X in beam]), len(step), axis=0)
-        effects = predict_many(model, Xs, np.asarray([p[-1] for p in plans], dtype=np.int64))
+        plans = [(plan + (a,), states) for plan, states in beam for a in step]
+        Xs = np.repeat(np.stack([states[-1] for _, states in beam]), len(step), axis=0)
+        effects = predict_many(model, Xs, np.asarray([p[-1] for p, _ in plans], dtype=np.int64))
         Xs = Xs.copy()
         Xs[:, :, :3] += effects
         dist = np.linalg.norm(Xs[:, :, :3] - X_goal[None, :, :3], axis=-1)
@@ -149,10 +150,11 @@ def refine_skeleton(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarray
             key = np.round(Xs[b, :, :3] * 1000).astype(np.int64).tobytes()
             if key not in seen:
                 seen.add(key)
-                beam.append((plans[b], Xs[b]))
+                beam.append((plans[b][0], plans[b][1] + [Xs[b]]))
                 if len(beam) == width:
                     break
-    return [plan for plan, _ in beam]
+    return [Verification(plan, np.stack(states), goal_errors(states[-1], X_goal), tau) for plan, states in beam
+            if plan]
 
 
 def states_pair(X_init, X_goal) -> tuple[np.ndarray, np.ndarray]:
