@@ -8,6 +8,7 @@ per writer, so writing N sampled domains is string joining.
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -106,10 +107,23 @@ class DomainWriter:
         return self._domain(actions, probabilistic=True)
 
 
+PDDL_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_-]*$")
+
+
+def pddl_name(text: str, default: str = "symbolic-task") -> str:
+    """`text` as a PDDL name: letters, digits, '-' and '_', starting with a letter (else `default`);
+    never a bare keyword such as `problem` or `domain`, which parsers reject."""
+    name = re.sub(r"[^A-Za-z0-9_-]", "-", text.strip())
+    if not PDDL_NAME.match(name) or name.lower() in ("problem", "domain", "define", "and", "not", "or"):
+        name = f"{default}-{name}" if name and PDDL_NAME.match(f"x{name}") else default
+    return name
+
+
 def problem_pddl(ops: OperatorSet, problem: SymbolicProblem, domain_name: str = "symbolic",
-                 name: str = "problem") -> str:
+                 name: str = "symbolic-task") -> str:
     """Problem from Sigma_init / Sigma_goal bits; the goal is every atom of the goal state."""
     check_problem(ops, problem)
+    name = pddl_name(name)
     init = " ".join(state_atoms(problem.init_unary, problem.init_rel))
     goal = " ".join(state_atoms(problem.goal_unary, problem.goal_rel))
     return (f"(define (problem {name}) (:domain {domain_name})\n (:objects {' '.join(problem.objects)})\n"

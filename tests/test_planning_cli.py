@@ -140,3 +140,20 @@ def test_cli_replans_in_a_world(models_dir, tmp_path, capsys):
     assert "round 0:" in out and "closed loop ended:" in out and "execution (fast):" in out
     assert out.index("round 0:") < out.index("executed pick")  # the plan is shown before it is executed
     assert code == (0 if "-> success" in out else 1)
+
+
+@pytest.mark.slow
+def test_tamp_pddl_exports_the_bundled_domain_and_a_problem_that_an_independent_parser_reads(tmp_path, capsys):
+    import pddl
+
+    save_problem(tmp_path / "p.json", Problem(np.array(X, float), np.array(GOAL, float), name="problem"))
+    assert main(["pddl", "--out", str(tmp_path / "out"), "--problem", str(tmp_path / "p.json")]) == 0
+    out = tmp_path / "out"
+    assert {p.name for p in out.iterdir()} == {"domain.pddl", "domain.ppddl", "problem.pddl"}
+    parsed = pddl.parse_problem(out / "problem.pddl")  # a problem named `problem` is renamed, not rejected
+    assert parsed.name != "problem" and {o.name for o in parsed.objects} == {"o0", "o1"}
+    assert "(:action pp0_" in (out / "domain.pddl").read_text()[:5000]
+    capsys.readouterr()
+    assert main(["pddl", "--out", str(tmp_path / "o2"), "--problem", str(tmp_path / "missing.json")]) == 2
+    err = capsys.readouterr().err
+    assert "missing.json" in err and "Traceback" not in err

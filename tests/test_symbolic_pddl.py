@@ -112,3 +112,29 @@ def test_sampled_domain_files_are_deduplicated(ops, tmp_path):
     assert len(set(texts)) == len(texts)
     again = write_sampled_domains(ops, tmp_path / "again", n_domains=30, seed=2)
     assert [p.read_text() for p, _ in again] == texts
+
+
+def test_an_independent_parser_reads_our_domains_and_problems(ops, problem, tmp_path):
+    """The PyPI `pddl` parser (not ours, not Fast Downward's) accepts domain.pddl, a sampled domain and
+    the problem file, with every action and object. (It does not read PPDDL's probabilistic effects;
+    domain.ppddl is checked by `symbolic.ppddl_parser` above.)"""
+    import pddl
+
+    paths = write_domains(ops, tmp_path)
+    sampled = write_sampled_domains(ops, tmp_path / "sampled", n_domains=4, seed=3)
+    (tmp_path / "problem.pddl").write_text(problem_pddl(ops, problem))
+    for path in (paths["pddl"], sampled[-1][0]):
+        domain = pddl.parse_domain(path)
+        assert {a.name for a in domain.actions} == {op.name for op in ops.operators}
+    parsed = pddl.parse_problem(tmp_path / "problem.pddl")
+    assert {o.name for o in parsed.objects} == set(problem.objects)
+    assert len(parsed.goal.operands) == problem.init_unary.size + problem.init_rel.size  # one atom per bit
+
+
+def test_problem_names_are_valid_pddl_names():
+    from symbolic.pddl import pddl_name
+
+    assert pddl_name("problem") != "problem" and pddl_name("domain") != "domain"
+    assert pddl_name("n4-k3-007") == "n4-k3-007"
+    assert pddl_name("3 blocks/odd") == "symbolic-task-3-blocks-odd"
+    assert pddl_name("") == "symbolic-task"

@@ -268,6 +268,23 @@ def cmd_domain(args: argparse.Namespace) -> int:
 
 
 
+def cmd_pddl(args: argparse.Namespace) -> int:
+    """A models directory's learned domain (and a problem's symbols) as PDDL files."""
+    from tamp.app.problem import load_problem
+    from tamp.planning.domain import export_pddl
+    from tamp.planning.models import pretrained_dir
+
+    check_output_dir(args.out, "--out")
+    problem = None if args.problem is None else load_problem(args.problem)
+    paths = export_pddl(args.models or pretrained_dir(), args.out, None if problem is None else problem.X_init,
+                        None if problem is None else problem.X_goal,
+                        problem_name=(problem.name or args.problem.stem) if problem is not None else "symbolic-task",
+                        sampled=args.sampled, seed=args.seed)
+    for kind, path in paths.items():
+        print(f"{kind}: {path}")
+    return 0
+
+
 def cmd_plan(args: argparse.Namespace) -> int:
     """Plan a problem file with the learned models; refine, execute and replay the plan."""
     from tamp.app.plan_command import options_from_args, run_plan
@@ -410,7 +427,8 @@ def build_parser() -> argparse.ArgumentParser:
         description="Compute the Symbolic Model's unary and relational bits before and after every "
         "transition, learn lifted operators (most frequent effect and the empirical distribution), "
         "and write domain.pddl, domain.ppddl, operators.json and stats.json (number of operators, "
-        "effects per operator, coverage on held-out transitions).",
+        "effects per operator, coverage on held-out transitions). `tamp pddl` writes the PDDL files of an "
+        "existing models directory (the bundled one by default) and of a problem.",
     )
     p.add_argument("--model", required=True, help="Symbolic Model checkpoint (tamp train --bottleneck gumbel_sigmoid)")
     p.add_argument("--data", required=True, help="dataset directory")
@@ -431,6 +449,25 @@ def build_parser() -> argparse.ArgumentParser:
                    help="accept a --model that is not a Symbolic Model (e.g. the Fig. 4 Sigmoid variant)")
     p.add_argument("--seed", type=int, default=0)
     p.set_defaults(func=cmd_domain)
+
+    p = sub.add_parser(
+        "pddl",
+        help="export a models directory's learned domain (and a problem) as PDDL for other planners",
+        description="Write the learned domain of --models (its domain/operators.json) as domain.pddl "
+        "(most frequent effects: a deterministic STRIPS domain with equality) and domain.ppddl (PPDDL "
+        "probabilistic effects), with --problem the problem's symbols (from the Symbolic Model) as "
+        "problem.pddl, and with --sampled N the distinct domains of N sampled ones, as Level 1 draws them. "
+        "Fast Downward and other PDDL planners read domain.pddl and problem.pddl; "
+        "`tamp domain` learns a domain from data.",
+    )
+    p.add_argument("--models", type=Path, default=None,
+                   help="models directory (domain/, and symbolic.pt for --problem); default: the bundled models")
+    p.add_argument("--out", type=Path, required=True, help="output directory")
+    p.add_argument("--problem", type=Path, default=None, help="problem file (JSON: X_init, X_goal) to export")
+    p.add_argument("--sampled", type=non_negative_int, default=0, metavar="N",
+                   help="also write the distinct domains among N sampled ones (sampled/, with sampled.json)")
+    p.add_argument("--seed", type=non_negative_int, default=0, help="seed of the sampled domains (default 0)")
+    p.set_defaults(func=cmd_pddl)
 
     p = sub.add_parser(
         "symbols",

@@ -50,3 +50,31 @@ def learn_domain(model_path: str | Path, data_dir: str | Path, out_dir: str | Pa
     report["transitions"] = int(len(data))
     report["only_moved"] = only_moved
     return report
+
+
+def export_pddl(models_dir: str | Path, out_dir: str | Path, X_init: np.ndarray | None = None,
+                X_goal: np.ndarray | None = None, problem_name: str = "symbolic-task", sampled: int = 0,
+                seed: int = 0) -> dict[str, Path]:
+    """Write a models directory's learned domain as PDDL files other planners read: domain.pddl (most
+    frequent effects), domain.ppddl (the effect distributions), with a scene pair (X_init, X_goal) its
+    problem.pddl (Sigma_init and Sigma_goal from the Symbolic Model), and with `sampled` = N the
+    distinct domains of N samples (seed `seed`, as the planner draws them) in sampled/."""
+    import symbolic
+    from tamp.planning.models import DOMAIN_DIR, load_models
+
+    models_dir, out = Path(models_dir), Path(out_dir)
+    if not (models_dir / DOMAIN_DIR / "operators.json").is_file():
+        raise UserError(f"no learned domain at {models_dir / DOMAIN_DIR / 'operators.json'}")
+    ops = symbolic.load_domain(models_dir / DOMAIN_DIR)
+    paths = symbolic.write_domains(ops, out)
+    if X_init is not None and X_goal is not None:
+        models = load_models(models_dir)
+        assert models.symbolic is not None  # load_models with need_symbolic
+        models.require_objects(len(X_init), "the problem")
+        problem = symbolic.make_problem(*models.symbolic.symbols(X_init), *models.symbolic.symbols(X_goal))
+        paths["problem"] = out / "problem.pddl"
+        paths["problem"].write_text(symbolic.problem_pddl(ops, problem, name=problem_name))
+    if sampled > 0:
+        written = symbolic.write_sampled_domains(ops, out / "sampled", sampled, seed)
+        paths["sampled"] = written[0][0].parent
+    return paths
