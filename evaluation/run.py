@@ -146,7 +146,7 @@ def _level1_time(result) -> float:
     return sum(result.timings.get(k, 0.0) for k in LEVEL1_STAGES)
 
 
-def _level1_stages(results: list) -> dict[str, float] | None:
+def _level1_stages(results: list) -> dict[str, float | None] | None:
     """Seconds per Level-1 stage (symbols, symbolic, verify), summed over planning calls; None without
     a symbolic level."""
     if not any("symbols" in r.timings for r in results):
