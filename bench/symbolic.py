@@ -1,20 +1,31 @@
-"""Level-1 (probabilistic symbolic planning) time per problem at N sampled domains, n = 2, 3, 4.
+"""Level 1 per problem on a learned domain, n = 2 to 6, stage by stage, against the planner before
+issue 26, measured in the same run.
 
-    .venv/bin/python bench/symbolic.py            # defaults: N = 100, 20 problems per n
-    .venv/bin/python bench/symbolic.py --quick    # fewer problems, for a smoke run
+    .venv/bin/python bench/symbolic.py                     # bundled models, n = 2..6, 10 problems per n
+    .venv/bin/python bench/symbolic.py --quick             # 4 problems per n
+    .venv/bin/python bench/symbolic.py --models runs/paper_scale/models --problems set.jsonl
 
-Operators come from the noisy symbolic blocks world (`symbolic.blocksworld`, 20k transitions per n,
-~300 operators for n = 3). Problems: random scene, goal after k = 1..5 random effective actions.
-Backends (see `symbolic.planner`): python (in-process BFS), fd (translate once + search binary per
-distinct domain, parallel) and the naive baseline fd-naive (driver per sampled domain). The naive
-baseline is measured on --naive-domains domains per problem and scaled linearly to N (it has no
-dedup or reuse, so its cost is linear in N); the scaled figure is labelled as such. Side by side,
-the python and naive FD plans are compared domain by domain (outcome, plan length, identical plan).
+Problems: --problems FILE (`tamp problems`; its object counts), else generated in the Drake world
+(strict protocol, k = 1..3 random actions, seed --seed). The networks' object limit is lifted for the
+measurement: the Symbolic and Dynamics Models take any number of objects, the question here is
+what Level 1 costs, not how well they predict beyond the counts they were trained on.
+
+Stages per problem (the `bilevel` planner's Level 1 with the default PlanConfig, kinematics off):
+symbols (the Symbolic Model on X_init and X_goal), sampling (effects drawn for the operators the
+search meets), search (the one search for all N domains, backward distances included), verification
+(ranked plans and their alternatives rolled out with the Dynamics Model). Level 1 = their sum.
+
+Baseline (n <= --baseline-max-n; the grounded task of the old planner has 466k ground actions at
+n = 5, 1.27 million at n = 6): the planner before issue 26 (`symbolic.reference.plan_each_domain`: a
+random stream per domain, one breadth-first search per domain over the grounded task, reused between
+domains that agree on the operators it touched, 10,000 expansions shared) on the same symbolic
+problems and seeds; grounding is paid once per n, outside the timings, as the old planner cached it.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 import time
 from pathlib import Path
@@ -23,120 +34,116 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from symbolic import blocksworld as bw
-from symbolic import fast_downward as fd
-from symbolic.operators import learn_operators, stats
-from symbolic.pddl import DomainWriter, problem_pddl
-from symbolic.planner import SymbolicPlanner
-from symbolic.sampling import sample_choices
+STAGES = ("symbols", "sampling", "search", "verify", "level1")
 
 
 def pct(xs, q):
     return float(np.percentile(np.asarray(xs), q)) if len(xs) else float("nan")
 
 
-def fmt(x):
-    return f"{x * 1000:8.1f} ms"
+def ms(x: float) -> str:
+    return f"{x * 1000:9.1f}"
+
+
+def problems_for(args) -> list:
+    from tamp.app.problem import random_problem, read_problem_set
+
+    if args.problems:
+        return [p for p in read_problem_set(args.problems) if p.n in args.sizes]
+    out = []
+    for n in args.sizes:
+        for i in range(args.per_n):
+            k = 1 + i % 3
+            out.append(random_problem(n, k, seed=args.seed * 1000 + 100 * n + i, name=f"n{n}-k{k}-{i:03d}"))
+            print(f"\rgenerating problems: n = {n}, {i + 1}/{args.per_n}", end="", flush=True)
+    print()
+    return out
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--domains", type=int, default=100, help="N sampled domains per problem")
-    ap.add_argument("--problems", type=int, default=20, help="problems per n (python backend)")
-    ap.add_argument("--fd-problems", type=int, default=3, help="problems per n for the fd backend")
-    ap.add_argument("--naive-problems", type=int, default=2, help="problems per n for fd-naive")
-    ap.add_argument("--naive-domains", type=int, default=10, help="domains per problem for fd-naive")
-    ap.add_argument("--transitions", type=int, default=20000)
-    ap.add_argument("--sizes", type=int, nargs="+", default=[2, 3, 4])
-    ap.add_argument("--search", default="astar(lmcut())")
-    ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--models", type=Path, default=None, help="models directory (default: the bundled models)")
+    ap.add_argument("--problems", type=Path, default=None, help="problem set (default: generated)")
+    ap.add_argument("--sizes", type=lambda s: [int(v) for v in s.split(",")], default=[2, 3, 4, 5, 6],
+                    help="object counts (default 2,3,4,5,6)")
+    ap.add_argument("--per-n", type=int, default=10, help="generated problems per object count (default 10)")
+    ap.add_argument("--seed", type=int, default=7, help="seed of the generated problems (default 7)")
+    ap.add_argument("--baseline-max-n", type=int, default=4, help="largest n for the old planner (default 4)")
+    ap.add_argument("--quick", action="store_true", help="4 problems per n")
     args = ap.parse_args()
     if args.quick:
-        args.problems, args.fd_problems, args.naive_problems, args.naive_domains = 5, 1, 1, 4
-    N = args.domains
-    summary = []
-    for n in args.sizes:
+        args.per_n = 4
+
+    import torch
+
+    from symbolic.grounding import problem_states
+    from symbolic.reference import GroundTask, plan_each_domain
+    from tamp.planning.bilevel import PlanConfig, _symbolic_problem, plan
+    from tamp.planning.models import load_models, pretrained_dir
+    from tamp.planning.search import SearchConfig
+
+    torch.set_num_threads(1)
+    models = load_models(args.models or pretrained_dir())
+    for m in (models.symbolic, models.dynamics):  # the object limit lifted for the measurement
+        m.config = dataclasses.replace(m.config, n_max=max(6, max(args.sizes)))
+    assert models.domain is not None
+    problems = problems_for(args)
+    cfg = PlanConfig(feasibility=False, search=SearchConfig(max_expansions=1))  # Level 2 not run
+    print(f"domain: {len(models.domain)} operators; N = {cfg.n_domains}; Level-1 budget {cfg.level1_budget} "
+          f"generated states; {len(problems)} problems")
+    rows: dict[int, list[dict]] = {}
+    old: dict[int, list[float]] = {}
+    for n in sorted({p.n for p in problems}):
+        batch = [p for p in problems if p.n == n]
         t0 = time.perf_counter()
-        ops = learn_operators(bw.random_dataset(args.transitions, (n,), seed=n, p_large=0.003))
-        st = stats(ops)
-        ppddl_kb = len(DomainWriter(ops).ppddl()) / 1024
-        print(f"\n=== n = {n}: {st['n_operators']} operators ({st['n_probabilistic']} probabilistic, "
-              f"max {st['effects_per_operator']['max']} effects), PPDDL {ppddl_kb:.0f} KB, "
-              f"learned in {time.perf_counter() - t0:.1f} s")
-        problems = [bw.random_problem(n, 1 + i % 5, seed=1000 * n + i, p_large=0.003)[0] for i in range(args.problems)]
-
-        py = SymbolicPlanner(ops, backend="python", search=args.search)
-        t0 = time.perf_counter()
-        py.ground(n)
-        print(f"python: grounding once per (operator set, n): {time.perf_counter() - t0:.3f} s, "
-              f"{len(py.ground(n))} ground actions")
-        rows = []
-        for p in problems:
+        models.symbolic_planner(cfg.backend, cfg.symbolic_time_limit).task(n)
+        setup = time.perf_counter() - t0
+        plan("bilevel", models, batch[0].X_init, batch[0].X_goal, cfg)  # warm-up: first forward passes
+        rows[n] = []
+        for p in batch:
+            r = plan("bilevel", models, p.X_init, p.X_goal, replace_seed(cfg, p.seed))
+            t = r.timings
+            sym = r.symbolic_stats.get("timings", {})
+            row = {"symbols": t.get("symbols", 0.0), "sampling": sym.get("sampling", 0.0),
+                   "search": t.get("symbolic", 0.0) - sym.get("sampling", 0.0), "verify": t.get("verify", 0.0),
+                   "generated": r.symbolic_stats.get("generated", 0), "level": r.level,
+                   "timeouts": r.symbolic_stats.get("outcomes", {}).get("timeout", 0)}
+            row["level1"] = row["symbols"] + row["sampling"] + row["search"] + row["verify"]
+            rows[n].append(row)
+        print(f"n = {n}: lifted task built in {setup * 1000:.0f} ms (once per n); {len(batch)} problems", flush=True)
+        if n <= args.baseline_max_n:
             t0 = time.perf_counter()
-            res = py.plan_probabilistic(p, N, seed=0)
-            rows.append((time.perf_counter() - t0, res))
-        total = [t for t, _ in rows]
-        parts = {k: [r.timings.get(k, 0.0) for _, r in rows] for k in ("sampling", "grounding", "planner", "parsing")}
-        solved = sum(bool(r.plans) for _, r in rows)
-        print(f"python  N={N}: per problem median {fmt(pct(total, 50))}  p90 {fmt(pct(total, 90))}  "
-              f"| median split: sampling {fmt(pct(parts['sampling'], 50))}, planner {fmt(pct(parts['planner'], 50))}, "
-              f"parsing {fmt(pct(parts['parsing'], 50))}, per-problem setup {fmt(pct(parts['grounding'], 50))}")
-        print(f"        searches per problem (median) {pct([r.n_searches for _, r in rows], 50):.0f} of "
-              f"{pct([r.n_unique_domains for _, r in rows], 50):.0f} distinct domains; "
-              f"{solved}/{len(rows)} problems with a plan; top plan share median "
-              f"{pct([r.plans[0].probability for _, r in rows if r.plans], 50):.2f}")
+            ground = GroundTask(models.domain, n)
+            print(f"        baseline: grounded task of {len(ground.op_index)} actions built in "
+                  f"{time.perf_counter() - t0:.1f} s (once per n)", flush=True)
+            old[n] = []
+            for p in batch:
+                sp = _symbolic_problem(models, p.X_init, p.X_goal, cfg)
+                init, goal = problem_states(sp)
+                out = plan_each_domain(models.domain, ground, init, goal, cfg.n_domains, p.seed, sp.nonempty)
+                old[n].append(out["sampling"] + out["search"])
 
-        fdp = SymbolicPlanner(ops, backend="fd", search=args.search, time_limit=60)
-        fd_rows = []
-        for p in problems[: args.fd_problems]:
-            t0 = time.perf_counter()
-            res = fdp.plan_probabilistic(p, N, seed=0)
-            fd_rows.append((time.perf_counter() - t0, res))
-        fd_total = [t for t, _ in fd_rows]
-        if fd_rows:
-            print(f"fd      N={N}: per problem median {fmt(pct(fd_total, 50))}  p90 {fmt(pct(fd_total, 90))}  "
-                  f"| median split: sampling {fmt(pct([r.timings['sampling'] for _, r in fd_rows], 50))}, "
-                  f"planner (translate + {pct([r.n_searches - 1 for _, r in fd_rows], 50):.0f} searches on "
-                  f"{fdp.workers} workers) {fmt(pct([r.timings['planner'] for _, r in fd_rows], 50))}, "
-                  f"parsing {fmt(pct([r.timings['parsing'] for _, r in fd_rows], 50))}")
+    print("\nLevel 1 per problem, ms: median / p90 / max / mean (new); the old planner's sampling + search")
+    print(f"{'n':>2} {'stage':>10} {'median':>9} {'p90':>9} {'max':>9} {'mean':>9}")
+    for n, rs in rows.items():
+        for stage in STAGES:
+            xs = [r[stage] for r in rs]
+            print(f"{n:>2} {stage:>10} {ms(pct(xs, 50))} {ms(pct(xs, 90))} {ms(max(xs))} {ms(float(np.mean(xs)))}")
+        sym = [r["sampling"] + r["search"] for r in rs]
+        gen = [r["generated"] for r in rs]
+        print(f"{n:>2} {'symbolic':>10} {ms(pct(sym, 50))} {ms(pct(sym, 90))} {ms(max(sym))} {ms(float(np.mean(sym)))}"
+              f"   (generated states median {pct(gen, 50):.0f}, max {max(gen)}; problems with domains out of "
+              f"budget {sum(r['timeouts'] > 0 for r in rs)}; solved at Level 1 {sum(r['level'] == 1 for r in rs)}"
+              f"/{len(rs)})")
+        if n in old:
+            o = old[n]
+            print(f"{n:>2} {'old':>10} {ms(pct(o, 50))} {ms(pct(o, 90))} {ms(max(o))} {ms(float(np.mean(o)))}"
+                  f"   old / new: median {pct(o, 50) / pct(sym, 50):.0f}x, mean {np.mean(o) / np.mean(sym):.0f}x")
+    print("\nsymbolic = sampling + search; level1 = symbols + symbolic + verify.")
 
-        naive = SymbolicPlanner(ops, backend="fd-naive", search=args.search, time_limit=60)
-        calls, agree_status, agree_len, same_plan, compared = [], 0, 0, 0, 0
-        write_t = []
-        for p in problems[: args.naive_problems]:
-            choices = sample_choices(ops, args.naive_domains, seed=0)
-            for c in choices:
-                t0 = time.perf_counter()
-                domain = naive._domain_text(c, n)
-                write_t.append(time.perf_counter() - t0)
-                t0 = time.perf_counter()
-                b = fd.run_fast_downward(domain, problem_pddl(ops, p), args.search, 60)
-                calls.append(time.perf_counter() - t0)
-                a = py.plan(p, c)
-                compared += 1
-                agree_status += a.status == b.status
-                if a.solved and b.solved:
-                    agree_len += len(a.plan) == len(b.plan)
-                    same_plan += a.plan == b.plan
-                elif a.status == b.status:
-                    agree_len += 1
-                    same_plan += 1
-        if calls:
-            per_call = pct(calls, 50)
-            naive_problem = (per_call + pct(write_t, 50)) * N
-            print(f"fd-naive: one driver call per domain: median {fmt(per_call)} per call (+{fmt(pct(write_t, 50))} "
-                  f"writing) -> {naive_problem:.2f} s per problem at N={N} (scaled from {len(calls)} calls)")
-            print(f"side by side on {compared} (problem, domain) pairs, python vs FD {args.search}: "
-                  f"same outcome {agree_status}/{compared}, same plan length {agree_len}/{compared}, "
-                  f"identical plan {same_plan}/{compared}")
-            summary.append((n, st["n_operators"], pct(total, 50), pct(total, 90),
-                            pct(fd_total, 50) if fd_rows else float("nan"), naive_problem))
-    print("\n=== summary: Level-1 seconds per problem at N = %d (median; python p90)" % N)
-    print(f"{'n':>2} {'ops':>5} {'python':>9} {'p90':>9} {'fd':>9} {'fd-naive*':>10} "
-          f"{'naive/python':>13} {'naive/fd':>9}")
-    for n, nops, med, p90, fdm, nv in summary:
-        print(f"{n:>2} {nops:>5} {med:9.4f} {p90:9.4f} {fdm:9.3f} {nv:10.2f} {nv / med:12.0f}x {nv / fdm:8.1f}x")
-    print("* fd-naive scaled linearly from --naive-domains calls per problem to N.")
+
+def replace_seed(cfg, seed: int):
+    return dataclasses.replace(cfg, seed=seed)
 
 
 if __name__ == "__main__":

@@ -21,7 +21,7 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from reference_search import GroundTask, bfs  # noqa: E402
+from symbolic.reference import GroundTask, bfs  # noqa: E402
 
 from symbolic import blocksworld as bw  # noqa: E402
 from symbolic.atoms import pack_state, unpack_state  # noqa: E402
@@ -77,7 +77,7 @@ def _check_against_one_bfs_per_domain(ops, problems, n_domains: int) -> int:
         choices = planner.sampler.choices(n_domains, seed)
         out = search_domains(task, DomainSet.of_choices(ops, choices), init, goal, 10**6, None, problem.nonempty)
         for k in range(n_domains):
-            status, plan, states = bfs(ground, choices[k], init, goal, problem.nonempty)
+            status, plan, states, _ = bfs(ground, choices[k], init, goal, problem.nonempty)
             assert status is out.status[k]
             if plan is not None:
                 i = out.plan_of[k]

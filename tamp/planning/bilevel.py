@@ -172,7 +172,9 @@ def _level1_plans(models: Models, X_init, X_goal, cfg: PlanConfig, result: PlanR
                                          budget=cfg.level1_budget)
         result.timings["symbolic"] = time.perf_counter() - t
         result.symbolic_stats = {"n_domains": out.n_domains, "unique_plans": len(out.plans),
-                                 "outcomes": dict(out.statuses)}
+                                 "outcomes": dict(out.statuses), "expanded": out.expanded,
+                                 "generated": out.generated,
+                                 "timings": {k: round(v, 6) for k, v in out.timings.items()}}
         if not out.plans:
             result.reasons.append(f"level 1: no symbolic plan in any of the {out.n_domains} sampled domains "
                                   f"(outcomes: {dict(out.statuses)})")
