@@ -19,20 +19,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-from symbolic.reference import GroundTask, bfs  # noqa: E402
-
-from symbolic import blocksworld as bw  # noqa: E402
-from symbolic.atoms import pack_state, unpack_state  # noqa: E402
-from symbolic.build import load_domain, make_problem  # noqa: E402
-from symbolic.grounding import problem_states  # noqa: E402
-from symbolic.lifted import LiftedTask  # noqa: E402
-from symbolic.operators import learn_operators  # noqa: E402
-from symbolic.planner import SymbolicPlanner  # noqa: E402
-from symbolic.sampling import DomainSet, EffectSampler  # noqa: E402
-from symbolic.search import search_domains  # noqa: E402
-from symbolic.structs import SymbolicProblem  # noqa: E402
+from symbolic import blocksworld as bw
+from symbolic.atoms import pack_state, unpack_state
+from symbolic.build import load_domain, make_problem
+from symbolic.grounding import problem_states
+from symbolic.lifted import LiftedTask
+from symbolic.operators import learn_operators
+from symbolic.planner import SymbolicPlanner
+from symbolic.reference import GroundTask, bfs
+from symbolic.sampling import DomainSet, EffectSampler
+from symbolic.search import search_domains
+from symbolic.structs import SymbolicProblem
 
 ROOT = Path(__file__).resolve().parents[1]
 GOLDEN = Path(__file__).resolve().parent / "data" / "level1_golden.json"
