@@ -927,7 +927,47 @@ def section_level1(res: Results, figures: Path) -> Section:
                        "`bilevel_alg1` time (s)", "`bilevel` time (s)"] +
                       (["`bilevel_alg1` Level 1 runs (%)", "`bilevel` Level 1 runs (%)"] if len(res.runs) > 1 else []),
                       rows)
-    return Section("level1", title, lines, {"groups": table, "paper_level1_share_pct": paper.LEVEL1_SHARE_PCT})
+    times = _level1_times(res)
+    if times:
+        lines += ["", "Level-1 time per problem (ms), median / mean, in total and per stage: symbols (the Symbolic "
+                  "Model on X_init and X_goal), symbolic (sampled domains and the symbolic search), verify (rollouts "
+                  "of the ranked plans and their alternatives); kinematic checks and refinement are not in it. "
+                  f"The paper: {paper.LEVEL1_TIME_S['bilevel'][0] * 1000:.0f} ± "
+                  f"{paper.LEVEL1_TIME_S['bilevel'][1] * 1000:.0f} ms (mean, problems solved at Level 1).", ""]
+        lines += md_table(["n", "method", "problems", "Level 1", "symbols", "symbolic", "verify"],
+                          [[t["group"], f"`{t['method']}`", str(t["problems"])] +
+                           [_ms_pair(t.get(k)) for k in ("level1", "symbols", "symbolic", "verify")] for t in times])
+    return Section("level1", title, lines, {"groups": table, "paper_level1_share_pct": paper.LEVEL1_SHARE_PCT,
+                                            "times": times})
+
+
+def _level1_times(res: Results) -> list[dict]:
+    """Per n and Level-1 method: median and mean Level-1 time and, where rows have them, per stage (s)."""
+    out = []
+    for label, keep in _by_n(res):
+        for m in ("bilevel_alg1", "bilevel"):
+            rs = [r for r in res.rows
+                  if r["method"] == m and keep(r["n"], r["k"]) and r.get("level1_time_s") is not None]
+            if not rs:
+                continue
+            t: dict[str, Any] = {"group": label, "method": m, "problems": len(rs)}
+            t["level1"] = _median_mean([r["level1_time_s"] for r in rs])
+            staged = [r["level1_stages_s"] for r in rs if r.get("level1_stages_s")]
+            if len(staged) == len(rs):
+                for stage in ("symbols", "symbolic", "verify"):
+                    t[stage] = _median_mean([st.get(stage) or 0.0 for st in staged])
+            out.append(t)
+    return out
+
+
+def _median_mean(xs: list[float]) -> tuple[float | None, float | None]:
+    return median(xs), mean_std(xs)[0]
+
+
+def _ms_pair(pair: tuple[float | None, float | None] | None) -> str:
+    if pair is None or pair[0] is None or pair[1] is None:
+        return DASH
+    return f"{pair[0] * 1000:.1f} / {pair[1] * 1000:.1f}"
 
 
 def section_symbols(symbols: list[dict] | None, source: Path) -> Section:

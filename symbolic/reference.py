@@ -122,7 +122,8 @@ def plan_each_domain(ops: OperatorSet, task: GroundTask, init: int, goal: int, n
     t0 = time.perf_counter()
     task._cache.clear()
     memo: list[tuple[np.ndarray, np.ndarray, tuple]] = []
-    plans, left = [], budget
+    plans: list[tuple | None] = []
+    left = budget
     for k in range(n_domains):
         c = choices[k]
         hit = next((res for ops_, vals, res in memo if np.array_equal(c[ops_], vals)), None)

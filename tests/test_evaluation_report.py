@@ -50,6 +50,8 @@ def make_rows(methods=METHODS, per_cell=4, seed=3):
                         "executed_plans": rng.randint(1, 5) if solved and m == "probabilistic_oracle" else int(solved),
                         "symbolic_backend": None if m.startswith("cfs") else "fd",
                         "planning_time_s": rng.uniform(0.001, 2.0), "level1_time_s": 0.004,
+                        "level1_stages_s": {"symbols": rng.uniform(0, 0.002), "symbolic": rng.uniform(0, 0.01),
+                                            "verify": rng.uniform(0, 0.01)} if m.startswith("bilevel") else None,
                         "predicted_error_m": rng.uniform(0.0, 0.16) if solved else None,
                         "candidates": [], "refined": None if not solved else failure is None,
                         "refine_failure": failure,
@@ -59,6 +61,9 @@ def make_rows(methods=METHODS, per_cell=4, seed=3):
                         "final_error_m": final, "success": success, "outcome": outcome,
                         "rounds": k - 1 if m == "bilevel_replan" else None,
                         "fidelity": "fast", "eps_m": 0.05, "tau_verify_m": 0.07})
+    for r in rows:
+        if r["level1_stages_s"]:
+            r["level1_time_s"] = sum(r["level1_stages_s"].values())
     # k = 1: the top probabilistic plan is the deterministic one, so Table II's k=1 p is "identical"
     det = {r["problem"]: r for r in rows if r["method"] == "deterministic"}
     for r in rows:
@@ -432,7 +437,19 @@ def test_replanning_and_refinement(full_report):
 
 def test_level1_algorithm1_against_our_extensions(full_report):
     _, data, s = full_report
-    (t,) = s["10"]["tables"]
+    t, times = s["10"]["tables"]
+    # Level-1 time per n and method, median / mean (ms), in total and per stage, from the rows
+    assert [(row["n"], row["method"]) for row in times] == [
+        (n, f"`{m}`") for n in ("2", "3", "4", "all") for m in ("bilevel_alg1", "bilevel")]
+    for row in times:
+        rs = [r for r in data.rows if r["method"] == row["method"].strip("`") and group_keep(row["n"], "n")(r)]
+        assert int(row["problems"]) == len(rs)
+        for col, value in (("Level 1", lambda r: r["level1_time_s"]),
+                           ("symbols", lambda r: r["level1_stages_s"]["symbols"]),
+                           ("verify", lambda r: r["level1_stages_s"]["verify"])):
+            med, mean = (float(v) for v in row[col].split(" / "))
+            xs = [1000 * value(r) for r in rs]
+            assert med == pytest.approx(np.median(xs), abs=0.051) and mean == pytest.approx(np.mean(xs), abs=0.051)
     check_comparison(t, data, "bilevel_alg1", "bilevel", "`bilevel_alg1` (%)", "`bilevel` (%)", "n")
     for row in t[:-1]:
         pairs = data.pairs("bilevel_alg1", "bilevel", group_keep(row["n"], "n"))
