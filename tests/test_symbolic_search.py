@@ -95,6 +95,10 @@ def test_one_search_gives_every_domain_its_own_breadth_first_plan(bundled, golde
     problems.append((SymbolicProblem(problems[3][0].init_unary, problems[3][0].init_rel, blocked,
                                      problems[3][0].goal_rel), 9))
     assert _check_against_one_bfs_per_domain(ops, problems, 30) == 150
+    # more objects than any operator has parameters (operators bind to subsets)
+    larger = [(bw.random_problem(n, k, seed=s, p_large=0.0)[0], s) for n, s, k in ((4, 2, 3), (4, 3, 4), (5, 2, 3),
+                                                                                   (5, 3, 4), (5, 5, 5))]
+    assert _check_against_one_bfs_per_domain(ops, larger, 20) == 100
     learned = [(_problem(e, bundled), e["seed"]) for e in golden["problems"] if e["n"] <= 3][:12]
     assert _check_against_one_bfs_per_domain(bundled, learned, 20) == 240
 
