@@ -214,7 +214,7 @@ def add_planner_arguments(p: argparse.ArgumentParser, backends: tuple[str, ...] 
                    "Fast Downward needs more at 4 objects)")
     p.add_argument("--level1-budget", type=positive_int, default=default.level1_budget,
                    help="symbolic states Level 1's search (one for all N domains) may generate per planning call "
-                   f"(default {default.level1_budget}: well under 1 s at 2 to 6 objects); deterministic, "
+                   f"(default {default.level1_budget}: at most about 0.2-0.3 s at 2 to 6 objects); deterministic, "
                    "whatever the machine's load")
     p.add_argument("--max-expansions", type=positive_int, default=default.search.max_expansions,
                    help="continuous search node limit per planning call: it decides when the search gives up, "

@@ -59,7 +59,7 @@ class PlanConfig:
     eps: float = EPS_SUCCESS  # metres: success tolerance (goal test of the search, closed loop)
     backend: str = "python"  # symbolic planner backend, one of SYMBOLIC_BACKENDS
     symbolic_time_limit: float = 10.0  # seconds per symbolic planner call
-    level1_budget: int | None = 300_000  # symbolic states the search for all N domains may generate
+    level1_budget: int | None = 100_000  # symbolic states the search for all N domains may generate
     #                                      (deterministic; about 3-4 microseconds each on this machine)
     level1_time_budget: float | None = None  # seconds for all N symbolic planner calls (machine-dependent)
     verify_all: bool = False  # verify every candidate (default: stop at the first verified one, Alg. 1)
