@@ -88,7 +88,7 @@ def test_refine_skeleton_finds_the_concrete_actions_the_symbols_cannot_tell_apar
     stub = StubModel()
     # one step "put 0 on 1" with every grasp and release offset: only (0, 0, 1, 0) lands centred
     options = [[(0, g, 1, r) for g in (-1, 0, 1) for r in (-1, 0, 1)]]
-    checked = refine_skeleton(stub, X_INIT, A_ON_B, options, width=4)
+    checked, _ = refine_skeleton(stub, X_INIT, A_ON_B, options, width=4)
     plans = [v.actions for v in checked]
     assert plans[0] == ((0, 0, 1, 0),) and len(plans) == 4 and len(set(plans)) == 4
     errors = [goal_error(execute(X_INIT, p), A_ON_B) for p in plans]
@@ -98,9 +98,11 @@ def test_refine_skeleton_finds_the_concrete_actions_the_symbols_cannot_tell_apar
     goal = A_ON_B.copy()
     goal[:, 1] += 0.075
     options = [[(1, g, 1, r) for g in (-1, 0, 1) for r in (-1, 0, 1)], options[0]]
-    best = refine_skeleton(stub, X_INIT, goal, options, width=3)[0]
+    best = refine_skeleton(stub, X_INIT, goal, options, width=3)[0][0]
     assert goal_error(execute(X_INIT, best.actions), goal) < 1e-9 and best.verified
-    assert refine_skeleton(stub, X_INIT, goal, [[], options[1]], width=3) == []  # a step nothing can take
+    assert refine_skeleton(stub, X_INIT, goal, [[], options[1]], width=3) == ([], None)  # a step nothing can take
+    _, own = refine_skeleton(stub, X_INIT, goal, options, width=3, also=[(1, 0, 1, 1), (0, 0, 1, 0)])
+    assert own is not None and own.error == pytest.approx(goal_error(execute(X_INIT, own.actions), goal))
 
 
 def test_same_symbols_but_goal_elsewhere_needs_a_nonempty_plan():

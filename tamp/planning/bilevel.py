@@ -393,19 +393,22 @@ class _Verifier:
         """Verify ranked plan i (and its alternatives); take the first acceptable verified plan."""
         candidate = self.ranked[i]
         self._done += 1
-        own = self._rollout(i)
-        group, checks = [candidate], [own]
+        group: list[Candidate] = [candidate]
+        checks: list[Verification] = []
         limit = min(self.cfg.alternatives, self.alternatives_left)
         if limit > 0 and candidate.states is not None and candidate.actions:
             planner = self.models.symbolic_planner(self.cfg.backend, self.cfg.symbolic_time_limit)
             options = planner.skeleton_options(len(self.X_init), candidate.states)
-            alternatives = [v for v in refine_skeleton(self.model, self.X_init, self.X_goal, options, limit + 1,
-                                                       self.cfg.tau_verify) if v.actions != candidate.actions]
-            alternatives = alternatives[:limit]
+            best, own = refine_skeleton(self.model, self.X_init, self.X_goal, options, limit + 1,
+                                        self.cfg.tau_verify, also=candidate.actions)
+            assert own is not None  # `also` given
+            alternatives = [v for v in best if v.actions != candidate.actions][:limit]
             self.alternatives_left -= len(alternatives)
             group += [Candidate(v.actions, candidate.count, candidate.probability, alternative_of=i)
                       for v in alternatives]
-            checks += alternatives
+            checks = [own] + alternatives
+        else:
+            checks = [self._rollout(i)]
         for c, v in zip(group, checks):
             c.error, c.verified = v.error, v.verified
         self.checked += group

@@ -119,7 +119,8 @@ def verify_many(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarray, pl
 
 
 def refine_skeleton(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarray,
-                    options: Sequence[Sequence], width: int, tau: float = TAU_VERIFY) -> list[Verification]:
+                    options: Sequence[Sequence], width: int, tau: float = TAU_VERIFY,
+                    also: Sequence | None = None) -> tuple[list[Verification], Verification | None]:
     """Concrete plans for a symbolic skeleton, best first, verified: a beam search with the Dynamics Model.
 
     `options[t]` are the actions that can take step t of the skeleton (every action that leads
@@ -130,19 +131,32 @@ def refine_skeleton(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarray
     verification measure) after the last; plans that predict the same state (to 1 mm) count once.
     Which offsets and which of several symbolically alike objects a plan uses decides where the
     blocks end, and symbols of a few bits cannot say; the Dynamics Model can. The rollouts of the
-    search are the plans' verifications (the same predictions as `verify`).
+    search are the plans' verifications (the same predictions as `verify`). `also`, a plan of the
+    skeleton's length (the ranked plan itself), is rolled out in the same forward passes and returned
+    verified beside the best plans (None without it).
     """
     X_init, X_goal = np.asarray(X_init, dtype=float), np.asarray(X_goal, dtype=float)
     beam: list[tuple[tuple, list[np.ndarray]]] = [((), [X_init])]
+    extra = None if also is None else [tuple(int(v) for v in a) for a in also]
+    if extra is not None and len(extra) != len(options):
+        raise ValueError(f"`also` has {len(extra)} actions, the skeleton {len(options)} steps")
+    extra_states = [X_init]
     for t, step in enumerate(options):
         step = [tuple(int(v) for v in a) for a in step]
         if not step or width < 1:
-            return []
+            return [], (None if extra is None else verify_many(model, X_init, X_goal, [extra], tau)[0])
         plans = [(plan + (a,), states) for plan, states in beam for a in step]
         Xs = np.repeat(np.stack([states[-1] for _, states in beam]), len(step), axis=0)
-        effects = predict_many(model, Xs, np.asarray([p[-1] for p, _ in plans], dtype=np.int64))
+        actions = [p[-1] for p, _ in plans]
+        if extra is not None:  # the extra plan's step t rides along in the same pass
+            Xs = np.concatenate([Xs, extra_states[-1][None]])
+            actions.append(extra[t])
+        effects = predict_many(model, Xs, np.asarray(actions, dtype=np.int64))
         Xs = Xs.copy()
         Xs[:, :, :3] += effects
+        if extra is not None:
+            extra_states.append(Xs[-1])
+            Xs = Xs[:-1]
         dist = np.linalg.norm(Xs[:, :, :3] - X_goal[None, :, :3], axis=-1)
         score = dist.max(axis=1) if t == len(options) - 1 else dist.sum(axis=1)
         beam, seen = [], set()
@@ -153,8 +167,11 @@ def refine_skeleton(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarray
                 beam.append((plans[b][0], plans[b][1] + [Xs[b]]))
                 if len(beam) == width:
                     break
-    return [Verification(plan, np.stack(states), goal_errors(states[-1], X_goal), tau) for plan, states in beam
+    best = [Verification(plan, np.stack(states), goal_errors(states[-1], X_goal), tau) for plan, states in beam
             if plan]
+    if extra is None:
+        return best, None
+    return best, Verification(tuple(extra), np.stack(extra_states), goal_errors(extra_states[-1], X_goal), tau)
 
 
 def states_pair(X_init, X_goal) -> tuple[np.ndarray, np.ndarray]:
