@@ -46,7 +46,7 @@ def ms(x: float) -> str:
 
 
 def problems_for(args) -> list:
-    from tamp.app.problem import random_problem, read_problem_set
+    from tamp.app.problem import StuckScene, random_problem, read_problem_set
 
     if args.problems:
         return [p for p in read_problem_set(args.problems) if p.n in args.sizes]
@@ -54,7 +54,13 @@ def problems_for(args) -> list:
     for n in args.sizes:
         for i in range(args.per_n):
             k = 1 + i % 3
-            out.append(random_problem(n, k, seed=args.seed * 1000 + 100 * n + i, name=f"n{n}-k{k}-{i:03d}"))
+            seed = args.seed * 1000 + 100 * n + i
+            while True:  # a scene in which the random actions keep failing: the next seed, as `tamp problems`
+                try:
+                    out.append(random_problem(n, k, seed=seed, name=f"n{n}-k{k}-{i:03d}"))
+                    break
+                except StuckScene:
+                    seed += 10_000
             print(f"\rgenerating problems: n = {n}, {i + 1}/{args.per_n}", end="", flush=True)
     print()
     return out

@@ -111,6 +111,9 @@ def search_domains(task: LiftedTask, domains: DomainSet, init: int, goal: int, b
     while active:
         t = time.perf_counter()
         distances.grow(_radius(D), out, budget)
+        while D < distances.bound(init) < INFINITE:  # no domain has a plan shorter than the bound
+            D = distances.bound(init)
+            distances.grow(_radius(D), out, budget)
         bounds_of: dict[int, np.ndarray] = {}  # per state, its successors' bounds at this radius
         t_back += time.perf_counter() - t
         if distances.bound(init) >= INFINITE:
