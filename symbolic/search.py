@@ -37,6 +37,10 @@ from symbolic.sampling import DomainSet
 from symbolic.structs import PlannerStatus
 
 INFINITE = 1 << 30
+# With at most this many successors of the initial state (2 blocks: about 30) the symbolic space is a few
+# dozen states: past depth bound 3, one breadth-first search without depth bounds beats iterative
+# deepening, which repeats the whole search for every bound up to the longest plan (up to 16 at n = 2).
+SMALL_BRANCHING = 40
 
 
 @dataclass
@@ -107,6 +111,7 @@ def search_domains(task: LiftedTask, domains: DomainSet, init: int, goal: int, b
     active = full  # domains without a plan yet
     masks = domains.table  # operator -> domains per effect, filled by `prepare` for each new state
     t_back = 0.0
+    small = len(task.expand(init).successors) <= SMALL_BRANCHING
     D = 1
     while active:
         t = time.perf_counter()
@@ -118,13 +123,17 @@ def search_domains(task: LiftedTask, domains: DomainSet, init: int, goal: int, b
         t_back += time.perf_counter() - t
         if distances.bound(init) >= INFINITE:
             break  # the goal cannot be reached from init in any domain
-        out.depth = D
+        if distances.complete or (small and D > 3):  # one unbounded search, not one per depth bound:
+            D = INFINITE  # every state that can reach the goal is known (only the others are pruned), or
+        out.depth = D     # the space is small enough to search it all for the domains still without a plan
         # forward, depth bound D; nodes are (state, domains, parent node, ground action)
         node_state, node_parent, node_action = [init], [-1], [-1]
         layer = [(0, active)]
         seen: dict[int, int] = {init: active}
         cut = 0  # domains in which some state was left out for the bound (not proven unsolvable)
-        for depth in range(D):
+        depth = -1
+        while layer and depth < D - 1:
+            depth += 1
             remaining = D - depth - 1  # actions left after the successor
             bounded = remaining <= distances.radius or distances.complete
             nxt: list[tuple[int, int]] = []
@@ -181,8 +190,6 @@ def search_domains(task: LiftedTask, domains: DomainSet, init: int, goal: int, b
                         node_action.append(ev_act[i])
                         nxt.append((len(node_state) - 1, new))
             layer = nxt
-            if not layer:
-                break
         unsolvable = active & ~cut
         for k in _bits(unsolvable):
             out.status[k] = PlannerStatus.UNSOLVABLE
