@@ -167,8 +167,11 @@ def refine_skeleton(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarray
                 beam.append((plans[b][0], plans[b][1] + [Xs[b]]))
                 if len(beam) == width:
                     break
-    best = [Verification(plan, np.stack(states), goal_errors(states[-1], X_goal), tau) for plan, states in beam
-            if plan]
+    beam = [(plan, states) for plan, states in beam if plan]
+    if beam:  # every plan's per-object errors in one operation
+        finals = np.stack([states[-1][:, :3] for _, states in beam])
+        errors = np.linalg.norm(finals - X_goal[None, :, :3], axis=-1)
+    best = [Verification(plan, np.stack(states), errors[b], tau) for b, (plan, states) in enumerate(beam)]
     if extra is None:
         return best, None
     return best, Verification(tuple(extra), np.stack(extra_states), goal_errors(extra_states[-1], X_goal), tau)
