@@ -107,7 +107,7 @@ def main() -> None:
         plan("bilevel", models, batch[0].X_init, batch[0].X_goal, cfg)  # warm-up: first forward passes
         rows[n] = []
         for p in batch:
-            r = plan("bilevel", models, p.X_init, p.X_goal, replace_seed(cfg, p.seed))
+            r = plan("bilevel", models, p.X_init, p.X_goal, dataclasses.replace(cfg, seed=p.seed))
             t = r.timings
             sym = r.symbolic_stats.get("timings", {})
             row = {"symbols": t.get("symbols", 0.0), "sampling": sym.get("sampling", 0.0),
@@ -146,10 +146,6 @@ def main() -> None:
             print(f"{n:>2} {'old':>10} {ms(pct(o, 50))} {ms(pct(o, 90))} {ms(max(o))} {ms(float(np.mean(o)))}"
                   f"   old / new: median {pct(o, 50) / pct(sym, 50):.0f}x, mean {np.mean(o) / np.mean(sym):.0f}x")
     print("\nsymbolic = sampling + search; level1 = symbols + symbolic + verify.")
-
-
-def replace_seed(cfg, seed: int):
-    return dataclasses.replace(cfg, seed=seed)
 
 
 if __name__ == "__main__":

@@ -177,7 +177,7 @@ class LiftedTask:
         reaches each, and the successor index of every row. Global flips are computed once per
         distinct (tuple, local flip): operators that differ only in their offsets share effects."""
         pair = tuple_idx * self._n_flip_ids + self.flip_id[rows]
-        upair, first_row, pair_of_row = np.unique(pair, return_index=True, return_inverse=True)
+        _, first_row, pair_of_row = np.unique(pair, return_index=True, return_inverse=True)
         flips = self._flips(tuple_idx[first_row], rows[first_row])
         # distinct global flips (several tuples can flip the same bits)
         order = np.lexsort(flips.T[::-1]) if self.words > 1 else np.argsort(flips[:, 0], kind="stable")
@@ -194,7 +194,7 @@ class LiftedTask:
         by_first = np.argsort(first, kind="stable")
         rank = np.empty(n_flips, np.int64)
         rank[by_first] = np.arange(n_flips)
-        chosen = flips[first_row_pair(pair_of_row.ravel(), first[by_first])]
+        chosen = flips[pair_of_row.ravel()[first[by_first]]]  # each successor's (tuple, local flip)
         if self.words == 1:
             states = [state ^ f for f in chosen[:, 0].tolist()]
         else:
@@ -264,16 +264,6 @@ class LiftedTask:
     def action(self, g: GroundAction) -> Action:
         return self.ops.operators[self.operator(g)].action(self.binding(g))
 
-    def apply(self, state: int, g: GroundAction, effect: int) -> int:
-        """`state` after ground action g with its operator's effect `effect` (precondition not checked)."""
-        row = int(self.effect_start[self.operator(g)]) + effect
-        flip = self._flips(np.array([g % self.n_tuples]), np.array([row]))[0]
-        return state ^ sum(int(c) << (64 * w) for w, c in enumerate(flip.tolist()))
-
-
-def first_row_pair(pair_of_row: np.ndarray, rows: np.ndarray) -> np.ndarray:
-    """The (tuple, local flip) pair of each given row."""
-    return pair_of_row[rows]
 
 
 def _key(bits: np.ndarray, arity: int) -> int:

@@ -51,7 +51,7 @@ def _strip_variant(steps: list[PlanStep]) -> list[PlanStep]:
 
 
 class SymbolicPlanner:
-    """Plans with one operator set. Reuse the instance across problems (ground tasks are cached)."""
+    """Plans with one operator set. Reuse the instance across problems (the lifted task of each n is built once)."""
 
     def __init__(self, ops: OperatorSet, backend: str = "python", search: str = fd.DEFAULT_SEARCH,
                  time_limit: float = 10.0, scope: str = "subset", workers: int | None = None,

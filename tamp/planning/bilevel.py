@@ -344,7 +344,7 @@ def _level1(models: Models, X_init, X_goal, cfg: PlanConfig, result: PlanResult,
         verifier.check(i)  # lines 10-11
         if verifier.chosen is not None and not cfg.verify_all:
             break  # line 12
-        if verifier.out_of_refinements:
+        if verifier.refinements_used_up():
             break
     verifier.finish()
     return verifier.chosen
@@ -374,8 +374,8 @@ class _Verifier:
         self._done = 0  # ranked plans checked
         self._start = time.perf_counter()
 
-    @property
-    def out_of_refinements(self) -> bool:
+    def refinements_used_up(self) -> bool:
+        """True (and the reason recorded) when no plan is chosen and no full refinement is left."""
         if self.feas is None or self.feas.refinements_left > 0 or self.chosen is not None:
             return False
         self.result.reasons.append(f"level 1: refinement budget ({self.cfg.max_refinements}) used up")
