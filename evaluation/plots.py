@@ -16,7 +16,8 @@ from tamp.records import atomic_write
 from .stats import Confusion
 
 COLORS = {"deterministic": "#7f7f7f", "probabilistic": "#ff7f0e", "cfs": "#1f77b4", "bilevel": "#2ca02c",
-          "bilevel_replan": "#9467bd", "symbolic_sigmoid": "#bcbd22", "cfs_gumbel": "#17becf"}
+          "bilevel_replan": "#9467bd",
+          "bilevel_alg1": "#8c564b", "symbolic_sigmoid": "#bcbd22", "cfs_gumbel": "#17becf"}
 
 
 def _save(fig: Figure, path: Path) -> Path:
@@ -114,4 +115,29 @@ def confusion_bars(path: Path, groups: Sequence[str], confusions: Sequence[Confu
     return _save(fig, path)
 
 
-__all__ = ["confusion_bars", "grouped_bars", "success_by_nk", "verifier_sweep"]
+def scaling_curves(path: Path, numbers: Mapping) -> Path:
+    """Success (%) and planning time (s, log scale: median solid, mean dashed) against the number of
+    blocks, one line per method (`evaluation.scaling.scaling_numbers`)."""
+    fig = Figure(figsize=(9, 3.4))
+    ax_s, ax_t = fig.subplots(1, 2)
+    for m, cells in numbers["methods"].items():
+        ns = sorted(cells)
+        color = COLORS.get(m)
+        ax_s.plot(ns, _values([cells[n]["success_pct"] for n in ns]), marker="o", markersize=3, label=m, color=color)
+        ax_t.plot(ns, _values([cells[n]["time_median_s"] for n in ns]), marker="o", markersize=3, label=m,
+                  color=color)
+        ax_t.plot(ns, _values([cells[n]["time_mean_s"] for n in ns]), linestyle="--", color=color or "k",
+                  linewidth=1)
+    ax_s.set_ylim(0, 100)
+    ax_s.set_ylabel("success (%)")
+    ax_t.set_yscale("log")
+    ax_t.set_ylabel("planning time (s): median, mean dashed")
+    for ax in (ax_s, ax_t):
+        ax.set_xlabel("blocks n")
+        ax.set_xticks(numbers["ns"])
+        ax.grid(alpha=0.3)
+    ax_s.legend(fontsize=7)
+    return _save(fig, path)
+
+
+__all__ = ["confusion_bars", "grouped_bars", "scaling_curves", "success_by_nk", "verifier_sweep"]

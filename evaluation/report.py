@@ -22,7 +22,7 @@ from tamp.errors import UserError
 from tamp.planning.structs import OUTCOMES, Outcome
 from tamp.records import atomic_write_text
 
-from . import paper, plots
+from . import paper, plots, scaling
 from .stats import IDENTICAL, confusion, mean_std, median, paired_ttest, percentile, rate_pct
 
 METHOD_ORDER = ("deterministic", "probabilistic", "probabilistic_oracle", "cfs", "bilevel", "bilevel_alg1",
@@ -988,6 +988,18 @@ def section_symbols(symbols: list[dict] | None, source: Path) -> Section:
     return Section("symbols", title, lines, {"bits": symbols})
 
 
+def section_scaling(res: Results, figures: Path) -> Section:
+    title = "13. Scaling with the number of blocks"
+    if len(res.ns) < 2:
+        return _skipped("scaling", title, f"The problems have one object count (n = {res.ns[0]}): nothing to "
+                                          "scale over (`tamp problems --objects 2,3,4,5,6`).")
+    numbers = scaling.scaling_numbers(res.rows)
+    png = plots.scaling_curves(figures / "scaling.png", numbers) if numbers["methods"] else None
+    lines = scaling.scaling_lines(numbers, None if png is None else f"{png.parent.name}/{png.name}")
+    lines[0] += _protocol_note(res)
+    return Section("scaling", title, lines, numbers)
+
+
 # --- the report ----------------------------------------------------------------------------------
 def _json_safe(x: Any) -> Any:
     if isinstance(x, float) and not math.isfinite(x):
@@ -1011,6 +1023,7 @@ def build_report(res: Results, figures: Path, ablation: dict | None = None,
                 section_symbols(symbols, symbols_source)]
     if any(res.has(a, b) for a, b in FEASIBILITY_PAIRS):  # only when run before and after (`*_nofeas`)
         sections.append(section_feasibility(res, figures))
+    sections.append(section_scaling(res, figures))
     lines = ["# Evaluation report", "",
              f"From `{source}` ({len(res.rows)} rows, {len(res.cells)} problems). Ours next to the paper's "
              "numbers (Dogangun et al., quoted as printed). Success in % of problems (one decimal), times in "

@@ -15,6 +15,10 @@ probabilistic planner are refined and executed from X_init one after the other, 
 first, until one succeeds or `EvalConfig.oracle_max_plans` were executed; `executed_plans` counts
 them, and `plan` and the refinement fields are those of the last one executed.
 
+`effect_error_m`: per executed action, the Dynamics Model's position error (metres, mean over the
+objects) predicting that action's effect from the state the world was in before it: how well the
+model the method plans with knows the world on the actions it chose (None without one).
+
 Closed-loop rows: `plan` holds the actions sent to the world (a failed one included, the loop goes
 on from the observed state), `refine_time_s` the wall time of each World.step (planning and, in
 `full`, execution), `level`, `predicted_error_m` and `candidates` are the first round's, timings are
@@ -62,7 +66,7 @@ ROW_KEYS = ("problem", "n", "k", "run", "protocol", "moved", "method", "solved",
             "level1_time_s", "predicted_error_m", "candidates", "refined", "refine_failure", "refine_time_s",
             "executed_actions", "executed_plans", "final_error_m", "success", "outcome", "rounds", "fidelity",
             "eps_m", "tau_verify_m", "symbolic_backend", "feasibility", "search_time_s", "feasibility_time_s",
-            "plan_refine_time_s", "level1_stages_s", "search_expanded")
+            "plan_refine_time_s", "level1_stages_s", "search_expanded", "effect_error_m")
 # the only fields that vary between runs
 TIMING_KEYS = ("planning_time_s", "level1_time_s", "refine_time_s", "search_time_s", "feasibility_time_s",
                "plan_refine_time_s", "level1_stages_s")
@@ -117,7 +121,9 @@ class EvalConfig:
         p = self.planner
         out = {"fidelity": self.fidelity, "eps_m": p.eps, "tau_verify_m": p.tau_verify, "n_domains": p.n_domains,
                "search_time_limit_s": p.search.time_limit, "search_max_expansions": p.search.max_expansions,
+               "search_confident_m": p.search.confident, "search_look_on": p.search.look_on,
                "level1_budget": p.level1_budget, "level1_time_budget_s": p.level1_time_budget,
+               "level1_focus_from": p.focus_from,
                "symbolic_backend": p.backend, "oracle_max_plans": self.oracle_max_plans}
         if p.symbolic_time_limit != PlanConfig.symbolic_time_limit:  # older results directories stay resumable
             out["symbolic_time_limit_s"] = p.symbolic_time_limit
@@ -186,6 +192,18 @@ def _feasibility_fields(results: list) -> dict:
     fields["feasibility_time_s"] = _round(sum(r.timings.get("feasibility", 0.0) for r in used))
     fields["plan_refine_time_s"] = _round(sum(r.timings.get("refine", 0.0) for r in used))
     return fields
+
+
+def _effect_errors(models, states: Sequence[np.ndarray], actions) -> list[float | None] | None:
+    """Per executed action: the Dynamics Model's position error (m, mean over objects) predicting its
+    effect from the state the world was in before it; None without a Dynamics Model."""
+    if models.dynamics is None:
+        return None
+    out: list[float | None] = []
+    for X, X_next, action in zip(states, states[1:], actions):
+        e_hat = models.dynamics.predict_effect(X, np.asarray([tuple(action)], dtype=np.int64))[0]
+        out.append(_round(float(np.linalg.norm(X[:, :3] + e_hat - X_next[:, :3], axis=1).mean())))
+    return out
 
 
 def _failure(failure) -> dict | None:
@@ -300,29 +318,30 @@ class Evaluator:
                   "predicted_error_m": _round(result.predicted_error), "candidates": _candidates(result),
                   "refined": None, "refine_failure": None, "refine_time_s": [], "executed_actions": 0,
                   "executed_plans": 0, "final_error_m": _round(goal_error(problem.X_init, problem.X_goal)),
-                  "rounds": None}
+                  "rounds": None, "effect_error_m": None}
         if not result.solved:
             return fields
         plans = [c.actions for c in result.candidates[:self.config.oracle_max_plans]] if method.oracle \
             else [result.plan]
         for number, actions in enumerate(plans, start=1):
-            outcome = self._execute(problem, actions)
+            outcome = self._execute(problem, actions, models)
             fields = {**fields, "plan": _actions(actions), **outcome, "executed_plans": number}
             if outcome["refined"] and outcome["final_error_m"] < self.config.eps:
                 break
         return fields
 
-    def _execute(self, problem: Problem, actions) -> dict:
+    def _execute(self, problem: Problem, actions, models) -> dict:
         """Refine and execute one plan from X_init: the refinement fields of a row."""
         if not actions:  # the planner says the initial state meets the goal: nothing to refine
             return {"refined": True, "refine_failure": None, "refine_time_s": [], "executed_actions": 0,
-                    "final_error_m": _round(goal_error(problem.X_init, problem.X_goal))}
+                    "final_error_m": _round(goal_error(problem.X_init, problem.X_goal)), "effect_error_m": []}
         from tamp.app.runner import execute_plan
 
         ex = execute_plan(actions, problem.X_init, problem.X_goal, self.config.fidelity, world=self.world("fast"))
         return {"refined": ex.refined.success, "refine_failure": _failure(ex.refined.failure),
                 "refine_time_s": [_round(s.refine_time) for s in ex.refined.steps],
-                "executed_actions": len(ex.refined.steps), "final_error_m": _round(ex.error)}
+                "executed_actions": len(ex.refined.steps), "final_error_m": _round(ex.error),
+                "effect_error_m": _effect_errors(models, [problem.X_init, *ex.X_after], actions)}
 
     def _closed_loop(self, problem: Problem, method: Method, models) -> dict:
         from tamp.app.runner import run_closed_loop
@@ -349,7 +368,8 @@ class Evaluator:
                 "refined": (failure is None) if solved else None, "refine_failure": _failure(failure),
                 "refine_time_s": [_round(sum(t)) for t in run.step_times], "executed_actions": executed,
                 "executed_plans": None, "final_error_m": _round(goal_error(X_final, problem.X_goal)),
-                "rounds": max(len(out.rounds) - 1, 0)}
+                "rounds": max(len(out.rounds) - 1, 0),
+                "effect_error_m": _effect_errors(models, out.states, out.executed)}
 
 
 # --------------------------------------------------------------------------- workers

@@ -41,6 +41,21 @@ def update_train_state(path: str | Path, info: dict[str, Any]) -> None:
     atomic_write_bytes(Path(path), lambda f: f.write(buf.getbuffer()))
 
 
+def set_object_limit(path: str | Path, n_max: int) -> None:
+    """Rewrite the checkpoint at ``path`` to take scenes of up to ``n_max`` objects. The weights do not
+    depend on it (attention over any number of objects): raise it only with evidence that the model
+    predicts that many objects well (tamp/pretrained/PROVENANCE.md: bench/generalization.py and a
+    planning evaluation at those counts)."""
+    if not isinstance(n_max, int) or n_max < 1:
+        raise ValueError(f"n_max must be a positive integer, got {n_max!r}")
+    payload = read_checkpoint(path)
+    payload["config"] = {**payload["config"], "n_max": n_max}
+    model_from_payload(payload, path)  # still a valid model
+    buf = io.BytesIO()
+    torch.save(payload, buf)
+    atomic_write_bytes(Path(path), lambda f: f.write(buf.getbuffer()))
+
+
 def read_checkpoint(path: str | Path) -> dict[str, Any]:
     """Load a checkpoint payload safely; ValueError (with the path) if it is not one of ours."""
     path = Path(path)

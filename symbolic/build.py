@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Sequence
 
 import numpy as np
 
@@ -68,12 +69,17 @@ def load_domain(domain_dir: str | Path) -> OperatorSet:
     return load_operators(Path(domain_dir) / "operators.json")
 
 
-def make_problem(init_unary, init_rel, goal_unary, goal_rel, nonempty: bool = False) -> SymbolicProblem:
-    """Sigma_init / Sigma_goal bits -> problem (shapes checked against each other); `nonempty`: see
-    SymbolicProblem."""
+def make_problem(init_unary, init_rel, goal_unary, goal_rel, nonempty: bool = False,
+                 movable: Sequence[int] | None = None) -> SymbolicProblem:
+    """Sigma_init / Sigma_goal bits -> problem (shapes checked against each other); `nonempty` and
+    `movable`: see SymbolicProblem."""
     iu, ir, gu, gr = (np.asarray(x) for x in (init_unary, init_rel, goal_unary, goal_rel))
     iu, ir = check_bits(iu, ir, "init")
     gu, gr = check_bits(gu, gr, "goal", iu.shape[1], ir.shape[0])
     if gu.shape != iu.shape:
         raise ValueError(f"goal has {gu.shape[0]} objects, init has {iu.shape[0]}")
-    return SymbolicProblem(iu, ir, gu, gr, nonempty)
+    if movable is not None:
+        movable = tuple(sorted({int(o) for o in movable}))
+        if any(not 0 <= o < iu.shape[0] for o in movable):
+            raise ValueError(f"movable objects {movable} are not all among the {iu.shape[0]} objects")
+    return SymbolicProblem(iu, ir, gu, gr, nonempty, movable)

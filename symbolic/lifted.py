@@ -16,6 +16,7 @@ bit layout of `atoms.py`; its expansion is computed with numpy and cached per st
 
 from __future__ import annotations
 
+import copy
 import itertools
 from dataclasses import dataclass
 
@@ -158,6 +159,20 @@ class LiftedTask:
         self._first = _CodeIndex(list(first_groups), list(first_groups.values()))
         self._post = _CodeIndex(list(post_groups), [list(g.values()) for g in post_groups.values()])
         self._cache: dict[int, Expansion] = {}
+
+    def restricted(self, movable: tuple[int, ...]) -> LiftedTask:
+        """The task whose ground actions pick only objects in `movable`: the tuples whose first
+        object (the picked one) is in it, in the same order. Operator tables are shared; ground
+        action numbers are the restricted task's own."""
+        sub = copy.copy(self)
+        keep = np.array([t[0] in movable for t in self.tuples], dtype=bool)
+        sub.tuples = [t for t, k in zip(self.tuples, keep.tolist()) if k]
+        sub.n_tuples = max(len(sub.tuples), 1)
+        sub.positions = self.positions[keep]
+        sub._tuple_arity = self._tuple_arity[keep]
+        sub._bit_value = [v[keep] for v in self._bit_value]
+        sub._cache = {}
+        return sub
 
     # ---- state helpers ---------------------------------------------------------------------------
     def _keys(self, state: int) -> np.ndarray:

@@ -68,13 +68,22 @@ class SymbolicPlanner:
         self.writer = DomainWriter(ops)
         self.sampler = EffectSampler(ops)  # cumulative effect tables, once per operator set
         self._tasks: dict[int, LiftedTask] = {}
+        self._restricted: dict[tuple[int, tuple[int, ...]], LiftedTask] = {}  # (n, movable) -> task
 
     # ---- helpers -------------------------------------------------------------------------------
-    def task(self, n: int) -> LiftedTask:
-        """The lifted task of n-object scenes (built once per n: index tables, no grounding)."""
+    def task(self, n: int, movable: tuple[int, ...] | None = None) -> LiftedTask:
+        """The lifted task of n-object scenes (built once per n: index tables, no grounding); with
+        `movable`, its view whose actions pick only those objects (kept for the last 64 sets)."""
         if n not in self._tasks:
             self._tasks[n] = LiftedTask(self.ops, n, self.scope)
-        return self._tasks[n]
+        if movable is None or len(movable) == n:
+            return self._tasks[n]
+        key = (n, tuple(movable))
+        if key not in self._restricted:
+            if len(self._restricted) >= 64:
+                self._restricted.pop(next(iter(self._restricted)))
+            self._restricted[key] = self._tasks[n].restricted(key[1])
+        return self._restricted[key]
 
     def _allowed(self, n: int) -> np.ndarray:
         ar = np.array([op.arity for op in self.ops.operators])
@@ -96,7 +105,7 @@ class SymbolicPlanner:
         if self.backend == "python":
             start = time.perf_counter()
             out = self._search(problem, DomainSet.of_choices(self.ops, ch[None]), self.budget, None)
-            return self._result(problem.n, out, 0, time.perf_counter() - start)
+            return self._result(self.task(problem.n, problem.movable), out, 0, time.perf_counter() - start)
         result = fd.run_fast_downward(self._domain_text(ch, problem.n), problem_pddl(self.ops, problem),
                                       self.search, self.time_limit)
         return result
@@ -129,7 +138,7 @@ class SymbolicPlanner:
 
     def _search(self, problem: SymbolicProblem, domains: DomainSet, budget: int,
                 deadline: float | None) -> SearchOutcome:
-        task = self.task(problem.n)
+        task = self.task(problem.n, problem.movable)
         init, goal = problem_states(problem)
         try:
             return search_domains(task, domains, init, goal, budget, deadline, problem.nonempty)
@@ -145,7 +154,7 @@ class SymbolicPlanner:
         out = self._search(problem, domains, self.budget if budget is None else budget, deadline)
         searched = time.perf_counter() - start
         t0 = time.perf_counter()
-        task = self.task(problem.n)
+        task = self.task(problem.n, problem.movable)  # the search's ground action numbers
         found: dict[tuple, list] = {}
         for k in range(n_domains):  # domain order: the first domain to produce a plan names its steps
             i = out.plan_of[k]
@@ -180,12 +189,11 @@ class SymbolicPlanner:
                 found[key] = [steps, 1, None if r.states is None else tuple(r.states)]
         return _ranked(found)
 
-    def _result(self, n: int, out: SearchOutcome, domain: int, seconds: float) -> PlannerResult:
-        """The PlannerResult of one domain of a python search, with its plan's symbolic states."""
+    def _result(self, task: LiftedTask, out: SearchOutcome, domain: int, seconds: float) -> PlannerResult:
+        """The PlannerResult of one domain of a python search (over `task`), with its plan's symbolic states."""
         i = out.plan_of[domain]
         if i < 0:
             return PlannerResult(out.status[domain], None, out.message, seconds)
-        task = self.task(n)
         return PlannerResult(out.status[domain], [task.step(g) for g in out.plans[i]], out.message, seconds,
                              states=list(out.states[i]))
 

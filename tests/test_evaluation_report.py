@@ -60,6 +60,8 @@ def make_rows(methods=METHODS, per_cell=4, seed=3):
                         "executed_actions": k if solved and failure is None else 0,
                         "final_error_m": final, "success": success, "outcome": outcome,
                         "rounds": k - 1 if m == "bilevel_replan" else None,
+                        "effect_error_m": [rng.uniform(0.0, 0.03) for _ in range(k)]
+                        if solved and failure is None else [],
                         "fidelity": "fast", "eps_m": 0.05, "tau_verify_m": 0.07})
     for r in rows:
         if r["level1_stages_s"]:
@@ -462,6 +464,41 @@ def test_level1_algorithm1_against_our_extensions(full_report):
     assert t[-1]["n"] == "paper" and t[-1]["`bilevel_alg1` Level 1 (%)"] == "≈60"
 
 
+def test_scaling_with_the_number_of_blocks(full_report):
+    _, data, s = full_report
+    table, growth, effect = s["13"]["tables"]
+    assert {(r["method"], r["n"]) for r in table} == {(f"`{m}`", str(n)) for m in METHODS for n in (2, 3, 4)}
+    mean_t = {}
+    for row in table:
+        m, n = row["method"].strip("`"), int(row["n"])
+        rs = [r for r in data.of(m) if r["n"] == n]
+        times = [1000 * r["planning_time_s"] for r in rs]
+        assert int(row["problems"]) == len(rs)
+        close(row["success (%)"], pct([r["success"] for r in rs]), 1)
+        med, mean = (float(v) for v in row["planning median / mean (ms)"].split(" / "))
+        assert med == pytest.approx(np.median(times), abs=0.51) and mean == pytest.approx(np.mean(times), abs=0.51)
+        mean_t[m, n] = np.mean(times)
+        close(row["refined (%)"], pct([r["refined"] for r in rs if r["refined"] is not None]), 1)
+        if m.startswith("bilevel"):
+            close(row["Level 1 (%)"], pct([r["level"] == 1 for r in rs]), 1)
+        else:
+            assert row["Level 1 (%)"] == "—"
+    for row in growth:
+        m = row["method"].strip("`")
+        if row["step"].startswith("overall"):
+            expected = (mean_t[m, 4] / mean_t[m, 2]) ** 0.5
+        else:
+            a, b = (int(x) for x in row["step"].split("->"))
+            expected = mean_t[m, b] / mean_t[m, a]
+        assert float(row["mean"].rstrip("x")) == pytest.approx(expected, abs=0.006)
+    dynamics = ("cfs", "bilevel", "bilevel_alg1", "bilevel_replan")
+    for row in effect:
+        errors = [e for r in data.rows if r["n"] == int(row["n"]) and r["method"] in dynamics
+                  for e in r["effect_error_m"]]
+        assert int(row["actions"]) == len(errors)
+        close(row["mean (cm)"], 100 * np.mean(errors), 2)
+
+
 def test_learned_symbols_section(full_report):
     _, _, s = full_report
     (t,) = s["11"]["tables"]
@@ -474,7 +511,7 @@ def test_learned_symbols_section(full_report):
 
 def test_figures_and_json(full_report):
     out, data, s = full_report
-    for name in ("dual_model", "verifier_tau", "verifier_confusion", "success", "planning_time"):
+    for name in ("dual_model", "verifier_tau", "verifier_confusion", "success", "planning_time", "scaling"):
         png = out / "figures" / f"{name}.png"
         assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 5000
     numbers = json.loads((out / "report.json").read_text())

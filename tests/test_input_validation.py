@@ -130,8 +130,14 @@ def test_evaluate_checks_every_input_before_writing(tmp_path, capsys):
     problems = _problem_set(tmp_path / "set.jsonl", [good, Problem(five, five, k=1, name="b")])
     out = tmp_path / "out"
     args = ["evaluate", "--problems", str(problems), "--out", str(out), "--methods", "cfs", "--no-report", "--quiet"]
-    assert main(args[:1] + ["--models", str(pretrained_dir())] + args[1:]) == 2  # too many objects for the models
-    _one_line_error(capsys, str(problems), "problem b has 5 objects", "at most 4")
+    from learned.checkpoint import set_object_limit
+
+    four = tmp_path / "four"  # the bundled models as trained on 2-4 blocks, before their limit was raised
+    shutil.copytree(pretrained_dir(), four)
+    for name in ("dynamics.pt", "symbolic.pt"):
+        set_object_limit(four / name, 4)
+    assert main(args[:1] + ["--models", str(four)] + args[1:]) == 2  # too many objects for the models
+    _one_line_error(capsys, str(problems), "problem b has 5 objects", "trained for at most 4")
     assert not out.exists()
     bad_models = tmp_path / "models"
     shutil.copytree(pretrained_dir(), bad_models)

@@ -87,6 +87,23 @@ def _problem_reachable_by_the_model(models_dir, tmp_path):
     return path
 
 
+def test_the_object_limit_is_the_one_the_models_were_trained_for(models_dir, tmp_path, capsys):
+    """Models trained on scenes of up to 4 blocks refuse a fifth in one line naming 4; the bundled
+    models take the world's 6 (PROVENANCE.md: trained on 2-4, checked at 5 and 6)."""
+    from tamp.planning.models import load_models, pretrained_dir
+    from tamp.planning.validate import MAX_OBJECTS
+
+    five = [[0.5 + 0.08 * i, 0.2, 0.025, 1, 0] for i in range(5)]
+    path = tmp_path / "five.json"
+    path.write_text(json.dumps({"X_init": five, "X_goal": five}))
+    assert main(["plan", "--problem", str(path), "--models", str(models_dir), "--execute", "none"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "5 objects, but the models were trained for at most 4" in err
+    bundled = load_models(pretrained_dir())
+    assert bundled.n_max == MAX_OBJECTS
+    bundled.require_objects(MAX_OBJECTS, "a six-block problem")
+
+
 @pytest.mark.sim
 def test_cli_plans_without_execution(models_dir, tmp_path, capsys):
     path = _problem_reachable_by_the_model(models_dir, tmp_path)

@@ -105,3 +105,41 @@ def test_a_search_that_must_avoid_an_infeasible_action_finds_another_plan():
 
 def out_eps() -> float:
     return SearchConfig().eps
+
+
+class BiasedModel(StubModel):
+    """The stub dynamics, but picking object 0 in the scene X with one of `biased` is predicted to
+    leave it 4 cm off along x: a goal state within eps (5 cm), not within `confident` (3 cm)."""
+
+    def __init__(self, biased):
+        super().__init__()
+        self.biased = {tuple(a) for a in biased}
+
+    def predict_effect(self, X_, actions):
+        e = super().predict_effect(X_, actions)
+        if np.allclose(X_, X):
+            for b, a in enumerate(np.asarray(actions).reshape(-1, 4).tolist()):
+                if tuple(a) in self.biased:
+                    e[b, 0, 0] += 0.04
+        return e
+
+
+def test_a_goal_state_predicted_4_cm_off_waits_for_a_closer_one_of_the_same_length():
+    G = goal_after([(0, 0, 0, 1)])  # the bar shifted 7.5 cm along y on itself
+    assert goal_error(goal_after([(0, -1, 0, 0)]), G) < 1e-9  # picked at -1, released at 0: the same shift
+    model = BiasedModel([(0, -1, 0, 0)])  # generated first, predicted 4 cm off
+    first = continuous_search(model, X, G, SearchConfig(look_on=0))
+    assert first.plan == [(0, -1, 0, 0)]
+    closer = continuous_search(model, X, G)
+    assert closer.solved and closer.plan == [(0, 0, 0, 1)]
+    assert goal_error(closer.trajectory[-1], G) < SearchConfig().confident
+
+
+def test_a_shorter_plan_predicted_4_cm_off_beats_longer_exact_ones():
+    G = goal_after([(0, 0, 0, 1)])
+    every_first_move_of_the_bar = [(0, g, j, r) for g in (-1, 0, 1) for j in range(3) for r in (-1, 0, 1)]
+    out = continuous_search(BiasedModel(every_first_move_of_the_bar), X, G)
+    assert out.solved and len(out.plan) == 1
+    assert 0.03 < goal_error(out.trajectory[-1], G) < 0.05
+    with pytest.raises(ValueError, match="confident"):
+        SearchConfig(confident=0.06)

@@ -121,6 +121,32 @@ def test_lifted_successors_are_the_grounded_ones_in_ground_action_order(bundled,
                         assert s in task.predecessors(t)
 
 
+def test_a_problem_with_movable_objects_plans_only_with_them_and_loses_no_plan_that_does():
+    """`SymbolicProblem.movable`: every plan picks up only those objects, and a domain whose
+    unrestricted breadth-first plan picks only them gets the same plan (fewer actions, same order)."""
+    ops = learn_operators(bw.random_dataset(3000, (2, 3), seed=21, p_large=0.0))
+    planner = SymbolicPlanner(ops)
+    compared = 0
+    for n, s, k in ((5, 2, 2), (5, 3, 3), (5, 5, 2), (4, 7, 3)):
+        problem = bw.random_problem(n, k, seed=s, p_large=0.0)[0]
+        full = planner.plan_probabilistic(problem, 20, s)
+        picked = sorted({a[0] for p in full.plans for a in p.actions})
+        assert picked and len(picked) < n
+        focused = planner.plan_probabilistic(make_problem(problem.init_unary, problem.init_rel, problem.goal_unary,
+                                                          problem.goal_rel, movable=picked), 20, s)
+        assert _ranked(focused) == _ranked(full) and focused.statuses == full.statuses
+        fewer = picked[1:]
+        if fewer:
+            narrow = planner.plan_probabilistic(make_problem(problem.init_unary, problem.init_rel, problem.goal_unary,
+                                                             problem.goal_rel, movable=fewer), 20, s)
+            assert all(a[0] in fewer for p in narrow.plans for a in p.actions)
+            assert narrow.generated < full.generated
+        compared += 1
+    assert compared == 4
+    with pytest.raises(ValueError, match="movable"):
+        make_problem(problem.init_unary, problem.init_rel, problem.goal_unary, problem.goal_rel, movable=[n])
+
+
 def test_sampled_domains_do_not_depend_on_n_and_masks_match_choices(bundled):
     sampler = EffectSampler(bundled)
     a, b = sampler.choices(100, seed=7), sampler.choices(30, seed=7)

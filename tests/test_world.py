@@ -4,6 +4,7 @@ import pytest
 
 from tamp.planning import structs
 from tamp.planning.structs import BLOCK_SIZES, PickPlace
+from tamp.planning.validate import MAX_OBJECTS, check_scene
 from tamp.sim import World, WorldConfig
 from tamp.sim.kinematics import Q_LOWER, Q_UPPER, tcp_pose
 from tamp.sim.motion import MotionPlanner
@@ -187,6 +188,37 @@ def test_random_scene_and_actions(world):
     assert np.all((X[:, 0] >= 0.44) & (X[:, 0] <= 0.86))
     actions = world.actions()
     assert len(actions) == 9 * 4**2 == len(set(actions))
+
+
+def test_six_block_layouts_fit_the_workspace_within_reach():
+    """MAX_OBJECTS blocks, all bars (the most crowded case) and mixed: every random layout is a scene
+    the world accepts as given (on the table, within reach, no two footprints overlapping)."""
+    for p_large in (0.5, 1.0):
+        world = World(WorldConfig(p_large=p_large), seed=0)
+        for seed in range(300):
+            world.rng = np.random.default_rng(seed)
+            types, positions = world._random_layout(MAX_OBJECTS)
+            check_scene(np.concatenate([positions, np.eye(2)[types]], axis=1), upright=True,
+                        where=f"layout {seed}")
+
+
+def test_six_block_scenes_rest_and_random_actions_keep_them_valid():
+    """Reset at 6 blocks settles to resting, upright blocks; random actions from there leave valid
+    scenes (on the table or on a block, within reach) and some of them move a block."""
+    world = World(WorldConfig(), seed=0)
+    rng = np.random.default_rng(0)
+    statuses = []
+    for seed in range(2):
+        X = world.reset(n_objects=MAX_OBJECTS, seed=seed)
+        assert X.shape == (MAX_OBJECTS, 5)
+        check_scene(X, upright=True, where=f"reset {seed}")
+        actions = world.actions()
+        assert len(actions) == 9 * MAX_OBJECTS**2
+        for step in range(5):
+            X_next, info = world.step(actions[rng.integers(len(actions))])
+            check_scene(X_next, where=f"reset {seed} step {step}")
+            statuses.append(info.status)
+    assert "ok" in statuses
 
 
 @pytest.mark.parametrize(

@@ -216,9 +216,22 @@ def add_planner_arguments(p: argparse.ArgumentParser, backends: tuple[str, ...] 
                    help="symbolic states Level 1's search (one for all N domains) may generate per planning call "
                    f"(default {default.level1_budget}: at most about 0.2-0.3 s at 2 to 6 objects); deterministic, "
                    "whatever the machine's load")
+    p.add_argument("--focus-from", type=positive_int, default=default.focus_from, metavar="N",
+                   help="with N or more blocks, Level 1's symbolic plans pick up only the blocks off their goal "
+                   "(farther than the success tolerance in x, y), as the continuous search's pruning does: the "
+                   "symbolic search then grows with the blocks to move, not all of them "
+                   f"(default {default.focus_from}; "
+                   "`bilevel_alg1`, the paper's Algorithm 1, never restricts)")
     p.add_argument("--max-expansions", type=positive_int, default=default.search.max_expansions,
                    help="continuous search node limit per planning call: it decides when the search gives up, "
                    f"whatever the machine's load (default {default.search.max_expansions}, about 10 s at 4 objects)")
+    p.add_argument("--confident", type=positive_float, default=default.search.confident, metavar="METRES",
+                   help="the continuous search ends at a goal state whose every object is predicted within this "
+                   f"distance of its goal (default {default.search.confident:g} m); a goal state within the success "
+                   f"tolerance ({default.search.eps:g} m) but not this close is kept while it looks on")
+    p.add_argument("--look-on", type=non_negative_int, default=default.search.look_on, metavar="EXPANSIONS",
+                   help="expansions the continuous search spends looking for a goal state within --confident after "
+                   f"finding one that is not (default {default.search.look_on}; 0 returns the first goal state)")
     p.add_argument("--time-limit", type=positive_float, default=default.search.time_limit,
                    help="continuous search wall-clock limit per planning call, s: a safety net behind "
                    f"--max-expansions (default {default.search.time_limit:g})")
@@ -231,8 +244,10 @@ def add_planner_arguments(p: argparse.ArgumentParser, backends: tuple[str, ...] 
 def planner_config(args: argparse.Namespace) -> PlanConfig:
     """The PlanConfig of the flags of `add_planner_arguments` (seed 0: callers set the problem's)."""
     return PlanConfig(n_domains=args.n_domains, backend=args.symbolic_backend, level1_budget=args.level1_budget,
+                      focus_from=args.focus_from,
                       symbolic_time_limit=args.symbolic_time_limit, feasibility=getattr(args, "feasibility", True),
-                      search=SearchConfig(max_expansions=args.max_expansions, time_limit=args.time_limit))
+                      search=SearchConfig(max_expansions=args.max_expansions, time_limit=args.time_limit,
+                                          confident=args.confident, look_on=args.look_on))
 
 
 def options_from_args(args: argparse.Namespace) -> PlanOptions:

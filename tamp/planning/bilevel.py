@@ -31,7 +31,14 @@ import numpy as np
 
 from tamp.errors import UserError
 from tamp.planning.models import Models
-from tamp.planning.search import SearchConfig, SearchResult, SearchStatus, continuous_search, state_key
+from tamp.planning.search import (
+    SearchConfig,
+    SearchResult,
+    SearchStatus,
+    continuous_search,
+    misplaced_objects,
+    state_key,
+)
 from tamp.planning.structs import Infeasible, KinematicFeasibility, PickPlace, RefinementOutcome
 from tamp.planning.validate import check_problem
 from tamp.planning.verify import (
@@ -69,6 +76,8 @@ class PlanConfig:
     #                         beam search of this width over the skeleton, `verify.refine_skeleton`), verified after it
     alternatives_total: int = 256  # per problem; later symbolic plans are verified alone
     nonempty: bool = True  # X_init not within tau of X_goal: the symbolic plan needs >= 1 action
+    focus_from: int | None = 5  # from this many objects on, symbolic plans pick up only blocks off their
+    #                             goal (`search.misplaced_objects`, the continuous search's pruning); None: never
     # Kinematics in the planning loop (cfs, bilevel; needs a `kinematics` object passed to `plan`):
     feasibility: bool = True  # check actions on the predicted states, refine a plan before returning it
     max_refinements: int = 4  # full refinements per planning call (Level-1 candidates and Level-2 plans)
@@ -82,6 +91,8 @@ class PlanConfig:
                 raise UserError(f"PlanConfig.{name} must be positive, got {getattr(self, name)}")
         if self.n_domains < 1:
             raise UserError(f"the number of sampled domains must be at least 1, got {self.n_domains}")
+        if self.focus_from is not None and self.focus_from < 1:
+            raise UserError(f"PlanConfig.focus_from must be a positive object count or None, got {self.focus_from}")
 
 
 @dataclass
@@ -144,13 +155,18 @@ class PlanResult:
 # --- the levels -------------------------------------------------------------------------------
 def _symbolic_problem(models: Models, X_init: np.ndarray, X_goal: np.ndarray, cfg: PlanConfig):
     """Sigma_init, Sigma_goal; with cfg.nonempty, the empty plan is ruled out when it cannot verify
-    (X_init itself is not within tau of X_goal although the symbols may agree)."""
+    (X_init itself is not within tau of X_goal although the symbols may agree); from cfg.focus_from
+    objects on, plans may pick up only the blocks off their goal."""
     from symbolic import make_problem
 
     assert models.symbolic is not None  # models.symbolic_planner() checked it
     ui, ri = models.symbolic.symbols(X_init)
     ug, rg = models.symbolic.symbols(X_goal)
-    return make_problem(ui, ri, ug, rg, nonempty=cfg.nonempty and goal_error(X_init, X_goal) >= cfg.tau_verify)
+    movable = None
+    if cfg.focus_from is not None and len(X_init) >= cfg.focus_from:
+        movable = misplaced_objects(X_init, X_goal, cfg.search.misplaced, cfg.search.eps).tolist() or None
+    return make_problem(ui, ri, ug, rg, nonempty=cfg.nonempty and goal_error(X_init, X_goal) >= cfg.tau_verify,
+                        movable=movable)
 
 
 def _level1_plans(models: Models, X_init, X_goal, cfg: PlanConfig, result: PlanResult,
@@ -173,7 +189,7 @@ def _level1_plans(models: Models, X_init, X_goal, cfg: PlanConfig, result: PlanR
         result.timings["symbolic"] = time.perf_counter() - t
         result.symbolic_stats = {"n_domains": out.n_domains, "unique_plans": len(out.plans),
                                  "outcomes": dict(out.statuses), "expanded": out.expanded,
-                                 "generated": out.generated,
+                                 "generated": out.generated, "movable": problem.movable,
                                  "timings": {k: round(v, 6) for k, v in out.timings.items()}}
         if not out.plans:
             result.reasons.append(f"level 1: no symbolic plan in any of the {out.n_domains} sampled domains "
@@ -462,8 +478,11 @@ def _feasible_choice(verified: list[Verification], feas: _Feasibility | None) ->
 def plan_bilevel_alg1(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig(),
                       kinematics: KinematicFeasibility | None = None) -> PlanResult:
     """The paper's Algorithm 1 exactly: ranked symbolic plans verified alone (no look-alike
-    alternatives) and the empty plan allowed whenever Sigma_init = Sigma_goal."""
-    result = plan_bilevel(models, X_init, X_goal, replace(cfg, alternatives=0, nonempty=False, feasibility=False))
+    alternatives, any block picked) and the empty plan allowed whenever Sigma_init = Sigma_goal; its
+    Level 2 returns the continuous search's first goal state."""
+    paper = replace(cfg, alternatives=0, nonempty=False, feasibility=False, focus_from=None,
+                    search=replace(cfg.search, look_on=0))
+    result = plan_bilevel(models, X_init, X_goal, paper)
     result.method = "bilevel_alg1"
     return result
 
