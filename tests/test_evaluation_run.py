@@ -176,9 +176,12 @@ def test_rows_follow_the_schema_and_their_outcomes_agree(serial, problems_file):
             assert r["executed_plans"] == int(r["solved"])
         if not r["solved"]:
             assert r["outcome"] == "no_plan" and r["plan"] is None and r["refined"] is None
-            assert r["executed_actions"] == 0 and r["predicted_error_m"] is None
+            assert r["executed_actions"] == 0 and r["predicted_error_m"] is None and not r["effect_error_m"]
             assert r["final_error_m"] == pytest.approx(goal_error(p.X_init, p.X_goal), abs=1e-6)
             continue
+        # the Dynamics Model's one-step error on every executed action (the stub mimics the world: cm, not m)
+        assert len(r["effect_error_m"]) == r["executed_actions"]
+        assert all(0 <= e < 0.1 for e in r["effect_error_m"])
         assert r["level"] in (1, 2) and r["predicted_error_m"] >= 0
         assert r["executed_actions"] == len(r["refine_time_s"]) <= len(r["plan"])
         if r["refine_failure"] is not None:
@@ -243,11 +246,11 @@ def test_the_oracle_counts_success_iff_some_plan_reaches_the_goal(monkeypatch):
         result.timings["total"], result.predicted_error = 0.01, 0.2
         return result
 
-    def fake_execute(self, problem, actions):
+    def fake_execute(self, problem, actions, models):
         executed.append(actions)
         good = actions == ranked[2].actions
         return {"refined": True, "refine_failure": None, "refine_time_s": [0.1], "executed_actions": 1,
-                "final_error_m": 0.0 if good else 0.3}
+                "final_error_m": 0.0 if good else 0.3, "effect_error_m": [0.01]}
 
     import tamp.planning.bilevel
 
