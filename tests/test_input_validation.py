@@ -302,3 +302,15 @@ def test_bad_input_found_by_the_libraries_below_tamp_is_a_one_line_user_error(tm
     err = capsys.readouterr().err
     assert code == 2 and err.startswith("tamp train: error: ") and len(err.strip().splitlines()) == 1
     assert "Traceback" not in err
+
+
+@pytest.mark.parametrize("command", [["demo"], ["simulate"], ["problems", "--out", "set.jsonl"],
+                                     ["collect", "--out", "data"], ["train", "--data", "data", "--out", "m.pt"]])
+def test_a_negative_seed_is_refused_in_one_line(command, capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SystemExit) as exit_:
+        main(command + ["--seed", "-1"])
+    assert exit_.value.code == 2
+    err = capsys.readouterr().err
+    assert "argument --seed: expected an integer >= 0, got '-1'" in err and "Traceback" not in err
+    assert list(tmp_path.iterdir()) == []  # nothing written

@@ -174,7 +174,7 @@ def _add_train_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--precision", choices=("float32", "bfloat16"), default=None,
                    help="forward/backward precision (default: bfloat16 autocast where the CPU has native "
                    "bfloat16, else float32; weights and loss stay float32)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the split, the initial weights and the batches")
+    p.add_argument("--seed", type=non_negative_int, default=0, help="seed of the split, the initial weights and the batches")
     p.add_argument("--threads", type=positive_int, default=1, help="torch threads (default 1)")
 
 
@@ -318,7 +318,7 @@ def build_parser() -> argparse.ArgumentParser:
         "happened and where the time went.",
     )
     p.add_argument("--objects", type=positive_int, default=3, help="number of blocks, 1..6 (default 3)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the scene and the actions (default 0)")
+    p.add_argument("--seed", type=non_negative_int, default=0, help="seed of the scene and the actions (default 0)")
     p.add_argument("--steps", type=positive_int, default=5, help="number of random actions (default 5)")
     p.add_argument("--json", action="store_true", help="print JSON lines instead of text")
     p.add_argument("--replay", type=_html_path, metavar="OUT.html",
@@ -338,7 +338,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="object counts drawn uniformly per scene, e.g. 2,3,4 (default)")
     p.add_argument("--out", type=Path, required=True, help="dataset directory (new, or the one to resume)")
     add_parallel_arguments(p)
-    p.add_argument("--seed", type=int, default=0, help="dataset seed (default 0)")
+    p.add_argument("--seed", type=non_negative_int, default=0, help="dataset seed (default 0)")
     p.add_argument("--actions-per-scene", type=int, default=10, metavar="M",
                    help="chained random actions per scene (default 10)")
     p.add_argument("--scenes-per-shard", type=int, default=20, metavar="K",
@@ -447,7 +447,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="drop effects of probability below P and renormalise (default 0; the paper's authors: 0.1)")
     p.add_argument("--any-bottleneck", action="store_true",
                    help="accept a --model that is not a Symbolic Model (e.g. the Fig. 4 Sigmoid variant)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=non_negative_int, default=0)
     p.set_defaults(func=cmd_domain)
 
     p = sub.add_parser(
@@ -483,7 +483,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--problems", type=Path, default=None, help="problem set (tamp problems --out): its scenes")
     p.add_argument("--data", type=Path, default=None, help="or a dataset directory: states of its transitions")
     p.add_argument("--max-scenes", type=positive_int, default=5000, help="scenes read at most (default 5000)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the scenes drawn from --data (default 0)")
+    p.add_argument("--seed", type=non_negative_int, default=0, help="seed of the scenes drawn from --data (default 0)")
     p.add_argument("--png", type=Path, default=None, help="write the table as a heat map (PNG)")
     p.add_argument("--json", type=Path, default=None, help="write every figure as JSON")
     p.set_defaults(func=cmd_symbols)
@@ -516,7 +516,7 @@ def build_parser() -> argparse.ArgumentParser:
         "each action (orange) as translucent blocks beside the executed ones. Exit status 0 on "
         "success, 1 if there was no plan, the plan could not be refined or it missed the goal.",
     )
-    p.add_argument("--seed", type=int, default=0, help="seed of the problem and the planner (default 0)")
+    p.add_argument("--seed", type=non_negative_int, default=0, help="seed of the problem and the planner (default 0)")
     p.add_argument("--objects", type=positive_int, default=3, help="number of blocks (default 3)")
     p.add_argument("--actions", type=positive_int, default=3,
                    help="k: random actions that generate the goal (default 3)")
