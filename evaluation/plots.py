@@ -118,7 +118,7 @@ def confusion_bars(path: Path, groups: Sequence[str], confusions: Sequence[Confu
 def scaling_curves(path: Path, numbers: Mapping) -> Path:
     """Success (%) and planning time (s, log scale: median solid, mean dashed) against the number of
     blocks, one line per method (`evaluation.scaling.scaling_numbers`)."""
-    fig = Figure(figsize=(9, 3.4))
+    fig = Figure(figsize=(9, 3.4), layout="constrained")
     ax_s, ax_t = fig.subplots(1, 2)
     for m, cells in numbers["methods"].items():
         ns = sorted(cells)
@@ -131,7 +131,7 @@ def scaling_curves(path: Path, numbers: Mapping) -> Path:
     ax_s.set_ylim(0, 100)
     ax_s.set_ylabel("success (%)")
     ax_t.set_yscale("log")
-    ax_t.set_ylabel("planning time (s): median, mean dashed")
+    ax_t.set_ylabel("planning time (s)\nmedian; mean dashed")
     for ax in (ax_s, ax_t):
         ax.set_xlabel("blocks n")
         ax.set_xticks(numbers["ns"])
