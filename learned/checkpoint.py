@@ -27,18 +27,14 @@ def save_checkpoint(path: str | Path, model: EffectModel, train_state: dict[str,
                                               model.state_dict().items()}}
     if train_state is not None:
         payload["train"] = train_state
-    buf = io.BytesIO()
-    torch.save(payload, buf)
-    atomic_write_bytes(Path(path), lambda f: f.write(buf.getbuffer()))
+    _write(path, payload)
 
 
 def update_train_state(path: str | Path, info: dict[str, Any]) -> None:
     """Atomically merge ``info`` into the training state of the checkpoint at ``path``."""
     payload = read_checkpoint(path)
     payload["train"] = {**payload.get("train", {}), **info}
-    buf = io.BytesIO()
-    torch.save(payload, buf)
-    atomic_write_bytes(Path(path), lambda f: f.write(buf.getbuffer()))
+    _write(path, payload)
 
 
 def set_object_limit(path: str | Path, n_max: int) -> None:
@@ -51,6 +47,11 @@ def set_object_limit(path: str | Path, n_max: int) -> None:
     payload = read_checkpoint(path)
     payload["config"] = {**payload["config"], "n_max": n_max}
     model_from_payload(payload, path)  # still a valid model
+    _write(path, payload)
+
+
+def _write(path: str | Path, payload: dict[str, Any]) -> None:
+    """Atomically write a checkpoint payload (serialized in memory first: no partial file on error)."""
     buf = io.BytesIO()
     torch.save(payload, buf)
     atomic_write_bytes(Path(path), lambda f: f.write(buf.getbuffer()))
