@@ -130,6 +130,68 @@ def interpret_symbols(symbols: Callable[[np.ndarray], tuple[np.ndarray, np.ndarr
     return out
 
 
+# A bit is named by its best fact when |phi| reaches this (the fact explains the bit, not only agrees
+# with it because both are rare).
+STRONG_PHI = 0.7
+# The facts as phrases about objects {i}, {j}; {neg} is "not " where the bit says the fact is false.
+FACT_PHRASES = {
+    "large (type)": "{i} {neg}large", "elevated (z > 4 cm)": "{i} {neg}elevated",
+    "on another block": "{i} {neg}on a block", "carries a block": "{i} {neg}carrying a block",
+    "left half (y > 0)": "{i} {neg}in the left half", "far half (x > 0.7 m)": "{i} {neg}in the far half",
+    "i on j": "{i} {neg}on {j}", "j on i": "{j} {neg}on {i}", "z_i > z_j (i higher)": "{i} {neg}higher than {j}",
+    "z_i <= z_j (vertical order)": "{i} {neg}at most as high as {j}", "y_i < y_j": "{i} {neg}right of {j}",
+    "x_i < x_j": "{i} {neg}nearer the arm than {j}", "near (< 10 cm)": "{i} {neg}near {j}",
+    "same type": "{i} {neg}the same type as {j}", "i large": "{i} {neg}large", "j large": "{j} {neg}large"}
+
+
+@dataclass
+class BitNames:
+    """Names of a Symbolic Model's bits for people: the raw bit (``u0(o2)``, ``r1(o2,o0)``) and, where
+    `tamp symbols`' table finds a strong agreement (|phi| >= `min_phi`), what its value says, e.g.
+    ``u0(o2)=0 ~ o2 elevated``. Built from that table (`interpret_symbols`, or the dicts of its
+    ``--json`` file)."""
+
+    facts: dict[str, tuple[str, bool]]  # bit name ("u0", "r1", "r1(i,i)") -> (fact, bit 1 means "not fact")
+    phi: dict[str, float]  # bit name -> |phi| of that fact
+
+    @classmethod
+    def from_report(cls, report: Sequence[BitReport | dict], min_phi: float = STRONG_PHI) -> "BitNames":
+        facts, phi = {}, {}
+        for bit in report:
+            b = bit.to_dict() if isinstance(bit, BitReport) else bit
+            best = b["best"]
+            if abs(b["phi"][best]) >= min_phi:
+                facts[b["name"]] = (best, bool(b["negated"][best]))
+                phi[b["name"]] = abs(b["phi"][best])
+        return cls(facts, phi)
+
+    @classmethod
+    def none(cls) -> "BitNames":
+        """No meanings: every bit by its raw name."""
+        return cls({}, {})
+
+    @staticmethod
+    def bit(kind: str, k: int, i: str, j: str | None = None) -> str:
+        """The raw name: ``u{k}(i)`` for a unary bit, ``r{k}(i,j)`` for a relation (i == j included)."""
+        return f"u{k}({i})" if kind == "u" else f"r{k}({i},{j})"
+
+    def meaning(self, kind: str, k: int, value: int, i: str, j: str | None = None) -> str | None:
+        """What the bit's `value` says about the objects, or None when the bit has no strong meaning."""
+        key = f"u{k}" if kind == "u" else (f"r{k}(i,i)" if i == j else f"r{k}")
+        if key not in self.facts:
+            return None
+        fact, negated = self.facts[key]
+        holds = bool(value) != negated
+        template = FACT_PHRASES.get(fact, "{neg}" + fact + ("({i})" if kind == "u" or i == j else "({i},{j})"))
+        return template.format(i=i, j=j, neg="" if holds else "not ")
+
+    def describe(self, kind: str, k: int, value: int, i: str, j: str | None = None) -> str:
+        """``u0(o2)=0 ~ o2 elevated``, or ``r0(o1,o2)=1`` for a bit without a strong meaning."""
+        text = f"{self.bit(kind, k, i, j)}={int(value)}"
+        meaning = self.meaning(kind, k, value, i, j)
+        return text if meaning is None else f"{text} ~ {meaning}"
+
+
 def format_symbols_markdown(report: Sequence[BitReport]) -> str:
     """One line per bit: its rate and the fact it agrees with best (by |phi|), then every fact."""
     lines = ["| bit | read on | rate | best fact | agreement | phi |", "|---|---|---|---|---|---|"]

@@ -24,7 +24,7 @@ from symbolic.fast_downward import (
                                     raise_for_status,
                                     run_fast_downward,
 )
-from symbolic.grounding import replay, steps_to_actions
+from symbolic.grounding import apply_effect, replay, steps_to_actions
 from symbolic.lifted import LiftedTask
 from symbolic.operators import coverage, learn_operators, load_operators, save_operators, stats
 from symbolic.pddl import DomainWriter, problem_pddl, write_domains
@@ -48,7 +48,7 @@ __all__ = [
     "Action", "DomainSet", "DomainWriter", "Effect", "EffectSampler", "LiftedTask", "Operator", "OperatorSet",
     "PlannerCrashed", "PlannerError", "PlannerResult", "PlannerStatus", "PlannerTimeout", "PlannerUnsolvable",
     "ProbabilisticPlanResult", "RankedPlan", "SymbolicDataset", "SymbolicPlanner", "SymbolicProblem",
-    "build_domain", "coverage", "dedup_choices", "learn_operators", "load_domain", "load_operators",
+    "apply_effect", "build_domain", "coverage", "dedup_choices", "learn_operators", "load_domain", "load_operators",
     "make_dataset", "make_problem", "plan_deterministic", "plan_probabilistic", "problem_pddl",
     "raise_for_status", "replay", "run_fast_downward", "sample_choices", "save_operators", "search_domains",
     "split_dataset", "stats", "steps_to_actions", "write_domains", "write_sampled_domains",

@@ -7,10 +7,12 @@ the packed search, so that tests can check the search's plans.
 
 from __future__ import annotations
 
+from typing import Sequence
+
 import numpy as np
 
 from symbolic.atoms import check_bits, object_index, pack_state
-from symbolic.structs import Action, OperatorSet, PlanStep, SymbolicProblem
+from symbolic.structs import Action, Effect, OperatorSet, PlanStep, SymbolicProblem
 
 
 def check_problem(ops: OperatorSet, problem: SymbolicProblem) -> None:
@@ -40,6 +42,18 @@ def steps_to_actions(ops: OperatorSet, steps: list[PlanStep], n: int) -> list[Ac
     return actions
 
 
+def apply_effect(unary: np.ndarray, rel: np.ndarray, effect: Effect,
+                 binding: Sequence[int]) -> tuple[np.ndarray, np.ndarray]:
+    """The state after `effect` of an operator whose parameters are bound to the objects `binding`
+    (new arrays; the precondition is the caller's to check)."""
+    u, r = np.array(unary, np.uint8), np.array(rel, np.uint8)
+    for i, k in effect.unary_flips:
+        u[binding[i], k] ^= 1
+    for k, i, j in effect.rel_flips:
+        r[k, binding[i], binding[j]] ^= 1
+    return u, r
+
+
 def replay(ops: OperatorSet, problem: SymbolicProblem, steps: list[PlanStep],
            choice: np.ndarray | None = None) -> tuple[bool, str]:
     """Apply plan steps to Sigma_init with array operations (independent of the packed search).
@@ -63,11 +77,7 @@ def replay(ops: OperatorSet, problem: SymbolicProblem, steps: list[PlanStep],
             return False, f"step {t}: {name} needs {op.arity} distinct objects, got {args}"
         if not (np.array_equal(u[b], op.pre_unary) and np.array_equal(r[:, b][:, :, b], op.pre_rel)):
             return False, f"step {t}: precondition of {name}{tuple(args)} does not hold"
-        e = op.effects[0 if choice is None else int(choice[oi])]
-        for i, k in e.unary_flips:
-            u[b[i], k] ^= 1
-        for k, i, j in e.rel_flips:
-            r[k, b[i], b[j]] ^= 1
+        u, r = apply_effect(u, r, op.effects[0 if choice is None else int(choice[oi])], b)
     if not (np.array_equal(u, problem.goal_unary) and np.array_equal(r, problem.goal_rel)):
         return False, "final state differs from the goal"
     return True, "ok"

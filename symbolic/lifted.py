@@ -251,6 +251,11 @@ class LiftedTask:
         states, _ = self._successors(state, tuple_idx, rows)
         return [s for s in states if s != state]
 
+    def applicable(self, state: int) -> list[GroundAction]:
+        """Every ground action whose operator's precondition holds in `state`, in ground-action order."""
+        tuple_idx, rows = self._all.match(self._keys(state))
+        return sorted(set((self.effect_op[rows] * self.n_tuples + tuple_idx).tolist()))
+
     def actions_to(self, state: int, target: int) -> list[GroundAction]:
         """The ground actions applicable in `state` one of whose effects leads to `target`, in order."""
         tuple_idx, rows = self._all.match(self._keys(state))

@@ -5,6 +5,7 @@ import argparse
 import json
 import os
 import sys
+import textwrap
 from pathlib import Path
 
 import numpy as np
@@ -489,15 +490,20 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", type=Path, default=None, help="write every figure as JSON")
     p.set_defaults(func=cmd_symbols)
 
+    from tamp.app.plan_command import STEPS_HELP as PLAN_STEPS_HELP
+    from tamp.app.plan_command import add_arguments as add_plan_arguments
+
     p = sub.add_parser(
         "plan",
         help="plan a problem (X_init, X_goal) with the bilevel planner or a baseline; refine, execute, replay",
-        description="Plan with the learned models in --models DIR (symbolic.pt, dynamics.pt, domain/ from "
-        "`tamp train` and `tamp domain`), print the plan, the level that solved it, the verification of "
-        "each symbolic candidate and the timings, then refine and execute it in the Drake world and "
-        "print the final error. Exit status 0 if a plan was found (and, when executed, reached the goal).",
+        description=textwrap.fill(
+            "Plan with the learned models in --models DIR (symbolic.pt, dynamics.pt, domain/ from `tamp train` "
+            "and `tamp domain`), print the plan, the level that solved it, the verification of each symbolic "
+            "candidate and the timings, then refine and execute it in the Drake world and print the final error, "
+            "then each step: its symbols, operator, motion and what was observed. Exit status 0 if a plan was "
+            "found (and, when executed, reached the goal).", 100),
+        epilog=PLAN_STEPS_HELP, formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    from tamp.app.plan_command import add_arguments as add_plan_arguments
 
     add_plan_arguments(p)
     p.set_defaults(func=cmd_plan)

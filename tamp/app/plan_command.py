@@ -18,6 +18,26 @@ from tamp.planning.bilevel import METHODS, SYMBOLIC_BACKENDS, PlanConfig, PlanRe
 from tamp.planning.search import SearchConfig
 from tamp.planning.verify import goal_error
 
+STEPS_HELP = """\
+reading the per-step output (printed after execution; the same in OUT.steps.json and the replay's panel):
+  step k: the action (pick a block at a grasp offset, place it on a block at a release offset)
+  symbols before   the Symbolic Model's bits read on the state observed before the step, as the facts
+                   the named bits say hold. A bit is named (u0(o2)=0 ~ o2 elevated) where `tamp symbols`
+                   finds a strong agreement (|phi| >= 0.7) with a geometric fact; the table is read from
+                   MODELS/symbols.json (`tamp symbols --model MODELS/symbolic.pt --problems P --json
+                   MODELS/symbols.json`); other bits keep their raw names (r0(o1,o2)=1)
+  operator         the learned operator grounding the action in those symbols, the effect expected
+                   (the one a Level-1 plan counted on, else the most probable), its probability, and
+                   the bits it expects to change
+  motion           refinement: the IK solver of the waypoints (one branch: elbow up, wrist down), each
+                   motion's planner ("direct": the straight joint segment is free; "rrtconnect": OMPL
+                   searched, with its time), and the failure stage, where and why if it did not refine
+  observed         the symbols read on the state after the step: "the expected symbols", or MISMATCH
+                   and the bits that differ (the motion did not produce the effect the abstraction
+                   counted on)
+  Dynamics Model   its position error predicting the step from the observed state (mean over blocks)
+"""
+
 LEVELS = {1: "level 1 (verified symbolic plan)", 2: "level 2 (continuous search)"}
 
 
@@ -31,6 +51,7 @@ class PlanOptions:
     rounds: int | None = None  # replanning rounds (default k - 1 of the problem, else 4)
     replay: Path | None = None
     planner: PlanConfig = PlanConfig()  # its seed is replaced by the problem's
+    steps: Path | None = None  # per-step JSON (default: beside the replay, if any)
 
 
 def fmt_action(a) -> str:
@@ -90,8 +111,9 @@ def print_result(result: PlanResult, tau: float, indent: str = "") -> None:
 # The runners load the simulator (Drake): imported when a plan is run, so that `tamp --help` and
 # argument errors stay fast.
 
-def _open_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timeline) -> int:
+def _open_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timeline, names) -> tuple[int, list[dict]]:
     from tamp.app.runner import execute_plan, kinematics_for
+    from tamp.app.steps import open_loop_steps
 
     kinematics = kinematics_for(options.method, cfg)
     if kinematics is not None:
@@ -99,12 +121,15 @@ def _open_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timeline)
     result = plan(options.method, models, problem.X_init, problem.X_goal, cfg, kinematics=kinematics)
     print_result(result, cfg.tau_verify)
     if not result.solved:
-        return 1
+        return 1, []
     if options.execute == "none" or not result.plan:
         if not result.plan:
             print("empty plan: the initial state already meets the goal; nothing to execute")
-        return 0
+        return 0, []
     ex = execute_plan(result.plan, problem.X_init, problem.X_goal, options.execute, timeline=timeline)
+    records = open_loop_steps(models, result, problem.X_init, ex, names,
+                              timeline.action_starts if timeline is not None else ())
+    _print_steps(records)
     if ex.refined.success:
         print(f"refinement: ok, {len(ex.refined.steps)} action(s) refined in {ex.refine_time:.2f} s, "
               f"{sum(s.duration for s in ex.refined.steps):.1f} s of arm motion")
@@ -113,11 +138,21 @@ def _open_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timeline)
     ok = ex.error < cfg.eps
     print(f"execution ({options.execute}): final error {ex.error * 100:.1f} cm (max over objects) -> "
           f"{'success' if ok else 'failure'} (eps {cfg.eps * 100:g} cm)")
-    return 0 if ok and ex.success else 1
+    return (0 if ok and ex.success else 1), records
 
 
-def _closed_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timeline) -> int:
+def _print_steps(records: list[dict]) -> None:
+    from tamp.app.steps import format_steps
+
+    if records:
+        print("steps (symbols read by the Symbolic Model on the observed states; see `tamp plan --help`):")
+        for line in format_steps(records):
+            print("  " + line)
+
+
+def _closed_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timeline, names) -> tuple[int, list[dict]]:
     from tamp.app.runner import kinematics_for, run_closed_loop
+    from tamp.app.steps import closed_loop_steps
 
     def show_step(action, X, info, seconds) -> None:
         print(f"  executed {fmt_action(action)}: {info.status}{': ' + info.reason if info.reason else ''}; "
@@ -129,13 +164,16 @@ def _closed_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timelin
 
     rounds = replan_rounds(problem.k) if options.rounds is None else options.rounds
     print(f"closed loop: up to {rounds} replanning round(s), executing in the {options.execute} world")
-    out = run_closed_loop(options.method, models, problem.X_init, problem.X_goal, rounds, cfg, options.execute,
+    run = run_closed_loop(options.method, models, problem.X_init, problem.X_goal, rounds, cfg, options.execute,
                           kinematics=kinematics_for(options.method, cfg), timeline=timeline,
-                          on_round=show_round, on_step=show_step).loop
+                          on_round=show_round, on_step=show_step)
+    out = run.loop
+    records = closed_loop_steps(models, run, names)
+    _print_steps(records)
     print(f"closed loop ended: {out.reason}")
     print(f"execution ({options.execute}): {len(out.executed)} action(s), final error {out.error * 100:.1f} cm "
           f"(max over objects) -> {'success' if out.success else 'failure'} (eps {cfg.eps * 100:g} cm)")
-    return 0 if out.success else 1
+    return (0 if out.success else 1), records
 
 
 def run_plan(problem_path: Path, models_dir: Path, options: PlanOptions) -> int:
@@ -143,7 +181,7 @@ def run_plan(problem_path: Path, models_dir: Path, options: PlanOptions) -> int:
     import torch
 
     from tamp.app.problem import load_problem
-    from tamp.planning.models import load_models
+    from tamp.planning.models import has_symbolic, load_bit_names, load_models
 
     # Planning runs many small forward passes: one thread is faster, and much faster when another
     # process keeps the second core busy (a 2-thread pass then waits for it: 20-40x slower, measured).
@@ -155,7 +193,18 @@ def run_plan(problem_path: Path, models_dir: Path, options: PlanOptions) -> int:
         raise UserError("--replay needs an execution (--execute fast or full)")
     if options.replay is not None:
         check_output_file(options.replay, "--replay")
-    models = load_models(models_dir, need_symbolic=options.method != "cfs")
+    steps_file = options.steps
+    if steps_file is None and options.replay is not None:
+        from tamp.app.steps import steps_path
+
+        steps_file = steps_path(options.replay)
+    if steps_file is not None:
+        if options.execute == "none":
+            raise UserError("--steps records executed steps; it needs --execute fast or full")
+        check_output_file(steps_file, "--steps")
+    # the continuous search needs no Symbolic Model, but the per-step view reads symbols when there is one
+    models = load_models(models_dir, need_symbolic=options.method != "cfs" or has_symbolic(models_dir))
+    names = load_bit_names(models_dir)
     cfg = dataclasses.replace(options.planner, seed=problem.seed)
     models.require_objects(problem.n, str(problem_path))
     k = "?" if problem.k is None else problem.k
@@ -168,8 +217,16 @@ def run_plan(problem_path: Path, models_dir: Path, options: PlanOptions) -> int:
 
         timeline = Timeline()
     run = _closed_loop if options.replan else _open_loop
-    code = run(problem, models, options, cfg, timeline)
+    code, records = run(problem, models, options, cfg, timeline, names)
+    if steps_file is not None and records:
+        from tamp.app.steps import steps_document, write_steps
+
+        write_steps(steps_file, steps_document(str(problem_path), options.method, None, records, names))
+        print(f"steps written to {steps_file}")
     if timeline is not None:
+        from tamp.app.steps import panel_entries
+
+        timeline.show_panel(panel_entries(records, timeline.t_end))
         if timeline.times:
             assert options.replay is not None  # the timeline exists for it
             path = timeline.write_html(options.replay)
@@ -194,7 +251,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--execute", choices=("none", "fast", "full"), default="fast",
                    help="refine and execute the plan in the fast world (default) or with the arm under "
                    "physics (full), or not at all")
-    p.add_argument("--replay", type=Path, default=None, metavar="OUT.html", help="write a Meshcat HTML replay")
+    p.add_argument("--replay", type=Path, default=None, metavar="OUT.html",
+                   help="write a Meshcat HTML replay, with a panel showing each step's symbols as the timeline "
+                   "plays (open OUT.html#step=2 to start at step 2); the steps' JSON goes beside it, "
+                   "OUT.steps.json")
+    p.add_argument("--steps", type=Path, default=None, metavar="OUT.json",
+                   help="write the per-step record as JSON (default: beside the replay, if any)")
     add_planner_arguments(p)
 
 
@@ -253,6 +315,9 @@ def planner_config(args: argparse.Namespace) -> PlanConfig:
 def options_from_args(args: argparse.Namespace) -> PlanOptions:
     if args.replay is not None and args.replay.suffix.lower() not in (".html", ".htm"):
         raise UserError(f"the replay is an HTML file; give a path ending in .html, got {args.replay}")
-    return PlanOptions(args.method, args.execute, args.replan, args.rounds, args.replay, planner_config(args))
+    if args.steps is not None and args.steps.suffix.lower() != ".json":
+        raise UserError(f"the steps file is JSON; give a path ending in .json, got {args.steps}")
+    return PlanOptions(args.method, args.execute, args.replan, args.rounds, args.replay, planner_config(args),
+                       args.steps)
 
 

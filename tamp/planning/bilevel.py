@@ -129,6 +129,15 @@ class PlanResult:
     def solved(self) -> bool:
         return self.plan is not None
 
+    @property
+    def plan_states(self) -> tuple[int, ...] | None:
+        """The packed symbolic states a Level-1 plan passes through (None: Level 2, or a backend
+        that does not give them)."""
+        if self.level != 1 or self.plan is None:
+            return None
+        actions = tuple(tuple(int(v) for v in a) for a in self.plan)
+        return next((c.states for c in self.candidates if c.actions == actions and c.verified), None)
+
     def rejected_dict(self) -> dict | None:
         """`rejected` with string keys (JSON): {"level 1": {"no_grasp": 3, ...}, "level 2": {...}}."""
         if self.rejected is None:
@@ -420,8 +429,8 @@ class _Verifier:
             assert own is not None  # `also` given
             alternatives = [v for v in best if v.actions != candidate.actions][:limit]
             self.alternatives_left -= len(alternatives)
-            group += [Candidate(v.actions, candidate.count, candidate.probability, alternative_of=i)
-                      for v in alternatives]
+            group += [Candidate(v.actions, candidate.count, candidate.probability, alternative_of=i,
+                                states=candidate.states) for v in alternatives]
             checks = [own] + alternatives
         else:
             checks = [self._rollout(i)]

@@ -23,6 +23,7 @@ if TYPE_CHECKING:
     from symbolic import OperatorSet
 
 SYMBOLIC_FILE, DYNAMICS_FILE, DOMAIN_DIR = "symbolic.pt", "dynamics.pt", "domain"
+SYMBOLS_FILE = "symbols.json"  # what the Symbolic Model's bits mean (`tamp symbols --json`), optional
 
 
 def pretrained_dir() -> Path:
@@ -86,6 +87,29 @@ def require_kind(model, kind: str, path: str | Path) -> None:
     if kind == "dynamics" and activation == "gumbel_sigmoid":
         raise UserError(f"{path}: a Symbolic Model (gumbel_sigmoid bottleneck), but a Dynamics Model is needed "
                          "(tamp train --bottleneck sigmoid)")
+
+
+def has_symbolic(directory: str | Path) -> bool:
+    """DIR holds a Symbolic Model and its learned domain (the continuous search needs neither)."""
+    directory = Path(directory)
+    return (directory / SYMBOLIC_FILE).is_file() and (directory / DOMAIN_DIR / "operators.json").is_file()
+
+
+def load_bit_names(directory: str | Path):
+    """The names of the Symbolic Model's bits from DIR/symbols.json (`tamp symbols --json`; bits
+    without a strong meaning keep their raw names); raw names only when the file is absent. A file
+    that cannot be read is a UserError naming it."""
+    import json
+
+    from learned.interpret import BitNames
+
+    path = Path(directory) / SYMBOLS_FILE
+    if not path.is_file():
+        return BitNames.none()
+    try:
+        return BitNames.from_report(json.loads(path.read_text()))
+    except (ValueError, KeyError, TypeError) as error:
+        raise UserError(f"{path}: not a symbols table written by `tamp symbols --json` ({error})") from None
 
 
 def load_models(directory: str | Path, need_symbolic: bool = True) -> Models:

@@ -21,6 +21,10 @@ from tamp.sim.plants import X_FlangeTcp, X_WBase
 Q_LOWER = np.array([-2 * np.pi, -2 * np.pi, -np.pi, -2 * np.pi, -2 * np.pi, -2 * np.pi])
 Q_UPPER = -Q_LOWER
 V_MAX = np.array([2.0944, 2.0944, 3.1416, 3.1416, 3.1416, 3.1416])
+# How a waypoint's configuration was found: the closed form on the branch, or Drake's numerical IK
+# (constrained to the same branch) where the closed form has none.
+IK_SOLVERS = ("closed form", "numerical")
+BRANCH = "elbow up, wrist down"  # the one IK branch of every top-down grasp (`on_branch`)
 # Home: upper arm up, forearm forward, tool pointing down over the table.
 Q_HOME = np.array([0.0, -np.pi / 2, np.pi / 2, -np.pi / 2, -np.pi / 2, 0.0])
 
@@ -77,20 +81,24 @@ def solve_chain(
     waypoints: list[tuple[str, RigidTransform]],
     q_start: np.ndarray,
     fallback: Callable[[RigidTransform, np.ndarray], np.ndarray | None] | None = None,
+    solvers: dict[str, str] | None = None,
 ) -> tuple[dict[str, np.ndarray], str | None]:
     """Joint configurations of tcp poses solved in order, each on the branch and nearest the one
     before (the first nearest q_start); `fallback(X_WTcp, q_ref)` (e.g. numerical IK) is tried when
     the closed form has no solution. Returns (configurations found, name of the first pose without
-    a solution or None). Shared by the skill (`World.step`) and the feasibility check."""
+    a solution or None); `solvers`, if given, gets which solver found each pose (IK_SOLVERS).
+    Shared by the skill (`World.step`) and the feasibility check."""
     qs: dict[str, np.ndarray] = {}
     q_prev = q_start
     for name, X_WTcp in waypoints:
-        q = analytic_ik(X_WTcp, q_prev)
+        q, solver = analytic_ik(X_WTcp, q_prev), IK_SOLVERS[0]
         if q is None and fallback is not None:
-            q = fallback(X_WTcp, q_prev)
+            q, solver = fallback(X_WTcp, q_prev), IK_SOLVERS[1]
         if q is None:
             return qs, name
         qs[name] = q_prev = q
+        if solvers is not None:
+            solvers[name] = solver
     return qs, None
 
 

@@ -61,6 +61,7 @@ def refine(
         t0 = time.perf_counter()
         X_before, q_before = world.X, world.q.copy()
         X_after, info = world.step(action)
+        result.infos.append(info)
         failure = step_failure(info)
         if failure is not None:
             result.failure = RefinementFailure(k, action, *failure)

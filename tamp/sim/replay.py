@@ -13,6 +13,7 @@ report each action's start (`action_started`), which is what ties predictions to
 from __future__ import annotations
 
 import html
+import json
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Sequence
@@ -80,6 +81,8 @@ class Timeline(WorldObserver):
     action_starts: list[float] = field(default_factory=list)  # seconds: when each executed action began
     ghosts: list[Ghosts] = field(default_factory=list)
     caption: list[str] = field(default_factory=list)  # lines shown over the replay, above the legend
+    # a side panel following the timeline: (replay seconds from which it shows, HTML), in time order
+    panel: list[tuple[float, str]] = field(default_factory=list)
 
     @property
     def t_end(self) -> float:
@@ -103,6 +106,11 @@ class Timeline(WorldObserver):
         if starts:
             self.ghosts.append(Ghosts("predicted", predicted[1:len(starts) + 1], list(starts), PREDICTED_RGBA,
                                       "Dynamics Model's prediction after the current action"))
+
+    def show_panel(self, entries: Sequence[tuple[float, str]]) -> None:
+        """A side panel that follows the timeline: entry i's HTML is shown from its time (seconds) until
+        the next entry's. The page's ``#step=N`` opens the replay at entry N (counted from 0)."""
+        self.panel = sorted(entries, key=lambda e: e[0])
 
     def scene_started(self, scene, q: np.ndarray) -> None:
         """Begin a new scene (a reset); earlier frames are kept and the replay continues."""
@@ -184,6 +192,8 @@ class Timeline(WorldObserver):
         page = meshcat.StaticHtml()
         if self.ghosts or self.caption:
             page = page.replace("</body>", self._overlay() + "</body>", 1)
+        if self.panel:
+            page = page.replace("</body>", _panel(self.panel) + "</body>", 1)
         return atomic_write_text(path, page)
 
     def camera(self) -> tuple[np.ndarray, np.ndarray]:
@@ -228,6 +238,50 @@ class Timeline(WorldObserver):
                 'pointer-events:none">' + "<br>".join(lines) + "</div>\n")
 
 
+PANEL_ID = "tamp-steps"
+_PANEL_STYLE = ("position:fixed;left:8px;bottom:8px;width:460px;max-width:calc(100vw - 16px);max-height:62vh;"
+                "overflow:auto;padding:8px 10px;background:rgba(255,255,255,0.94);font:12px/1.45 sans-serif;"
+                "border-radius:4px;box-shadow:0 1px 4px rgba(0,0,0,0.3)")
+
+
+def _panel(entries: Sequence[tuple[float, str]]) -> str:
+    """The panel's element and the script that keeps it on the entry of Meshcat's animation time
+    (`viewer.animator.time`, seconds), polled 10 times a second; ``#step=N`` seeks to entry N once
+    the animation is loaded (without WebGL, the page still shows entry N)."""
+    times = json.dumps([round(float(t), 4) for t, _ in entries])
+    pages = json.dumps([text for _, text in entries]).replace("</", "<\\/")
+    return (f'<div id="{PANEL_ID}" style="{_PANEL_STYLE}"></div>\n<script>\n(function () {{\n'
+            f"const times = {times}, pages = {pages};\n"
+            f'const panel = document.getElementById("{PANEL_ID}");\n'
+            """const wanted = /[#&]step=(\\d+)/.exec(location.hash);
+let pinned = wanted ? Math.min(parseInt(wanted[1], 10), pages.length - 1) : null;
+let shown = -1, seeked = false;
+function animator() {
+  return (typeof viewer !== "undefined" && viewer.animator && viewer.animator.duration > 0) ? viewer.animator : null;
+}
+function entryAt(t) {
+  let k = 0;
+  for (let i = 0; i < times.length; i++) if (times[i] <= t + 1e-6) k = i;
+  return k;
+}
+function tick() {
+  const a = animator();
+  let k = pinned === null ? 0 : pinned;
+  if (a !== null) {
+    if (pinned !== null && !seeked) {
+      a.seek(times[pinned] + 0.01); a.display_progress(times[pinned] + 0.01); seeked = true;
+    }
+    else if (pinned === null || seeked) k = entryAt(a.time);
+  }
+  if (k !== shown) { shown = k; panel.innerHTML = pages[k]; panel.dataset.entry = String(k); }
+}
+tick();
+setInterval(tick, 100);
+})();
+</script>
+""")
+
+
 def _draw_ghosts(meshcat, recording, ghosts: Ghosts) -> None:
     """Translucent boxes for `ghosts`, their poses (and visibility) keyed into the recording."""
     from pydrake.geometry import Box, Rgba
@@ -254,3 +308,4 @@ def _position_layout(scene):
                         if plant.get_joint(j).num_positions() == 1])
     block_starts = [plant.get_body(plant.GetBodyIndices(b)[0]).floating_positions_start() for b in scene.blocks]
     return arm_idx, block_starts
+

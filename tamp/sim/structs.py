@@ -113,6 +113,9 @@ class StepInfo:
     reason: str = ""
     ik_success: dict[str, bool] = field(default_factory=dict)  # waypoint name -> IK found
     motion_success: dict[str, bool] = field(default_factory=dict)  # motion name -> path found
+    ik_solver: dict[str, str] = field(default_factory=dict)  # waypoint -> kinematics.IK_SOLVERS entry
+    motion_planner: dict[str, str] = field(default_factory=dict)  # motion -> "direct" (straight) or "rrtconnect"
+    motion_seconds: dict[str, float] = field(default_factory=dict)  # motion -> wall-clock planning seconds
     grasped: int = -1  # object actually carried (-1: none)
     carried: list[int] = field(default_factory=list)  # grasped object and blocks resting on it
     settle_time: float = 0.0  # simulated seconds until the scene was at rest
@@ -136,6 +139,9 @@ class StepInfo:
             "reason": self.reason,
             "ik_success": dict(self.ik_success),
             "motion_success": dict(self.motion_success),
+            "ik_solver": dict(self.ik_solver),
+            "motion_planner": dict(self.motion_planner),
+            "motion_seconds": {k: round(v, 5) for k, v in self.motion_seconds.items()},
             "grasped": self.grasped,
             "carried": list(self.carried),
             "settle_time": round(self.settle_time, 4),

@@ -19,6 +19,7 @@ from pydrake.trajectories import PiecewisePolynomial
 
 from tamp.planning.structs import PickPlace
 from tamp.sim.kinematics import V_MAX
+from tamp.sim.structs import StepInfo
 
 if TYPE_CHECKING:
     from tamp.sim.skill import Scene
@@ -173,6 +174,7 @@ class RefinedPlan:
     scene_init: Scene  # the exact initial scene (block poses with orientation)
     q_init: np.ndarray  # arm joints at the start
     steps: list[RefinedAction] = field(default_factory=list)
+    infos: list[StepInfo] = field(default_factory=list)  # per action tried: what the skill did (IK, motions)
     failure: RefinementFailure | None = None
     trajectory: PiecewisePolynomial | None = None
     start_times: list[float] = field(default_factory=list)  # each action's start in `trajectory`

@@ -255,6 +255,8 @@ class World:
         retreat = planner.plan(qs["place"], qs["retreat"], self.config.planning_time,
                                direct=self.config.direct_motions, simplify=self.config.simplify_paths, seed=seed,
                                max_checks=self.config.planning_checks)
+        info.motion_seconds["retreat"] = time.perf_counter() - t_motion
+        info.motion_planner["retreat"] = retreat.planner
         info.motion_success["retreat"] = retreat.path is not None
         if retreat.path is not None:
             paths["retreat"] = retreat.path
@@ -306,7 +308,7 @@ class World:
         planner, _ = self._layout(self._require_scene().types)
         todo = [(name, X_WG) for name, X_WG in waypoints if name not in skip]
         found, failed = solve_chain(todo, self.q if q_start is None else q_start,
-                                    lambda X_WG, q_ref: self._numerical_ik(planner, X_WG, q_ref))
+                                    lambda X_WG, q_ref: self._numerical_ik(planner, X_WG, q_ref), info.ik_solver)
         qs = {**(known or {}), **found}
         for name in found:
             info.ik_success[name] = True
@@ -326,9 +328,12 @@ class World:
 
     def _plan(self, planner: MotionPlanner, motions, info: StepInfo, paths: dict) -> bool:
         for name, q_a, q_b in motions:
+            t = time.perf_counter()
             result = planner.plan(q_a, q_b, self.config.planning_time, direct=self.config.direct_motions,
                                   simplify=self.config.simplify_paths, seed=self.motion_seeds.of(name),
                                   max_checks=self.config.planning_checks)
+            info.motion_seconds[name] = time.perf_counter() - t
+            info.motion_planner[name] = result.planner
             info.motion_success[name] = result.path is not None
             if result.path is None:
                 info.status = StepStatus.MOTION_FAILURE
