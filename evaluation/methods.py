@@ -128,9 +128,11 @@ def load_method_models(models_dir: str | Path, methods: Sequence[str]) -> dict[s
     sets: dict[str, Models] = {}
     needed = {METHODS[m].models for m in methods}
     if "default" in needed or "symbolic_sigmoid" in needed:
-        from tamp.planning.models import load_models
+        from tamp.planning.models import has_symbolic, load_models
 
-        need_symbolic = any(METHODS[m].models == "default" and METHODS[m].symbolic for m in methods)
+        # the continuous search plans without the Symbolic Model; the rows' per-step view reads symbols
+        need_symbolic = any(METHODS[m].models == "default" and METHODS[m].symbolic for m in methods) \
+            or has_symbolic(models_dir)
         sets["default"] = load_models(models_dir, need_symbolic=need_symbolic)
     if "symbolic_sigmoid" in needed:
         path, domain_dir = models_dir / VARIANTS_DIR / SYMBOLIC_SIGMOID, models_dir / VARIANTS_DIR / DOMAIN_SIGMOID

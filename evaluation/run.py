@@ -19,6 +19,15 @@ them, and `plan` and the refinement fields are those of the last one executed.
 objects) predicting that action's effect from the state the world was in before it: how well the
 model the method plans with knows the world on the actions it chose (None without one).
 
+`steps`: per step executed or attempted (a refinement failure stops the plan; closed loop: every
+action sent to the world), the step through the learned abstraction (`tamp.planning.steps`):
+`operator` (None: no learned operator grounds the action in the observed symbols), `probability`
+of the expected effect, `on_plan` (the symbols before equal the Level-1 plan's; None: no plan
+symbols), `kinematic` (the planners' kinematic check of the action on the observed state before it:
+"ok" or the reason), `refined`, `match` (the symbols observed after equal the expected ones; None:
+not executed or no operator), `mismatched_bits` and `error_m` (the Dynamics Model's error, as in
+`effect_error_m`). None for rows without a Symbolic Model. `tamp refinability` aggregates them.
+
 Closed-loop rows: `plan` holds the actions sent to the world (a failed one included, the loop goes
 on from the observed state), `refine_time_s` the wall time of each World.step (planning and, in
 `full`, execution), `level`, `predicted_error_m` and `candidates` are the first round's, timings are
@@ -53,6 +62,7 @@ from tamp.app.parallel import BACKENDS, run_tasks
 from tamp.app.problem import Problem
 from tamp.errors import UserError
 from tamp.planning.bilevel import PlanConfig
+from tamp.planning.steps import dynamics_errors, symbolic_steps
 from tamp.planning.structs import OUTCOMES, Outcome
 from tamp.planning.verify import goal_error
 from tamp.records import atomic_write_text, exclusive, package_versions
@@ -66,7 +76,7 @@ ROW_KEYS = ("problem", "n", "k", "run", "protocol", "moved", "method", "solved",
             "level1_time_s", "predicted_error_m", "candidates", "refined", "refine_failure", "refine_time_s",
             "executed_actions", "executed_plans", "final_error_m", "success", "outcome", "rounds", "fidelity",
             "eps_m", "tau_verify_m", "symbolic_backend", "feasibility", "search_time_s", "feasibility_time_s",
-            "plan_refine_time_s", "level1_stages_s", "search_expanded", "effect_error_m")
+            "plan_refine_time_s", "level1_stages_s", "search_expanded", "effect_error_m", "steps")
 # the only fields that vary between runs
 TIMING_KEYS = ("planning_time_s", "level1_time_s", "refine_time_s", "search_time_s", "feasibility_time_s",
                "plan_refine_time_s", "level1_stages_s")
@@ -195,14 +205,27 @@ def _feasibility_fields(results: list) -> dict:
 
 
 def _effect_errors(models, states: Sequence[np.ndarray], actions) -> list[float | None] | None:
-    """Per executed action: the Dynamics Model's position error (m, mean over objects) predicting its
-    effect from the state the world was in before it; None without a Dynamics Model."""
-    if models.dynamics is None:
+    """Per executed action, the Dynamics Model's error (m, mean over objects); None without one."""
+    errors = dynamics_errors(models, states, actions)
+    return None if errors is None else [_round(e) for e in errors]
+
+
+def _steps(models, states: Sequence[np.ndarray], actions, plan_states, infos, checker) -> list[dict] | None:
+    """The `steps` of a row: each step executed or attempted (states: X_0 .. X_m observed, m executed;
+    infos: the skill's StepInfo per step, or None where it did not run), through the abstraction."""
+    if models.symbolic is None or models.domain is None:
         return None
-    out: list[float | None] = []
-    for X, X_next, action in zip(states, states[1:], actions):
-        e_hat = models.dynamics.predict_effect(X, np.asarray([tuple(action)], dtype=np.int64))[0]
-        out.append(_round(float(np.linalg.norm(X[:, :3] + e_hat - X_next[:, :3], axis=1).mean())))
+    from tamp.sim.refine import step_failure
+
+    out = []
+    for step in symbolic_steps(models, states, actions, plan_states):
+        info = infos[step.index] if step.index < len(infos) else None
+        reason = checker.check(states[step.index], np.asarray([step.action], dtype=np.int64))[0]
+        out.append({"operator": step.operator, "probability": _round(step.probability, 4),
+                    "on_plan": step.on_plan, "kinematic": "ok" if reason is None else str(reason.value),
+                    "refined": info is not None and step_failure(info) is None and step.executed,
+                    "match": step.match, "mismatched_bits": len(step.mismatches()) if step.match is not None else None,
+                    "error_m": _round(step.dynamics_error_m)})
     return out
 
 
@@ -318,30 +341,33 @@ class Evaluator:
                   "predicted_error_m": _round(result.predicted_error), "candidates": _candidates(result),
                   "refined": None, "refine_failure": None, "refine_time_s": [], "executed_actions": 0,
                   "executed_plans": 0, "final_error_m": _round(goal_error(problem.X_init, problem.X_goal)),
-                  "rounds": None, "effect_error_m": None}
+                  "rounds": None, "effect_error_m": None, "steps": None}
         if not result.solved:
             return fields
-        plans = [c.actions for c in result.candidates[:self.config.oracle_max_plans]] if method.oracle \
-            else [result.plan]
-        for number, actions in enumerate(plans, start=1):
-            outcome = self._execute(problem, actions, models)
+        plans = [(c.actions, c.states) for c in result.candidates[:self.config.oracle_max_plans]] if method.oracle \
+            else [(result.plan, result.plan_states)]
+        for number, (actions, plan_states) in enumerate(plans, start=1):
+            outcome = self._execute(problem, actions, models, plan_states)
             fields = {**fields, "plan": _actions(actions), **outcome, "executed_plans": number}
             if outcome["refined"] and outcome["final_error_m"] < self.config.eps:
                 break
         return fields
 
-    def _execute(self, problem: Problem, actions, models) -> dict:
+    def _execute(self, problem: Problem, actions, models, plan_states=None) -> dict:
         """Refine and execute one plan from X_init: the refinement fields of a row."""
         if not actions:  # the planner says the initial state meets the goal: nothing to refine
             return {"refined": True, "refine_failure": None, "refine_time_s": [], "executed_actions": 0,
-                    "final_error_m": _round(goal_error(problem.X_init, problem.X_goal)), "effect_error_m": []}
+                    "final_error_m": _round(goal_error(problem.X_init, problem.X_goal)), "effect_error_m": [],
+                    "steps": []}
         from tamp.app.runner import execute_plan
 
         ex = execute_plan(actions, problem.X_init, problem.X_goal, self.config.fidelity, world=self.world("fast"))
+        states = [problem.X_init, *ex.X_after]
         return {"refined": ex.refined.success, "refine_failure": _failure(ex.refined.failure),
                 "refine_time_s": [_round(s.refine_time) for s in ex.refined.steps],
                 "executed_actions": len(ex.refined.steps), "final_error_m": _round(ex.error),
-                "effect_error_m": _effect_errors(models, [problem.X_init, *ex.X_after], actions)}
+                "effect_error_m": _effect_errors(models, states, actions),
+                "steps": _steps(models, states, actions, plan_states, ex.refined.infos, self.checker(problem))}
 
     def _closed_loop(self, problem: Problem, method: Method, models) -> dict:
         from tamp.app.runner import run_closed_loop
@@ -369,7 +395,19 @@ class Evaluator:
                 "refine_time_s": [_round(sum(t)) for t in run.step_times], "executed_actions": executed,
                 "executed_plans": None, "final_error_m": _round(goal_error(X_final, problem.X_goal)),
                 "rounds": max(len(out.rounds) - 1, 0),
-                "effect_error_m": _effect_errors(models, out.states, out.executed)}
+                "effect_error_m": _effect_errors(models, out.states, out.executed),
+                "steps": self._loop_steps(problem, models, run)}
+
+    def _loop_steps(self, problem: Problem, models, run) -> list[dict] | None:
+        """The `steps` of a closed loop: each action sent to the world (`tamp.app.steps.loop_steps`)."""
+        if models.symbolic is None or models.domain is None:
+            return None
+        from tamp.app.steps import loop_steps
+
+        checker, out = self.checker(problem), []
+        for s in loop_steps(run):
+            out += _steps(models, s.states, [s.action], s.plan_states, [s.info], checker) or []
+        return out
 
 
 # --------------------------------------------------------------------------- workers

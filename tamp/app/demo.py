@@ -18,7 +18,16 @@ import numpy as np
 
 from tamp.app.plan_command import LEVELS, fmt_action, print_result
 from tamp.app.problem import Problem, random_problem
-from tamp.app.runner import Execution, execute_plan, kinematics_for, run_closed_loop
+from tamp.app.runner import ClosedLoopRun, Execution, execute_plan, kinematics_for, run_closed_loop
+from tamp.app.steps import (
+    closed_loop_steps,
+    format_steps,
+    open_loop_steps,
+    panel_entries,
+    steps_document,
+    steps_path,
+    write_steps,
+)
 from tamp.errors import UserError
 from tamp.planning.bilevel import ClosedLoopResult, PlanConfig, PlanResult, plan, replan_rounds
 from tamp.planning.structs import TYPE_NAMES, Outcome, PickPlace
@@ -53,6 +62,7 @@ class DemoResult:
     replays: list[Path] = field(default_factory=list)
     loop: ClosedLoopResult | None = None  # closed loop (replan): every round and executed action
     step_times: list[tuple[float, float]] = field(default_factory=list)  # closed loop: (refine, execute) s
+    steps: list[dict] = field(default_factory=list)  # per executed step (tamp.app.steps records)
 
     @property
     def outcome(self) -> Outcome:
@@ -76,7 +86,7 @@ def run_demo(cfg: DemoConfig = DemoConfig()) -> DemoResult:
     write the replay(s)."""
     import torch
 
-    from tamp.planning.models import load_models, pretrained_dir
+    from tamp.planning.models import load_bit_names, load_models, pretrained_dir
 
     if cfg.fidelity not in ("full", "fast"):
         raise UserError(f"fidelity must be 'full' or 'fast', got {cfg.fidelity!r}")
@@ -87,6 +97,7 @@ def run_demo(cfg: DemoConfig = DemoConfig()) -> DemoResult:
     torch.set_num_threads(1)
     models_dir = pretrained_dir() if cfg.models is None else Path(cfg.models)
     models = load_models(models_dir)
+    names = load_bit_names(models_dir)
     models.require_objects(cfg.objects, f"--objects {cfg.objects}: the scene")
     plan_cfg = PlanConfig(seed=cfg.seed)
     kinematics = kinematics_for("bilevel", plan_cfg)
@@ -102,13 +113,16 @@ def run_demo(cfg: DemoConfig = DemoConfig()) -> DemoResult:
 
     timeline = Timeline() if cfg.replay is not None else None
     if cfg.replan:
-        out.loop = _closed_loop(problem, models, plan_cfg, kinematics, cfg, result, timeline, out.step_times)
+        run = _closed_loop(problem, models, plan_cfg, kinematics, cfg, result, timeline, out.step_times)
+        out.loop, out.steps = run.loop, closed_loop_steps(models, run, names)
+        _print_steps(out.steps)
         _print_loop_summary(out, cfg)
         if timeline is not None:
             timeline.caption = [f"tamp demo --seed {cfg.seed}: {problem.n} blocks, goal from {problem.k} random "
                                 f"actions, closed loop", _verdict(out)]
             timeline.show_goal(problem.X_goal)
             assert cfg.replay is not None  # the timeline exists for it
+            _write_steps(timeline, out, cfg, names)
             path = timeline.write_html(cfg.replay)
             out.replays.append(path)
             print(f"replay written to {path} ({path.stat().st_size / 1e6:.1f} MB): open it in a browser", flush=True)
@@ -121,6 +135,9 @@ def run_demo(cfg: DemoConfig = DemoConfig()) -> DemoResult:
         print(f"\nrefining and executing {len(result.plan)} action(s) with {what}:", flush=True)
         out.execution = execute_plan(result.plan, problem.X_init, problem.X_goal, cfg.fidelity, timeline=timeline)
         _print_execution(out.execution, result.plan, result.predicted, problem.X_goal, cfg.fidelity)
+        out.steps = open_loop_steps(models, result, problem.X_init, out.execution, names,
+                                    timeline.action_starts if timeline is not None else ())
+        _print_steps(out.steps)
     elif timeline is not None:  # show the problem: the initial scene and the goal
         from tamp.sim import World
 
@@ -133,10 +150,28 @@ def run_demo(cfg: DemoConfig = DemoConfig()) -> DemoResult:
         assert cfg.replay is not None  # the timeline exists for it
         timeline.caption = [f"tamp demo --seed {cfg.seed}: {problem.n} blocks, goal from {problem.k} random actions",
                             _verdict(out)]
+        _write_steps(timeline, out, cfg, names)
         _write_replay(timeline, problem.X_goal, None if out.execution is None else result.predicted, cfg.replay, out)
     if cfg.candidates:
         _replay_candidates(out, models, cfg)
     return out
+
+
+def _print_steps(records: list[dict]) -> None:
+    if records:
+        print("\nsteps (symbols read by the Symbolic Model on the observed states; `tamp plan --help` explains):")
+        for line in format_steps(records):
+            print("  " + line)
+
+
+def _write_steps(timeline: Timeline, out: DemoResult, cfg: DemoConfig, names) -> None:
+    """The steps as JSON beside the replay, and the replay's step panel."""
+    if not out.steps or cfg.replay is None:
+        return
+    path = write_steps(steps_path(cfg.replay), steps_document(f"tamp demo --seed {cfg.seed}", "bilevel",
+                                                               out.result.level, out.steps, names))
+    timeline.show_panel(panel_entries(out.steps, timeline.t_end))
+    print(f"steps written to {path}")
 
 
 def _write_replay(timeline: Timeline, X_goal, predicted, path: Path, out: DemoResult) -> None:
@@ -252,7 +287,7 @@ def _print_summary(out: DemoResult, cfg: DemoConfig) -> None:
 
 def _closed_loop(problem: Problem, models, plan_cfg: PlanConfig, kinematics: FeasibilityChecker | None,
                  cfg: DemoConfig, first: PlanResult, timeline: Timeline | None,
-                 step_times: list[tuple[float, float]]) -> ClosedLoopResult:
+                 step_times: list[tuple[float, float]]) -> ClosedLoopRun:
     """Execute the first action of the plan, observe the scene, replan from it (up to k - 1 rounds;
     the last plan runs to its end), in a World of the demo's fidelity: each action is refined and
     executed there, an action that cannot be refined changes nothing and the loop goes on. The first
@@ -283,7 +318,7 @@ def _closed_loop(problem: Problem, models, plan_cfg: PlanConfig, kinematics: Fea
     step_times.extend(run.step_times)
     if timeline is not None:
         _show_loop_predictions(timeline, planned, run.action_starts)
-    return run.loop
+    return run
 
 
 def _show_loop_predictions(timeline: Timeline, planned: list[tuple[int, PlanResult]],

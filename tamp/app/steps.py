@@ -17,8 +17,9 @@ One record per step (JSON keys):
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Sequence
+from typing import TYPE_CHECKING, Iterator, Sequence
 
 from learned.interpret import BitNames
 from tamp.planning.steps import SymbolicStep, symbolic_steps
@@ -75,26 +76,41 @@ def open_loop_steps(models: Models, result: PlanResult, X_init, execution: Execu
     return step_records(steps, execution.refined.infos, names, starts)
 
 
-def closed_loop_steps(models: Models, run: ClosedLoopRun, names: BitNames) -> list[dict]:
-    """The records of a closed loop: each executed action with the symbols of the round that chose it
-    (every round executes its plan's first action; the last round that executed runs its plan to the
-    end). An action that could not be refined changed nothing."""
-    loop = run.loop
-    records: list[dict] = []
-    k = 0
+@dataclass
+class LoopStep:
+    """One action a closed loop sent to the world, with what its step record needs."""
+
+    index: int
+    round: int  # the planning round whose plan chose it
+    states: list  # the observed states before and after (before only: it could not be refined, nothing ran)
+    action: tuple
+    plan_states: Sequence[int] | None  # that round's plan's symbolic states from this action on (Level 1)
+    info: StepInfo | None
+
+
+def loop_steps(run: ClosedLoopRun) -> Iterator[LoopStep]:
+    """The actions of a closed loop with the round that chose each: every round executes its plan's
+    first action, the last round that executed runs its plan to the end."""
+    loop, k = run.loop, 0
     planned = [r for r in loop.rounds if r.plan]
     for r, result in enumerate(planned):
-        take = len(loop.executed) - k if r == len(planned) - 1 else 1
-        for j in range(take):
-            states = result.plan_states
-            (step,) = symbolic_steps(models, loop.states[k:k + 2], [loop.executed[k]],
-                                     None if states is None else states[j:])
-            starts = run.action_starts[k:k + 1]
+        for j in range(len(loop.executed) - k if r == len(planned) - 1 else 1):
             info = run.infos[k] if k < len(run.infos) else None
-            records += step_records([step], [info], names, starts)
-            records[-1]["index"] = k
-            records[-1]["round"] = r
+            ran = info is None or info.changed
+            states = result.plan_states
+            yield LoopStep(k, r, loop.states[k:k + (2 if ran else 1)], tuple(loop.executed[k]),
+                           None if states is None else states[j:], info)
             k += 1
+
+
+def closed_loop_steps(models: Models, run: ClosedLoopRun, names: BitNames) -> list[dict]:
+    """The records of a closed loop (`loop_steps`); an action that could not be refined did not run:
+    no observed symbols, no prediction error."""
+    records: list[dict] = []
+    for s in loop_steps(run):
+        (step,) = symbolic_steps(models, s.states, [s.action], s.plan_states)
+        records += step_records([step], [s.info], names, run.action_starts[s.index:s.index + 1])
+        records[-1].update(index=s.index, round=s.round)
     return records
 
 
