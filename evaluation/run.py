@@ -25,7 +25,8 @@ action sent to the world), the step through the learned abstraction (`tamp.plann
 of the expected effect, `on_plan` (the symbols before equal the Level-1 plan's; None: no plan
 symbols), `kinematic` (the planners' kinematic check of the action on the observed state before it:
 "ok" or the reason), `refined`, `match` (the symbols observed after equal the expected ones; None:
-not executed or no operator), `mismatched_bits` and `error_m` (the Dynamics Model's error, as in
+not executed or no operator), `mismatched_bits`, `allowed` (the observed symbols are one of the
+operator's learned effects, if not the expected one) and `error_m` (the Dynamics Model's error, as in
 `effect_error_m`). None for rows without a Symbolic Model. `tamp refinability` aggregates them.
 
 Closed-loop rows: `plan` holds the actions sent to the world (a failed one included, the loop goes
@@ -225,6 +226,7 @@ def _steps(models, states: Sequence[np.ndarray], actions, plan_states, infos, ch
                     "on_plan": step.on_plan, "kinematic": "ok" if reason is None else str(reason.value),
                     "refined": info is not None and step_failure(info) is None and step.executed,
                     "match": step.match, "mismatched_bits": len(step.mismatches()) if step.match is not None else None,
+                    "allowed": None if step.match is None else step.observed_effect is not None,
                     "error_m": _round(step.dynamics_error_m)})
     return out
 

@@ -167,7 +167,9 @@ def format_steps(records: Sequence[dict]) -> list[str]:
                 diffs = ", ".join(f"{d['bit']}={d['observed']} (expected {d['expected']})"
                                   + (f" ~ {d['meaning_observed']}" if d["meaning_observed"] else "")
                                   for d in s["mismatches"])
-                lines.append(f"  observed: MISMATCH in {len(s['mismatches'])} bit(s): {diffs}")
+                allowed = "" if s["observed_effect"] is None else \
+                    f" (the operator's effect {s['observed_effect'] + 1}, not the expected one)"
+                lines.append(f"  observed: MISMATCH in {len(s['mismatches'])} bit(s){allowed}: {diffs}")
         if r["dynamics_error_m"] is not None:
             lines.append(f"  Dynamics Model: {r['dynamics_error_m'] * 100:.1f} cm off (mean over blocks)")
     return lines
@@ -243,8 +245,10 @@ def step_panel_html(record: dict, total: int) -> str:
             elif s["match"]:
                 out.append('<div><b>observed</b>: <span style="color:#1e8449">the expected symbols</span></div>')
             else:
+                allowed = "" if s["observed_effect"] is None else \
+                    f"; the operator's effect {s['observed_effect'] + 1}"
                 out.append(f'<div><b>observed</b>: <span style="{_MISMATCH}">MISMATCH in '
-                           f"{len(s['mismatches'])} bit(s)</span> (red rows)</div>")
+                           f"{len(s['mismatches'])} bit(s)</span> (red rows{allowed})</div>")
     if m is not None:
         out.append(f"<div><b>motion</b>: {escape(format_motion(m))}</div>")
     if r["dynamics_error_m"] is not None:

@@ -12,6 +12,8 @@ For step k, from the states the world was in before and after it (`symbolic_step
   arity: its precondition covers the most objects), the one seen most in the data among those;
 - the symbols read on the state observed after the step, and whether they equal the expected ones:
   a mismatch is a step whose motion did not produce the symbolic effect the abstraction counted on;
+  and which of the operator's learned effects, if any, gives them (the outcome was one the
+  abstraction allows, if not the one it counted on);
 - the Dynamics Model's position error predicting the step from the observed state before it.
 
 A step whose action could not be refined has no observed symbols (it changed nothing). Steps after
@@ -94,6 +96,7 @@ class SymbolicStep:
     expected: Symbols | None = None  # before with the expected effect applied
     observed: Symbols | None = None  # read on the observed state after (None: the step changed nothing)
     on_plan: bool | None = None  # the symbols before equal the Level-1 plan's (None: no plan symbols)
+    observed_effect: int | None = None  # the operator's effect that gives the observed symbols (None: none does)
     dynamics_error_m: float | None = None  # mean over objects of |predicted - observed| position
 
     @property
@@ -135,7 +138,7 @@ class SymbolicStep:
                 "before": state(self.before), "expected": state(self.expected), "observed": state(self.observed),
                 "expected_changes": changes(self.before, self.expected),
                 "observed_changes": changes(self.before, self.observed),
-                "match": self.match, "on_plan": self.on_plan,
+                "match": self.match, "on_plan": self.on_plan, "observed_effect": self.observed_effect,
                 "mismatches": [{"bit": names.bit(kind, k, f"o{i}", _obj(j)), "expected": e, "observed": o,
                                 "meaning_observed": names.meaning(kind, k, o, f"o{i}", _obj(j))}
                                for kind, k, i, j, e, o in self.mismatches()],
@@ -220,3 +223,6 @@ def _ground(models: Models, step: SymbolicStep, planned: tuple[Symbols, Symbols]
     step.operator, step.binding = op.name, tuple(task.binding(g))
     step.effect, step.n_effects, step.probability = e, len(op.effects), float(op.probabilities[e])
     step.expected = Symbols.of(*apply_effect(step.before.unary, step.before.rel, op.effects[e], step.binding))
+    if step.observed is not None:  # did the world do one of the things the operator learned it may do?
+        step.observed_effect = next((i for i, effect in enumerate(op.effects) if Symbols.of(
+            *apply_effect(step.before.unary, step.before.rel, effect, step.binding)) == step.observed), None)
