@@ -72,6 +72,27 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_refinability(args: argparse.Namespace) -> int:
+    """Per learned operator: used, kinematically feasible, refined, symbolic effect realised."""
+    from evaluation import refinability
+    from evaluation.run import EvalConfig, evaluate, read_rows
+    from tamp.app.plan_command import planner_config
+
+    config = EvalConfig(planner=planner_config(args), fidelity=args.fidelity, workers=args.workers,
+                        backend=args.backend, address=args.address, progress=not args.quiet)
+    rows = read_rows(evaluate(args.models, args.problems, args.out, args.methods, config))
+    rows = [r for r in rows if r["outcome"] != "error"]
+    if not any(r.get("steps") for r in rows):
+        raise UserError(f"{args.out}: no row has per-step records (the models need a Symbolic Model and its "
+                        "domain, and the planners must have executed something)")
+    paths = refinability.write(rows, args.out)
+    for f in refinability.fidelity_by_method(rows):
+        share = "—" if f["as_expected_pct"] is None else f"{f['as_expected_pct']:.1f}"
+        print(f"{f['method']}: {f['judged']} executed steps with an operator, {share} % as expected")
+    print("written " + ", ".join(str(p) for p in paths))
+    return 0
+
+
 def cmd_report(args: argparse.Namespace) -> int:
     """Tables, figures and significance tests from a results directory."""
     if not (args.directory / "rows.jsonl").is_file():
@@ -138,6 +159,31 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--no-report", action="store_true", help="write the rows only (tamp report makes the report)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_evaluate)
+
+    p = sub.add_parser(
+        "refinability",
+        help="per learned operator: how often plans use it, pass the kinematic check, refine, and realise its effect",
+        description="Evaluate the methods on a problem set as `tamp evaluate` does (OUT is a results directory: "
+        "the rows are resumed, not recomputed), then, for each learned operator the executed plans used: how "
+        "often; how often its actions passed the planners' kinematic check and refined into IK and "
+        "collision-free motions; of the executed ones, how often the symbols read after the step equal the ones "
+        "the operator expected (and are one of its learned effects); the Dynamics Model's mean position error. "
+        "Writes OUT/refinability.md (fidelity per method, the operator table, the ten least faithful "
+        "operators with an example each), OUT/refinability.csv (every operator) and "
+        "OUT/figures/refinability.png.",
+    )
+    p.add_argument("--models", type=Path, required=True, help="models directory: symbolic.pt, dynamics.pt, domain/")
+    p.add_argument("--problems", type=Path, required=True, help="problem set (tamp problems --out)")
+    p.add_argument("--out", type=Path, required=True,
+                   help="results directory (new, or a `tamp evaluate --out` to resume)")
+    p.add_argument("--methods", type=_name_list, default=["cfs", "bilevel", "bilevel_replan"],
+                   help="comma-separated methods whose plans are studied (default cfs,bilevel,bilevel_replan)")
+    p.add_argument("--fidelity", choices=("fast", "full"), default="fast",
+                   help="execute in the fast world (default) or with the arm under physics")
+    add_parallel_arguments(p, workers_default=1)
+    add_planner_arguments(p, backends=SYMBOLIC_BACKENDS, feasibility=False)
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=cmd_refinability)
 
     p = sub.add_parser(
         "report",

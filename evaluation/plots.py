@@ -140,4 +140,26 @@ def scaling_curves(path: Path, numbers: Mapping) -> Path:
     return _save(fig, path)
 
 
-__all__ = ["confusion_bars", "grouped_bars", "scaling_curves", "success_by_nk", "verifier_sweep"]
+def refinability_scatter(path: Path, table: Sequence[Mapping]) -> Path:
+    """Per learned operator (`evaluation.refinability.operator_table`): the share of its executed steps
+    whose symbols came out as expected against how often it was used (log scale), the marker's
+    colour the share of its steps that refined."""
+    rows = [t for t in table if t["as_expected_pct"] is not None]
+    fig = Figure(figsize=(7, 3.6), layout="constrained")
+    ax = fig.add_subplot()
+    if rows:
+        points = ax.scatter([t["uses"] for t in rows], [t["as_expected_pct"] for t in rows],
+                            c=_values([t["refined_pct"] for t in rows]), cmap="viridis", vmin=0, vmax=100,
+                            s=[10 + 4 * t["executed"] for t in rows], alpha=0.75, edgecolors="k", linewidths=0.3)
+        fig.colorbar(points, ax=ax, label="refined (%)")
+    ax.set_xscale("log")
+    ax.set_ylim(-3, 103)
+    ax.set_xlabel("steps that used the operator (log scale)")
+    ax.set_ylabel("executed steps as expected (%)")
+    ax.set_title("Learned operators: symbolic effect realised by motion (marker size: executed steps)", fontsize=9)
+    ax.grid(alpha=0.3)
+    return _save(fig, path)
+
+
+__all__ = ["confusion_bars", "grouped_bars", "refinability_scatter", "scaling_curves", "success_by_nk",
+           "verifier_sweep"]

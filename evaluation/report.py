@@ -22,7 +22,7 @@ from tamp.errors import UserError
 from tamp.planning.structs import OUTCOMES, Outcome
 from tamp.records import atomic_write_text
 
-from . import paper, plots, scaling
+from . import paper, plots, refinability, scaling
 from .stats import IDENTICAL, confusion, mean_std, median, paired_ttest, percentile, rate_pct
 
 METHOD_ORDER = ("deterministic", "probabilistic", "probabilistic_oracle", "cfs", "bilevel", "bilevel_alg1",
@@ -1000,6 +1000,20 @@ def section_scaling(res: Results, figures: Path) -> Section:
     return Section("scaling", title, lines, numbers)
 
 
+def section_fidelity(res: Results) -> Section:
+    title = "14. Abstraction fidelity: symbolic steps realised by motion"
+    numbers = refinability.fidelity_by_method(res.rows)
+    if not any(f["judged"] for f in numbers):
+        return _skipped("fidelity", title, "No row has an executed step judged against a learned operator (rows "
+                                           "written before per-step records, or models without a Symbolic Model).")
+    lines = [f"Every executed plan step read through the learned abstraction. {refinability.FIDELITY_NOTE} "
+             "The last two columns relate a step that breaks the abstraction to the plan's outcome: the success "
+             "rate of problems whose executed steps were all as expected, and of those with at least one that "
+             "was not. Per operator: `tamp refinability` on this directory.", ""]
+    lines += refinability.fidelity_lines(numbers)
+    return Section("fidelity", title, lines, {"methods": numbers})
+
+
 # --- the report ----------------------------------------------------------------------------------
 def _json_safe(x: Any) -> Any:
     if isinstance(x, float) and not math.isfinite(x):
@@ -1024,6 +1038,7 @@ def build_report(res: Results, figures: Path, ablation: dict | None = None,
     if any(res.has(a, b) for a, b in FEASIBILITY_PAIRS):  # only when run before and after (`*_nofeas`)
         sections.append(section_feasibility(res, figures))
     sections.append(section_scaling(res, figures))
+    sections.append(section_fidelity(res))
     lines = ["# Evaluation report", "",
              f"From `{source}` ({len(res.rows)} rows, {len(res.cells)} problems). Ours next to the paper's "
              "numbers (Dogangun et al., quoted as printed). Success in % of problems (one decimal), times in "
