@@ -136,7 +136,7 @@ FIDELITY_NOTE = ("A step is *as expected* when the symbols the Symbolic Model re
                  "executed (refinement failed) are not judged.")
 
 
-def markdown(rows: Sequence[dict], figure: str | None = None) -> str:
+def markdown(rows: Sequence[dict], figure: str | None = None, min_executed: int = MIN_EXECUTED) -> str:
     """The refinability report: fidelity per method, the operator table (the 30 most used; all in the
     CSV), the least faithful operators with an example each."""
     table = operator_table(rows)
@@ -155,10 +155,10 @@ def markdown(rows: Sequence[dict], figure: str | None = None) -> str:
                      f"{_cm(t['error_cm'])} | {t['methods']} |")
     if len(table) > 30:
         lines += ["", f"{len(table) - 30} more operators in refinability.csv."]
-    worst = least_faithful(table)
-    lines += ["", f"## The {len(worst)} least faithful operators (at least {MIN_EXECUTED} executed steps)", ""]
+    worst = least_faithful(table, min_executed=min_executed)
+    lines += ["", f"## The {len(worst)} least faithful operators (at least {min_executed} executed steps)", ""]
     if not worst:
-        lines.append(f"No operator was executed {MIN_EXECUTED} times or more.")
+        lines.append(f"No operator was executed {min_executed} times or more.")
     else:
         lines += ["| operator | executed | as expected (%) | allowed (%) | example: problem, method, step, action, "
                   "bits off |", "|---|---|---|---|---|"]
@@ -181,7 +181,7 @@ def csv_text(table: Sequence[dict]) -> str:
     return buffer.getvalue()
 
 
-def write(rows: Sequence[dict], out_dir: Path) -> list[Path]:
+def write(rows: Sequence[dict], out_dir: Path, min_executed: int = MIN_EXECUTED) -> list[Path]:
     """refinability.md, refinability.csv and figures/refinability.png in out_dir."""
     from tamp.records import atomic_write_text
 
@@ -190,6 +190,6 @@ def write(rows: Sequence[dict], out_dir: Path) -> list[Path]:
     table = operator_table(rows)
     png = refinability_scatter(Path(out_dir) / "figures" / "refinability.png", table) if table else None
     md = atomic_write_text(Path(out_dir) / "refinability.md",
-                           markdown(rows, None if png is None else f"figures/{png.name}"))
+                           markdown(rows, None if png is None else f"figures/{png.name}", min_executed))
     out = [md, atomic_write_text(Path(out_dir) / "refinability.csv", csv_text(table))]
     return out + ([png] if png is not None else [])

@@ -2,6 +2,9 @@
 from __future__ import annotations
 
 import json
+import re
+import shutil
+import subprocess
 
 import numpy as np
 import pytest
@@ -136,6 +139,11 @@ def test_cli_plans_with_fast_downward_and_algorithm_1(models_dir, tmp_path, caps
 
 @pytest.mark.sim
 def test_cli_executes_and_writes_the_replay(models_dir, tmp_path, capsys):
+    _plan_with_replay(models_dir, tmp_path, capsys)
+
+
+def _plan_with_replay(models_dir, tmp_path, capsys):
+    """`tamp plan --replay`: checks the output, the replay and the per-step view; (replay, steps)."""
     path = _problem_reachable_by_the_model(models_dir, tmp_path)
     replay = tmp_path / "out.html"
     code = main(["plan", "--problem", str(path), "--models", str(models_dir), "--method", "cfs",
@@ -144,6 +152,39 @@ def test_cli_executes_and_writes_the_replay(models_dir, tmp_path, capsys):
     assert "refinement:" in out and "execution (fast): final error" in out
     assert code == (0 if "-> success" in out else 1)
     assert replay.is_file() and replay.stat().st_size > 10_000
+    # the per-step view: printed, written beside the replay, and in the replay's panel
+    steps = json.loads((tmp_path / "out.steps.json").read_text())["steps"]
+    executed = int(re.search(r"refinement: (?:ok, )?(\d+) action", out).group(1)) if "refinement: ok" in out else None
+    assert steps and (executed is None or len(steps) == executed)
+    for k, step in enumerate(steps):
+        assert f"step {k + 1}: pick" in out
+        motion = step["motion"]
+        assert set(motion["ik_solver"].values()) <= {"closed form", "numerical"}
+        assert all(m["planner"] in ("direct", "rrtconnect", "") for m in motion["motions"].values())
+        assert step["symbols"]["before"]["unary"] and "match" in step["symbols"]
+        assert step["t_start"] is not None and step["t_start"] >= 0
+    page = replay.read_text()
+    assert 'id="tamp-steps"' in page and f"step {len(steps)} of {len(steps)}" in page
+    return replay, len(steps)
+
+
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+
+
+@pytest.mark.sim
+@pytest.mark.skipif(CHROMIUM is None, reason="needs Chromium (Debian: apt-get install chromium)")
+def test_the_replay_panel_follows_the_step_in_a_browser(models_dir, tmp_path, capsys):
+    """In headless Chromium, the replay's panel shows the step named in the page's #step=N."""
+    replay, steps = _plan_with_replay(models_dir, tmp_path, capsys)
+    for step in range(steps + 1):
+        dom = subprocess.run([CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--no-first-run",
+                              "--disable-background-networking", "--disable-component-update", "--disable-sync",
+                              f"--user-data-dir={tmp_path / 'chromium'}", "--virtual-time-budget=5000",
+                              "--dump-dom", f"{replay.as_uri()}#step={step}"],
+                             capture_output=True, text=True, timeout=120).stdout
+        panel = re.search(r'<div id="tamp-steps"[^>]*data-entry="(\d+)"[^>]*>(.*?)</div>', dom, re.S)
+        assert panel is not None and int(panel.group(1)) == step
+        assert (f"step {step} of {steps}" if step else "before step 1") in panel.group(2)
 
 
 @pytest.mark.sim

@@ -246,8 +246,8 @@ _PANEL_STYLE = ("position:fixed;left:8px;bottom:8px;width:460px;max-width:calc(1
 
 def _panel(entries: Sequence[tuple[float, str]]) -> str:
     """The panel's element and the script that keeps it on the entry of Meshcat's animation time
-    (`viewer.animator.time`, seconds), polled 10 times a second; ``#step=N`` seeks to entry N once
-    the animation is loaded (without WebGL, the page still shows entry N)."""
+    (`viewer.animator.time`, seconds), polled 10 times a second; ``#step=N`` pauses the animation at
+    entry N once it is loaded (without WebGL, the page still shows entry N); press play to go on."""
     times = json.dumps([round(float(t), 4) for t, _ in entries])
     pages = json.dumps([text for _, text in entries]).replace("</", "<\\/")
     return (f'<div id="{PANEL_ID}" style="{_PANEL_STYLE}"></div>\n<script>\n(function () {{\n'
@@ -255,7 +255,7 @@ def _panel(entries: Sequence[tuple[float, str]]) -> str:
             f'const panel = document.getElementById("{PANEL_ID}");\n'
             """const wanted = /[#&]step=(\\d+)/.exec(location.hash);
 let pinned = wanted ? Math.min(parseInt(wanted[1], 10), pages.length - 1) : null;
-let shown = -1, seeked = false;
+let shown = -1, seeked = false, seekTime = null;
 function animator() {
   return (typeof viewer !== "undefined" && viewer.animator && viewer.animator.duration > 0) ? viewer.animator : null;
 }
@@ -266,13 +266,12 @@ function entryAt(t) {
 }
 function tick() {
   const a = animator();
-  let k = pinned === null ? 0 : pinned;
-  if (a !== null) {
-    if (pinned !== null && !seeked) {
-      a.seek(times[pinned] + 0.01); a.display_progress(times[pinned] + 0.01); seeked = true;
-    }
-    else if (pinned === null || seeked) k = entryAt(a.time);
+  if (a !== null && pinned !== null && !seeked) {
+    a.pause(); a.seek(times[pinned] + 0.01); a.display_progress(times[pinned] + 0.01);
+    seeked = true; seekTime = a.time;
   }
+  let k = pinned === null ? 0 : pinned;
+  if (a !== null && (pinned === null || a.time !== seekTime)) { pinned = null; k = entryAt(a.time); }
   if (k !== shown) { shown = k; panel.innerHTML = pages[k]; panel.dataset.entry = String(k); }
 }
 tick();
