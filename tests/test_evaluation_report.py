@@ -63,6 +63,17 @@ def make_rows(methods=METHODS, per_cell=4, seed=3):
                         "effect_error_m": [rng.uniform(0.0, 0.03) for _ in range(k)]
                         if solved and failure is None else [],
                         "fidelity": "fast", "eps_m": 0.05, "tau_verify_m": 0.07})
+                    r = rows[-1]
+                    ran = r["executed_actions"]
+                    r["steps"] = None if m.startswith("cfs_") or not solved else [
+                        {"operator": f"op{rng.randint(0, 5)}" if rng.random() < 0.95 else None,
+                         "probability": 0.5, "on_plan": (r["level"] == 1) if r["level"] else None, "kinematic": "ok",
+                         "refined": j < ran, "match": (rng.random() < 0.6) if j < ran else None,
+                         "mismatched_bits": 0, "allowed": True if j < ran else None, "error_m": 0.01}
+                        for j in range(max(ran, 1 if failure else 0))]
+                    for step in r["steps"] or []:
+                        if step["operator"] is None:
+                            step["match"] = None
     for r in rows:
         if r["level1_stages_s"]:
             r["level1_time_s"] = sum(r["level1_stages_s"].values())
@@ -509,6 +520,25 @@ def test_learned_symbols_section(full_report):
     assert rows["r0"]["best fact"] == "i on j" and rows["r0"]["read on"] == "12" and rows["r0"]["rate"] == "0.083"
 
 
+def test_the_abstraction_fidelity_is_recomputed_from_rows(full_report):
+    """Section 14: per method, executed steps judged against their operator, the share as expected, and
+    success with every step as expected against with one that was not; each cell from the rows."""
+    _, data, s = full_report
+    (t,) = s["14"]["tables"]
+    rows = [r for r in data.rows if r["outcome"] != "error"]
+    assert [r["method"] for r in t] == [m for m in dict.fromkeys(r["method"] for r in rows)
+                                        if any(x["steps"] is not None for x in rows if x["method"] == m)]
+    for line in t:
+        mine = [r for r in rows if r["method"] == line["method"] and r["steps"] is not None]
+        judged = [x for r in mine for x in r["steps"] if x["match"] is not None]
+        assert int(line["problems"]) == len(mine) and int(line["executed steps (with an operator)"]) == len(judged)
+        close(line["as expected (%)"], 100 * np.mean([x["match"] for x in judged]), 1)
+        broken = [r for r in mine if any(x["match"] is False for x in r["steps"])]
+        assert line["success, a step not as expected (%)"] == \
+            f"{100 * np.mean([r['success'] for r in broken]):.1f} (of {len(broken)})"
+        assert int(line["no operator"]) == sum(x["operator"] is None for r in mine for x in r["steps"])
+
+
 def test_figures_and_json(full_report):
     out, data, s = full_report
     for name in ("dual_model", "verifier_tau", "verifier_confusion", "success", "planning_time", "scaling"):
@@ -533,6 +563,7 @@ def test_missing_sections_are_one_line_notes(tmp_path):
     assert {r["method"] for r in s["6"]["tables"][-1]} == {"`deterministic`", "`cfs`"}
     skipped = json.loads((tmp_path / "report.json").read_text())["skipped"]
     assert skipped == ["table1", "dual_model", "table2", "verifier", "table3", "replanning", "level1", "symbols"]
+    assert "14" in s and s["14"]["tables"]  # the abstraction fidelity of the rows' steps
     assert (tmp_path / "figures" / "success.png").stat().st_size > 0
 
 

@@ -141,12 +141,12 @@ class StepInfo:
             "motion_success": dict(self.motion_success),
             "ik_solver": dict(self.ik_solver),
             "motion_planner": dict(self.motion_planner),
-            "motion_seconds": {k: round(v, 5) for k, v in self.motion_seconds.items()},
             "grasped": self.grasped,
             "carried": list(self.carried),
             "settle_time": round(self.settle_time, 4),
             "settled": self.settled,
-            "timings": {k: round(v, 5) for k, v in self.timings.items()},
+            "timings": {**{k: round(v, 5) for k, v in self.timings.items()},
+                        **{f"motion_{k}": round(v, 5) for k, v in self.motion_seconds.items()}},
         }
         if self.execution is not None:
             record["execution"] = self.execution.to_dict()
