@@ -49,15 +49,35 @@ def _write_report(directory: Path, ablation: Path | None = None) -> Path:
     return write_report(directory, ablation=ablation)
 
 
-def cmd_evaluate(args: argparse.Namespace) -> int:
-    """Every method on every problem: plan, refine, execute; rows to OUT/rows.jsonl, then the report."""
-    from evaluation.run import EvalConfig, evaluate, read_rows
+def _eval_config(args: argparse.Namespace):
+    """The EvalConfig of the flags of `_add_run_arguments` (`tamp evaluate`, `tamp refinability`)."""
+    from evaluation.run import EvalConfig
     from tamp.app.plan_command import planner_config
 
-    config = EvalConfig(planner=planner_config(args), fidelity=args.fidelity, workers=args.workers,
-                        backend=args.backend, address=args.address, oracle_max_plans=args.oracle_max_plans,
-                        progress=not args.quiet)
-    rows_path = evaluate(args.models, args.problems, args.out, args.methods, config)
+    return EvalConfig(planner=planner_config(args), fidelity=args.fidelity, workers=args.workers,
+                      backend=args.backend, address=args.address,
+                      oracle_max_plans=getattr(args, "oracle_max_plans", EvalConfig.oracle_max_plans),
+                      progress=not args.quiet)
+
+
+def _add_run_arguments(p: argparse.ArgumentParser, models_help: str, out_help: str, methods_default,
+                       methods_help: str) -> None:
+    """The flags of a command that runs methods on a problem set (`tamp evaluate`, `tamp refinability`)."""
+    p.add_argument("--models", type=Path, required=True, help=models_help)
+    p.add_argument("--problems", type=Path, required=True, help="problem set (tamp problems --out)")
+    p.add_argument("--out", type=Path, required=True, help=out_help)
+    p.add_argument("--methods", type=_name_list, default=methods_default, help=methods_help)
+    p.add_argument("--fidelity", choices=("fast", "full"), default="fast",
+                   help="execute in the fast world (default) or with the arm under physics")
+    add_parallel_arguments(p, workers_default=1)
+    add_planner_arguments(p, backends=SYMBOLIC_BACKENDS, feasibility=False)
+
+
+def cmd_evaluate(args: argparse.Namespace) -> int:
+    """Every method on every problem: plan, refine, execute; rows to OUT/rows.jsonl, then the report."""
+    from evaluation.run import evaluate, read_rows
+
+    rows_path = evaluate(args.models, args.problems, args.out, args.methods, _eval_config(args))
     rows = read_rows(rows_path)
     print(f"{len(rows)} rows in {rows_path}: {sum(r['success'] for r in rows)} successes")
     if args.no_report:
@@ -75,12 +95,9 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 def cmd_refinability(args: argparse.Namespace) -> int:
     """Per learned operator: used, kinematically feasible, refined, symbolic effect realised."""
     from evaluation import refinability
-    from evaluation.run import EvalConfig, evaluate, read_rows
-    from tamp.app.plan_command import planner_config
+    from evaluation.run import evaluate, read_rows
 
-    config = EvalConfig(planner=planner_config(args), fidelity=args.fidelity, workers=args.workers,
-                        backend=args.backend, address=args.address, progress=not args.quiet)
-    rows = read_rows(evaluate(args.models, args.problems, args.out, args.methods, config))
+    rows = read_rows(evaluate(args.models, args.problems, args.out, args.methods, _eval_config(args)))
     rows = [r for r in rows if r["outcome"] != "error"]
     if not any(r.get("steps") for r in rows):
         raise UserError(f"{args.out}: no row has per-step records (the models need a Symbolic Model and its "
@@ -145,15 +162,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         "these), and symbolic_sigmoid, cfs_gumbel when DIR/variants/ holds their models. A problem set "
         "with several runs (tamp problems --runs) is reported as mean ± std over its runs.",
     )
-    p.add_argument("--models", type=Path, required=True,
-                   help="models directory: symbolic.pt, dynamics.pt, domain/ (and optionally variants/)")
-    p.add_argument("--problems", type=Path, required=True, help="problem set (tamp problems --out)")
-    p.add_argument("--out", type=Path, required=True, help="results directory (new, or the one to resume)")
-    p.add_argument("--methods", type=_name_list, default=None, help="comma-separated methods (default: all available)")
-    p.add_argument("--fidelity", choices=("fast", "full"), default="fast",
-                   help="execute in the fast world (default) or with the arm under physics")
-    add_parallel_arguments(p, workers_default=1)
-    add_planner_arguments(p, backends=SYMBOLIC_BACKENDS, feasibility=False)
+    _add_run_arguments(p, "models directory: symbolic.pt, dynamics.pt, domain/ (and optionally variants/)",
+                       "results directory (new, or the one to resume)", None,
+                       "comma-separated methods (default: all available)")
     p.add_argument("--oracle-max-plans", type=positive_int, default=20,
                    help="probabilistic_oracle: ranked plans executed at most per problem (default 20)")
     p.add_argument("--no-report", action="store_true", help="write the rows only (tamp report makes the report)")
@@ -172,16 +183,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         "operators with an example each), OUT/refinability.csv (every operator) and "
         "OUT/figures/refinability.png.",
     )
-    p.add_argument("--models", type=Path, required=True, help="models directory: symbolic.pt, dynamics.pt, domain/")
-    p.add_argument("--problems", type=Path, required=True, help="problem set (tamp problems --out)")
-    p.add_argument("--out", type=Path, required=True,
-                   help="results directory (new, or a `tamp evaluate --out` to resume)")
-    p.add_argument("--methods", type=_name_list, default=["cfs", "bilevel", "bilevel_replan"],
-                   help="comma-separated methods whose plans are studied (default cfs,bilevel,bilevel_replan)")
-    p.add_argument("--fidelity", choices=("fast", "full"), default="fast",
-                   help="execute in the fast world (default) or with the arm under physics")
-    add_parallel_arguments(p, workers_default=1)
-    add_planner_arguments(p, backends=SYMBOLIC_BACKENDS, feasibility=False)
+    _add_run_arguments(p, "models directory: symbolic.pt, dynamics.pt, domain/",
+                       "results directory (new, or a `tamp evaluate --out` to resume)",
+                       ["cfs", "bilevel", "bilevel_replan"],
+                       "comma-separated methods whose plans are studied (default cfs,bilevel,bilevel_replan)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_refinability)
 

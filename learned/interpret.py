@@ -152,23 +152,21 @@ class BitNames:
     ``--json`` file)."""
 
     facts: dict[str, tuple[str, bool]]  # bit name ("u0", "r1", "r1(i,i)") -> (fact, bit 1 means "not fact")
-    phi: dict[str, float]  # bit name -> |phi| of that fact
 
     @classmethod
     def from_report(cls, report: Sequence[BitReport | dict], min_phi: float = STRONG_PHI) -> "BitNames":
-        facts, phi = {}, {}
+        facts = {}
         for bit in report:
             b = bit.to_dict() if isinstance(bit, BitReport) else bit
             best = b["best"]
             if abs(b["phi"][best]) >= min_phi:
                 facts[b["name"]] = (best, bool(b["negated"][best]))
-                phi[b["name"]] = abs(b["phi"][best])
-        return cls(facts, phi)
+        return cls(facts)
 
     @classmethod
     def none(cls) -> "BitNames":
         """No meanings: every bit by its raw name."""
-        return cls({}, {})
+        return cls({})
 
     @staticmethod
     def bit(kind: str, k: int, i: str, j: str | None = None) -> str:

@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Iterator, Sequence
 
 from learned.interpret import BitNames
+from tamp.app.plan_command import fmt_action
 from tamp.planning.steps import SymbolicStep, symbolic_steps
 from tamp.records import atomic_write_text
 
@@ -56,12 +57,12 @@ def motion_record(info: StepInfo | None) -> dict | None:
 
 
 def step_records(steps: Sequence[SymbolicStep], infos: Sequence[StepInfo | None], names: BitNames,
-                 starts: Sequence[float | None] = (), symbolic: bool = True) -> list[dict]:
+                 starts: Sequence[float | None] = ()) -> list[dict]:
     """One record per step (see the module docstring)."""
     out = []
     for k, step in enumerate(steps):
         out.append({"index": k, "action": list(step.action),
-                    "symbols": step.to_dict(names) if symbolic and step.before is not None else None,
+                    "symbols": step.to_dict(names) if step.before is not None else None,
                     "motion": motion_record(infos[k] if k < len(infos) else None),
                     "dynamics_error_m": None if step.dynamics_error_m is None else round(step.dynamics_error_m, 4),
                     "t_start": starts[k] if k < len(starts) else None})
@@ -126,10 +127,6 @@ def write_steps(path: Path, document: dict) -> Path:
     return atomic_write_text(path, json.dumps(document, indent=1) + "\n")
 
 
-def _action(a) -> str:
-    return f"pick {a[0]} at {a[1]:+d}, place on {a[2]} at {a[3]:+d}"
-
-
 def _change(bit: str, value: int, meaning: str | None) -> str:
     return f"{bit}={value}" + (f" ~ {meaning}" if meaning else "")
 
@@ -140,7 +137,7 @@ def format_steps(records: Sequence[dict]) -> list[str]:
     the Dynamics Model's error."""
     lines = []
     for r in records:
-        lines.append(f"step {r['index'] + 1}: {_action(r['action'])}")
+        lines.append(f"step {r['index'] + 1}: {fmt_action(r['action'])}")
         s = r["symbols"]
         if s is not None:
             before = s["before"]
@@ -220,7 +217,7 @@ def step_panel_html(record: dict, total: int) -> str:
     from html import escape
 
     r, s, m = record, record["symbols"], record["motion"]
-    out = [f"<div><b>step {r['index'] + 1} of {total}</b>: {escape(_action(r['action']))}</div>"]
+    out = [f"<div><b>step {r['index'] + 1} of {total}</b>: {escape(fmt_action(r['action']))}</div>"]
     if s is not None:
         facts = "; ".join(s["before"]["facts"]) or "no named fact holds"
         out.append(f"<div><b>before</b>: {escape(facts)} ({len(s['before']['set'])} bits set)</div>")
