@@ -96,7 +96,7 @@ def main() -> None:
     problems = problems_for(args)
     cfg = PlanConfig(feasibility=False, search=SearchConfig(max_expansions=1))  # Level 2 not run
     print(f"domain: {len(models.domain)} operators; N = {cfg.n_domains}; Level-1 budget {cfg.level1_budget} "
-          f"generated states; {len(problems)} problems")
+          f"generated states ({cfg.level1_focus_budget} from {cfg.focus_from} objects on); {len(problems)} problems")
     rows: dict[int, list[dict]] = {}
     old: dict[int, list[float]] = {}
     for n in sorted({p.n for p in problems}):

@@ -134,7 +134,7 @@ class EvalConfig:
                "search_time_limit_s": p.search.time_limit, "search_max_expansions": p.search.max_expansions,
                "search_confident_m": p.search.confident, "search_look_on": p.search.look_on,
                "level1_budget": p.level1_budget, "level1_time_budget_s": p.level1_time_budget,
-               "level1_focus_from": p.focus_from,
+               "level1_focus_from": p.focus_from, "level1_focus_budget": p.level1_focus_budget,
                "symbolic_backend": p.backend, "oracle_max_plans": self.oracle_max_plans}
         if p.symbolic_time_limit != PlanConfig.symbolic_time_limit:  # older results directories stay resumable
             out["symbolic_time_limit_s"] = p.symbolic_time_limit

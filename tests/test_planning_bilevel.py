@@ -13,6 +13,7 @@ import pytest
 sys.path.insert(0, str(Path(__file__).parent))
 from planning_stubs import StubModel, two_block_domain, world_step
 
+from tamp.errors import UserError
 from tamp.planning.bilevel import PlanConfig, plan, plan_closed_loop
 from tamp.planning.models import Models
 from tamp.planning.search import SearchConfig
@@ -311,3 +312,25 @@ def test_refinement_failures_send_the_planner_to_level2_with_the_failing_pair_pr
     assert result.refinements[0]["level"] == 1 and result.refinements[0]["plan"] == [[0, 0, 1, 0]]
     assert result.refinements[-1]["failed_action"] is None and kin.refined[-1] == [tuple(a) for a in result.plan]
     assert goal_error(execute(X_INIT, result.plan), A_ON_B) < 0.05
+
+
+def test_from_focus_from_blocks_on_level1_gives_up_at_its_own_budget(domain):
+    """`level1_focus_budget` bounds Level 1 from `focus_from` objects on (Level 2 then plans), and only
+    there: the same budget leaves a four-block problem to Level 1, and the paper's Algorithm 1 never uses it."""
+    far = np.array([[0.45, -0.3 + 0.12 * i, 0.025, 1, 0] for i in range(3)])
+    stacked = far.copy()
+    stacked[0, :3] = far[1, :3] + [0, 0, 0.05]
+    X5, G5 = np.vstack([X_INIT, far]), np.vstack([A_ON_B, stacked])  # two blocks to stack: two actions
+    cfg = PlanConfig(n_domains=20, focus_from=5, level1_focus_budget=1)
+    assert cfg.level1_budget_for(4) == cfg.level1_budget and cfg.level1_budget_for(5) == 1
+    five = plan("bilevel", models(domain), X5, G5, cfg)
+    assert five.symbolic_stats["outcomes"] == {"timeout": 20} and not five.candidates
+    assert five.level == 2 and goal_error(execute(X5, five.plan), G5) < 0.05
+    four = plan("bilevel", models(domain), X5[:4], G5[:4], cfg)
+    assert four.level == 1 and four.symbolic_stats["generated"] > 1
+    alg1 = plan("bilevel_alg1", models(domain), X5, G5, cfg)
+    assert alg1.symbolic_stats["outcomes"].get("timeout", 0) == 0 and alg1.level == 1
+    default = PlanConfig()
+    assert default.level1_budget_for(6) == default.level1_focus_budget < default.level1_budget_for(4)
+    with pytest.raises(UserError, match="level1_focus_budget"):
+        PlanConfig(level1_focus_budget=0)

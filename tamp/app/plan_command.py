@@ -276,14 +276,20 @@ def add_planner_arguments(p: argparse.ArgumentParser, backends: tuple[str, ...] 
                    "Fast Downward needs more at 4 objects)")
     p.add_argument("--level1-budget", type=positive_int, default=default.level1_budget,
                    help="symbolic states Level 1's search (one for all N domains) may generate per planning call "
-                   f"(default {default.level1_budget}: at most about 0.2-0.3 s at 2 to 6 objects); deterministic, "
-                   "whatever the machine's load")
+                   f"(default {default.level1_budget}: at most about 0.2-0.3 s); deterministic, whatever the machine's "
+                   "load")
     p.add_argument("--focus-from", type=positive_int, default=default.focus_from, metavar="N",
                    help="with N or more blocks, Level 1's symbolic plans pick up only the blocks off their goal "
                    "(farther than the success tolerance in x, y), as the continuous search's pruning does: the "
                    "symbolic search then grows with the blocks to move, not all of them "
                    f"(default {default.focus_from}; "
                    "`bilevel_alg1`, the paper's Algorithm 1, never restricts)")
+    p.add_argument("--level1-focus-budget", type=positive_int, default=default.level1_focus_budget,
+                   metavar="STATES",
+                   help="with --focus-from blocks or more, Level 1's budget instead of --level1-budget (default "
+                   f"{default.level1_focus_budget}: about 40-60 ms; there the learned symbols rarely give a verified "
+                   "plan beyond a few thousand states, and a search that ends at its budget only delays the "
+                   "continuous search)")
     p.add_argument("--max-expansions", type=positive_int, default=default.search.max_expansions,
                    help="continuous search node limit per planning call: it decides when the search gives up, "
                    f"whatever the machine's load (default {default.search.max_expansions}, about 10 s at 4 objects)")
@@ -306,7 +312,7 @@ def add_planner_arguments(p: argparse.ArgumentParser, backends: tuple[str, ...] 
 def planner_config(args: argparse.Namespace) -> PlanConfig:
     """The PlanConfig of the flags of `add_planner_arguments` (seed 0: callers set the problem's)."""
     return PlanConfig(n_domains=args.n_domains, backend=args.symbolic_backend, level1_budget=args.level1_budget,
-                      focus_from=args.focus_from,
+                      focus_from=args.focus_from, level1_focus_budget=args.level1_focus_budget,
                       symbolic_time_limit=args.symbolic_time_limit, feasibility=getattr(args, "feasibility", True),
                       search=SearchConfig(max_expansions=args.max_expansions, time_limit=args.time_limit,
                                           confident=args.confident, look_on=args.look_on))

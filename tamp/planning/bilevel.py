@@ -78,6 +78,9 @@ class PlanConfig:
     nonempty: bool = True  # X_init not within tau of X_goal: the symbolic plan needs >= 1 action
     focus_from: int | None = 5  # from this many objects on, symbolic plans pick up only blocks off their
     #                             goal (`search.misplaced_objects`, the continuous search's pruning); None: never
+    level1_focus_budget: int | None = 25_000  # from focus_from objects on, Level 1's budget (None: level1_budget):
+    #   there the learned symbols rarely give a verified plan beyond a few thousand states, and a search
+    #   that ends at the budget only delays Level 2 (tuned on the seed-13 problems of 5 and 6 blocks)
     # Kinematics in the planning loop (cfs, bilevel; needs a `kinematics` object passed to `plan`):
     feasibility: bool = True  # check actions on the predicted states, refine a plan before returning it
     max_refinements: int = 4  # full refinements per planning call (Level-1 candidates and Level-2 plans)
@@ -93,6 +96,16 @@ class PlanConfig:
             raise UserError(f"the number of sampled domains must be at least 1, got {self.n_domains}")
         if self.focus_from is not None and self.focus_from < 1:
             raise UserError(f"PlanConfig.focus_from must be a positive object count or None, got {self.focus_from}")
+        for name in ("level1_budget", "level1_focus_budget"):
+            if getattr(self, name) is not None and getattr(self, name) < 1:
+                raise UserError(f"PlanConfig.{name} must be a positive number of states or None, "
+                                f"got {getattr(self, name)}")
+
+    def level1_budget_for(self, n_objects: int) -> int | None:
+        """Level 1's budget (generated symbolic states) in a scene of `n_objects` blocks."""
+        if self.focus_from is None or n_objects < self.focus_from or self.level1_focus_budget is None:
+            return self.level1_budget
+        return min(self.level1_focus_budget, self.level1_budget or self.level1_focus_budget)
 
 
 @dataclass
@@ -194,7 +207,7 @@ def _level1_plans(models: Models, X_init, X_goal, cfg: PlanConfig, result: PlanR
     if probabilistic:
         out = planner.plan_probabilistic(problem, n_domains=cfg.n_domains, seed=cfg.seed,
                                          time_budget=cfg.level1_time_budget,
-                                         budget=cfg.level1_budget)
+                                         budget=cfg.level1_budget_for(len(X_init)))
         result.timings["symbolic"] = time.perf_counter() - t
         result.symbolic_stats = {"n_domains": out.n_domains, "unique_plans": len(out.plans),
                                  "outcomes": dict(out.statuses), "expanded": out.expanded,
