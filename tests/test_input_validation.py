@@ -234,6 +234,8 @@ def test_unwritable_outputs_are_refused_before_the_work(tmp_path, capsys):
     (["domain", "--model", "m", "--data", "d", "--out", "o", "--sampled", "-1"], "--sampled"),
     (["domain", "--model", "m", "--data", "d", "--out", "o", "--min-prob", "2"], "--min-prob"),
     (["evaluate", "--models", "m", "--problems", "p", "--out", "o", "--time-limit", "inf"], "--time-limit"),
+    (["evaluate", "--models", "m", "--problems", "p", "--out", "o", "--level1-focus-budget", "0"],
+     "--level1-focus-budget"),
 ])
 def test_numeric_flags_are_range_checked_naming_the_flag(capsys, argv, flag):
     with pytest.raises(SystemExit) as info:
