@@ -289,7 +289,7 @@ def add_planner_arguments(p: argparse.ArgumentParser, backends: tuple[str, ...] 
                    help="with --focus-from blocks or more, Level 1's budget instead of --level1-budget (default "
                    f"{default.level1_focus_budget}: about 40-60 ms; there the learned symbols rarely give a verified "
                    "plan beyond a few thousand states, and a search that ends at its budget only delays the "
-                   "continuous search)")
+                   "continuous search; the --level1-budget value gives one budget at any number of blocks)")
     p.add_argument("--max-expansions", type=positive_int, default=default.search.max_expansions,
                    help="continuous search node limit per planning call: it decides when the search gives up, "
                    f"whatever the machine's load (default {default.search.max_expansions}, about 10 s at 4 objects)")
