@@ -56,8 +56,7 @@ def _eval_config(args: argparse.Namespace):
 
     return EvalConfig(planner=planner_config(args), fidelity=args.fidelity, workers=args.workers,
                       backend=args.backend, address=args.address,
-                      oracle_max_plans=getattr(args, "oracle_max_plans", EvalConfig.oracle_max_plans),
-                      progress=not args.quiet)
+                      oracle_max_plans=args.oracle_max_plans, progress=not args.quiet)
 
 
 def _add_run_arguments(p: argparse.ArgumentParser, models_help: str, out_help: str, methods_default,
@@ -71,6 +70,9 @@ def _add_run_arguments(p: argparse.ArgumentParser, models_help: str, out_help: s
                    help="execute in the fast world (default) or with the arm under physics")
     add_parallel_arguments(p, workers_default=1)
     add_planner_arguments(p, backends=SYMBOLIC_BACKENDS, feasibility=False)
+    p.add_argument("--oracle-max-plans", type=positive_int, default=20,
+                   help="probabilistic_oracle: ranked plans executed at most per problem (default 20)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
@@ -95,10 +97,10 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 def cmd_refinability(args: argparse.Namespace) -> int:
     """Per learned operator: used, kinematically feasible, refined, symbolic effect realised."""
     from evaluation import refinability
-    from evaluation.run import evaluate, read_rows
+    from evaluation.run import ERROR_OUTCOME, evaluate, read_rows
 
     rows = read_rows(evaluate(args.models, args.problems, args.out, args.methods, _eval_config(args)))
-    rows = [r for r in rows if r["outcome"] != "error"]
+    rows = [r for r in rows if r["outcome"] != ERROR_OUTCOME and r["method"] in args.methods]
     if not any(r.get("steps") for r in rows):
         raise UserError(f"{args.out}: no row has per-step records (the models need a Symbolic Model and its "
                         "domain, and the planners must have executed something)")
@@ -165,10 +167,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     _add_run_arguments(p, "models directory: symbolic.pt, dynamics.pt, domain/ (and optionally variants/)",
                        "results directory (new, or the one to resume)", None,
                        "comma-separated methods (default: all available)")
-    p.add_argument("--oracle-max-plans", type=positive_int, default=20,
-                   help="probabilistic_oracle: ranked plans executed at most per problem (default 20)")
     p.add_argument("--no-report", action="store_true", help="write the rows only (tamp report makes the report)")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_evaluate)
 
     p = sub.add_parser(
@@ -187,7 +186,6 @@ def register(sub: argparse._SubParsersAction) -> None:
                        "results directory (new, or a `tamp evaluate --out` to resume)",
                        ["cfs", "bilevel", "bilevel_replan"],
                        "comma-separated methods whose plans are studied (default cfs,bilevel,bilevel_replan)")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_refinability)
 
     p = sub.add_parser(

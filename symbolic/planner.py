@@ -104,7 +104,7 @@ class SymbolicPlanner:
         ch = np.zeros(len(self.ops), np.int64) if choice is None else np.asarray(choice)
         if self.backend == "python":
             start = time.perf_counter()
-            out = self._search(problem, DomainSet.of_choices(self.ops, ch[None]), self.budget, None)
+            out = self._search(problem, DomainSet.of_choices(self.ops, ch[None]), self.budget, start + self.time_limit)
             return self._result(self.task(problem.n, problem.movable), out, 0, time.perf_counter() - start)
         result = fd.run_fast_downward(self._domain_text(ch, problem.n), problem_pddl(self.ops, problem),
                                       self.search, self.time_limit)
@@ -137,7 +137,8 @@ class SymbolicPlanner:
         return ProbabilisticPlanResult(ranked, n_domains, n_unique, n_searches, dict(statuses), timings)
 
     def _search(self, problem: SymbolicProblem, domains: DomainSet, budget: int,
-                deadline: float | None) -> SearchOutcome:
+                deadline: float) -> SearchOutcome:
+        """The one search for all `domains`, until `budget` generated states or `deadline` (time.perf_counter s)."""
         task = self.task(problem.n, problem.movable)
         init, goal = problem_states(problem)
         try:

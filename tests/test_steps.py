@@ -146,3 +146,19 @@ def test_the_refinability_table_and_the_fidelity_are_recomputed_from_rows(tmp_pa
     md = (tmp_path / "refinability.md").read_text()
     assert "| b | 2 | 0.0 | 50.0 | p1, cfs, step 2, [1, 0, 0, 0], 2 |" in md
     assert (tmp_path / "figures" / "refinability.png") in paths
+
+
+def test_tamp_refinability_studies_only_the_methods_asked_for(tmp_path, monkeypatch, capsys):
+    """The rows of a `tamp evaluate` directory hold every method evaluated; `--methods` picks the ones studied."""
+    import evaluation.run
+    from tamp.app.cli import main
+
+    rows = [{"problem": "p1", "method": m, "outcome": "success", "success": True, "plan": [[0, 0, 1, 0]],
+             "steps": [_step(op)]} for m, op in (("cfs", "a"), ("bilevel", "b"))]
+    (tmp_path / "rows.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
+    monkeypatch.setattr(evaluation.run, "evaluate", lambda *args, **kwargs: tmp_path / "rows.jsonl")
+    assert main(["refinability", "--models", "m", "--problems", "p", "--out", str(tmp_path), "--methods", "cfs"]) == 0
+    out = capsys.readouterr().out
+    assert "cfs: 1 executed steps" in out and "bilevel" not in out
+    table = (tmp_path / "refinability.csv").read_text().splitlines()
+    assert [line.split(",")[0] for line in table[1:]] == ["a"]

@@ -178,6 +178,10 @@ def test_level1_time_budget_bounds_probabilistic_planning(ops, problems):
     assert [(p.actions, p.count) for p in same.plans] == [(p.actions, p.count) for p in unbounded.plans]
     spent = SymbolicPlanner(ops, backend="python").plan_probabilistic(problem, n_domains=60, seed=4, time_budget=0.0)
     assert spent.statuses == {"timeout": 60} and spent.plans == []
+    # the planner's time_limit bounds every python search, one deterministic domain's too
+    assert SymbolicPlanner(ops, backend="python").plan_deterministic(problem).solved
+    late = SymbolicPlanner(ops, backend="python", time_limit=1e-9).plan_deterministic(problem)
+    assert late.status.value == "timeout" and not late.solved
 
 
 def test_level1_budget_is_shared_by_all_domains_and_deterministic(ops, problems):

@@ -117,7 +117,8 @@ class SymbolicStep:
         return self.expected.differences(self.observed)
 
     def to_dict(self, names: BitNames) -> dict:
-        """JSON-ready: raw bits, set bits by name, the changes expected and observed, the mismatches."""
+        """JSON-ready: raw bits, set bits by name, the changes expected and observed, the mismatches (the
+        step's index, action and Dynamics Model error sit beside it in `tamp.app.steps.step_records`)."""
         def changes(a: Symbols | None, b: Symbols | None) -> list[dict] | None:
             if a is None or b is None:
                 return None
@@ -131,7 +132,7 @@ class SymbolicStep:
             return {**s.to_dict(), "set": [names.bit(kind, k, f"o{i}", _obj(j)) for kind, k, i, j, v in s.bits() if v],
                     "facts": named_facts(s, names)}
 
-        return {"index": self.index, "action": list(self.action), "executed": self.executed,
+        return {"executed": self.executed,
                 "operator": self.operator, "binding": None if self.binding is None else [f"o{b}" for b in self.binding],
                 "effect": self.effect, "n_effects": self.n_effects,
                 "probability": None if self.probability is None else round(self.probability, 4),
@@ -141,8 +142,7 @@ class SymbolicStep:
                 "match": self.match, "on_plan": self.on_plan, "observed_effect": self.observed_effect,
                 "mismatches": [{"bit": names.bit(kind, k, f"o{i}", _obj(j)), "expected": e, "observed": o,
                                 "meaning_observed": names.meaning(kind, k, o, f"o{i}", _obj(j))}
-                               for kind, k, i, j, e, o in self.mismatches()],
-                "dynamics_error_m": None if self.dynamics_error_m is None else round(self.dynamics_error_m, 4)}
+                               for kind, k, i, j, e, o in self.mismatches()]}
 
 
 def dynamics_errors(models: Models, states: Sequence[np.ndarray], actions) -> list[float] | None:
