@@ -128,12 +128,10 @@ def load_method_models(models_dir: str | Path, methods: Sequence[str]) -> dict[s
     sets: dict[str, Models] = {}
     needed = {METHODS[m].models for m in methods}
     if "default" in needed or "symbolic_sigmoid" in needed:
-        from tamp.planning.models import has_symbolic, load_models
+        from tamp.planning.models import load_models
 
-        # the continuous search plans without the Symbolic Model; the rows' per-step view reads symbols
-        need_symbolic = any(METHODS[m].models == "default" and METHODS[m].symbolic for m in methods) \
-            or has_symbolic(models_dir)
-        sets["default"] = load_models(models_dir, need_symbolic=need_symbolic)
+        needs_symbols = any(METHODS[m].models == "default" and METHODS[m].symbolic for m in methods)
+        sets["default"] = load_models(models_dir, need_symbolic=True if needs_symbols else None)
     if "symbolic_sigmoid" in needed:
         path, domain_dir = models_dir / VARIANTS_DIR / SYMBOLIC_SIGMOID, models_dir / VARIANTS_DIR / DOMAIN_SIGMOID
         model, domain = learned.load_model(path), symbolic.load_domain(domain_dir)

@@ -136,10 +136,11 @@ FIDELITY_NOTE = ("A step is *as expected* when the symbols the Symbolic Model re
                  "executed (refinement failed) are not judged.")
 
 
-def markdown(rows: Sequence[dict], figure: str | None = None, min_executed: int = MIN_EXECUTED) -> str:
+def markdown(rows: Sequence[dict], figure: str | None = None, min_executed: int = MIN_EXECUTED,
+             table: Sequence[dict] | None = None) -> str:
     """The refinability report: fidelity per method, the operator table (the 30 most used; all in the
-    CSV), the least faithful operators with an example each."""
-    table = operator_table(rows)
+    CSV), the least faithful operators with an example each. `table`: `operator_table(rows)`, if known."""
+    table = operator_table(rows) if table is None else list(table)
     lines = ["# Refinability of the learned operators", "",
              f"From {len(rows)} evaluation rows; {sum(t['uses'] for t in table)} steps grounded in "
              f"{len(table)} learned operators. {FIDELITY_NOTE}", "", "## Abstraction fidelity per method", ""]
@@ -190,6 +191,6 @@ def write(rows: Sequence[dict], out_dir: Path, min_executed: int = MIN_EXECUTED)
     table = operator_table(rows)
     png = refinability_scatter(Path(out_dir) / "figures" / "refinability.png", table) if table else None
     md = atomic_write_text(Path(out_dir) / "refinability.md",
-                           markdown(rows, None if png is None else f"figures/{png.name}", min_executed))
+                           markdown(rows, None if png is None else f"figures/{png.name}", min_executed, table))
     out = [md, atomic_write_text(Path(out_dir) / "refinability.csv", csv_text(table))]
     return out + ([png] if png is not None else [])

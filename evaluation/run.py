@@ -205,21 +205,25 @@ def _feasibility_fields(results: list) -> dict:
     return fields
 
 
-def _effect_errors(models, states: Sequence[np.ndarray], actions) -> list[float | None] | None:
-    """Per executed action, the Dynamics Model's error (m, mean over objects); None without one."""
-    errors = dynamics_errors(models, states, actions)
+def _rounded(errors: Sequence[float] | None) -> list[float | None] | None:
+    """A row's `effect_error_m` from `dynamics_errors` (m per executed action; None without a Dynamics Model)."""
     return None if errors is None else [_round(e) for e in errors]
 
 
-def _steps(models, states: Sequence[np.ndarray], actions, plan_states, infos, checker) -> list[dict] | None:
+def _has_abstraction(models) -> bool:
+    """Whether rows get `steps`: a Symbolic Model and its domain to read the steps through."""
+    return models.symbolic is not None and models.domain is not None
+
+
+def _steps(models, states: Sequence[np.ndarray], actions, plan_states, infos, checker,
+           errors: Sequence[float]) -> list[dict]:
     """The `steps` of a row: each step executed or attempted (states: X_0 .. X_m observed, m executed;
-    infos: the skill's StepInfo per step, or None where it did not run), through the abstraction."""
-    if models.symbolic is None or models.domain is None:
-        return None
+    infos: the skill's StepInfo per step, or None where it did not run; errors: `dynamics_errors` of
+    the executed ones), through the abstraction."""
     from tamp.sim.refine import step_failure
 
     out = []
-    for step in symbolic_steps(models, states, actions, plan_states):
+    for step in symbolic_steps(models, states, actions, plan_states, errors):
         info = infos[step.index] if step.index < len(infos) else None
         reason = checker.check(states[step.index], np.asarray([step.action], dtype=np.int64))[0]
         out.append({"operator": step.operator, "probability": _round(step.probability, 4),
@@ -365,11 +369,13 @@ class Evaluator:
 
         ex = execute_plan(actions, problem.X_init, problem.X_goal, self.config.fidelity, world=self.world("fast"))
         states = [problem.X_init, *ex.X_after]
+        errors = dynamics_errors(models, states, actions)
+        steps = _steps(models, states, actions, plan_states, ex.refined.infos, self.checker(problem),
+                       errors or []) if _has_abstraction(models) else None
         return {"refined": ex.refined.success, "refine_failure": _failure(ex.refined.failure),
                 "refine_time_s": [_round(s.refine_time) for s in ex.refined.steps],
                 "executed_actions": len(ex.refined.steps), "final_error_m": _round(ex.error),
-                "effect_error_m": _effect_errors(models, states, actions),
-                "steps": _steps(models, states, actions, plan_states, ex.refined.infos, self.checker(problem))}
+                "effect_error_m": _rounded(errors), "steps": steps}
 
     def _closed_loop(self, problem: Problem, method: Method, models) -> dict:
         from tamp.app.runner import run_closed_loop
@@ -385,6 +391,7 @@ class Evaluator:
         executed = len(out.executed)
         X_final = out.X_final if executed else problem.X_init
         failure = run.first_failure
+        errors = dynamics_errors(models, out.states, out.executed)
         return {**_feasibility_fields(out.rounds), "level1_stages_s": _level1_stages(out.rounds),
                 "search_expanded": _search_expanded(out.rounds),
                 "solved": solved, "level": None if first is None else first.level,
@@ -397,18 +404,17 @@ class Evaluator:
                 "refine_time_s": [_round(sum(t)) for t in run.step_times], "executed_actions": executed,
                 "executed_plans": None, "final_error_m": _round(goal_error(X_final, problem.X_goal)),
                 "rounds": max(len(out.rounds) - 1, 0),
-                "effect_error_m": _effect_errors(models, out.states, out.executed),
-                "steps": self._loop_steps(problem, models, run)}
+                "effect_error_m": _rounded(errors), "steps": self._loop_steps(problem, models, run, errors or [])}
 
-    def _loop_steps(self, problem: Problem, models, run) -> list[dict] | None:
+    def _loop_steps(self, problem: Problem, models, run, errors: Sequence[float]) -> list[dict] | None:
         """The `steps` of a closed loop: each action sent to the world (`tamp.app.steps.loop_steps`)."""
-        if models.symbolic is None or models.domain is None:
+        if not _has_abstraction(models):
             return None
         from tamp.app.steps import loop_steps
 
         checker, out = self.checker(problem), []
         for s in loop_steps(run):
-            out += _steps(models, s.states, [s.action], s.plan_states, [s.info], checker) or []
+            out += _steps(models, s.states, [s.action], s.plan_states, [s.info], checker, errors[s.index:s.index + 1])
         return out
 
 

@@ -19,6 +19,7 @@ from collections import deque
 import numpy as np
 
 from symbolic.atoms import n_bits
+from symbolic.sampling import EffectSampler
 from symbolic.structs import OperatorSet, PlannerStatus
 
 
@@ -101,12 +102,7 @@ def bfs(task: GroundTask, choice, init: int, goal: int, nonempty: bool = False, 
 def sample_per_domain_stream(ops: OperatorSet, n_domains: int, seed: int) -> np.ndarray:
     """(N, n_operators) effect choices as drawn until issue 26: domain k's uniforms from its own
     `np.random.default_rng([seed, k])`, one per operator, compared with the cumulative probabilities."""
-    width = max(len(op.effects) for op in ops.operators)
-    cum = np.ones((len(ops), width))
-    for i, op in enumerate(ops.operators):
-        c = np.cumsum(op.probabilities)
-        cum[i, : len(c)] = c
-        cum[i, len(c) - 1:] = np.inf
+    cum = EffectSampler(ops).cumulative
     return np.stack([(np.random.default_rng([seed, k]).random(len(ops))[:, None] >= cum).sum(axis=1)
                      for k in range(n_domains)])
 

@@ -21,9 +21,9 @@ from tamp.app.problem import Problem, random_problem
 from tamp.app.runner import ClosedLoopRun, Execution, execute_plan, kinematics_for, run_closed_loop
 from tamp.app.steps import (
     closed_loop_steps,
-    format_steps,
     open_loop_steps,
     panel_entries,
+    print_steps,
     steps_document,
     steps_path,
     write_steps,
@@ -115,7 +115,7 @@ def run_demo(cfg: DemoConfig = DemoConfig()) -> DemoResult:
     if cfg.replan:
         run = _closed_loop(problem, models, plan_cfg, kinematics, cfg, result, timeline, out.step_times)
         out.loop, out.steps = run.loop, closed_loop_steps(models, run, names)
-        _print_steps(out.steps)
+        print_steps(out.steps, blank_line=True)
         _print_loop_summary(out, cfg)
         if timeline is not None:
             timeline.caption = [f"tamp demo --seed {cfg.seed}: {problem.n} blocks, goal from {problem.k} random "
@@ -137,7 +137,7 @@ def run_demo(cfg: DemoConfig = DemoConfig()) -> DemoResult:
         _print_execution(out.execution, result.plan, result.predicted, problem.X_goal, cfg.fidelity)
         out.steps = open_loop_steps(models, result, problem.X_init, out.execution, names,
                                     timeline.action_starts if timeline is not None else ())
-        _print_steps(out.steps)
+        print_steps(out.steps, blank_line=True)
     elif timeline is not None:  # show the problem: the initial scene and the goal
         from tamp.sim import World
 
@@ -155,13 +155,6 @@ def run_demo(cfg: DemoConfig = DemoConfig()) -> DemoResult:
     if cfg.candidates:
         _replay_candidates(out, models, cfg)
     return out
-
-
-def _print_steps(records: list[dict]) -> None:
-    if records:
-        print("\nsteps (symbols read by the Symbolic Model on the observed states; `tamp plan --help` explains):")
-        for line in format_steps(records):
-            print("  " + line)
 
 
 def _write_steps(timeline: Timeline, out: DemoResult, cfg: DemoConfig, names) -> None:

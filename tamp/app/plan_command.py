@@ -142,12 +142,9 @@ def _open_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timeline,
 
 
 def _print_steps(records: list[dict]) -> None:
-    from tamp.app.steps import format_steps
+    from tamp.app.steps import print_steps  # tamp.app.steps imports this module
 
-    if records:
-        print("steps (symbols read by the Symbolic Model on the observed states; see `tamp plan --help`):")
-        for line in format_steps(records):
-            print("  " + line)
+    print_steps(records)
 
 
 def _closed_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timeline, names) -> tuple[int, list[dict]]:
@@ -181,7 +178,7 @@ def run_plan(problem_path: Path, models_dir: Path, options: PlanOptions) -> int:
     import torch
 
     from tamp.app.problem import load_problem
-    from tamp.planning.models import has_symbolic, load_bit_names, load_models
+    from tamp.planning.models import load_bit_names, load_models
 
     # Planning runs many small forward passes: one thread is faster, and much faster when another
     # process keeps the second core busy (a 2-thread pass then waits for it: 20-40x slower, measured).
@@ -202,8 +199,7 @@ def run_plan(problem_path: Path, models_dir: Path, options: PlanOptions) -> int:
         if options.execute == "none":
             raise UserError("--steps records executed steps; it needs --execute fast or full")
         check_output_file(steps_file, "--steps")
-    # the continuous search needs no Symbolic Model, but the per-step view reads symbols when there is one
-    models = load_models(models_dir, need_symbolic=options.method != "cfs" or has_symbolic(models_dir))
+    models = load_models(models_dir, need_symbolic=True if options.method != "cfs" else None)
     names = load_bit_names(models_dir)
     cfg = dataclasses.replace(options.planner, seed=problem.seed)
     models.require_objects(problem.n, str(problem_path))

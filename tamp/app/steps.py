@@ -131,6 +131,16 @@ def _change(bit: str, value: int, meaning: str | None) -> str:
     return f"{bit}={value}" + (f" ~ {meaning}" if meaning else "")
 
 
+def print_steps(records: Sequence[dict], blank_line: bool = False) -> None:
+    """Print `format_steps` under its header (nothing without records; `blank_line`: one before it), as
+    `tamp plan` and `tamp demo` do."""
+    if records:
+        print("\n" * blank_line
+              + "steps (symbols read by the Symbolic Model on the observed states; see `tamp plan --help`):")
+        for line in format_steps(records):
+            print("  " + line)
+
+
 def format_steps(records: Sequence[dict]) -> list[str]:
     """Text lines of the records: per step the symbols before (as the facts the named bits say),
     the operator with its effect and what it expects to change, the motion, what was observed, and

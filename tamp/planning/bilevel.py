@@ -101,9 +101,13 @@ class PlanConfig:
                 raise UserError(f"PlanConfig.{name} must be a positive number of states or None, "
                                 f"got {getattr(self, name)}")
 
+    def focused(self, n_objects: int) -> bool:
+        """Whether Level 1 focuses on the blocks off their goal in a scene of `n_objects` blocks."""
+        return self.focus_from is not None and n_objects >= self.focus_from
+
     def level1_budget_for(self, n_objects: int) -> int | None:
         """Level 1's budget (generated symbolic states) in a scene of `n_objects` blocks."""
-        if self.focus_from is None or n_objects < self.focus_from or self.level1_focus_budget is None:
+        if not self.focused(n_objects) or self.level1_focus_budget is None:
             return self.level1_budget
         return min(self.level1_focus_budget, self.level1_budget or self.level1_focus_budget)
 
@@ -185,7 +189,7 @@ def _symbolic_problem(models: Models, X_init: np.ndarray, X_goal: np.ndarray, cf
     ui, ri = models.symbolic.symbols(X_init)
     ug, rg = models.symbolic.symbols(X_goal)
     movable = None
-    if cfg.focus_from is not None and len(X_init) >= cfg.focus_from:
+    if cfg.focused(len(X_init)):
         movable = misplaced_objects(X_init, X_goal, cfg.search.misplaced, cfg.search.eps).tolist() or None
     return make_problem(ui, ri, ug, rg, nonempty=cfg.nonempty and goal_error(X_init, X_goal) >= cfg.tau_verify,
                         movable=movable)

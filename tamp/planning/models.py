@@ -89,12 +89,6 @@ def require_kind(model, kind: str, path: str | Path) -> None:
                          "(tamp train --bottleneck sigmoid)")
 
 
-def has_symbolic(directory: str | Path) -> bool:
-    """DIR holds a Symbolic Model and its learned domain (the continuous search needs neither)."""
-    directory = Path(directory)
-    return (directory / SYMBOLIC_FILE).is_file() and (directory / DOMAIN_DIR / "operators.json").is_file()
-
-
 def load_bit_names(directory: str | Path):
     """The names of the Symbolic Model's bits from DIR/symbols.json (`tamp symbols --json`; bits
     without a strong meaning keep their raw names); raw names only when the file is absent. A file
@@ -112,8 +106,9 @@ def load_bit_names(directory: str | Path):
         raise UserError(f"{path}: not a symbols table written by `tamp symbols --json` ({error})") from None
 
 
-def load_models(directory: str | Path, need_symbolic: bool = True) -> Models:
-    """Load DIR/dynamics.pt, and unless `need_symbolic` is False DIR/symbolic.pt and DIR/domain/.
+def load_models(directory: str | Path, need_symbolic: bool | None = True) -> Models:
+    """Load DIR/dynamics.pt, and unless `need_symbolic` is False DIR/symbolic.pt and DIR/domain/
+    (None: when both are there; the continuous search needs neither, the per-step view reads symbols).
 
     Checks that the Symbolic Model's symbol sizes (d_z, K) match the domain's; errors name the file.
     """
@@ -126,6 +121,8 @@ def load_models(directory: str | Path, need_symbolic: bool = True) -> Models:
                                 f"{DYNAMICS_FILE} and {DOMAIN_DIR}/ in it)")
     paths = {"dynamics": directory / DYNAMICS_FILE, "symbolic": directory / SYMBOLIC_FILE,
              "domain": directory / DOMAIN_DIR / "operators.json"}
+    if need_symbolic is None:
+        need_symbolic = paths["symbolic"].is_file() and paths["domain"].is_file()
     wanted = ("dynamics", "symbolic", "domain") if need_symbolic else ("dynamics",)
     missing = [str(paths[w]) for w in wanted if not paths[w].is_file()]
     if missing:

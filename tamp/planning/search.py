@@ -242,9 +242,9 @@ def continuous_search(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarr
         out.predict_calls += calls
         out.generated += len(actions)
         dist = np.linalg.norm(succ - goal[None], axis=2)  # (B, n)
-        out.best_error = min(out.best_error, float(dist.max(axis=1).min()))
-        h = (dist.sum(axis=1) / config.h_unit).tolist()
         worst = dist.max(axis=1)
+        out.best_error = min(out.best_error, float(worst.min()))
+        h = (dist.sum(axis=1) / config.h_unit).tolist()
         reached = (worst < config.eps).tolist()
         keys = keys_of(succ)
         here = key(P) if pruned else b""

@@ -158,19 +158,22 @@ def dynamics_errors(models: Models, states: Sequence[np.ndarray], actions) -> li
 
 
 def symbolic_steps(models: Models, states: Sequence[np.ndarray], actions: Sequence,
-                   plan_states: Sequence[int] | None = None) -> list[SymbolicStep]:
+                   plan_states: Sequence[int] | None = None,
+                   errors: Sequence[float] | None = None) -> list[SymbolicStep]:
     """The steps of a plan as executed: `states` are the observed states X_0 .. X_m (m executed
     actions), `actions` the plan (m actions, or more when action m could not be refined: its step is
-    recorded without observed symbols). `plan_states`: a Level-1 plan's packed symbolic states."""
+    recorded without observed symbols). `plan_states`: a Level-1 plan's packed symbolic states.
+    `errors`: `dynamics_errors` of these states and actions when the caller has them already."""
     actions = [tuple(int(v) for v in a) for a in actions]
     m = len(states) - 1
     steps: list[SymbolicStep] = []
-    errors = dynamics_errors(models, states, actions[:m]) or []
+    if errors is None:
+        errors = dynamics_errors(models, states, actions[:m]) or []
     symbols = models.symbolic
     observed = [None if symbols is None else Symbols.of(*symbols.symbols(X)) for X in states]
     for k, action in enumerate(actions[:m + 1]):
         step = SymbolicStep(k, action, observed[k], observed=observed[k + 1] if k < m else None,
-                            dynamics_error_m=errors[k] if k < len(errors) else None)
+                            dynamics_error_m=errors[k] if k < min(m, len(errors)) else None)
         if step.before is not None and models.domain is not None:
             planned = _plan_symbols(models, plan_states, k, step.before.n)
             _ground(models, step, planned)
