@@ -133,6 +133,7 @@ class EvalConfig:
         out = {"fidelity": self.fidelity, "eps_m": p.eps, "tau_verify_m": p.tau_verify, "n_domains": p.n_domains,
                "search_time_limit_s": p.search.time_limit, "search_max_expansions": p.search.max_expansions,
                "search_confident_m": p.search.confident, "search_look_on": p.search.look_on,
+               "search_release_targets": p.search.release_targets,
                "level1_budget": p.level1_budget, "level1_time_budget_s": p.level1_time_budget,
                "level1_focus_from": p.focus_from, "level1_focus_budget": p.level1_focus_budget,
                "symbolic_backend": p.backend, "oracle_max_plans": self.oracle_max_plans}

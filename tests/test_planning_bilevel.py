@@ -16,7 +16,7 @@ from planning_stubs import StubModel, two_block_domain, world_step
 from tamp.errors import UserError
 from tamp.planning.bilevel import PlanConfig, plan, plan_closed_loop
 from tamp.planning.models import Models
-from tamp.planning.search import SearchConfig
+from tamp.planning.search import SearchConfig, continuous_search
 from tamp.planning.verify import goal_error, verify
 
 X_INIT = np.array([[0.6, 0.0, 0.025, 1, 0], [0.7, 0.1, 0.025, 1, 0]])
@@ -122,7 +122,7 @@ def test_same_symbols_but_goal_elsewhere_needs_a_nonempty_plan():
     assert paper.level == 2 and paper.plan == [(0, -1, 0, 1)]
 
 
-def test_bilevel_alg1_never_returns_an_alternative_or_a_forced_nonempty_plan(domain):
+def test_bilevel_alg1_never_returns_an_alternative_or_a_forced_nonempty_plan(domain, monkeypatch):
     def summary(result):
         return result.plan, result.level, [(c.actions, c.verified, c.alternative_of) for c in result.candidates]
 
@@ -138,6 +138,14 @@ def test_bilevel_alg1_never_returns_an_alternative_or_a_forced_nonempty_plan(dom
     goal[0, 1] = 0.15
     alg1_shift = plan("bilevel_alg1", models(shift), X, goal, PlanConfig(n_domains=20))
     assert [c.actions for c in alg1_shift.candidates] == [()] and alg1_shift.level == 2
+    # its Level 2 is the paper's search: the paper's pruning rule, the first goal state returned
+    import tamp.planning.bilevel as bilevel
+    searched = []
+    monkeypatch.setattr(bilevel, "continuous_search", lambda model, x, g, config, *rest:
+                        searched.append(config) or continuous_search(model, x, g, config, *rest))
+    plan("bilevel_alg1", models(shift), X, goal, PlanConfig(n_domains=20))
+    assert searched and all(not c.release_targets and c.look_on == 0 for c in searched)
+    monkeypatch.undo()
     # whatever the configuration says, it is `bilevel` with both extensions off
     for m, x, g, cfg in ((models(domain), X_INIT, A_ON_B, PlanConfig(n_domains=100, seed=0)),
                          (models(shift), X, goal, PlanConfig(n_domains=20))):

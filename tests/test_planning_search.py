@@ -27,7 +27,8 @@ def goal_after(actions):
 
 def test_goal_oriented_pruning_follows_the_paper():
     G = goal_after([(1, 0, 2, 0)])  # cube 1 onto cube 2: only object 1 is misplaced
-    acts = goal_oriented_actions(X, G)
+    acts = goal_oriented_actions(X, G, release_targets=False)
+    assert np.array_equal(acts, goal_oriented_actions(X, G))  # the closest object has the closest release point
     assert len(acts) == 18
     assert set(map(tuple, acts[:9])) == {(1, g, 2, r) for g in (-1, 0, 1) for r in (-1, 0, 1)}  # closest to its goal
     assert set(map(tuple, acts[9:])) == {(1, g, 1, r) for g in (-1, 0, 1) for r in (-1, 0, 1)}  # itself
@@ -36,6 +37,20 @@ def test_goal_oriented_pruning_follows_the_paper():
     H[1, 2] = 0.125
     assert set(goal_oriented_actions(X, H)[:, 0]) == {1}
     assert len(goal_oriented_actions(X, X)) == 0
+
+
+def test_release_point_targets_reach_a_goal_beside_another_block():
+    # cube 1's goal is on bar 0 at release offset +1 (7.5 cm along +y of its centre), but cube 2 is
+    # closer to it (6.9 cm): the paper's rule offers only cube 2 and cube 1 itself as targets
+    Y = np.array([[0.55, -0.15, 0.025, 0, 1], [0.8, 0.1, 0.025, 1, 0], [0.61, -0.04, 0.025, 1, 0]])
+    G = world_step(Y, (1, 0, 0, 1))
+    paper = goal_oriented_actions(Y, G, release_targets=False)
+    assert set(paper[:, 2]) == {2, 1}
+    ours = goal_oriented_actions(Y, G)
+    assert len(ours) == 27 and set(ours[:, 2]) == {2, 0, 1}
+    # so the search finds the one-action plan that the paper's pruning cannot
+    assert continuous_search(StubModel(), Y, G).plan == [(1, 0, 0, 1)]
+    assert continuous_search(StubModel(), Y, G, SearchConfig(release_targets=False, max_depth=1)).plan is None
 
 
 @pytest.mark.parametrize("plan", [[(1, 0, 2, 0)], [(1, 0, 2, 0), (0, -1, 0, 1)],
@@ -143,3 +158,14 @@ def test_a_shorter_plan_predicted_4_cm_off_beats_longer_exact_ones():
     assert 0.03 < goal_error(out.trajectory[-1], G) < 0.05
     with pytest.raises(ValueError, match="confident"):
         SearchConfig(confident=0.06)
+
+
+def test_paper_pruning_flag_restores_the_papers_rule():
+    import argparse
+
+    from tamp.app.plan_command import add_planner_arguments, planner_config
+
+    parser = argparse.ArgumentParser()
+    add_planner_arguments(parser)
+    assert planner_config(parser.parse_args([])).search.release_targets
+    assert not planner_config(parser.parse_args(["--paper-pruning"])).search.release_targets

@@ -296,6 +296,11 @@ def add_planner_arguments(p: argparse.ArgumentParser, backends: tuple[str, ...] 
     p.add_argument("--look-on", type=non_negative_int, default=default.search.look_on, metavar="EXPANSIONS",
                    help="expansions the continuous search spends looking for a goal state within --confident after "
                    f"finding one that is not (default {default.search.look_on}; 0 returns the first goal state)")
+    p.add_argument("--paper-pruning", dest="release_targets", action="store_false",
+                   help="the continuous search prunes actions by the paper's rule alone: a misplaced block goes onto "
+                   "the object closest to its goal or onto itself (default: also onto the object with an offset "
+                   "release point closest to its goal, when that is another object; `bilevel_alg1` always "
+                   "uses the paper's rule)")
     p.add_argument("--time-limit", type=positive_float, default=default.search.time_limit,
                    help="continuous search wall-clock limit per planning call, s: a safety net behind "
                    f"--max-expansions (default {default.search.time_limit:g})")
@@ -311,7 +316,8 @@ def planner_config(args: argparse.Namespace) -> PlanConfig:
                       focus_from=args.focus_from, level1_focus_budget=args.level1_focus_budget,
                       symbolic_time_limit=args.symbolic_time_limit, feasibility=getattr(args, "feasibility", True),
                       search=SearchConfig(max_expansions=args.max_expansions, time_limit=args.time_limit,
-                                          confident=args.confident, look_on=args.look_on))
+                                          confident=args.confident, look_on=args.look_on,
+                                          release_targets=args.release_targets))
 
 
 def options_from_args(args: argparse.Namespace) -> PlanOptions:

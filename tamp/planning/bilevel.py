@@ -505,9 +505,9 @@ def plan_bilevel_alg1(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConf
                       kinematics: KinematicFeasibility | None = None) -> PlanResult:
     """The paper's Algorithm 1 exactly: ranked symbolic plans verified alone (no look-alike
     alternatives, any block picked) and the empty plan allowed whenever Sigma_init = Sigma_goal; its
-    Level 2 returns the continuous search's first goal state."""
+    Level 2 returns the continuous search's first goal state and prunes actions by the paper's rule."""
     paper = replace(cfg, alternatives=0, nonempty=False, feasibility=False, focus_from=None,
-                    search=replace(cfg.search, look_on=0))
+                    search=replace(cfg.search, look_on=0, release_targets=False))
     result = plan_bilevel(models, X_init, X_goal, paper)
     result.method = "bilevel_alg1"
     return result
