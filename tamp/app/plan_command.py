@@ -286,6 +286,12 @@ def add_planner_arguments(p: argparse.ArgumentParser, backends: tuple[str, ...] 
                    f"{default.level1_focus_budget}: about 40-60 ms; there the learned symbols rarely give a verified "
                    "plan beyond a few thousand states, and a search that ends at its budget only delays the "
                    "continuous search; the --level1-budget value gives one budget at any number of blocks)")
+    p.add_argument("--level1-confident", type=positive_float, default=default.level1_confident, metavar="METRES",
+                   help="a verified Level-1 plan predicted farther than this from the goal (worst block) is kept "
+                   "while the continuous search looks for a plan, and returned only if it finds none (default "
+                   f"{default.level1_confident:g} m, the success tolerance; the paper takes every plan verified "
+                   f"within tau = {default.tau_verify:g} m: give that value for its rule; `bilevel_alg1` always "
+                   "does)")
     p.add_argument("--max-expansions", type=positive_int, default=default.search.max_expansions,
                    help="continuous search node limit per planning call: it decides when the search gives up, "
                    f"whatever the machine's load (default {default.search.max_expansions}, about 10 s at 4 objects)")
@@ -314,6 +320,7 @@ def planner_config(args: argparse.Namespace) -> PlanConfig:
     """The PlanConfig of the flags of `add_planner_arguments` (seed 0: callers set the problem's)."""
     return PlanConfig(n_domains=args.n_domains, backend=args.symbolic_backend, level1_budget=args.level1_budget,
                       focus_from=args.focus_from, level1_focus_budget=args.level1_focus_budget,
+                      level1_confident=args.level1_confident,
                       symbolic_time_limit=args.symbolic_time_limit, feasibility=getattr(args, "feasibility", True),
                       search=SearchConfig(max_expansions=args.max_expansions, time_limit=args.time_limit,
                                           confident=args.confident, look_on=args.look_on,

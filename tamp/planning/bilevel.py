@@ -81,6 +81,9 @@ class PlanConfig:
     level1_focus_budget: int | None = 25_000  # from focus_from objects on, Level 1's budget (None: level1_budget):
     #   there the learned symbols rarely give a verified plan beyond a few thousand states, and a search
     #   that ends at the budget only delays Level 2 (tuned on the seed-13 problems of 5 and 6 blocks)
+    level1_confident: float | None = EPS_SUCCESS  # metres: a verified Level-1 plan predicted farther than this
+    #   from the goal (worst object; the paper verifies up to tau_verify) is kept while Level 2 looks for a
+    #   plan, and taken only if Level 2 finds none (None: take it, as the paper does)
     # Kinematics in the planning loop (cfs, bilevel; needs a `kinematics` object passed to `plan`):
     feasibility: bool = True  # check actions on the predicted states, refine a plan before returning it
     max_refinements: int = 4  # full refinements per planning call (Level-1 candidates and Level-2 plans)
@@ -89,7 +92,8 @@ class PlanConfig:
     def __post_init__(self) -> None:
         if self.backend not in SYMBOLIC_BACKENDS:
             raise UserError(f"symbolic backend must be one of {', '.join(SYMBOLIC_BACKENDS)}, got {self.backend!r}")
-        for name in ("tau_verify", "eps", "symbolic_time_limit"):
+        for name in ("tau_verify", "eps", "symbolic_time_limit") + (("level1_confident",) if self.level1_confident
+                                                                      is not None else ()):
             if not getattr(self, name) > 0:
                 raise UserError(f"PlanConfig.{name} must be positive, got {getattr(self, name)}")
         if self.n_domains < 1:
@@ -366,9 +370,15 @@ def plan_bilevel(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig(),
     def body(result: PlanResult) -> PlanResult:
         feas = _Feasibility.of(kinematics, cfg, result)
         chosen = _level1(models, X_init, X_goal, cfg, result, feas)
-        if chosen is not None:
+        if chosen is not None and (cfg.level1_confident is None or chosen.error < cfg.level1_confident):
             return _take(result, chosen.actions, 1, chosen.trajectory, X_goal)
-        return _level2(models, X_init, X_goal, cfg, result, feas)  # line 16: continuous search fallback
+        if chosen is not None:  # our extension: verified, but predicted to miss the goal
+            result.reasons.append(f"level 1: its verified plan is predicted {chosen.error * 100:.1f} cm from the "
+                                  f"goal (over {cfg.level1_confident * 100:g} cm); kept while level 2 searches")
+        result = _level2(models, X_init, X_goal, cfg, result, feas)  # line 16: continuous search fallback
+        if result.solved or chosen is None:
+            return result
+        return _take(result, chosen.actions, 1, chosen.trajectory, X_goal)
     return _timed("bilevel", body)
 
 
@@ -506,7 +516,7 @@ def plan_bilevel_alg1(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConf
     """The paper's Algorithm 1 exactly: ranked symbolic plans verified alone (no look-alike
     alternatives, any block picked) and the empty plan allowed whenever Sigma_init = Sigma_goal; its
     Level 2 returns the continuous search's first goal state and prunes actions by the paper's rule."""
-    paper = replace(cfg, alternatives=0, nonempty=False, feasibility=False, focus_from=None,
+    paper = replace(cfg, alternatives=0, nonempty=False, feasibility=False, focus_from=None, level1_confident=None,
                     search=replace(cfg.search, look_on=0, release_targets=False))
     result = plan_bilevel(models, X_init, X_goal, paper)
     result.method = "bilevel_alg1"
