@@ -24,6 +24,7 @@ from collections import defaultdict
 from pathlib import Path
 from typing import Any, Sequence
 
+from .format import fmt_cm, fmt_pct
 from .stats import rate_pct
 
 LEAST_FAITHFUL = 10
@@ -107,14 +108,6 @@ def fidelity_by_method(rows: Sequence[dict]) -> list[dict[str, Any]]:
     return out
 
 
-def _pct(x: float | None) -> str:
-    return "—" if x is None else f"{x:.1f}"
-
-
-def _cm(x: float | None) -> str:
-    return "—" if x is None else f"{x:.2f}"
-
-
 def fidelity_lines(fidelity: Sequence[dict]) -> list[str]:
     """The Markdown table of `fidelity_by_method`."""
     lines = ["| method | problems | executed steps (with an operator) | as expected (%) | allowed (%) | "
@@ -122,11 +115,11 @@ def fidelity_lines(fidelity: Sequence[dict]) -> list[str]:
              "steps as expected (%) | success, a step not as expected (%) |",
              "|---|---|---|---|---|---|---|---|---|---|"]
     for f in fidelity:
-        lines.append(f"| {f['method']} | {f['problems']} | {f['judged']} | {_pct(f['as_expected_pct'])} | "
-                     f"{_pct(f['allowed_pct'])} | {_pct(f['on_plan_as_expected_pct'])} | "
-                     f"{_pct(f['off_plan_as_expected_pct'])} | {f['no_operator']} | "
-                     f"{_pct(f['faithful_success_pct'])} (of {f['faithful_problems']}) | "
-                     f"{_pct(f['broken_success_pct'])} (of {f['broken_problems']}) |")
+        lines.append(f"| {f['method']} | {f['problems']} | {f['judged']} | {fmt_pct(f['as_expected_pct'])} | "
+                     f"{fmt_pct(f['allowed_pct'])} | {fmt_pct(f['on_plan_as_expected_pct'])} | "
+                     f"{fmt_pct(f['off_plan_as_expected_pct'])} | {f['no_operator']} | "
+                     f"{fmt_pct(f['faithful_success_pct'])} (of {f['faithful_problems']}) | "
+                     f"{fmt_pct(f['broken_success_pct'])} (of {f['broken_problems']}) |")
     return lines
 
 
@@ -151,9 +144,9 @@ def markdown(rows: Sequence[dict], figure: str | None = None, min_executed: int 
     lines += ["| operator | uses | kinematic check passed (%) | refined (%) | executed | as expected (%) | "
               "allowed (%) | position error (cm) | methods |", "|---|---|---|---|---|---|---|---|---|"]
     for t in table[:30]:
-        lines.append(f"| {t['operator']} | {t['uses']} | {_pct(t['kinematic_pct'])} | {_pct(t['refined_pct'])} | "
-                     f"{t['executed']} | {_pct(t['as_expected_pct'])} | {_pct(t['allowed_pct'])} | "
-                     f"{_cm(t['error_cm'])} | {t['methods']} |")
+        lines.append(f"| {t['operator']} | {t['uses']} | {fmt_pct(t['kinematic_pct'])} | {fmt_pct(t['refined_pct'])} | "
+                     f"{t['executed']} | {fmt_pct(t['as_expected_pct'])} | {fmt_pct(t['allowed_pct'])} | "
+                     f"{fmt_cm(t['error_cm'])} | {t['methods']} |")
     if len(table) > 30:
         lines += ["", f"{len(table) - 30} more operators in refinability.csv."]
     worst = least_faithful(table, min_executed=min_executed)
@@ -167,8 +160,8 @@ def markdown(rows: Sequence[dict], figure: str | None = None, min_executed: int 
             e = t["example"]
             example = "—" if e is None else \
                 f"{e['problem']}, {e['method']}, step {e['step']}, {e['action']}, {e['mismatched_bits']}"
-            lines.append(f"| {t['operator']} | {t['executed']} | {_pct(t['as_expected_pct'])} | "
-                         f"{_pct(t['allowed_pct'])} | {example} |")
+            lines.append(f"| {t['operator']} | {t['executed']} | {fmt_pct(t['as_expected_pct'])} | "
+                         f"{fmt_pct(t['allowed_pct'])} | {example} |")
     return "\n".join(lines) + "\n"
 
 

@@ -16,13 +16,14 @@ import math
 from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Iterable, Sequence
+from typing import Any, Callable, Sequence
 
 from tamp.errors import UserError
 from tamp.planning.structs import OUTCOMES, Outcome
 from tamp.records import atomic_write_text
 
 from . import paper, plots, refinability, scaling
+from .format import DASH, fmt_pct, fmt_pm, fmt_ratio, fmt_s, md_table
 from .stats import IDENTICAL, confusion, mean_std, median, paired_ttest, percentile, rate_pct
 
 METHOD_ORDER = ("deterministic", "probabilistic", "probabilistic_oracle", "cfs", "bilevel", "bilevel_alg1",
@@ -52,27 +53,9 @@ BACKEND_INFO = {"python": "our in-process search (`python`)", "fd": "Fast Downwa
 PROTOCOL_INFO = {"strict": "`strict` (every one of the k random actions moved a block)",
                  "paper": "`paper` (the k random actions kept whatever their outcome, as the paper's authors do)"}
 TAUS_CM = tuple(range(1, 16))  # the verifier sweep (the paper's Fig. 6)
-DASH = "—"
 
 
 # --- formatting ----------------------------------------------------------------------------------
-def fmt_pct(x: float | None) -> str:
-    return DASH if x is None else f"{x:.1f}"
-
-
-def fmt_s(x: float | None) -> str:
-    return DASH if x is None else f"{x:.3f}"
-
-
-def fmt_pm(pair: tuple[float | None, float | None], digits: int = 3) -> str:
-    m, s = pair
-    return DASH if m is None else f"{m:.{digits}f} ± {s:.{digits}f}"
-
-
-def fmt_ratio(x: float | None, digits: int = 2) -> str:
-    return DASH if x is None else f"{x:.{digits}f}"
-
-
 def fmt_p(p: float | str | None) -> str:
     """'identical', '—' (fewer than two pairs), '< 0.0001', else four decimals."""
     if p is None:
@@ -86,12 +69,6 @@ def fmt_p(p: float | str | None) -> str:
 def fmt_paper_p(p: float) -> str:
     """A p-value of the paper as printed: '< 0.0001' for `paper.P_BELOW`, else two decimals."""
     return "< 0.0001" if p <= paper.P_BELOW else f"{p:.2f}"
-
-
-def md_table(header: Sequence[str], rows: Iterable[Sequence[str]]) -> list[str]:
-    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    lines += ["| " + " | ".join(str(c) for c in r) + " |" for r in rows]
-    return lines + [""]
 
 
 def _paper_pm(pair: tuple[float, float], digits: int = 2, scale: float = 1.0) -> str:

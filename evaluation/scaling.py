@@ -8,9 +8,9 @@ mean of those steps. Plain dicts in, plain dicts out, so that a test can recompu
 """
 from __future__ import annotations
 
-import math
 from typing import Any, Sequence
 
+from .format import fmt_factor, fmt_ms, fmt_pct
 from .stats import mean_std, median, rate_pct
 
 SYMBOLIC_LEVEL = ("bilevel", "bilevel_alg1", "bilevel_replan")  # methods with a Level 1
@@ -70,18 +70,6 @@ def scaling_numbers(rows: Sequence[dict]) -> dict[str, Any]:
     return {"ns": ns, "methods": table, "growth": growth, "effect_error": effect}
 
 
-def _pct(x: float | None) -> str:
-    return "—" if x is None else f"{x:.1f}"
-
-
-def _ms(x: float | None) -> str:
-    return "—" if x is None else f"{x * 1000:.0f}"
-
-
-def _factor(x: float | None) -> str:
-    return "—" if x is None or not math.isfinite(x) else f"{x:.2f}x"
-
-
 def scaling_lines(numbers: dict[str, Any], figure: str | None) -> list[str]:
     """The section's Markdown from `scaling_numbers`."""
     lines = ["Per method and number of blocks n: success (%), planning time (ms, median / mean), the share of "
@@ -91,19 +79,20 @@ def scaling_lines(numbers: dict[str, Any], figure: str | None) -> list[str]:
              "Level-1 time median / mean (ms) | refined (%) |", "|---|---|---|---|---|---|---|---|"]
     for m, cells in numbers["methods"].items():
         for n, c in sorted(cells.items()):
-            level1 = (_pct(c.get("level1_pct")), f"{_ms(c.get('level1_time_median_s'))} / "
-                      f"{_ms(c.get('level1_time_mean_s'))}") if "level1_pct" in c else ("—", "—")
-            lines.append(f"| `{m}` | {n} | {c['problems']} | {_pct(c['success_pct'])} | "
-                         f"{_ms(c['time_median_s'])} / {_ms(c['time_mean_s'])} | {level1[0]} | {level1[1]} | "
-                         f"{_pct(c['refined_pct'])} |")
+            level1 = (fmt_pct(c.get("level1_pct")), f"{fmt_ms(c.get('level1_time_median_s'))} / "
+                      f"{fmt_ms(c.get('level1_time_mean_s'))}") if "level1_pct" in c else ("—", "—")
+            lines.append(f"| `{m}` | {n} | {c['problems']} | {fmt_pct(c['success_pct'])} | "
+                         f"{fmt_ms(c['time_median_s'])} / {fmt_ms(c['time_mean_s'])} | {level1[0]} | {level1[1]} | "
+                         f"{fmt_pct(c['refined_pct'])} |")
     lines += ["", "Growth of planning time per added block, t(n + 1) / t(n), mean and median; 'overall' is the "
               "geometric mean per block over the whole range.", "",
               "| method | step | mean | median |", "|---|---|---|---|"]
     for m, g in numbers["growth"].items():
         for step, f in g["steps"].items():
-            lines.append(f"| `{m}` | {step} | {_factor(f['mean'])} | {_factor(f['median'])} |")
+            lines.append(f"| `{m}` | {step} | {fmt_factor(f['mean'])} | {fmt_factor(f['median'])} |")
         o = g["overall"]
-        lines.append(f"| `{m}` | overall {o['from']}->{o['to']} | {_factor(o['mean'])} | {_factor(o['median'])} |")
+        lines.append(f"| `{m}` | overall {o['from']}->{o['to']} | {fmt_factor(o['mean'])} | "
+                     f"{fmt_factor(o['median'])} |")
     if numbers["effect_error"]:
         lines += ["", "The Dynamics Model's effect error on the executed actions of "
                   + ", ".join(f"`{m}`" for m in DEFAULT_DYNAMICS) + " (position error of its one-step prediction "

@@ -370,11 +370,13 @@ def plan_bilevel(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig(),
     def body(result: PlanResult) -> PlanResult:
         feas = _Feasibility.of(kinematics, cfg, result)
         chosen = _level1(models, X_init, X_goal, cfg, result, feas)
-        if chosen is not None and (cfg.level1_confident is None or chosen.error < cfg.level1_confident):
-            return _take(result, chosen.actions, 1, chosen.trajectory, X_goal)
-        if chosen is not None:  # our extension: verified, but predicted to miss the goal
+        confident = cfg.level1_confident
+        if chosen is not None and confident is not None and chosen.error >= confident:
+            # our extension: verified, but predicted to miss the goal
             result.reasons.append(f"level 1: its verified plan is predicted {chosen.error * 100:.1f} cm from the "
-                                  f"goal (over {cfg.level1_confident * 100:g} cm); kept while level 2 searches")
+                                  f"goal (over {confident * 100:g} cm); kept while level 2 searches")
+        elif chosen is not None:
+            return _take(result, chosen.actions, 1, chosen.trajectory, X_goal)
         result = _level2(models, X_init, X_goal, cfg, result, feas)  # line 16: continuous search fallback
         if result.solved or chosen is None:
             return result
