@@ -39,6 +39,19 @@ def execute(X, actions):
     return X
 
 
+def test_a_verified_plan_is_cut_where_it_reaches_the_goal():
+    stub = StubModel()
+    # A onto B reaches the goal; shifting B afterwards leaves the blocks 9 cm off
+    v = verify(stub, X_INIT, A_ON_B, [(0, 0, 1, 0), (1, 0, 1, 1)], tau=0.1)
+    assert v.verified and v.error > 0.07
+    cut = v.cut(A_ON_B, 0.035)
+    assert cut.actions == ((0, 0, 1, 0),) and cut.error < 1e-9 and len(cut.trajectory) == 2
+    assert np.array_equal(cut.trajectory, v.trajectory[:2])
+    # a plan that reaches the goal only with its last action is kept whole
+    whole = verify(stub, X_INIT, A_ON_B, [(1, 0, 1, 1), (1, 0, 1, -1), (0, 0, 1, 0)])
+    assert whole.cut(A_ON_B, 0.035) is whole
+
+
 def test_verify_rolls_out_and_uses_the_per_object_max():
     stub = StubModel()
     v = verify(stub, X_INIT, A_ON_B, [(0, 0, 1, 1)])
@@ -167,6 +180,7 @@ def test_bilevel_alg1_never_returns_an_alternative_or_a_forced_nonempty_plan(dom
                         searched.append(config) or continuous_search(model, x, g, config, *rest))
     plan("bilevel_alg1", models(shift), X, goal, PlanConfig(n_domains=20))
     assert searched and all(not c.release_targets and c.look_on == 0 for c in searched)
+    assert alg1_shift.level == 2  # Level 1's plan was not cut or kept: alg1's rules are the paper's
     monkeypatch.undo()
     # whatever the configuration says, it is `bilevel` with both extensions off
     for m, x, g, cfg in ((models(domain), X_INIT, A_ON_B, PlanConfig(n_domains=100, seed=0)),
@@ -225,6 +239,42 @@ def test_closed_loop_replans_from_the_observed_state(domain):
     closed = plan_closed_loop("bilevel", models(domain), X_INIT, A_ON_B, flaky_world, rounds=1)
     assert closed.success and len(closed.rounds) == 2 and closed.executed == [(0, 0, 1, 0)] * 2
     assert closed.error < 0.05 and len(closed.states) == 3
+
+
+def test_the_closed_loop_keeps_a_plan_on_course_and_replans_one_off_course(domain):
+    goal = execute(X_INIT, [(1, 0, 1, 1), (0, 0, 1, 0)])  # B shifted 7.5 cm along y, then A on B
+    calls = []
+
+    def planner(method, *args, **kwargs):
+        calls.append(method)
+        return plan(method, *args, **kwargs)
+
+    def world(nudge_m=0.0):
+        """The stub world; with `nudge_m`, the first action's moved blocks land that far off along x."""
+        X = [X_INIT]
+
+        def step(action):
+            after = world_step(X[-1], action)
+            if len(X) == 1:
+                after[:, 0] += nudge_m * (np.linalg.norm(after[:, :3] - X[-1][:, :3], axis=1) > 1e-6)
+            X.append(after)
+            return after
+        return step
+
+    calls.clear()
+    kept = plan_closed_loop("cfs", models(domain), X_INIT, goal, world(), rounds=1, planner=planner)
+    assert kept.success and len(kept.rounds) == 2 and calls == ["cfs"]  # one planning call
+    assert kept.executed == kept.rounds[0].plan and "kept the rest" in kept.rounds[1].reasons[-1]
+    assert kept.rounds[1].level == kept.rounds[0].level
+    calls.clear()
+    fresh = plan_closed_loop("cfs", models(domain), X_INIT, goal, world(), rounds=1, planner=planner,
+                             cfg=PlanConfig(keep_plan=False))
+    assert fresh.success and calls == ["cfs", "cfs"]  # the paper's replanning: a planning call per round
+    # the first move lands 4 cm off: the rest of the plan no longer reaches the goal, so it plans again
+    calls.clear()
+    off = plan_closed_loop("cfs", models(domain), X_INIT, goal, world(0.04), rounds=1, planner=planner)
+    assert calls == ["cfs", "cfs"] and "keep" in off.rounds[1].timings
+    assert off.rounds[1].timings["total"] >= off.rounds[1].timings["keep"] > 0
 
 
 def test_unknown_method_is_a_clear_error(domain):

@@ -292,6 +292,13 @@ def add_planner_arguments(p: argparse.ArgumentParser, backends: tuple[str, ...] 
                    f"{default.level1_confident:g} m, the success tolerance; the paper takes every plan verified "
                    f"within tau = {default.tau_verify:g} m: give that value for its rule; `bilevel_alg1` always "
                    "does)")
+    p.add_argument("--no-level1-cut", dest="level1_cut", action="store_false",
+                   help="return a verified Level-1 plan whole (default: it ends at its first action predicted to "
+                   "bring every block within --confident of the goal; `bilevel_alg1` never cuts)")
+    p.add_argument("--no-keep-plan", dest="keep_plan", action="store_false",
+                   help="with --replan (bilevel_replan), plan again in every round, as the paper does (default: keep "
+                   "the rest of the last plan while, rolled out from the observed state, it ends within --confident "
+                   "of the goal and refines)")
     p.add_argument("--max-expansions", type=positive_int, default=default.search.max_expansions,
                    help="continuous search node limit per planning call: it decides when the search gives up, "
                    f"whatever the machine's load (default {default.search.max_expansions}, about 10 s at 4 objects)")
@@ -320,7 +327,8 @@ def planner_config(args: argparse.Namespace) -> PlanConfig:
     """The PlanConfig of the flags of `add_planner_arguments` (seed 0: callers set the problem's)."""
     return PlanConfig(n_domains=args.n_domains, backend=args.symbolic_backend, level1_budget=args.level1_budget,
                       focus_from=args.focus_from, level1_focus_budget=args.level1_focus_budget,
-                      level1_confident=args.level1_confident,
+                      level1_confident=args.level1_confident, level1_cut=args.level1_cut,
+                      keep_plan=args.keep_plan,
                       symbolic_time_limit=args.symbolic_time_limit, feasibility=getattr(args, "feasibility", True),
                       search=SearchConfig(max_expansions=args.max_expansions, time_limit=args.time_limit,
                                           confident=args.confident, look_on=args.look_on,

@@ -18,7 +18,10 @@ Methods (`METHODS`, same signature, same `PlanResult`):
 (= k - 1) replanning rounds; the last plan is executed to its end. It stops early once the observed
 state is within eps of the goal. (The paper executes the whole plan first and replans only if it
 failed; with a deterministic simulator that differs only in plans that would have succeeded anyway
-being replaced, and it needs no rollback of the world, which a real robot cannot do.)
+being replaced, and it needs no rollback of the world, which a real robot cannot do.) Our extension
+(`PlanConfig.keep_plan`): a round first rolls the rest of the last plan out from the observed state
+and keeps it when it still ends within `search.confident` of the goal and refines; only otherwise
+does it plan again, so a plan on course is not traded for another one.
 """
 from __future__ import annotations
 
@@ -84,6 +87,10 @@ class PlanConfig:
     level1_confident: float | None = EPS_SUCCESS  # metres: a verified Level-1 plan predicted farther than this
     #   from the goal (worst object; the paper verifies up to tau_verify) is kept while Level 2 looks for a
     #   plan, and taken only if Level 2 finds none (None: take it, as the paper does)
+    level1_cut: bool = True  # a verified Level-1 plan ends at its first action predicted to bring every block
+    #   within search.confident of the goal (False: the whole plan, as the paper does)
+    keep_plan: bool = True  # closed loop: keep the rest of the last plan while, rolled out from the observed
+    #   state, it ends within search.confident of the goal and refines (False: plan again every round)
     # Kinematics in the planning loop (cfs, bilevel; needs a `kinematics` object passed to `plan`):
     feasibility: bool = True  # check actions on the predicted states, refine a plan before returning it
     max_refinements: int = 4  # full refinements per planning call (Level-1 candidates and Level-2 plans)
@@ -156,8 +163,9 @@ class PlanResult:
         that does not give them)."""
         if self.level != 1 or self.plan is None:
             return None
-        actions = tuple(tuple(int(v) for v in a) for a in self.plan)
-        return next((c.states for c in self.candidates if c.actions == actions and c.verified), None)
+        actions = tuple(tuple(int(v) for v in a) for a in self.plan)  # the candidate's, or its start (level1_cut)
+        return next((c.states[:len(actions) + 1] for c in self.candidates
+                     if c.actions[:len(actions)] == actions and c.verified and c.states is not None), None)
 
     def rejected_dict(self) -> dict | None:
         """`rejected` with string keys (JSON): {"level 1": {"no_grasp": 3, ...}, "level 2": {...}}."""
@@ -466,7 +474,10 @@ class _Verifier:
         for c, v in zip(group, checks):
             c.error, c.verified = v.error, v.verified
         self.checked += group
-        verified = sorted((v for v in checks if v.verified), key=lambda v: v.error)
+        verified = [v for v in checks if v.verified]
+        if self.cfg.level1_cut:
+            verified = [v.cut(self.X_goal, self.cfg.search.confident) for v in verified]
+        verified.sort(key=lambda v: v.error)
         self.any_verified = self.any_verified or bool(verified)
         if self.chosen is None:
             self.chosen = _feasible_choice(verified, self.feas)
@@ -519,6 +530,7 @@ def plan_bilevel_alg1(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConf
     alternatives, any block picked) and the empty plan allowed whenever Sigma_init = Sigma_goal; its
     Level 2 returns the continuous search's first goal state and prunes actions by the paper's rule."""
     paper = replace(cfg, alternatives=0, nonempty=False, feasibility=False, focus_from=None, level1_confident=None,
+                    level1_cut=False,
                     search=replace(cfg.search, look_on=0, release_targets=False))
     result = plan_bilevel(models, X_init, X_goal, paper)
     result.method = "bilevel_alg1"
@@ -623,7 +635,14 @@ def plan_closed_loop(method: str, models: Models, X_init, X_goal,
             out.reason = "the observed state is within eps of the goal"
             break
         extra = {} if kinematics is None else {"kinematics": kinematics}
-        result = (planner or plan)(method, models, X, X_goal, cfg, **extra)
+        kept = keep_rest(models, X, X_goal, out.rounds[-1], cfg, kinematics) if cfg.keep_plan and out.rounds else None
+        if kept is not None and kept.solved:
+            result = kept
+        else:
+            result = (planner or plan)(method, models, X, X_goal, cfg, **extra)
+            if kept is not None:  # what trying to keep the last plan cost belongs to this round
+                result.timings["total"] += kept.timings["total"]
+                result.timings["keep"] = kept.timings["total"]
         out.rounds.append(result)
         if on_round is not None:
             on_round(r, result)
@@ -642,11 +661,44 @@ def plan_closed_loop(method: str, models: Models, X_init, X_goal,
     return out
 
 
+def keep_rest(models: Models, X: np.ndarray, X_goal: np.ndarray, last: PlanResult, cfg: PlanConfig,
+              kinematics: KinematicFeasibility | None = None) -> PlanResult:
+    """The rest of `last` (its first action executed) as this round's plan, if rolled out from the
+    observed state X it ends within cfg.search.confident of X_goal and, with `kinematics` (and
+    cfg.feasibility), passes the check and refines; else a result without a plan (its reasons say
+    why, its timings what the check cost). The plan keeps the last plan's level."""
+    rest = list(last.plan or [])[1:]
+    level = last.level or 2
+
+    def body(result: PlanResult) -> PlanResult:
+        if not rest:
+            result.reasons.append("keep: the last plan has no actions left")
+            return result
+        v = verify(models.require_dynamics(), X, X_goal, rest, cfg.tau_verify)
+        if v.error >= cfg.search.confident:
+            result.reasons.append(f"keep: the rest of the last plan is predicted {v.error * 100:.1f} cm from the "
+                                  f"goal from the observed state (over {cfg.search.confident * 100:g} cm)")
+            return result
+        feas = _Feasibility.of(kinematics, cfg, result)
+        if feas is not None and (feas.plan(v.trajectory, v.actions) is not None
+                                 or not feas.refine(level, v.trajectory, v.actions).success):
+            result.reasons.append("keep: the rest of the last plan is not kinematically feasible from here")
+            return result
+        states = last.plan_states
+        if states is not None:  # the same symbolic path from the next state on (the per-step view)
+            result.candidates = [Candidate(v.actions, 0, 0.0, v.error, True, states=states[1:])]
+        result.reasons.append(f"kept the rest of the last plan: predicted {v.error * 100:.1f} cm from the goal "
+                              "from the observed state")
+        return _take(result, v.actions, level, v.trajectory, X_goal)
+
+    return _timed(last.method, body)
+
+
 def replan_rounds(k: int | None, default: int = 4) -> int:
     """k - 1 replanning rounds for a problem generated with k actions."""
     return default if k is None else max(k - 1, 0)
 
 
 __all__: Sequence[str] = ["Candidate", "ClosedLoopResult", "METHODS", "PlanConfig", "PlanResult", "Planner",
-                          "plan", "plan_bilevel", "plan_bilevel_alg1", "plan_cfs", "plan_closed_loop",
+                          "keep_rest", "plan", "plan_bilevel", "plan_bilevel_alg1", "plan_cfs", "plan_closed_loop",
                           "plan_deterministic", "plan_probabilistic", "replan_rounds"]

@@ -77,6 +77,16 @@ class Verification:
     def verified(self) -> bool:
         return self.error < self.tau
 
+    def cut(self, X_goal: np.ndarray, within: float) -> "Verification":
+        """The plan up to its first action whose predicted state has every object within `within` metres
+        of X_goal, if that is before its last action; else this plan. Actions after the goal is
+        reached only add chances to fail."""
+        for k in range(1, len(self.actions)):
+            errors = goal_errors(self.trajectory[k], X_goal)
+            if errors.max(initial=0.0) < within:
+                return Verification(self.actions[:k], self.trajectory[:k + 1], errors, self.tau)
+        return self
+
 
 def predict_many(model: DynamicsModel, Xs: np.ndarray, actions: np.ndarray) -> np.ndarray:
     """Displacements (B, n, 3), metres, of action b on scene Xs[b]: one forward pass if the model has
