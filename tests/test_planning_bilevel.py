@@ -52,6 +52,25 @@ def test_a_verified_plan_is_cut_where_it_reaches_the_goal():
     assert whole.cut(A_ON_B, 0.035) is whole
 
 
+def test_a_pick_that_the_next_action_repeats_is_dropped_when_the_shorter_plan_is_as_good(domain):
+    from tamp.planning.bilevel import PlanResult, _Verifier
+    from tamp.planning.verify import without_repicks
+
+    assert without_repicks([(4, 0, 0, 1), (4, -1, 1, 0)]) == ((4, -1, 1, 0),)
+    assert without_repicks([(1, 0, 0, 0), (2, 0, 2, 1), (2, 0, 0, 0), (1, 0, 2, 0)]) == \
+        ((1, 0, 0, 0), (2, 0, 0, 0), (1, 0, 2, 0))  # only consecutive picks of one block
+    # A first released beside B, then picked again and put on B: A on B in one action does the same
+    twice = verify(StubModel(), X_INIT, A_ON_B, [(0, 0, 1, 1), (0, 0, 1, 0)])
+    assert twice.verified and twice.error < 1e-9
+    verifier = _Verifier(models(domain), X_INIT, A_ON_B, PlanConfig(), PlanResult("bilevel", None), None, [])
+    assert verifier._shortened(twice).actions == ((0, 0, 1, 0),)
+    # a repeated pick that matters stays: B shifted twice along y (15 cm); once ends 7.5 cm off
+    goal = execute(X_INIT, [(1, 0, 1, 1), (1, 0, 1, 1)])
+    two = verify(StubModel(), X_INIT, goal, [(1, 0, 1, 1), (1, 0, 1, 1)])
+    shifts = _Verifier(models(domain), X_INIT, goal, PlanConfig(), PlanResult("bilevel", None), None, [])
+    assert two.verified and shifts._shortened(two) is two
+
+
 def test_verify_rolls_out_and_uses_the_per_object_max():
     stub = StubModel()
     v = verify(stub, X_INIT, A_ON_B, [(0, 0, 1, 1)])

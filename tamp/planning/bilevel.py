@@ -54,6 +54,7 @@ from tamp.planning.verify import (
     states_pair,
     verify,
     verify_many,
+    without_repicks,
 )
 
 SYMBOLIC_BACKENDS = ("python", "fd", "fd-naive")  # in-process search; Fast Downward, batched or one call per domain
@@ -88,7 +89,8 @@ class PlanConfig:
     #   from the goal (worst object; the paper verifies up to tau_verify) is kept while Level 2 looks for a
     #   plan, and taken only if Level 2 finds none (None: take it, as the paper does)
     level1_cut: bool = True  # a verified Level-1 plan ends at its first action predicted to bring every block
-    #   within search.confident of the goal (False: the whole plan, as the paper does)
+    #   within search.confident of the goal, and loses each pick of a block the next action picks again when
+    #   the shorter plan is predicted as close (False: the plan as verified, as the paper does)
     keep_plan: bool = True  # closed loop: keep the rest of the last plan while, rolled out from the observed
     #   state, it ends within search.confident of the goal and refines (False: plan again every round)
     # Kinematics in the planning loop (cfs, bilevel; needs a `kinematics` object passed to `plan`):
@@ -476,11 +478,21 @@ class _Verifier:
         self.checked += group
         verified = [v for v in checks if v.verified]
         if self.cfg.level1_cut:
-            verified = [v.cut(self.X_goal, self.cfg.search.confident) for v in verified]
+            verified = [self._shortened(v) for v in verified]
         verified.sort(key=lambda v: v.error)
         self.any_verified = self.any_verified or bool(verified)
         if self.chosen is None:
             self.chosen = _feasible_choice(verified, self.feas)
+
+    def _shortened(self, v: Verification) -> Verification:
+        """`v` cut where it reaches the goal, then without the picks the next action repeats if that
+        plan is predicted within search.confident of the goal or no farther than `v` (cfg.level1_cut)."""
+        v = v.cut(self.X_goal, self.cfg.search.confident)
+        shorter = without_repicks(v.actions)
+        if len(shorter) == len(v.actions):
+            return v
+        w = verify(self.model, self.X_init, self.X_goal, shorter, self.cfg.tau_verify)
+        return w if w.verified and (w.error < self.cfg.search.confident or w.error <= v.error) else v
 
     def finish(self) -> None:
         """Record the candidates (checked ones, then the rest), the verification time and, without a

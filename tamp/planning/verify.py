@@ -88,6 +88,13 @@ class Verification:
         return self
 
 
+def without_repicks(actions: Sequence) -> tuple:
+    """The plan without each action whose block the next action picks up again: that pick takes the
+    block wherever it lies, so the earlier move mostly decides nothing but adds a chance to fail."""
+    plan = tuple(tuple(int(v) for v in a) for a in actions)
+    return tuple(a for a, b in zip(plan, plan[1:] + (None,)) if b is None or b[0] != a[0])
+
+
 def predict_many(model: DynamicsModel, Xs: np.ndarray, actions: np.ndarray) -> np.ndarray:
     """Displacements (B, n, 3), metres, of action b on scene Xs[b]: one forward pass if the model has
     `predict_effects` (the learned models), else one `predict_effect` call per distinct scene."""
