@@ -122,6 +122,28 @@ def cmd_report(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_compare(args: argparse.Namespace) -> int:
+    """Two evaluations of the same problems, paired: success, p, planning time, gained and lost."""
+    from .compare import compare_markdown, compare_numbers, load_rows
+
+    for d in (args.before, args.after):
+        if not d.is_dir():
+            raise UserError(f"no results directory at {d} (the --out directory of `tamp evaluate`)")
+    numbers = compare_numbers(load_rows(args.before), load_rows(args.after))
+    if not numbers["pairs"]:
+        raise UserError(f"{args.before} and {args.after} share no (problem, method) row: evaluate the same "
+                        "problem set with the same methods")
+    text = compare_markdown(numbers, str(args.before), str(args.after))
+    if args.out is not None:
+        from tamp.records import atomic_write_text
+
+        atomic_write_text(args.out, text)
+        print(f"comparison written to {args.out}")
+    else:
+        print(text, end="")
+    return 0
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     """Add this package's subcommands to the `tamp` parser."""
     p = sub.add_parser(
@@ -198,6 +220,19 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--ablation", type=Path, default=None,
                    help="ablation results to include (tamp ablate-activations output)")
     p.set_defaults(func=cmd_report)
+
+    p = sub.add_parser(
+        "compare",
+        help="before and after: two results directories of the same problems, paired per problem",
+        description="Pair the rows of two `tamp evaluate` results directories by (problem, run, method) and "
+        "print, per method and number of blocks, success before -> after with a paired t-test, planning time "
+        "(median / mean) before -> after, and the problems gained and lost. Rows only one side holds are "
+        "counted and left out. Reads rows.jsonl, or the rows.jsonl.gz that results/ ships.",
+    )
+    p.add_argument("before", type=Path, help="results directory of the baseline (tamp evaluate --out)")
+    p.add_argument("after", type=Path, help="results directory of the change, on the same problem set")
+    p.add_argument("--out", type=Path, default=None, help="write the Markdown here instead of printing it")
+    p.set_defaults(func=cmd_compare)
 
     p = sub.add_parser(
         "reproduce",

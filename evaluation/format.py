@@ -5,6 +5,9 @@ from __future__ import annotations
 import math
 from typing import Iterable, Sequence
 
+from .paper import P_BELOW
+from .stats import IDENTICAL
+
 DASH = "—"
 
 
@@ -34,6 +37,16 @@ def fmt_pm(pair: tuple[float | None, float | None], digits: int = 3) -> str:
     return DASH if m is None else f"{m:.{digits}f} ± {s:.{digits}f}"
 
 
+def fmt_p(p: float | str | None) -> str:
+    """'identical', '—' (fewer than two pairs), '< 0.0001', else four decimals."""
+    if p is None:
+        return DASH
+    if p == IDENTICAL:
+        return IDENTICAL
+    assert not isinstance(p, str)  # IDENTICAL is paired_ttest's only text
+    return "< 0.0001" if p < P_BELOW else f"{p:.4f}"
+
+
 def fmt_ratio(x: float | None, digits: int = 2) -> str:
     return DASH if x is None else f"{x:.{digits}f}"
 
@@ -50,4 +63,4 @@ def md_table(header: Sequence[str], rows: Iterable[Sequence[str]]) -> list[str]:
     return lines + [""]
 
 
-__all__ = ["DASH", "fmt_cm", "fmt_factor", "fmt_ms", "fmt_pct", "fmt_pm", "fmt_ratio", "fmt_s", "md_table"]
+__all__ = ["DASH", "fmt_cm", "fmt_factor", "fmt_ms", "fmt_p", "fmt_pct", "fmt_pm", "fmt_ratio", "fmt_s", "md_table"]

@@ -23,8 +23,8 @@ from tamp.planning.structs import OUTCOMES, Outcome
 from tamp.records import atomic_write_text
 
 from . import paper, plots, refinability, scaling
-from .format import DASH, fmt_pct, fmt_pm, fmt_ratio, fmt_s, md_table
-from .stats import IDENTICAL, confusion, mean_std, median, paired_ttest, percentile, rate_pct
+from .format import DASH, fmt_p, fmt_pct, fmt_pm, fmt_ratio, fmt_s, md_table
+from .stats import confusion, mean_std, median, paired_ttest, percentile, rate_pct
 
 METHOD_ORDER = ("deterministic", "probabilistic", "probabilistic_oracle", "cfs", "bilevel", "bilevel_alg1",
                 "bilevel_replan", "symbolic_sigmoid", "cfs_gumbel", "cfs_nofeas", "bilevel_nofeas",
@@ -56,16 +56,6 @@ TAUS_CM = tuple(range(1, 16))  # the verifier sweep (the paper's Fig. 6)
 
 
 # --- formatting ----------------------------------------------------------------------------------
-def fmt_p(p: float | str | None) -> str:
-    """'identical', '—' (fewer than two pairs), '< 0.0001', else four decimals."""
-    if p is None:
-        return DASH
-    if p == IDENTICAL:
-        return IDENTICAL
-    assert not isinstance(p, str)  # IDENTICAL is paired_ttest's only text
-    return "< 0.0001" if p < paper.P_BELOW else f"{p:.4f}"
-
-
 def fmt_paper_p(p: float) -> str:
     """A p-value of the paper as printed: '< 0.0001' for `paper.P_BELOW`, else two decimals."""
     return "< 0.0001" if p <= paper.P_BELOW else f"{p:.2f}"
