@@ -284,7 +284,8 @@ def test_the_closed_loop_keeps_a_plan_on_course_and_replans_one_off_course(domai
     kept = plan_closed_loop("cfs", models(domain), X_INIT, goal, world(), rounds=1, planner=planner)
     assert kept.success and len(kept.rounds) == 2 and calls == ["cfs"]  # one planning call
     assert kept.executed == kept.rounds[0].plan and "kept the rest" in kept.rounds[1].reasons[-1]
-    assert kept.rounds[1].level == kept.rounds[0].level
+    assert kept.rounds[1].level == kept.rounds[0].level and kept.rounds[1].kept and not kept.rounds[0].kept
+    assert kept.rounds[1].to_dict()["kept"] is True
     calls.clear()
     fresh = plan_closed_loop("cfs", models(domain), X_INIT, goal, world(), rounds=1, planner=planner,
                              cfg=PlanConfig(keep_plan=False))

@@ -72,11 +72,13 @@ def print_result(result: PlanResult, tau: float, indent: str = "") -> None:
     p = indent
     if result.solved:
         assert result.plan is not None and result.level is not None and result.predicted_error is not None  # solved
-        print(f"{p}{result.method}: plan of {len(result.plan)} action(s) from {LEVELS[result.level]}; "
+        source = f"kept: the rest of the last round's plan ({LEVELS[result.level]})" if result.kept else \
+            f"from {LEVELS[result.level]}"
+        print(f"{p}{result.method}: plan of {len(result.plan)} action(s) {source}; "
               f"predicted final error {result.predicted_error * 100:.1f} cm")
     else:
         print(f"{p}{result.method}: no plan")
-    if result.candidates:
+    if result.candidates and not result.kept:
         print(f"{p}  symbolic candidates, most frequent first (tau_verify {tau * 100:g} cm):")
         for i, c in enumerate(result.candidates[:10]):
             check = "not checked" if c.error is None else \

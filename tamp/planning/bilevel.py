@@ -154,6 +154,7 @@ class PlanResult:
     # (Level 2) the check or full refinement rejected, by reason; None when it was off
     rejected: dict[int, Counter] | None = None
     refinements: list[dict] = field(default_factory=list)  # level, plan, outcome of each full refinement
+    kept: bool = False  # closed loop: the plan is the rest of the last round's (`keep_rest`), not planned anew
 
     @property
     def solved(self) -> bool:
@@ -189,7 +190,7 @@ class PlanResult:
                                                          "duplicates", "predict_calls", "time")},
                 "timings": {k: round(v, 6) for k, v in self.timings.items()},
                 "reasons": list(self.reasons), "symbolic": self.symbolic_stats,
-                "rejected": self.rejected_dict(), "refinements": list(self.refinements)}
+                "rejected": self.rejected_dict(), "refinements": list(self.refinements), "kept": self.kept}
 
 
 # --- the levels -------------------------------------------------------------------------------
@@ -701,6 +702,7 @@ def keep_rest(models: Models, X: np.ndarray, X_goal: np.ndarray, last: PlanResul
             result.candidates = [Candidate(v.actions, 0, 0.0, v.error, True, states=states[1:])]
         result.reasons.append(f"kept the rest of the last plan: predicted {v.error * 100:.1f} cm from the goal "
                               "from the observed state")
+        result.kept = True
         return _take(result, v.actions, level, v.trajectory, X_goal)
 
     return _timed(last.method, body)
