@@ -44,7 +44,6 @@ def compare_numbers(before: Sequence[dict], after: Sequence[dict]) -> dict[str, 
     old = {_key(r): r for r in before}
     pairs = [(old[_key(r)], r) for r in after if _key(r) in old]
     methods = list(dict.fromkeys(r["method"] for _, r in pairs))
-    runs = len({r.get("run") for _, r in pairs}) > 1  # name the run only when the set has several
     out: dict[str, Any] = {"pairs": len(pairs), "only_before": len(old) - len(pairs),
                            "only_after": len(after) - len(pairs), "methods": {}}
     for m in methods:
@@ -52,24 +51,20 @@ def compare_numbers(before: Sequence[dict], after: Sequence[dict]) -> dict[str, 
         cells = {}
         for n in sorted({b["n"] for _, b in mine}) + ["all"]:
             group = [(a, b) for a, b in mine if n == "all" or b["n"] == n]
-            cells[n] = _cell(group, runs)
+            cells[n] = _cell(group)
         out["methods"][m] = cells
     return out
 
 
-def _cell(group: Sequence[tuple[dict, dict]], runs: bool) -> dict[str, Any]:
+def _cell(group: Sequence[tuple[dict, dict]]) -> dict[str, Any]:
     ok_a, ok_b = [bool(a["success"]) for a, _ in group], [bool(b["success"]) for _, b in group]
     t_a, t_b = [a["planning_time_s"] for a, _ in group], [b["planning_time_s"] for _, b in group]
     p = paired_ttest([float(x) for x in ok_a], [float(x) for x in ok_b])
     return {"problems": len(group), "success_before_pct": rate_pct(ok_a), "success_after_pct": rate_pct(ok_b),
             "p": p, "time_before_median_s": median(t_a), "time_after_median_s": median(t_b),
             "time_before_mean_s": mean_std(t_a)[0], "time_after_mean_s": mean_std(t_b)[0],
-            "gained": sorted(_name(b, runs) for a, b in group if b["success"] and not a["success"]),
-            "lost": sorted(_name(b, runs) for a, b in group if a["success"] and not b["success"])}
-
-
-def _name(row: dict, runs: bool) -> str:
-    return f"{row['problem']} (run {row['run']})" if runs else row["problem"]
+            "gained": sorted(b["problem"] for a, b in group if b["success"] and not a["success"]),
+            "lost": sorted(b["problem"] for a, b in group if a["success"] and not b["success"])}
 
 
 def _names(names: Sequence[str]) -> str:

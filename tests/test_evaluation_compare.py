@@ -40,10 +40,12 @@ def test_the_cells_pair_problems_and_name_what_was_gained_and_lost():
     assert "| `cfs` | 5 | 3 | 66.7 -> 66.7 |" in text and "1: n5-k2-000" in text and "(run" not in text
 
 
-def test_runs_are_named_when_a_set_has_several():
+def test_rows_pair_by_run_too():
+    # `tamp problems --runs` names problems r{run}-...; rows of one name in two runs are two problems
     before = [row("n5-k1-000", "cfs", 5, True, 0.1, run=0), row("n5-k1-000", "cfs", 5, False, 0.1, run=1)]
     after = [row("n5-k1-000", "cfs", 5, True, 0.1, run=0), row("n5-k1-000", "cfs", 5, True, 0.1, run=1)]
-    assert compare_numbers(before, after)["methods"]["cfs"][5]["gained"] == ["n5-k1-000 (run 1)"]
+    cell = compare_numbers(before, after)["methods"]["cfs"][5]
+    assert cell["problems"] == 2 and cell["success_before_pct"] == 50.0 and cell["success_after_pct"] == 100.0
 
 
 def test_the_command_reads_shipped_gzip_rows_and_refuses_unrelated_directories(tmp_path, capsys):
