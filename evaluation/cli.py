@@ -131,8 +131,8 @@ def cmd_compare(args: argparse.Namespace) -> int:
             raise UserError(f"no results directory at {d} (the --out directory of `tamp evaluate`)")
     numbers = compare_numbers(load_rows(args.before), load_rows(args.after))
     if not numbers["pairs"]:
-        raise UserError(f"{args.before} and {args.after} share no (problem, method) row: evaluate the same "
-                        "problem set with the same methods")
+        raise UserError(f"{args.before} and {args.after} share no (problem, run, method) row without an error: "
+                        "evaluate the same problem set with the same methods")
     text = compare_markdown(numbers, str(args.before), str(args.after))
     if args.out is not None:
         from tamp.records import atomic_write_text

@@ -40,12 +40,17 @@ def _key(row: dict) -> tuple:
 
 def compare_numbers(before: Sequence[dict], after: Sequence[dict]) -> dict[str, Any]:
     """Per method (in the after rows' order) and n (then 'all'): the paired cells over the
-    (problem, run) both sides hold for that method."""
+    (problem, run) both sides hold for that method. A pair with an error row on either side (the
+    evaluation crashed there, `tamp evaluate` says where) is counted and left out, as the report does."""
+    from .run import ERROR_OUTCOME
+
     old = {_key(r): r for r in before}
-    pairs = [(old[_key(r)], r) for r in after if _key(r) in old]
+    matched = [(old[_key(r)], r) for r in after if _key(r) in old]
+    pairs = [(a, b) for a, b in matched if ERROR_OUTCOME not in (a.get("outcome"), b.get("outcome"))]
     methods = list(dict.fromkeys(r["method"] for _, r in pairs))
-    out: dict[str, Any] = {"pairs": len(pairs), "only_before": len(old) - len(pairs),
-                           "only_after": len(after) - len(pairs), "methods": {}}
+    out: dict[str, Any] = {"pairs": len(pairs), "errors": len(matched) - len(pairs),
+                           "only_before": len(old) - len(matched), "only_after": len(after) - len(matched),
+                           "methods": {}}
     for m in methods:
         mine = [(a, b) for a, b in pairs if b["method"] == m]
         cells = {}
@@ -77,9 +82,10 @@ def _names(names: Sequence[str]) -> str:
 def compare_markdown(numbers: dict[str, Any], before: str, after: str) -> str:
     """The comparison as Markdown (`compare_numbers`' output)."""
     lines = [f"# Before and after: `{before}` -> `{after}`", "",
-             f"{numbers['pairs']} (problem, method) pairs in both; {numbers['only_before']} only before, "
-             f"{numbers['only_after']} only after (not compared). Success (%) before -> after with the paired "
-             "t-test's p over the same problems; planning time (ms) median / mean before -> after.", ""]
+             f"{numbers['pairs']} (problem, run, method) rows paired; {numbers['only_before']} only before, "
+             f"{numbers['only_after']} only after, {numbers['errors']} with an error row on a side (not compared). "
+             "Success (%) before -> after with the paired t-test's p over the same problems; planning time (ms) "
+             "median / mean before -> after.", ""]
     rows = []
     for m, cells in numbers["methods"].items():
         for n, c in cells.items():

@@ -25,6 +25,7 @@ AFTER = [row("n5-k1-000", "cfs", 5, True, 0.1), row("n5-k2-000", "cfs", 5, True,
 def test_the_cells_pair_problems_and_name_what_was_gained_and_lost():
     numbers = compare_numbers(BEFORE, AFTER)
     assert numbers["pairs"] == 5 and numbers["only_before"] == 1 and numbers["only_after"] == 1
+    assert numbers["errors"] == 0
     assert list(numbers["methods"]) == ["cfs", "bilevel"]  # bilevel_replan has no 'before'
     five = numbers["methods"]["cfs"][5]
     assert five["problems"] == 3 and five["success_before_pct"] == pytest.approx(200 / 3)
@@ -38,6 +39,15 @@ def test_the_cells_pair_problems_and_name_what_was_gained_and_lost():
     assert compare_numbers(BEFORE, BEFORE)["methods"]["cfs"][5]["p"] == "identical"
     text = compare_markdown(numbers, "old", "new")
     assert "| `cfs` | 5 | 3 | 66.7 -> 66.7 |" in text and "1: n5-k2-000" in text and "(run" not in text
+
+
+def test_a_crashed_row_is_counted_and_left_out():
+    crashed = dict(row("n5-k3-000", "cfs", 5, False, 0.0), outcome="error")
+    after = [r for r in AFTER if (r["problem"], r["method"]) != ("n5-k3-000", "cfs")] + [crashed]
+    numbers = compare_numbers(BEFORE, after)
+    five = numbers["methods"]["cfs"][5]
+    assert numbers["errors"] == 1 and five["problems"] == 2 and five["lost"] == []  # a crash is not "lost"
+    assert "1 with an error row" in compare_markdown(numbers, "a", "b")
 
 
 def test_rows_pair_by_run_too():
@@ -65,7 +75,7 @@ def test_the_command_reads_shipped_gzip_rows_and_refuses_unrelated_directories(t
     assert main(["compare", str(old), str(new), "--out", str(out)]) == 0
     assert out.read_text().startswith("# Before and after")
     assert main(["compare", str(old), str(other)]) == 2
-    assert "share no (problem, method) row" in capsys.readouterr().err
+    assert "share no (problem, run, method) row" in capsys.readouterr().err
     assert main(["compare", str(old), str(tmp_path / "missing")]) == 2
     assert main(["compare", str(old), str(tmp_path)]) == 2  # a directory without rows
     assert "no rows.jsonl" in capsys.readouterr().err

@@ -149,9 +149,11 @@ def test_a_verified_plan_predicted_to_miss_the_goal_waits_for_the_continuous_sea
     assert ours.level == 2 and len(ours.plan) == 2 and ours.predicted_error < 0.02
     assert goal_error(execute(X_INIT, ours.plan), goal) < 0.05
     assert any("kept while level 2 searches" in r for r in ours.reasons)
-    # the paper's rule takes the verified plan, which misses the goal
+    # the paper's rule takes the verified plan, which misses the goal; so does its Algorithm 1
     paper = plan("bilevel", models(domain), X_INIT, goal, PlanConfig(n_domains=100, seed=0, level1_confident=None))
     assert paper.level == 1 and paper.search is None and goal_error(execute(X_INIT, paper.plan), goal) > 0.05
+    alg1 = plan("bilevel_alg1", models(domain), X_INIT, goal, PlanConfig(n_domains=100, seed=0))
+    assert alg1.level == 1 and alg1.search is None and goal_error(execute(X_INIT, alg1.plan), goal) > 0.05
     # when the continuous search finds nothing, the kept plan is returned
     shallow = PlanConfig(n_domains=100, seed=0, search=SearchConfig(max_depth=1))
     kept = plan("bilevel", models(domain), X_INIT, goal, shallow)
@@ -293,8 +295,29 @@ def test_the_closed_loop_keeps_a_plan_on_course_and_replans_one_off_course(domai
     # the first move lands 4 cm off: the rest of the plan no longer reaches the goal, so it plans again
     calls.clear()
     off = plan_closed_loop("cfs", models(domain), X_INIT, goal, world(0.04), rounds=1, planner=planner)
-    assert calls == ["cfs", "cfs"] and "keep" in off.rounds[1].timings
+    assert calls == ["cfs", "cfs"] and "keep" in off.rounds[1].timings and not off.rounds[1].kept
     assert off.rounds[1].timings["total"] >= off.rounds[1].timings["keep"] > 0
+    assert off.rounds[1].reasons[0].startswith("keep: the rest of the last plan is predicted")
+    # the paper's Algorithm 1 replans in every round, as the paper does
+    calls.clear()
+    plan_closed_loop("bilevel_alg1", models(domain), X_INIT, goal, world(), rounds=1, planner=planner)
+    assert calls == ["bilevel_alg1", "bilevel_alg1"]
+
+
+def test_a_kept_level1_plan_follows_its_symbolic_path(domain):
+    from tamp.planning.bilevel import Candidate, PlanResult, keep_rest
+    from tamp.planning.structs import PickPlace
+
+    goal = execute(X_INIT, [(1, 0, 1, 1), (0, 0, 1, 0)])
+    actions = ((1, 0, 1, 1), (0, 0, 1, 0))
+    last = PlanResult("bilevel", [PickPlace(*a) for a in actions], level=1,
+                      candidates=[Candidate(actions, 5, 0.5, 0.0, True, states=(10, 11, 12))])
+    assert last.plan_states == (10, 11, 12)
+    kept = keep_rest(models(domain), world_step(X_INIT, actions[0]), goal, last, PlanConfig())
+    assert kept.kept and kept.level == 1 and kept.plan == [actions[1]] and kept.plan_states == (11, 12)
+    # off course (B not shifted): nothing kept, and the result says why
+    missed = keep_rest(models(domain), X_INIT, goal, last, PlanConfig())
+    assert not missed.solved and not missed.kept and missed.reasons[0].startswith("keep:")
 
 
 def test_unknown_method_is_a_clear_error(domain):
@@ -435,3 +458,23 @@ def test_from_focus_from_blocks_on_level1_gives_up_at_its_own_budget(domain):
     assert default.level1_budget_for(6) == default.level1_focus_budget < default.level1_budget_for(4)
     with pytest.raises(UserError, match="level1_focus_budget"):
         PlanConfig(level1_focus_budget=0)
+
+
+def test_a_failed_keep_is_counted_in_the_round_that_plans_again(domain):
+    # the rest of the plan is on course but fails refinement from the observed scene: the round plans
+    # again, and the refinement and time the keep attempt spent are in that round's record
+    goal = execute(X_INIT, [(1, 0, 1, 1), (0, 0, 1, 0)])
+    first = plan("cfs", models(domain), X_INIT, goal, PlanConfig(), kinematics=StubKinematics())
+    rest = tuple(first.plan[1])
+    kin = StubKinematics(unrefinable={rest})
+    X = [X_INIT]
+
+    def step(action):
+        X.append(world_step(X[-1], action))
+        return X[-1]
+
+    loop = plan_closed_loop("cfs", models(domain), X_INIT, goal, step, rounds=1, kinematics=kin)
+    second = loop.rounds[1]
+    assert not second.kept and second.timings["keep"] > 0 and second.reasons[0].startswith("keep:")
+    assert second.refinements[0]["plan"] == [list(rest)] and second.refinements[0]["failed_action"] == 0
+    assert second.rejected[2]["refine_motion"] >= 1

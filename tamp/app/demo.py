@@ -282,9 +282,10 @@ def _closed_loop(problem: Problem, models, plan_cfg: PlanConfig, kinematics: Fea
                  cfg: DemoConfig, first: PlanResult, timeline: Timeline | None,
                  step_times: list[tuple[float, float]]) -> ClosedLoopRun:
     """Execute the first action of the plan, observe the scene, replan from it (up to k - 1 rounds;
-    the last plan runs to its end), in a World of the demo's fidelity: each action is refined and
-    executed there, an action that cannot be refined changes nothing and the loop goes on. The first
-    round reuses the plan already printed. The replay shows each round's prediction of the action it
+    the last plan runs to its end, and a round keeps the rest of the last plan while it is on course),
+    in a World of the demo's fidelity: each action is refined and executed there, an action that
+    cannot be refined changes nothing and the loop goes on. The first round reuses the plan already
+    printed. The replay shows each round's prediction of the action it
     executed (the last round: of each of its actions)."""
     rounds = replan_rounds(problem.k)
     print(f"\nclosed loop ({cfg.fidelity} world): execute, observe, replan; up to {rounds} replanning "
@@ -293,12 +294,14 @@ def _closed_loop(problem: Problem, models, plan_cfg: PlanConfig, kinematics: Fea
     executed: list[PickPlace] = []
 
     def plan_round(method, models_, X, X_goal, config, **kinematics):
-        result = first if not planned else plan(method, models_, X, X_goal, config, **kinematics)
+        return first if not planned else plan(method, models_, X, X_goal, config, **kinematics)
+
+    def on_round(r: int, result: PlanResult) -> None:  # every round, planned anew or kept
         planned.append((len(executed), result))
-        if len(planned) > 1:
-            print(f"round {len(planned) - 1}: replanned from the observed scene", flush=True)
-            print_result(result, config.tau_verify, indent="  ")
-        return result
+        if r > 0:
+            how = "kept the rest of the last plan" if result.kept else "replanned from the observed scene"
+            print(f"round {r}: {how}", flush=True)
+            print_result(result, plan_cfg.tau_verify, indent="  ")
 
     def show_step(action: PickPlace, X: np.ndarray, info, seconds: float) -> None:
         executed.append(action)
@@ -307,7 +310,8 @@ def _closed_loop(problem: Problem, models, plan_cfg: PlanConfig, kinematics: Fea
               f"cm from the goal, {seconds:.1f} s", flush=True)
 
     run = run_closed_loop("bilevel", models, problem.X_init, problem.X_goal, rounds, plan_cfg, cfg.fidelity,
-                          kinematics=kinematics, timeline=timeline, planner=plan_round, on_step=show_step)
+                          kinematics=kinematics, timeline=timeline, planner=plan_round, on_round=on_round,
+                          on_step=show_step)
     step_times.extend(run.step_times)
     if timeline is not None:
         _show_loop_predictions(timeline, planned, run.action_starts)

@@ -72,9 +72,9 @@ def print_result(result: PlanResult, tau: float, indent: str = "") -> None:
     p = indent
     if result.solved:
         assert result.plan is not None and result.level is not None and result.predicted_error is not None  # solved
-        source = f"kept: the rest of the last round's plan ({LEVELS[result.level]})" if result.kept else \
-            f"from {LEVELS[result.level]}"
-        print(f"{p}{result.method}: plan of {len(result.plan)} action(s) {source}; "
+        source = f", kept: the rest of the last round's plan, from {LEVELS[result.level]}" if result.kept else \
+            f" from {LEVELS[result.level]}"
+        print(f"{p}{result.method}: plan of {len(result.plan)} action(s){source}; "
               f"predicted final error {result.predicted_error * 100:.1f} cm")
     else:
         print(f"{p}{result.method}: no plan")
@@ -106,7 +106,7 @@ def print_result(result: PlanResult, tau: float, indent: str = "") -> None:
             outcome = "refined" if x["failed_action"] is None else \
                 f"failed at action {x['failed_action']} ({x['reason']}: {x['message']})"
             print(f"{p}  full refinement of a level-{x['level']} plan of {len(x['plan'])} action(s): {outcome}")
-    stages = ("symbols", "symbolic", "verify", "search", "feasibility", "refine", "total")
+    stages = ("keep", "symbols", "symbolic", "verify", "search", "feasibility", "refine", "total")
     print(f"{p}  timings: " + ", ".join(f"{k} {_ms(result.timings[k])}" for k in stages if k in result.timings))
 
 
@@ -295,12 +295,15 @@ def add_planner_arguments(p: argparse.ArgumentParser, backends: tuple[str, ...] 
                    f"within tau = {default.tau_verify:g} m: give that value for its rule; `bilevel_alg1` always "
                    "does)")
     p.add_argument("--no-level1-cut", dest="level1_cut", action="store_false",
-                   help="return a verified Level-1 plan whole (default: it ends at its first action predicted to "
-                   "bring every block within --confident of the goal; `bilevel_alg1` never cuts)")
+                   help="return a verified Level-1 plan as verified (default: it ends at its first action predicted "
+                   "to bring every block within --confident of the goal, and an action whose block the next one "
+                   "picks again is dropped when the shorter plan is predicted as close; `bilevel_alg1` never "
+                   "shortens)")
     p.add_argument("--no-keep-plan", dest="keep_plan", action="store_false",
-                   help="with --replan (bilevel_replan), plan again in every round, as the paper does (default: keep "
-                   "the rest of the last plan while, rolled out from the observed state, it ends within --confident "
-                   "of the goal and refines)")
+                   help="with --replan (bilevel_replan), plan again in every round, as the paper does (default, for "
+                   "bilevel and cfs: keep the rest of the last plan while, rolled out from the observed state, it "
+                   "ends within --confident of the goal and refines; bilevel_alg1 and the symbolic baselines "
+                   "always plan again)")
     p.add_argument("--max-expansions", type=positive_int, default=default.search.max_expansions,
                    help="continuous search node limit per planning call: it decides when the search gives up, "
                    f"whatever the machine's load (default {default.search.max_expansions}, about 10 s at 4 objects)")
@@ -312,10 +315,10 @@ def add_planner_arguments(p: argparse.ArgumentParser, backends: tuple[str, ...] 
                    help="expansions the continuous search spends looking for a goal state within --confident after "
                    f"finding one that is not (default {default.search.look_on}; 0 returns the first goal state)")
     p.add_argument("--paper-pruning", dest="release_targets", action="store_false",
-                   help="the continuous search prunes actions by the paper's rule alone: a misplaced block goes onto "
-                   "the object closest to its goal or onto itself (default: also onto the object with an offset "
-                   "release point closest to its goal, when that is another object; `bilevel_alg1` always "
-                   "uses the paper's rule)")
+                   help="the continuous search (cfs, and bilevel's Level 2) prunes actions by the paper's rule alone: "
+                   "a misplaced block goes onto the object closest to its goal or onto itself (default: also onto "
+                   "the object with an offset release point closest to its goal, when that is another object; "
+                   "`bilevel_alg1` always uses the paper's rule)")
     p.add_argument("--time-limit", type=positive_float, default=default.search.time_limit,
                    help="continuous search wall-clock limit per planning call, s: a safety net behind "
                    f"--max-expansions (default {default.search.time_limit:g})")

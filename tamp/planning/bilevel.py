@@ -166,9 +166,13 @@ class PlanResult:
         that does not give them)."""
         if self.level != 1 or self.plan is None:
             return None
-        actions = tuple(tuple(int(v) for v in a) for a in self.plan)  # the candidate's, or its start (level1_cut)
-        return next((c.states[:len(actions) + 1] for c in self.candidates
-                     if c.actions[:len(actions)] == actions and c.verified and c.states is not None), None)
+        actions = tuple(tuple(int(v) for v in a) for a in self.plan)
+        known = [(c.actions, c.states) for c in self.candidates if c.verified and c.states is not None]
+        exact = next((states for plan, states in known if plan == actions), None)
+        if exact is not None:
+            return exact
+        # a plan cut where it reaches the goal (level1_cut): the start of its candidate's path
+        return next((states[:len(actions) + 1] for plan, states in known if plan[:len(actions)] == actions), None)
 
     def rejected_dict(self) -> dict | None:
         """`rejected` with string keys (JSON): {"level 1": {"no_grasp": 3, ...}, "level 2": {...}}."""
@@ -587,6 +591,8 @@ METHODS: dict[str, Planner] = {"bilevel": plan_bilevel, "bilevel_alg1": plan_bil
                                "cfs": plan_cfs}
 # the methods that put kinematics in their planning loop when given a checker (and cfg.feasibility)
 KINEMATIC_METHODS = frozenset({"cfs", "bilevel"})
+# the methods whose closed loop keeps a plan on course (cfg.keep_plan); the others replan every round
+KEEPING_METHODS = frozenset({"cfs", "bilevel"})
 
 
 def plan(method: str, models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig(),
@@ -648,14 +654,14 @@ def plan_closed_loop(method: str, models: Models, X_init, X_goal,
             out.reason = "the observed state is within eps of the goal"
             break
         extra = {} if kinematics is None else {"kinematics": kinematics}
-        kept = keep_rest(models, X, X_goal, out.rounds[-1], cfg, kinematics) if cfg.keep_plan and out.rounds else None
+        keep = cfg.keep_plan and method in KEEPING_METHODS and bool(out.rounds)
+        kept = keep_rest(models, X, X_goal, out.rounds[-1], cfg, kinematics) if keep else None
         if kept is not None and kept.solved:
             result = kept
         else:
             result = (planner or plan)(method, models, X, X_goal, cfg, **extra)
-            if kept is not None:  # what trying to keep the last plan cost belongs to this round
-                result.timings["total"] += kept.timings["total"]
-                result.timings["keep"] = kept.timings["total"]
+            if kept is not None:
+                _absorb(result, kept)
         out.rounds.append(result)
         if on_round is not None:
             on_round(r, result)
@@ -672,6 +678,22 @@ def plan_closed_loop(method: str, models: Models, X_init, X_goal,
         if last:
             out.reason = f"executed the plan of round {r} to its end (no replanning rounds left)"
     return out
+
+
+def _absorb(result: PlanResult, attempt: PlanResult) -> None:
+    """Count a failed `keep_rest` attempt in the round that planned anew: its time (`timings["keep"]`,
+    and in the total), reasons, full refinements and kinematic rejections."""
+    for stage in ("total", "feasibility", "refine"):
+        if stage in attempt.timings:
+            result.timings[stage] = result.timings.get(stage, 0.0) + attempt.timings[stage]
+    result.timings["keep"] = attempt.timings["total"]
+    result.reasons[:0] = attempt.reasons
+    result.refinements[:0] = attempt.refinements
+    if attempt.rejected is not None:
+        rejected = result.rejected if result.rejected is not None else {1: Counter(), 2: Counter()}
+        for level, counts in attempt.rejected.items():
+            rejected.setdefault(level, Counter()).update(counts)
+        result.rejected = rejected
 
 
 def keep_rest(models: Models, X: np.ndarray, X_goal: np.ndarray, last: PlanResult, cfg: PlanConfig,
