@@ -101,10 +101,10 @@ class PlanConfig:
     def __post_init__(self) -> None:
         if self.backend not in SYMBOLIC_BACKENDS:
             raise UserError(f"symbolic backend must be one of {', '.join(SYMBOLIC_BACKENDS)}, got {self.backend!r}")
-        for name in ("tau_verify", "eps", "symbolic_time_limit") + (("level1_confident",) if self.level1_confident
-                                                                      is not None else ()):
-            if not getattr(self, name) > 0:
-                raise UserError(f"PlanConfig.{name} must be positive, got {getattr(self, name)}")
+        for name in ("tau_verify", "eps", "symbolic_time_limit", "level1_confident"):
+            value = getattr(self, name)
+            if value is not None and not value > 0:  # level1_confident may be None (the paper's rule)
+                raise UserError(f"PlanConfig.{name} must be positive, got {value}")
         if self.n_domains < 1:
             raise UserError(f"the number of sampled domains must be at least 1, got {self.n_domains}")
         if self.focus_from is not None and self.focus_from < 1:

@@ -130,6 +130,7 @@ def goal_oriented_actions(X: np.ndarray, X_goal: np.ndarray, misplaced: float = 
     and it differs), itself."""
     wrong = misplaced_objects(X, X_goal, misplaced, eps)
     n, rows = len(X), []
+    points = X[:, None, :2] + _RELEASE_SHIFTS[None]  # (n, 5, 2) release points of every object
     for i in wrong:
         targets = [int(i)]
         if n > 1:
@@ -138,11 +139,11 @@ def goal_oriented_actions(X: np.ndarray, X_goal: np.ndarray, misplaced: float = 
             closest = int(np.argmin(dist))
             targets.insert(0, closest)
             if release_targets:
-                points = X[:, None, :2] + _RELEASE_SHIFTS[None]  # (n, 5, 2) release points
                 reach = np.linalg.norm(points - X_goal[i, :2], axis=2).min(axis=1)
                 reach[i] = np.inf
-                if int(np.argmin(reach)) != closest:
-                    targets.insert(1, int(np.argmin(reach)))
+                best = int(np.argmin(reach))
+                if best != closest:
+                    targets.insert(1, best)
         for j in targets:
             rows.append(np.column_stack([np.full(9, i), _PAIRS[:, 0], np.full(9, j), _PAIRS[:, 1]]))
     return np.concatenate(rows).astype(np.int64) if rows else np.zeros((0, 4), np.int64)
