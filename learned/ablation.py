@@ -5,14 +5,18 @@ fresh model per activation (seed + r, which also draws the validation split from
 data), keeps its best-by-validation weights, and reports the mean effect error (cm) on the test
 split. `ablation_run` is one (activation, run), so that a caller can run the cells in parallel and
 resume them one by one (`tamp reproduce`); `ablation_cell` reads a cell as it stands, without training
-(a finished run, or the best model so far of a run still training); `summarize_ablation` makes the table.
+(a finished run, or the best model so far of a run still training); `summarize_ablation` makes the table;
+`finish_ablation` completes a table whose finished runs are known only from its JSON (their models gone).
 """
 from __future__ import annotations
 
 import json
+import math
 import platform
 from collections.abc import Sequence
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import replace
+from multiprocessing import get_context
 from pathlib import Path
 from typing import Any
 
@@ -22,7 +26,7 @@ import torch
 from .checkpoint import load_model, read_checkpoint
 from .dataset import Transitions, atomic_write_bytes, load_transitions
 from .model import ACTIVATIONS, ModelConfig
-from .train import TrainConfig, evaluate, last_path, split_indices, train_model, train_options
+from .train import TrainConfig, evaluate, last_path, prepare, split_indices, train_model, train_options
 
 LABELS = {"gumbel_sigmoid": "Gumbel-Sigmoid", "tanh": "Tanh", "none": "No activation",
           "sigmoid": "Sigmoid"}
@@ -110,7 +114,7 @@ def summarize_ablation(runs: Sequence[dict[str, Any]], source: str, train: Train
                         "mean_cm": float(np.mean(errs)) if errs else None,
                         "std_cm": float(np.std(errs, ddof=1)) if len(errs) > 1 else 0.0,
                         "runs_cm": errs, "val_cm": [r["val_cm"] for r in done],
-                        "epochs": [r.get("epochs") for r in done],
+                        "epochs": [r.get("epochs") for r in done], "run_ids": [r["run"] for r in done],
                         "in_progress": [{"run": r["run"], "epochs": r.get("epochs"), "test_cm": r["test_cm"],
                                          "val_cm": r["val_cm"]} for r in mine if not r.get("finished", True)]}
     first = runs[0]
@@ -175,6 +179,111 @@ def summarize_ablation_dir(data: "str | Path | Transitions", out_dir: str | Path
     if not cells:
         raise ValueError(f"{out_dir}: no Table I run has begun there (no models/<activation>-run<k>.pt)")
     summary = summarize_ablation(cells, source, train, base)
+    write_ablation_report(summary, out_dir)
+    return summary
+
+
+def read_table(path: str | Path) -> dict[str, Any]:
+    """A Table I JSON (`write_ablation_report`'s ablation.json); ValueError naming the file and what is
+    missing when it is not one."""
+    path = Path(path)
+    try:
+        table = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise ValueError(f"no file {path}") from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+        raise ValueError(f"{path}: not a readable JSON file ({e})") from None
+    need = ("epochs", "seed", "num_train_val", "num_test", "zero_effect_cm", "config", "training", "activations")
+    missing = [k for k in need if not isinstance(table, dict) or k not in table]
+    if not missing and (not isinstance(table["activations"], dict) or not all(
+            isinstance(r, dict) and all(isinstance(r.get(f), list) for f in ("runs_cm", "val_cm", "epochs"))
+            for r in table["activations"].values())):
+        missing = ["activations.<name>.{runs_cm, val_cm, epochs}"]
+    if missing:
+        raise ValueError(f"{path}: not a Table I of `tamp ablate-activations` (missing {', '.join(missing)})")
+    return table
+
+
+def finished_runs(table: dict[str, Any]) -> list[dict[str, Any]]:
+    """The finished runs of a Table I JSON (`summarize_ablation`'s output), as `ablation_run` results.
+    A table written before runs were numbered in it (no `run_ids`) numbered them 0, 1, ... leaving out
+    the runs it lists as still training."""
+    out = []
+    for act, row in table["activations"].items():
+        busy = {p["run"] for p in row.get("in_progress", [])}
+        ids = row.get("run_ids") or [r for r in range(len(row["runs_cm"]) + len(busy)) if r not in busy]
+        out += [{"activation": act, "run": run, "test_cm": cm, "val_cm": val, "finished": True, "epochs": ep,
+                 "zero_cm": table["zero_effect_cm"], "num_train_val": table["num_train_val"],
+                 "num_test": table["num_test"]}
+                for run, cm, val, ep in zip(ids, row["runs_cm"], row["val_cm"], row["epochs"])]
+    return out
+
+
+def _same_settings(table: dict[str, Any], fresh: dict[str, Any]) -> list[str]:
+    """The fields in which a Table I JSON differs from one made now (`fresh`, of one trained cell's
+    settings): the training, the model, the epochs and seed, and the split (sizes and zero-effect
+    error, which fingerprint the data)."""
+    diffs = [f"{k}: {table.get(k)!r} in the table, {fresh[k]!r} here"
+             for k in ("epochs", "max_steps", "seed", "num_train_val", "num_test", "config", "training")
+             if table.get(k) != fresh[k]]
+    if not math.isclose(table.get("zero_effect_cm", -1.0), fresh["zero_effect_cm"], rel_tol=1e-6):
+        diffs.append(f"zero-effect error: {table.get('zero_effect_cm')} cm in the table, "
+                     f"{fresh['zero_effect_cm']} cm on these data (not the data it was made from)")
+    return diffs
+
+
+def _zero_effect_cm(data: Transitions) -> float:
+    """Mean distance (cm) the real objects of `data` move: the error of predicting no motion, as
+    `evaluate` reports it (zero_cm), without a model."""
+    t = prepare(data)
+    return 100 * float(t["absolute"].norm(dim=-1)[t["mask"]].sum()) / int(t["mask"].sum())
+
+
+def _finish_cell(data: str, activation: str, run: int, train: TrainConfig, config: ModelConfig,
+                 test_fraction: float, out_dir: str) -> dict[str, Any]:
+    """One cell for `finish_ablation`'s process pool (one torch thread), resumed if it began before."""
+    torch.set_num_threads(1)
+    return ablation_run(data, activation, run, train, config=config, test_fraction=test_fraction,
+                        out_dir=out_dir, resume=True)
+
+
+def finish_ablation(data: str | Path, table: dict[str, Any], out_dir: str | Path, runs: int, *,
+                    train: TrainConfig, config: ModelConfig | None = None, test_fraction: float = 0.2,
+                    workers: int = 1, progress: bool = True) -> dict[str, Any]:
+    """Complete Table I `table` (an ablation.json) to `runs` runs per activation: its finished runs are
+    kept as it lists them, every other run (still training when it was written, or never begun) is
+    trained in `out_dir` (`ablation_run`, resumed if it began there; `workers` at a time, one torch
+    thread each), and the whole table is written there. For a table whose models are gone: the same
+    seeds give the same runs. ValueError if the table was made with other settings or other data."""
+    data = str(data)
+    transitions, _, base = _inputs(data, PAPER_ORDER, config)
+    kept = finished_runs(table)
+    todo = [(a, r) for a in table["activations"] for r in range(runs)
+            if not any(k["activation"] == a and k["run"] == r for k in kept)]
+    probe = _splits(transitions, 0, train, test_fraction)
+    fresh = summarize_ablation([{"activation": "none", "run": 0, "test_cm": 0.0, "val_cm": 0.0,
+                                 "zero_cm": _zero_effect_cm(probe[2]),
+                                 "num_train_val": len(probe[0]) + len(probe[1]), "num_test": len(probe[2])}],
+                               data, train, base)
+    diffs = _same_settings(table, fresh)
+    if diffs:
+        raise ValueError("the table was made with other settings or data than these: " + "; ".join(diffs))
+    del transitions, probe
+    if progress:
+        print(f"Table I: {len(kept)} finished run(s) kept; training {len(todo)}: "
+              + ", ".join(f"{a} run {r}" for a, r in todo), flush=True)
+    trained = []
+    if todo:
+        with ProcessPoolExecutor(max_workers=max(1, min(workers, len(todo))),
+                                 mp_context=get_context("spawn")) as pool:
+            jobs = [pool.submit(_finish_cell, data, a, r, train, base, test_fraction, str(out_dir)) for a, r in todo]
+            for job in jobs:
+                trained.append(job.result())
+                if progress:
+                    t = trained[-1]
+                    print(f"  {t['activation']} run {t['run']}: {t['test_cm']:.3f} cm after {t['epochs']} epochs"
+                          + ("" if t["finished"] else " (unfinished: run again to resume)"), flush=True)
+    summary = summarize_ablation(kept + trained, data, train, base)
     write_ablation_report(summary, out_dir)
     return summary
 

@@ -87,3 +87,15 @@ def test_ablation_summary_of_an_empty_folder_is_a_clear_error(tiny_dataset, tmp_
                  "--summarize"]) == 2
     err = capsys.readouterr().err
     assert "--summarize" in err and "no Table I run has begun" in err and "Traceback" not in err
+
+
+def test_finishing_a_file_that_is_not_a_table_is_a_clear_error(tiny_dataset, tmp_path, capsys):
+    base = ["ablate-activations", "--data", str(tiny_dataset), "--out-dir", str(tmp_path / "out"), "--finish"]
+    (tmp_path / "rows.json").write_text('{"activations": {}}')
+    assert main(base + [str(tmp_path / "rows.json")]) == 2
+    err = capsys.readouterr().err
+    assert "--finish" in err and "not a Table I" in err and "epochs" in err and "Traceback" not in err
+    assert main(base + [str(tmp_path / "missing.json")]) == 2
+    assert "no file" in capsys.readouterr().err
+    assert main(base + [str(tmp_path / "rows.json"), "--summarize"]) == 2
+    assert "without --summarize" in capsys.readouterr().err

@@ -72,3 +72,40 @@ def test_table_i_so_far_averages_the_finished_runs_and_lists_those_still_trainin
         summarize_ablation_dir(data_dir, out, 2, activations=("sigmoid",), train=replace(train, lr=1e-2), config=cfg)
     with pytest.raises(ValueError, match="no Table I run has begun"):
         summarize_ablation_dir(data_dir, tmp_path / "empty", 2, train=train, config=cfg)
+
+
+def test_finishing_a_table_whose_models_are_gone_trains_only_its_missing_runs(tmp_path):
+    """`tamp ablate-activations --finish`: a table written while a run was still training (its models
+    since lost) is completed by training that run alone; the finished runs keep the table's figures, and
+    the trained run is the one a full ablation would have made (same seed, same split)."""
+    from learned.ablation import finish_ablation, read_table
+
+    data_dir = write_synthetic_dataset(tmp_path / "ds", 300, seed=4, shard_size=128)
+    cfg = ModelConfig(hidden=16, d_msg=8, d_z=4, heads=2)
+    train = TrainConfig(epochs=3, lr=1e-3, patience_epochs=50)
+    first = tmp_path / "first"
+    for r in range(2):
+        ablation_run(data_dir, "tanh", r, train, config=cfg, out_dir=first)
+    ablation_run(data_dir, "sigmoid", 0, train, config=cfg, out_dir=first)
+    ablation_run(data_dir, "sigmoid", 1, replace(train, time_limit_s=1e-9), config=cfg, out_dir=first)
+    old = summarize_ablation_dir(data_dir, first, 2, activations=("tanh", "sigmoid"), train=train, config=cfg)
+    assert not old["complete"] and old["activations"]["sigmoid"]["in_progress"][0]["run"] == 1
+    table = read_table(first / "ablation.json")
+    for row in table["activations"].values():  # as written before runs were numbered in the table
+        del row["run_ids"]
+
+    done = finish_ablation(data_dir, table, tmp_path / "second", 2, train=train, config=cfg, progress=False)
+    assert done["complete"] and not (tmp_path / "second" / "models" / "tanh-run0.pt").exists()
+    assert done["activations"]["tanh"]["runs_cm"] == old["activations"]["tanh"]["runs_cm"]
+    sig = done["activations"]["sigmoid"]
+    assert sig["run_ids"] == [0, 1] and sig["runs_cm"][0] == old["activations"]["sigmoid"]["runs_cm"][0]
+    alone = ablation_run(data_dir, "sigmoid", 1, train, config=cfg, out_dir=tmp_path / "alone")
+    assert sig["runs_cm"][1] == pytest.approx(alone["test_cm"]) and sig["epochs"][1] == alone["epochs"] == 3
+    assert json.loads((tmp_path / "second" / "ablation.json").read_text()) == done
+
+    with pytest.raises(ValueError, match="lr"):  # other settings than the table's
+        finish_ablation(data_dir, table, tmp_path / "third", 2, train=replace(train, lr=2e-3), config=cfg,
+                        progress=False)
+    other = write_synthetic_dataset(tmp_path / "ds2", 300, seed=5, shard_size=128)
+    with pytest.raises(ValueError, match="zero-effect"):  # other data of the same size
+        finish_ablation(other, table, tmp_path / "third", 2, train=train, config=cfg, progress=False)

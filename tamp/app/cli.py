@@ -195,7 +195,19 @@ def cmd_ablate(args: argparse.Namespace) -> int:
     from learned import ablate_activations, format_ablation_markdown, summarize_ablation_dir
 
     check_output_dir(args.out_dir, "--out-dir")
-    if args.summarize:
+    if args.finish is not None and (args.summarize or args.resume):
+        raise UserError("--finish trains the runs its table lacks (resuming them in --out-dir): "
+                        "give it without --summarize and --resume")
+    if args.finish is not None:
+        from learned.ablation import finish_ablation, read_table
+
+        try:
+            table = read_table(args.finish)
+            result = finish_ablation(args.data, table, args.out_dir, args.runs, train=_train_config(args),
+                                     workers=args.workers)
+        except ValueError as e:
+            raise UserError(f"--finish {args.finish}: {e}") from e
+    elif args.summarize:
         try:
             result = summarize_ablation_dir(args.data, args.out_dir, args.runs, train=_train_config(args))
         except ValueError as e:
@@ -420,6 +432,14 @@ def build_parser() -> argparse.ArgumentParser:
                    "averaged; a run still training is listed with its best model so far). Give the flags the runs "
                    "were trained with; `tamp reproduce --scale paper` keeps its runs in OUT/ablation, trained with "
                    "--epochs 4000 --lr 0.0008 --precision bfloat16")
+    p.add_argument("--finish", type=Path, default=None, metavar="ABLATION_JSON",
+                   help="complete this table (an ablation.json) to --runs runs per activation: its finished runs "
+                   "are kept as it lists them, the others (still training when it was written, or missing) are "
+                   "trained in --out-dir, resuming there. For a table whose models are gone, e.g. "
+                   "results/paper-scale/ablation.json with --data from `tamp collect --samples 160000 --seed 0`; "
+                   "the settings must be the table's (checked)")
+    p.add_argument("--workers", type=positive_int, default=1,
+                   help="with --finish: runs trained at a time, one process and one torch thread each (default 1)")
     _add_train_arguments(p)
     p.set_defaults(func=cmd_ablate)
 
