@@ -6,7 +6,7 @@ import sys
 from pathlib import Path
 
 from evaluation.methods import SYMBOLIC_BACKENDS
-from tamp.app.args import check_output_file, non_negative_int, positive_int
+from tamp.app.args import check_output_dir, check_output_file, non_negative_int, positive_int
 from tamp.app.parallel import add_arguments as add_parallel_arguments
 from tamp.app.plan_command import add_planner_arguments
 from tamp.app.problem import PROTOCOLS
@@ -144,6 +144,19 @@ def cmd_compare(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_pool(args: argparse.Namespace) -> int:
+    """Several evaluations as one results directory, one run per problem set."""
+    from .pool import pool
+
+    check_output_dir(args.out, "OUT")
+    report = pool(args.out, args.sources)
+    for r in report.runs:
+        runs = ", ".join(f"{old} -> {new}" for old, new in r["runs"].items())
+        print(f"{r['source']}: {r['rows']} rows, run {runs}")
+    print(f"{report.rows} rows pooled in {report.out}; `tamp report {report.out}` reports them together")
+    return 0
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     """Add this package's subcommands to the `tamp` parser."""
     p = sub.add_parser(
@@ -233,6 +246,21 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("after", type=Path, help="results directory of the change, on the same problem set")
     p.add_argument("--out", type=Path, default=None, help="write the Markdown here instead of printing it")
     p.set_defaults(func=cmd_compare)
+
+    p = sub.add_parser(
+        "pool",
+        help="several evaluations (e.g. two seeds' problem sets) as one results directory, one run per set",
+        description="Pool the rows of `tamp evaluate` results directories made with the same models and "
+        "settings (checked in their meta.json) into OUT: the sources' runs become runs 0, 1, ... in the order "
+        "given, and each problem is named r{run}-NAME, as `tamp problems --runs` names them. `tamp report OUT` "
+        "then gives every table over all the sets, with mean ± std over runs; `tamp compare` pairs two pooled "
+        "directories made from the same problem sets in the same order. Reads rows.jsonl or rows.jsonl.gz; "
+        "writes OUT/rows.jsonl and OUT/meta.json, never over existing ones.",
+    )
+    p.add_argument("out", type=Path, help="new results directory for the pooled rows")
+    p.add_argument("sources", type=Path, nargs="+", metavar="RESULTS_DIR",
+                   help="two or more --out directories of `tamp evaluate` (or shipped results folders)")
+    p.set_defaults(func=cmd_pool)
 
     p = sub.add_parser(
         "reproduce",
