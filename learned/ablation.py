@@ -249,12 +249,14 @@ def _finish_cell(data: str, activation: str, run: int, train: TrainConfig, confi
 
 def finish_ablation(data: str | Path, table: dict[str, Any], out_dir: str | Path, runs: int, *,
                     train: TrainConfig, config: ModelConfig | None = None, test_fraction: float = 0.2,
-                    workers: int = 1, progress: bool = True) -> dict[str, Any]:
+                    workers: int = 1, progress: bool = True, summarize: bool = False) -> dict[str, Any]:
     """Complete Table I `table` (an ablation.json) to `runs` runs per activation: its finished runs are
     kept as it lists them, every other run (still training when it was written, or never begun) is
     trained in `out_dir` (`ablation_run`, resumed if it began there; `workers` at a time, one torch
     thread each), and the whole table is written there. For a table whose models are gone: the same
-    seeds give the same runs. ValueError if the table was made with other settings or other data."""
+    seeds give the same runs. With `summarize` nothing is trained: those runs are read as they stand
+    in `out_dir` (`ablation_cell`; a run not begun there keeps the table's entry), e.g. while another
+    process trains them. ValueError if the table was made with other settings or other data."""
     data = str(data)
     transitions, _, base = _inputs(data, PAPER_ORDER, config)
     kept = finished_runs(table)
@@ -268,6 +270,8 @@ def finish_ablation(data: str | Path, table: dict[str, Any], out_dir: str | Path
     diffs = _same_settings(table, fresh)
     if diffs:
         raise ValueError("the table was made with other settings or data than these: " + "; ".join(diffs))
+    if summarize:
+        return _finish_summary(transitions, data, table, kept, todo, out_dir, train, base, test_fraction)
     del transitions, probe
     if progress:
         print(f"Table I: {len(kept)} finished run(s) kept; training {len(todo)}: "
@@ -284,6 +288,25 @@ def finish_ablation(data: str | Path, table: dict[str, Any], out_dir: str | Path
                     print(f"  {t['activation']} run {t['run']}: {t['test_cm']:.3f} cm after {t['epochs']} epochs"
                           + ("" if t["finished"] else " (unfinished: run again to resume)"), flush=True)
     summary = summarize_ablation(kept + trained, data, train, base)
+    write_ablation_report(summary, out_dir)
+    return summary
+
+
+def _finish_summary(transitions: Transitions, source: str, table: dict[str, Any], kept: list[dict[str, Any]],
+                    todo: list[tuple[str, int]], out_dir: str | Path, train: TrainConfig, config: ModelConfig,
+                    test_fraction: float) -> dict[str, Any]:
+    """`finish_ablation(summarize=True)`: the table with the runs it lacks as they stand in `out_dir`."""
+    cells = []
+    for act, run in todo:
+        cell = ablation_cell(transitions, act, run, train, out_dir, config=config, test_fraction=test_fraction)
+        if cell is None:  # not begun here: the table's own entry of a run still training, if any
+            cell = next(({"activation": act, "run": run, "test_cm": p["test_cm"], "val_cm": p["val_cm"],
+                          "epochs": p.get("epochs"), "finished": False, "zero_cm": table["zero_effect_cm"],
+                          "num_train_val": table["num_train_val"], "num_test": table["num_test"]}
+                         for p in table["activations"].get(act, {}).get("in_progress", []) if p["run"] == run), None)
+        if cell is not None:
+            cells.append(cell)
+    summary = summarize_ablation(kept + cells, source, train, config)
     write_ablation_report(summary, out_dir)
     return summary
 

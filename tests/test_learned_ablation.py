@@ -94,7 +94,13 @@ def test_finishing_a_table_whose_models_are_gone_trains_only_its_missing_runs(tm
     for row in table["activations"].values():  # as written before runs were numbered in the table
         del row["run_ids"]
 
+    # --summarize before any training: the run still training keeps the table's entry
+    so_far = finish_ablation(data_dir, table, tmp_path / "second", 2, train=train, config=cfg, summarize=True)
+    assert not so_far["complete"] and so_far["activations"]["sigmoid"]["in_progress"] == \
+        old["activations"]["sigmoid"]["in_progress"]
     done = finish_ablation(data_dir, table, tmp_path / "second", 2, train=train, config=cfg, progress=False)
+    assert finish_ablation(data_dir, table, tmp_path / "second", 2, train=train, config=cfg,
+                           summarize=True)["activations"] == done["activations"]  # read back, not retrained
     assert done["complete"] and not (tmp_path / "second" / "models" / "tanh-run0.pt").exists()
     assert done["activations"]["tanh"]["runs_cm"] == old["activations"]["tanh"]["runs_cm"]
     sig = done["activations"]["sigmoid"]

@@ -195,16 +195,15 @@ def cmd_ablate(args: argparse.Namespace) -> int:
     from learned import ablate_activations, format_ablation_markdown, summarize_ablation_dir
 
     check_output_dir(args.out_dir, "--out-dir")
-    if args.finish is not None and (args.summarize or args.resume):
-        raise UserError("--finish trains the runs its table lacks (resuming them in --out-dir): "
-                        "give it without --summarize and --resume")
+    if args.finish is not None and args.resume:
+        raise UserError("--finish resumes the runs its table lacks in --out-dir by itself: give it without --resume")
     if args.finish is not None:
         from learned.ablation import finish_ablation, read_table
 
         try:
             table = read_table(args.finish)
             result = finish_ablation(args.data, table, args.out_dir, args.runs, train=_train_config(args),
-                                     workers=args.workers)
+                                     workers=args.workers, summarize=args.summarize)
         except ValueError as e:
             raise UserError(f"--finish {args.finish}: {e}") from e
     elif args.summarize:
@@ -437,7 +436,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "are kept as it lists them, the others (still training when it was written, or missing) are "
                    "trained in --out-dir, resuming there. For a table whose models are gone, e.g. "
                    "results/paper-scale/ablation.json with --data from `tamp collect --samples 160000 --seed 0`; "
-                   "the settings must be the table's (checked)")
+                   "the settings must be the table's (checked). With --summarize: train nothing, write the "
+                   "table with those runs as they stand in --out-dir")
     p.add_argument("--workers", type=positive_int, default=1,
                    help="with --finish: runs trained at a time, one process and one torch thread each (default 1)")
     _add_train_arguments(p)
