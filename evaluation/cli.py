@@ -257,7 +257,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "directories made from the same problem sets in the same order. Reads rows.jsonl or rows.jsonl.gz; "
         "writes OUT/rows.jsonl and OUT/meta.json, never over existing ones.",
     )
-    p.add_argument("out", type=Path, help="new results directory for the pooled rows")
+    p.add_argument("out", type=Path, metavar="OUT", help="new results directory for the pooled rows")
     p.add_argument("sources", type=Path, nargs="+", metavar="RESULTS_DIR",
                    help="two or more --out directories of `tamp evaluate` (or shipped results folders)")
     p.set_defaults(func=cmd_pool)
