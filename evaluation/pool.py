@@ -20,6 +20,7 @@ from tamp.errors import UserError
 from tamp.records import atomic_write_text
 
 from .compare import load_rows
+from .report import read_json_object
 from .run import META_NAME, ROWS_NAME
 
 SAME = ("model_files", "config")  # meta.json fields every pooled source must share
@@ -38,13 +39,7 @@ def _meta(directory: Path) -> dict:
     if not path.is_file():
         raise UserError(f"{directory}: no {META_NAME} (pooling checks that every evaluation used the same models "
                         "and settings; give the --out directories of `tamp evaluate`)")
-    try:
-        meta = json.loads(path.read_text())
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as error:
-        raise UserError(f"{path}: not a readable JSON file ({error})") from None
-    if not isinstance(meta, dict):
-        raise UserError(f"{path}: expected a JSON object")
-    return meta
+    return read_json_object(path, "the evaluation's meta.json")
 
 
 def pool(out: str | Path, sources: Sequence[str | Path]) -> PoolReport:

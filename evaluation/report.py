@@ -152,7 +152,8 @@ def _check_row(path: Path, i: int, row: dict) -> None:
         raise UserError(f"{path}, line {i}: field 'refine_time_s' must be a list of seconds")
 
 
-def _read_json(path: Path, what: str) -> dict:
+def read_json_object(path: Path, what: str) -> dict:
+    """The JSON object in `path` (`what` it should be, for the error); UserError when it is not one."""
     try:
         data = json.loads(path.read_text())
     except json.JSONDecodeError as error:
@@ -176,7 +177,7 @@ def _read_symbols(path: Path) -> list[dict]:
 
 def load_ablation(path: Path) -> dict:
     """The JSON of `tamp ablate-activations` (`learned.ablation`); a ValueError names the file and field."""
-    data = _read_json(path, "the output of `tamp ablate-activations`")
+    data = read_json_object(path, "the output of `tamp ablate-activations`")
     acts = data.get("activations")
     if not isinstance(acts, dict) or not acts:
         raise UserError(f"{path}: field 'activations' must be an object of activation -> results")
@@ -1035,7 +1036,7 @@ def write_report(results_dir: Path, ablation: Path | None = None) -> Path:
     if not rows:
         raise UserError(f"{rows_path}: every row is an error row ({len(errors)}); nothing to report")
     meta_path = results_dir / "meta.json"
-    meta = _read_json(meta_path, "the evaluation's meta.json") if meta_path.is_file() else None
+    meta = read_json_object(meta_path, "the evaluation's meta.json") if meta_path.is_file() else None
     if ablation is not None and not Path(ablation).is_file():
         raise UserError(f"{ablation}: no such ablation file")
     ablation_path = Path(ablation) if ablation is not None else results_dir / "ablation.json"
