@@ -82,6 +82,15 @@ class Transitions:
         """All arrays as torch tensors (shared memory with numpy where possible)."""
         return {k: torch.from_numpy(np.ascontiguousarray(v)) for k, v in self.arrays().items()}
 
+    def padded(self, n_max: int) -> "Transitions":
+        """The same transitions padded with absent objects to ``n_max`` (at least this one's)."""
+        if n_max < self.n_max:
+            raise ValueError(f"cannot pad transitions of {self.n_max} objects down to {n_max}")
+        extra = ((0, 0), (0, n_max - self.n_max))
+        return Transitions(X=np.pad(self.X, extra + ((0, 0),)), X_next=np.pad(self.X_next, extra + ((0, 0),)),
+                           mask=np.pad(self.mask, extra), action=self.action, n=self.n, grasped=self.grasped,
+                           status=self.status, meta={**self.meta, "n_max": n_max}, skipped=list(self.skipped))
+
     @staticmethod
     def concatenate(parts: Sequence["Transitions"], meta: dict | None = None) -> "Transitions":
         if not parts:
@@ -341,13 +350,41 @@ def read_shard(path: str | Path, n_max: int | None = None,
     return Transitions(**{k: arrays[k] for k in KEYS})
 
 
-def load_transitions(directory: str | Path, skip_corrupt: bool = False) -> Transitions:
-    """Read and validate every shard of a dataset directory.
+def load_transitions(source: "str | Path | Sequence[str | Path]", skip_corrupt: bool = False) -> Transitions:
+    """Read and validate every shard of a dataset directory, or of several.
 
+    Several directories (datasets of one world collected apart, e.g. with other ``--objects``) are
+    concatenated in the order given and padded to the largest ``n_max``; their world and outcome codes
+    must agree, and ``meta["sources"]`` lists each one's path, seed, object counts and size.
     A bad shard raises ShardError (a ValueError naming the file); with ``skip_corrupt`` it is
     skipped with a warning and listed in ``.skipped`` instead.
     """
-    directory = Path(directory)
+    if isinstance(source, (str, Path)):
+        return _load_directory(Path(source), skip_corrupt)
+    directories = [Path(d) for d in source]
+    if not directories:
+        raise ValueError("no dataset directory given")
+    if len(directories) == 1:
+        return _load_directory(directories[0], skip_corrupt)
+    if len({d.resolve() for d in directories}) < len(directories):
+        raise ValueError(f"a dataset directory is given twice: {', '.join(map(str, directories))}")
+    parts = [_load_directory(d, skip_corrupt) for d in directories]
+    for d, part in zip(directories[1:], parts[1:]):
+        for key in ("format", "world_config", "status_codes"):
+            if part.meta.get(key) != parts[0].meta.get(key):
+                raise ValueError(f"{d}: its {key} differs from {directories[0]}'s: datasets of different "
+                                 "worlds cannot be combined")
+    n_max = max(p.n_max for p in parts)
+    sources = [{"path": str(d), "seed": p.meta.get("seed"), "n_max": p.n_max, "samples": len(p),
+                "objects": p.meta.get("collection", {}).get("objects")} for d, p in zip(directories, parts)]
+    meta = {k: v for k, v in parts[0].meta.items() if k not in ("collection", "seed")}
+    out = Transitions.concatenate([p.padded(n_max) for p in parts], {**meta, "n_max": n_max, "sources": sources})
+    out.skipped = [s for p in parts for s in p.skipped]
+    return out
+
+
+def _load_directory(directory: Path, skip_corrupt: bool) -> Transitions:
+    """The transitions of one dataset directory (see `load_transitions`)."""
     meta = read_meta(directory)
     status_values = sorted(meta["status_codes"].values())
     parts, skipped = [], []

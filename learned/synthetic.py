@@ -115,9 +115,9 @@ def generate(num_samples: int, seed: int = 0, n_choices=(2, 3, 4), n_max: int = 
 
 
 def write_synthetic_dataset(directory: str | Path, num_samples: int, seed: int = 0,
-                            shard_size: int = 1000, n_max: int = 4) -> Path:
+                            shard_size: int = 1000, n_max: int = 4, n_choices=(2, 3, 4)) -> Path:
     """Write a toy dataset in the on-disk format (exercises the same writer as the collector)."""
-    data = generate(num_samples, seed, n_max=n_max)
+    data = generate(num_samples, seed, n_choices, n_max=n_max)
     with DatasetWriter(directory, n_max=n_max, seed=seed, status_codes=STATUS_CODES,
                        world_config={"synthetic": True, "noise_m": 0.002},
                        shard_size=shard_size) as w:

@@ -32,6 +32,7 @@ from __future__ import annotations
 import copy
 import math
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from enum import Enum
 from pathlib import Path
@@ -139,10 +140,12 @@ class TrainResult:
         return self.stop_reason is not StopReason.TIME_LIMIT
 
 
-def train_options(train: TrainConfig, num_train: int, num_val: int) -> dict[str, Any]:
+def train_options(train: TrainConfig, num_train: int, num_val: int, init: str | Path | None = None
+                  ) -> dict[str, Any]:
     """The settings of `train` that change a run's result, as its checkpoints record them: a run resumes
     only under the same ones. The defaults are left out, so that older runs stay resumable."""
-    return {"batch_size": train.batch_size, "lr": train.lr, "val_fraction": train.val_fraction,
+    return {**({"init": str(init)} if init is not None else {}),
+            "batch_size": train.batch_size, "lr": train.lr, "val_fraction": train.val_fraction,
             "seed": train.seed, "num_train": num_train, "num_val": num_val,
             **({"only_moved": True} if train.only_moved else {}),
             **({"precision": train.precision} if train.precision != "float32" else {}),
@@ -231,10 +234,11 @@ class _Plateau:
             self.ref_cm, self.epoch = val_cm, epoch
 
 
-def train_model(data: "str | Path | Transitions", config: ModelConfig | None = None,
+def train_model(data: "str | Path | Sequence[str | Path] | Transitions", config: ModelConfig | None = None,
                 train: TrainConfig | None = None, out_path: str | Path | None = None, *,
-                val_data: Transitions | None = None, resume: bool = False, progress: bool = True) -> TrainResult:
-    """Train an EffectModel on a dataset directory or in-memory Transitions.
+                val_data: Transitions | None = None, resume: bool = False, progress: bool = True,
+                init: str | Path | None = None) -> TrainResult:
+    """Train an EffectModel on a dataset directory (or several: `load_transitions`) or in-memory Transitions.
 
     Validation data is ``val_data`` if given, else a seeded ``val_fraction`` split of ``data``.
     Validates after every epoch (and when ``max_steps`` stops training early), keeps the best
@@ -248,6 +252,9 @@ def train_model(data: "str | Path | Transitions", config: ModelConfig | None = N
     ``only_moved`` keeps the transitions that moved their picked block (`effects.moved_picks`),
     in training and validation alike: what the Symbolic Model learns its symbols from.
     `train` (default `TrainConfig()`, the paper's settings) says how; the names above are its fields.
+    ``init`` (a checkpoint) fine-tunes: training starts from its weights and input normalisation instead
+    of random ones, with its network settings (``config``, if given, must agree) and the data's object
+    limit, e.g. the bundled 2-4 block models on data that adds 5 and 6 blocks.
     """
     train = train or TrainConfig()
     if train.threads:
@@ -265,16 +272,26 @@ def train_model(data: "str | Path | Transitions", config: ModelConfig | None = N
         data, val_data = data.subset(train_idx), data.subset(val_idx)
     if len(val_data) == 0:
         raise ValueError("empty validation split")
+    initial = None if init is None else model_from_payload(read_checkpoint(init), init)
+    if initial is not None:
+        own = {**initial.config.to_dict(), "n_max": data.n_max}
+        given = own if config is None else {**config.to_dict(), "n_max": data.n_max}
+        if given != own:
+            differ = ", ".join(f"{k} {given[k]!r} (its {own[k]!r})" for k in own if given[k] != own[k])
+            raise ValueError(f"{init}: the network to fine-tune has other settings than asked for: {differ}")
+        config = ModelConfig.from_dict(own)
     config = config or ModelConfig(n_max=data.n_max)
     if data.n_max > config.n_max:
         raise ValueError(f"dataset n_max {data.n_max} exceeds model n_max {config.n_max}")
-    options = train_options(train, len(data), len(val_data))
+    options = train_options(train, len(data), len(val_data), init)
     tr, va = prepare(data), prepare(val_data)
 
     torch.manual_seed(train.seed)
     model = EffectModel(config)
     stats = normalisation(tr)
     model.set_normalisation(**stats)
+    if initial is not None:  # its weights and normalisation buffers
+        model.load_state_dict(initial.state_dict())
     opt = torch.optim.Adam(model.parameters(), lr=train.lr)
     epoch0, step, history = 0, 0, []
     best: dict[str, Any] = {"val_cm": float("inf"), "epoch": -1, "state": None}

@@ -99,3 +99,28 @@ def test_finishing_a_file_that_is_not_a_table_is_a_clear_error(tiny_dataset, tmp
     assert "no file" in capsys.readouterr().err
     assert main(base + [str(tmp_path / "rows.json"), "--resume"]) == 2
     assert "without --resume" in capsys.readouterr().err
+
+
+def test_train_on_two_datasets_then_fine_tune_on_more_blocks(tiny_dataset, tmp_path, capsys):
+    """The way to models for 6 blocks: a dataset of 2-4 and one of 5-6 blocks, trained on together;
+    --init fine-tunes a model, keeping its network, and the object limit becomes the data's."""
+    from learned.synthetic import write_synthetic_dataset
+
+    more = write_synthetic_dataset(tmp_path / "more", 200, seed=5, n_max=6, n_choices=(5, 6))
+    base = ["--epochs", "1", "--batch-size", "64", "--precision", "float32"]
+    small = tmp_path / "small.pt"
+    assert main(["train", "--data", str(tiny_dataset), "--bottleneck", "gumbel_sigmoid", "--d-z", "2",
+                 "--out", str(small), *base]) == 0
+    assert learned.load_model(small).config.n_max == 4
+    tuned = tmp_path / "tuned.pt"
+    assert main(["train", "--data", str(tiny_dataset), str(more), "--init", str(small), "--out", str(tuned),
+                 *base]) == 0
+    config = learned.load_model(tuned).config
+    assert (config.n_max, config.activation, config.d_z) == (6, "gumbel_sigmoid", 2)
+    assert main(["domain", "--model", str(tuned), "--data", str(tiny_dataset), str(more),
+                 "--out", str(tmp_path / "domain")]) == 0
+    assert "operators from 800 transitions" in capsys.readouterr().out
+    assert main(["train", "--data", str(more), "--init", str(small), "--bottleneck", "sigmoid",
+                 "--out", str(tmp_path / "x.pt"), *base]) == 2
+    err = capsys.readouterr().err
+    assert "small.pt" in err and "activation 'sigmoid' (its 'gumbel_sigmoid')" in err and "Traceback" not in err

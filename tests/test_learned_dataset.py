@@ -150,3 +150,36 @@ def test_arm_displacement_by_hand():
     Xn, grasped, status = apply_action(X, (0, 1, 1, 0))  # beside the small cube: nothing
     assert grasped == -1 and status == STATUS_CODES["nothing_grasped"]
     np.testing.assert_array_equal(Xn, X)
+
+
+def test_several_directories_load_as_one_dataset_padded_to_the_largest_scenes(tmp_path):
+    """Data collected apart (2-4 blocks, then 5-6) trains together: concatenated in the order given,
+    the smaller scenes padded with absent objects, each source recorded."""
+    small = write_synthetic_dataset(tmp_path / "small", 120, seed=1, shard_size=50)
+    large = write_synthetic_dataset(tmp_path / "large", 80, seed=2, shard_size=50, n_max=6, n_choices=(5, 6))
+    a, b = load_transitions(small), load_transitions(large)
+    both = load_transitions([small, large])
+    assert len(both) == 200 and both.n_max == 6 and both.meta["n_max"] == 6
+    np.testing.assert_array_equal(both.X[:120, :4], a.X)
+    assert not both.mask[:120, 4:].any() and not both.X[:120, 4:].any()
+    np.testing.assert_array_equal(both.X[120:], b.X)
+    np.testing.assert_array_equal(both.action, np.concatenate([a.action, b.action]))
+    assert set(np.unique(both.n)) == {2, 3, 4, 5, 6}
+    assert [(s["path"], s["seed"], s["n_max"], s["samples"]) for s in both.meta["sources"]] == [
+        (str(small), 1, 4, 120), (str(large), 2, 6, 80)]
+    assert "seed" not in both.meta  # no single seed describes the whole
+    assert len(load_transitions([small])) == 120
+
+
+def test_several_directories_must_be_distinct_and_of_one_world(tmp_path):
+    small = write_synthetic_dataset(tmp_path / "small", 60, seed=1)
+    with pytest.raises(ValueError, match="given twice"):
+        load_transitions([small, tmp_path / "small"])
+    other = write_synthetic_dataset(tmp_path / "other", 60, seed=2)
+    meta = json.loads((other / "meta.json").read_text())
+    meta["world_config"]["noise_m"] = 0.01
+    (other / "meta.json").write_text(json.dumps(meta))
+    with pytest.raises(ValueError, match=r"other: its world_config differs .*small's"):
+        load_transitions([small, other])
+    with pytest.raises(ValueError, match="no dataset directory"):
+        load_transitions([])

@@ -16,9 +16,10 @@ def untimed(history: list[dict]) -> list[dict]:
     return [{k: v for k, v in h.items() if k != "elapsed_s"} for h in history]
 
 
-def fit(data, config, epochs, out, *, resume=False, progress=False, **train):
+def fit(data, config, epochs, out, *, resume=False, progress=False, init=None, **train):
     """train_model with TrainConfig(epochs=epochs, **train)."""
-    return train_model(data, config, TrainConfig(epochs=epochs, **train), out, resume=resume, progress=progress)
+    return train_model(data, config, TrainConfig(epochs=epochs, **train), out, resume=resume, progress=progress,
+                       init=init)
 
 
 @pytest.fixture(scope="module")
@@ -193,3 +194,31 @@ def test_train_settings_scale_the_learning_rate_with_the_batch():
     assert (paper.batch_size, paper.lr, paper.precision, paper.patience_epochs) == (128, 1e-4, "float32", None)
     with pytest.raises(ValueError, match="precision"):
         TrainConfig(precision="float16")
+
+
+def test_fine_tuning_starts_from_the_checkpoint_and_takes_the_data_object_limit(trained, tmp_path):
+    """init=: the weights and input normalisation are the checkpoint's (not recomputed from the new
+    data), the network settings too, and the object limit is the new data's (here 6)."""
+    _, ckpt, _ = trained
+    start = load_model(ckpt)
+    more = generate(300, seed=7, n_choices=(5, 6), n_max=6)
+    tuned = train_model(more, None, TrainConfig(epochs=1, lr=1e-12, seed=0), tmp_path / "t.pt", progress=False,
+                        init=ckpt).model
+    assert tuned.config.n_max == 6 and {**tuned.config.to_dict(), "n_max": 4} == start.config.to_dict()
+    for name, value in start.state_dict().items():  # lr 1e-12: nothing moved
+        torch.testing.assert_close(tuned.state_dict()[name], value, atol=1e-6, rtol=0, msg=name)
+    fresh = train_model(more, ModelConfig(n_max=6, **SMALL), TrainConfig(epochs=1, lr=1e-12, seed=0), tmp_path / "f.pt",
+                        progress=False).model
+    assert not torch.equal(fresh.pos_mean, start.pos_mean)  # a fresh run's normalisation is the data's
+    assert evaluate(tuned, more)["err_cm"] < evaluate(fresh, more)["err_cm"]
+    assert load_model(tmp_path / "t.pt").config.n_max == 6
+
+
+def test_fine_tuning_refuses_other_network_settings_and_resumes_only_from_the_same_start(trained, tmp_path):
+    _, ckpt, data = trained
+    with pytest.raises(ValueError, match=r"other settings than asked for: activation 'gumbel_sigmoid' \(its 'sigmoid'\)"):
+        train_model(data, ModelConfig(**{**SMALL, "activation": "gumbel_sigmoid"}), TrainConfig(epochs=1),
+                    tmp_path / "m.pt", progress=False, init=ckpt)
+    fit(data, None, 1, tmp_path / "m.pt", init=ckpt)
+    with pytest.raises(ValueError, match="refusing to resume"):
+        fit(data, ModelConfig(**SMALL), 2, tmp_path / "m.pt", resume=True)

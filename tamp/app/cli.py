@@ -143,18 +143,25 @@ def cmd_dataset_stats(args: argparse.Namespace) -> int:
 
 def cmd_train(args: argparse.Namespace) -> int:
     """Train a Symbolic (gumbel_sigmoid) or Dynamics (sigmoid) Model on a dataset."""
-    from learned import ModelConfig, train_model
+    from learned import ModelConfig, read_meta, train_model
     from learned.train import last_path
 
     check_output_file(args.out, "--out")
     if args.resume and not last_path(Path(args.out)).is_file():
         raise UserError(f"--resume: no training state at {last_path(Path(args.out))} to continue from "
                          "(leave out --resume to start a new training)")
-    sizes = {k: v for k, v in (("d_z", args.d_z), ("heads", args.heads)) if v is not None}
-    config = ModelConfig(activation=args.bottleneck, arm_input=not args.no_arm_input, **sizes)
+    asked = {k: v for k, v in (("activation", args.bottleneck), ("d_z", args.d_z), ("heads", args.heads),
+                               ("arm_input", False if args.no_arm_input else None)) if v is not None}
+    asked["n_max"] = max(int(read_meta(d)["n_max"]) for d in args.data)  # the object limit of the data
+    if args.init is None:
+        config = ModelConfig.from_dict(asked)
+    else:  # fine-tuning: the network of --init, which the flags given must agree with
+        from learned import load_model
+
+        config = ModelConfig.from_dict({**load_model(args.init).config.to_dict(), **asked})
     settings = _train_config(args, only_moved=args.only_moved, val_fraction=args.val_fraction,
                              time_limit_s=None if args.time_limit_min is None else 60 * args.time_limit_min)
-    result = train_model(args.data, config, settings, args.out, resume=args.resume)
+    result = train_model(args.data, config, settings, args.out, resume=args.resume, init=args.init)
     print(f"best validation effect error {result.best_val_cm:.2f} cm (epoch {result.best_epoch}) -> {result.out_path}")
     print(f"stopped: {result.stop_reason.value} after {result.epochs_reached} epochs (batch {settings.batch_size}, "
           f"lr {settings.lr:.3g}, {settings.precision})"
@@ -391,9 +398,12 @@ def build_parser() -> argparse.ArgumentParser:
         "`tamp collect`. The best checkpoint by validation error is written to --out; "
         "<out>.last.pt holds the state to resume from (--resume).",
     )
-    p.add_argument("--data", required=True, help="dataset directory (tamp collect --out)")
-    p.add_argument("--bottleneck", choices=BOTTLENECKS, default="sigmoid",
-                   help="bottleneck activation: gumbel_sigmoid = Symbolic Model, sigmoid = Dynamics Model (default)")
+    p.add_argument("--data", required=True, nargs="+", metavar="DIR",
+                   help="dataset directory (tamp collect --out); several are trained on together, e.g. one "
+                   "collected with --objects 2,3,4 and one with --objects 5,6 (same world, checked)")
+    p.add_argument("--bottleneck", choices=BOTTLENECKS, default=None,
+                   help="bottleneck activation: gumbel_sigmoid = Symbolic Model, sigmoid = Dynamics Model "
+                   "(default, or --init's)")
     p.add_argument("--epochs", type=positive_int, default=1000,
                    help="training epochs at most (default 1000; --patience usually stops earlier)")
     p.add_argument("--out", required=True, help="checkpoint file to write (e.g. models/dynamics.pt)")
@@ -406,6 +416,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="stop after the epoch that passes this wall time; the run is unfinished, --resume continues")
     p.add_argument("--val-fraction", type=fraction, default=0.1, help="validation fraction, in [0, 1) (default 0.1)")
     p.add_argument("--resume", action="store_true", help="continue from <out>.last.pt")
+    p.add_argument("--init", type=Path, default=None, metavar="CHECKPOINT",
+                   help="fine-tune: start from this model's weights and input normalisation (e.g. "
+                   "tamp/pretrained/dynamics.pt, trained on 2-4 blocks, on data with 5 and 6) instead of random "
+                   "ones; its network settings are kept (--bottleneck, --d-z, --heads, --no-arm-input must agree "
+                   "if given) and the object limit is the data's")
     p.add_argument("--no-arm-input", action="store_true",
                    help="leave the arm's pick-to-place displacement out of the action encoding, so that "
                    "positions reach the decoder only through the symbols (the Symbolic Model)")
@@ -453,7 +468,8 @@ def build_parser() -> argparse.ArgumentParser:
         "existing models directory (the bundled one by default) and of a problem.",
     )
     p.add_argument("--model", required=True, help="Symbolic Model checkpoint (tamp train --bottleneck gumbel_sigmoid)")
-    p.add_argument("--data", required=True, help="dataset directory")
+    p.add_argument("--data", required=True, nargs="+", metavar="DIR",
+                   help="dataset directory, or several (learned from together)")
     p.add_argument("--out", required=True, help="output directory")
     p.add_argument("--holdout", type=fraction, default=0.1, help="fraction of transitions held out for coverage")
     p.add_argument("--sampled", type=non_negative_int, default=0, metavar="N", help="also write N sampled PDDL domains")

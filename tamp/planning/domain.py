@@ -6,6 +6,7 @@ probabilistic) and writes domain.pddl, domain.ppddl, operators.json and stats.js
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -13,11 +14,12 @@ import numpy as np
 from tamp.errors import UserError
 
 
-def learn_domain(model_path: str | Path, data_dir: str | Path, out_dir: str | Path, holdout: float = 0.1,
-                 seed: int = 0, sampled_domains: int = 0, skip_corrupt: bool = True,
+def learn_domain(model_path: str | Path, data_dir: "str | Path | Sequence[str | Path]", out_dir: str | Path,
+                 holdout: float = 0.1, seed: int = 0, sampled_domains: int = 0, skip_corrupt: bool = True,
                  involved_only: bool = False, min_count: int = 0, min_prob: float = 0.0,
                  only_moved: bool = False, any_bottleneck: bool = False) -> dict:
-    """Write the learned domain of `model_path` on the transitions in `data_dir`; returns stats.
+    """Write the learned domain of `model_path` on the transitions in `data_dir` (a dataset directory, or
+    several learned from together: `learned.load_transitions`); returns stats.
     `only_moved`: learn from the transitions that moved their picked block alone (as the paper's
     authors do), so that failed grasps and blocked motions are not among the operators' outcomes.
     `any_bottleneck`: accept a model that is not a Symbolic Model (the Fig. 4 Sigmoid variant)."""
@@ -32,6 +34,8 @@ def learn_domain(model_path: str | Path, data_dir: str | Path, out_dir: str | Pa
     if not any_bottleneck:
         require_kind(model, "symbolic", model_path)
     data = learned.load_transitions(data_dir, skip_corrupt=skip_corrupt)
+    if not isinstance(data_dir, (str, Path)):
+        data_dir = ", ".join(map(str, data_dir))
     if only_moved:
         data = data.subset(np.flatnonzero(learned.moved_picks(data.X, data.X_next, data.action)))
     if len(data) == 0:
