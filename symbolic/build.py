@@ -10,6 +10,7 @@ import numpy as np
 
 from symbolic.atoms import check_bits
 from symbolic.dataset import make_dataset, restrict_to_involved, split_dataset
+from symbolic.lifted import max_arity as lifted_max_arity
 from symbolic.operators import coverage, filter_operators, learn_operators, load_operators, save_operators, stats
 from symbolic.pddl import write_domains
 from symbolic.sampling import write_sampled_domains
@@ -18,7 +19,8 @@ from symbolic.structs import OperatorSet, SymbolicDataset, SymbolicProblem
 
 def build_domain(unary_pre, rel_pre, actions, unary_post, rel_post, n_per_transition, out_dir,
                  holdout: float | SymbolicDataset = 0.1, seed: int = 0, min_prob: float = 0.0,
-                 sampled_domains: int = 0, involved_only: bool = False, min_count: int = 0) -> dict:
+                 sampled_domains: int = 0, involved_only: bool = False, min_count: int = 0,
+                 max_arity: int | None = None) -> dict:
     """Learn operators from symbolic transitions and write the domain files.
 
     Inputs: padded bit arrays unary (T, n_max, d_z), relations (T, K, n_max, n_max), actions (T, 4),
@@ -29,6 +31,9 @@ def build_domain(unary_pre, rel_pre, actions, unary_post, rel_post, n_per_transi
     With `involved_only`, operators mention only the objects a transition involves (picked, target,
     and those whose bits change; see `restrict_to_involved`) instead of every object in the scene.
     `min_count` and `min_prob` drop rare operators and rare effects (`filter_operators`).
+    `max_arity` (default: the most the lifted search takes, `symbolic.lifted.max_arity`) leaves out the
+    training transitions that involve more objects: no operator is learned from them, and held-out ones
+    count as not covered.
     """
     data = make_dataset(unary_pre, rel_pre, actions, unary_post, rel_post, n_per_transition)
     if involved_only:
@@ -40,6 +45,13 @@ def build_domain(unary_pre, rel_pre, actions, unary_post, rel_post, n_per_transi
         train, held = data, holdout
     else:
         train, held = split_dataset(data, float(holdout), seed)
+    limit = lifted_max_arity(data.n_unary, data.n_relations) if max_arity is None else max_arity
+    if limit < 1:
+        raise ValueError(f"max_arity must be at least 1, got {limit}")
+    over = int((train.n > limit).sum())
+    train = train.subset(np.flatnonzero(train.n <= limit))
+    if len(train) == 0:
+        raise ValueError(f"every training transition involves more than {limit} objects: raise max_arity")
     learned = learn_operators(train)
     ops = filter_operators(learned, min_count, min_prob)
     if len(ops) == 0:
@@ -51,6 +63,7 @@ def build_domain(unary_pre, rel_pre, actions, unary_post, rel_post, n_per_transi
     report = stats(ops)
     report["train_transitions"] = len(train)
     report["involved_only"] = involved_only
+    report["max_arity"] = {"limit": limit, "transitions_left_out": over}
     report["filters"] = {"min_count": min_count, "min_prob": min_prob, "operators_learned": len(learned),
                          "operators_kept": len(ops)}
     report["coverage_train"] = coverage(ops, train)

@@ -26,6 +26,16 @@ from symbolic.atoms import n_bits, object_name
 from symbolic.structs import Action, OperatorSet, PlanStep
 
 GroundAction = int  # operator * n_tuples + tuple index: sorts in ground-action order
+MAX_PRECONDITION_BITS = 58  # an operator's sub-state code and its arity tag share one int64 key
+
+
+def max_arity(n_unary: int, n_relations: int) -> int:
+    """The largest operator arity a lifted search takes: a * n_unary + n_relations * a^2 precondition
+    bits at most `MAX_PRECONDITION_BITS` (4 for the bundled 1 unary bit and 3 relations)."""
+    a = 0
+    while (a + 1) * n_unary + n_relations * (a + 1) ** 2 <= MAX_PRECONDITION_BITS:
+        a += 1
+    return a
 
 
 @dataclass(frozen=True)
@@ -90,8 +100,10 @@ class LiftedTask:
         self.deterministic = np.array(n_effects, dtype=np.int64)[self.effect_op] == 1
         allowed = [op.arity <= n if scope == "subset" else op.arity == n for op in ops.operators]
         self.arities = sorted({op.arity for op, ok in zip(ops.operators, allowed) if ok})
-        if any(a * d + K * a * a > 58 for a in self.arities):
-            raise ValueError("operators with more than 58 precondition bits are not supported")
+        if self.arities and (a := self.arities[-1]) > max_arity(d, K):
+            raise ValueError(f"operators of arity {a} ({a * d + K * a * a} precondition bits) are not "
+                             f"supported: at most arity {max_arity(d, K)} "
+                             f"({MAX_PRECONDITION_BITS} bits); learn the domain with `tamp domain --max-arity`")
         # Tuples of every arity in one table: their local bits' global positions, padded with n_bits
         # (a bit that is always 0), and the tuple's arity.
         L_max = max((a * d + K * a * a for a in self.arities), default=0)

@@ -257,3 +257,29 @@ def test_build_domain_involved_only_plans_with_fewer_operators(tmp_path):
     small = build_domain(*args, tmp_path / "small", holdout=0.2, seed=0, involved_only=True)
     assert small["involved_only"] and small["n_operators"] < full["n_operators"]
     assert small["coverage_holdout"]["matched"] >= full["coverage_holdout"]["matched"]
+
+
+def test_domains_keep_to_the_operator_size_the_lifted_search_takes(tmp_path):
+    """With 5 and 6 blocks some transitions involve more objects than the lifted search's int64 keys
+    hold (4 with the bundled 1 unary bit and 3 relations): no operator is learned from them, by default,
+    and a domain built past the limit is refused by the search with a message that says what to do."""
+    from symbolic.lifted import LiftedTask, max_arity
+
+    assert max_arity(1, 3) == 4 and max_arity(8, 4) == 2
+    data = bw.random_dataset(1500, (2, 3, 4, 5), seed=2)
+    args = (data.unary_pre, data.rel_pre, data.actions, data.unary_post, data.rel_post, data.n)
+    limit = max_arity(data.n_unary, data.n_relations)
+    assert 2 <= limit < 5
+    report = build_domain(*args, tmp_path / "default", holdout=0.2, seed=0)
+    ops = load_domain(tmp_path / "default")
+    assert max(op.arity for op in ops.operators) == limit
+    left_out = report["max_arity"]["transitions_left_out"]
+    assert report["max_arity"]["limit"] == limit and 0 < left_out < 1500
+    assert report["train_transitions"] + left_out == 1200
+    assert report["coverage_holdout"]["matched"] < 1.0  # held-out large transitions count as not covered
+    LiftedTask(ops, 5)  # takes the scene of 5
+    build_domain(*args, tmp_path / "all", holdout=0.2, seed=0, max_arity=5)
+    with pytest.raises(ValueError, match=rf"arity 5 .* at most arity {limit} .*--max-arity"):
+        LiftedTask(load_domain(tmp_path / "all"), 5)
+    with pytest.raises(ValueError, match="at least 1"):
+        build_domain(*args, tmp_path / "none", holdout=0.2, seed=0, max_arity=0)

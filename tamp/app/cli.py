@@ -277,9 +277,13 @@ def cmd_domain(args: argparse.Namespace) -> int:
     report = learn_domain(args.model, args.data, args.out, holdout=args.holdout, seed=args.seed,
                           sampled_domains=args.sampled, involved_only=args.involved_only,
                           min_count=args.min_count, min_prob=args.min_prob, only_moved=args.only_moved,
-                          any_bottleneck=args.any_bottleneck)
+                          any_bottleneck=args.any_bottleneck, max_arity=args.max_arity)
     held = report.get("coverage_holdout") or {}
     print(f"{report['n_operators']} operators from {report['transitions']} transitions -> {args.out}")
+    left_out = report["max_arity"]["transitions_left_out"]
+    if left_out:
+        print(f"  {left_out} training transitions involve more than {report['max_arity']['limit']} objects "
+              "(the most the lifted search takes): no operator learned from them")
     for key in ("effects_per_operator", "coverage_train"):
         if key in report:
             print(f"  {key}: {json.dumps(report[key])}")
@@ -481,6 +485,10 @@ def build_parser() -> argparse.ArgumentParser:
                    "motions left out, as the paper's authors do)")
     p.add_argument("--min-count", type=non_negative_int, default=0, metavar="N",
                    help="keep operators seen at least N times (default 0: all; the paper's authors: 51)")
+    p.add_argument("--max-arity", type=positive_int, default=None, metavar="A",
+                   help="learn no operator from a transition that involves more than A objects (default: the "
+                   "most the lifted search takes, 4 with 1 unary bit and 3 relations; larger ones are refused "
+                   "by the planner)")
     p.add_argument("--min-prob", type=probability, default=0.0, metavar="P",
                    help="drop effects of probability below P and renormalise (default 0; the paper's authors: 0.1)")
     p.add_argument("--any-bottleneck", action="store_true",
