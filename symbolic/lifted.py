@@ -103,7 +103,8 @@ class LiftedTask:
         if self.arities and (a := self.arities[-1]) > max_arity(d, K):
             raise ValueError(f"operators of arity {a} ({a * d + K * a * a} precondition bits) are not "
                              f"supported: at most arity {max_arity(d, K)} "
-                             f"({MAX_PRECONDITION_BITS} bits); learn the domain with `tamp domain --max-arity`")
+                             f"({MAX_PRECONDITION_BITS} bits); learn the domain again with `tamp domain`, whose "
+                             "--max-arity keeps to that limit by default")
         # Tuples of every arity in one table: their local bits' global positions, padded with n_bits
         # (a bit that is always 0), and the tuple's arity.
         L_max = max((a * d + K * a * a for a in self.arities), default=0)

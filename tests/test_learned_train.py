@@ -216,7 +216,8 @@ def test_fine_tuning_starts_from_the_checkpoint_and_takes_the_data_object_limit(
 
 def test_fine_tuning_refuses_other_network_settings_and_resumes_only_from_the_same_start(trained, tmp_path):
     _, ckpt, data = trained
-    with pytest.raises(ValueError, match=r"other settings than asked for: activation 'gumbel_sigmoid' \(its 'sigmoid'\)"):
+    differ = r"other settings than asked for: activation 'gumbel_sigmoid' \(its 'sigmoid'\)"
+    with pytest.raises(ValueError, match=differ):
         train_model(data, ModelConfig(**{**SMALL, "activation": "gumbel_sigmoid"}), TrainConfig(epochs=1),
                     tmp_path / "m.pt", progress=False, init=ckpt)
     fit(data, None, 1, tmp_path / "m.pt", init=ckpt)
