@@ -316,3 +316,23 @@ def test_a_negative_seed_is_refused_in_one_line(command, capsys, tmp_path, monke
     err = capsys.readouterr().err
     assert "argument --seed: expected an integer >= 0, got '-1'" in err and "Traceback" not in err
     assert list(tmp_path.iterdir()) == []  # nothing written
+
+
+def test_a_domain_with_operators_the_search_cannot_take_is_refused_when_the_models_load(tmp_path):
+    """A domain learned past the lifted search's operator size (`tamp domain --max-arity 5` at d_z 1, K 3)
+    would fail every problem of an evaluation; loading the models says so once, naming the file."""
+    from symbolic.build import build_domain
+    from tamp.errors import UserError
+    from tamp.planning.models import load_models
+
+    models = tmp_path / "models"
+    shutil.copytree(pretrained_dir(), models, ignore=shutil.ignore_patterns("domain"))
+    rng = np.random.default_rng(0)
+    T, n = 40, 5
+    unary, rel = rng.integers(0, 2, (T, n, 1), np.uint8), rng.integers(0, 2, (T, 3, n, n), np.uint8)
+    actions = np.stack([np.zeros(T, int), np.zeros(T, int), np.ones(T, int), np.zeros(T, int)], axis=1)
+    build_domain(unary, rel, actions, unary, rel, np.full(T, n), models / "domain", holdout=0.0, max_arity=5)
+    with pytest.raises(UserError, match=r"operators\.json has operators of arity 5, .* at most 4 .*tamp domain"):
+        load_models(models)
+    with pytest.raises(ValueError, match="every training transition involves more than 4 objects"):
+        build_domain(unary, rel, actions, unary, rel, np.full(T, n), tmp_path / "default", holdout=0.0)

@@ -110,7 +110,8 @@ def load_models(directory: str | Path, need_symbolic: bool | None = True) -> Mod
     """Load DIR/dynamics.pt, and unless `need_symbolic` is False DIR/symbolic.pt and DIR/domain/
     (None: when both are there; the continuous search needs neither, the per-step view reads symbols).
 
-    Checks that the Symbolic Model's symbol sizes (d_z, K) match the domain's; errors name the file.
+    Checks that the Symbolic Model's symbol sizes (d_z, K) match the domain's, and that the symbolic search
+    takes the domain's operators (`symbolic.lifted.max_arity`); errors name the file.
     """
     import learned
     import symbolic
@@ -138,4 +139,11 @@ def load_models(directory: str | Path, need_symbolic: bool | None = True) -> Mod
             raise UserError(f"{paths['symbolic']} has d_z={cfg.d_z}, K={cfg.heads} but the domain in "
                              f"{paths['domain'].parent} was learned with d_z={models.domain.n_unary}, "
                              f"K={models.domain.n_relations}")
+        from symbolic.lifted import max_arity
+
+        largest, limit = max((op.arity for op in models.domain.operators), default=0), max_arity(cfg.d_z, cfg.heads)
+        if largest > limit:  # the lifted search (Level 1, the per-step records) would refuse every problem
+            raise UserError(f"{paths['domain']} has operators of arity {largest}, but the symbolic search takes at "
+                            f"most {limit} with d_z={cfg.d_z}, K={cfg.heads}: learn the domain again with "
+                            "`tamp domain` (its --max-arity keeps to the limit by default)")
     return models
