@@ -36,15 +36,14 @@ def learn_domain(model_path: str | Path, data_dir: "str | Path | Sequence[str | 
     if not any_bottleneck:
         require_kind(model, "symbolic", model_path)
     data = learned.load_transitions(data_dir, skip_corrupt=skip_corrupt)
-    if not isinstance(data_dir, (str, Path)):
-        data_dir = ", ".join(map(str, data_dir))
+    source = str(data_dir) if isinstance(data_dir, (str, Path)) else ", ".join(map(str, data_dir))  # for messages
     if only_moved:
         data = data.subset(np.flatnonzero(learned.moved_picks(data.X, data.X_next, data.action)))
     if len(data) == 0:
-        raise UserError(f"{data_dir}: the dataset holds no transitions" + (" that moved their picked block"
+        raise UserError(f"{source}: the dataset holds no transitions" + (" that moved their picked block"
                                                                           if only_moved else ""))
     if data.X.shape[1] > model.config.n_max:
-        raise UserError(f"{data_dir}: scenes of up to {data.X.shape[1]} objects, but the model takes "
+        raise UserError(f"{source}: scenes of up to {data.X.shape[1]} objects, but the model takes "
                          f"at most {model.config.n_max}")
     u_pre, r_pre = model.symbols_batch(data.X, data.mask)
     u_post, r_post = model.symbols_batch(data.X_next, data.mask)
@@ -53,7 +52,7 @@ def learn_domain(model_path: str | Path, data_dir: "str | Path | Sequence[str | 
                                    involved_only=involved_only, min_count=min_count, min_prob=min_prob,
                                    max_arity=max_arity)
     report["model"] = str(model_path)
-    report["data"] = str(data_dir)
+    report["data"] = source
     report["transitions"] = int(len(data))
     report["only_moved"] = only_moved
     return report
