@@ -134,6 +134,7 @@ class EvalConfig:
                "search_time_limit_s": p.search.time_limit, "search_max_expansions": p.search.max_expansions,
                "search_confident_m": p.search.confident, "search_look_on": p.search.look_on,
                "search_release_targets": p.search.release_targets,
+               "search_max_fragility": p.search.max_fragility, "search_noise_m": p.search.noise,
                "level1_budget": p.level1_budget, "level1_time_budget_s": p.level1_time_budget,
                "level1_focus_from": p.focus_from, "level1_focus_budget": p.level1_focus_budget,
                "level1_confident_m": p.level1_confident, "level1_cut": p.level1_cut,

@@ -162,6 +162,31 @@ def test_a_verified_plan_predicted_to_miss_the_goal_waits_for_the_continuous_sea
         PlanConfig(level1_confident=0.0)
 
 
+class _FragileStub(StubModel):
+    """The stub dynamics, but every action is predicted right only from exactly X_INIT: from inputs a
+    few millimetres off, the picked object lands 10 cm off along x (`verify.fragility` is 1)."""
+
+    def predict_effect(self, X, actions):
+        e = super().predict_effect(X, actions)
+        if 0 < np.abs(np.asarray(X)[:, :2] - X_INIT[:, :2]).max() < 0.05:
+            e[np.arange(len(e)), np.asarray(actions).reshape(-1, 4)[:, 0], 0] += 0.10
+        return e
+
+
+def test_a_fragile_verified_plan_waits_for_the_continuous_search(domain):
+    stub = _FragileStub()
+    fragile = Models(dynamics=stub, symbolic=stub, domain=domain)
+    ours = plan("bilevel", fragile, X_INIT, A_ON_B, PlanConfig(n_domains=100, seed=0))
+    assert any("perturbed rollouts" in r and "kept while level 2 searches" in r for r in ours.reasons)
+    # the continuous search's goal states are as fragile: it returns its best after looking on
+    assert ours.level == 2 and ours.search.fragility_checks >= 1 and "perturbed rollouts off it" in ours.search.reason
+    blind = plan("bilevel", fragile, X_INIT, A_ON_B, PlanConfig(n_domains=100, seed=0,
+                                                                 search=SearchConfig(max_fragility=None)))
+    assert blind.level == 1 and blind.search is None
+    # the same plan with the exact stub: taken at level 1
+    assert plan("bilevel", models(domain), X_INIT, A_ON_B, PlanConfig(n_domains=100, seed=0)).level == 1
+
+
 def test_same_symbols_but_goal_elsewhere_needs_a_nonempty_plan():
     # a large bar shifted 15 cm along y: the same symbols before and after. The empty plan cannot
     # verify (X_init is 15 cm from the goal), so Level 1 asks for at least one action and finds the

@@ -12,7 +12,7 @@ import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
-from tamp.app.args import check_output_file, non_negative_int, positive_float, positive_int
+from tamp.app.args import check_output_file, fraction, non_negative_int, positive_float, positive_int
 from tamp.errors import UserError
 from tamp.planning.bilevel import METHODS, SYMBOLIC_BACKENDS, PlanConfig, PlanResult, plan, replan_rounds
 from tamp.planning.search import SearchConfig
@@ -314,6 +314,14 @@ def add_planner_arguments(p: argparse.ArgumentParser, backends: tuple[str, ...] 
     p.add_argument("--look-on", type=non_negative_int, default=default.search.look_on, metavar="EXPANSIONS",
                    help="expansions the continuous search spends looking for a goal state within --confident after "
                    f"finding one that is not (default {default.search.look_on}; 0 returns the first goal state)")
+    p.add_argument("--max-fragility", type=fraction, default=default.search.max_fragility, metavar="FRACTION",
+                   help="a plan (the continuous search's goal state, a verified Level-1 plan) is taken at once only "
+                   "if at most this fraction of its rollouts with the Dynamics Model's inputs perturbed by "
+                   f"{default.search.noise * 1000:g} mm misses the goal (default {default.search.max_fragility:g}); "
+                   "otherwise the search looks on as for a goal state beyond --confident, and Level 1's plan waits "
+                   "for the continuous search as beyond --level1-confident")
+    p.add_argument("--no-fragility", dest="max_fragility", action="store_const", const=None,
+                   help="take plans by their predicted error alone (the rule before the fragility test)")
     p.add_argument("--paper-pruning", dest="release_targets", action="store_false",
                    help="the continuous search (cfs, and bilevel's Level 2) prunes actions by the paper's rule alone: "
                    "a misplaced block goes onto the object closest to its goal or onto itself (default: also onto "
@@ -337,7 +345,7 @@ def planner_config(args: argparse.Namespace) -> PlanConfig:
                       symbolic_time_limit=args.symbolic_time_limit, feasibility=getattr(args, "feasibility", True),
                       search=SearchConfig(max_expansions=args.max_expansions, time_limit=args.time_limit,
                                           confident=args.confident, look_on=args.look_on,
-                                          release_targets=args.release_targets))
+                                          max_fragility=args.max_fragility, release_targets=args.release_targets))
 
 
 def options_from_args(args: argparse.Namespace) -> PlanOptions:

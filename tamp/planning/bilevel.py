@@ -49,6 +49,7 @@ from tamp.planning.verify import (
     TAU_VERIFY,
     Verification,
     at_goal,
+    fragility,
     goal_error,
     refine_skeleton,
     states_pair,
@@ -390,6 +391,9 @@ def plan_bilevel(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig(),
             # our extension: verified, but predicted to miss the goal
             result.reasons.append(f"level 1: its verified plan is predicted {chosen.error * 100:.1f} cm from the "
                                   f"goal (over {confident * 100:g} cm); kept while level 2 searches")
+        elif chosen is not None and confident is not None and _fragile(models, X_init, X_goal, chosen, cfg):
+            result.reasons.append(f"level 1: its verified plan misses the goal in over "
+                                  f"{cfg.search.max_fragility:.0%} of its perturbed rollouts; kept while level 2 searches")
         elif chosen is not None:
             return _take(result, chosen.actions, 1, chosen.trajectory, X_goal)
         result = _level2(models, X_init, X_goal, cfg, result, feas)  # line 16: continuous search fallback
@@ -397,6 +401,14 @@ def plan_bilevel(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig(),
             return result
         return _take(result, chosen.actions, 1, chosen.trajectory, X_goal)
     return _timed("bilevel", body)
+
+
+def _fragile(models: Models, X_init, X_goal, chosen: Verification, cfg: PlanConfig) -> bool:
+    """Whether more than cfg.search.max_fragility of the plan's perturbed rollouts miss the goal
+    (`verify.fragility`; our extension, the continuous search's test of a goal state)."""
+    limit = cfg.search.max_fragility
+    return limit is not None and bool(chosen.actions) and fragility(
+        models.require_dynamics(), X_init, X_goal, chosen.actions, cfg.eps, cfg.search.noise) > limit
 
 
 def _level1(models: Models, X_init, X_goal, cfg: PlanConfig, result: PlanResult,
@@ -548,7 +560,7 @@ def plan_bilevel_alg1(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConf
     Level 2 returns the continuous search's first goal state and prunes actions by the paper's rule."""
     paper = replace(cfg, alternatives=0, nonempty=False, feasibility=False, focus_from=None, level1_confident=None,
                     level1_cut=False,
-                    search=replace(cfg.search, look_on=0, release_targets=False))
+                    search=replace(cfg.search, look_on=0, release_targets=False, max_fragility=None))
     result = plan_bilevel(models, X_init, X_goal, paper)
     result.method = "bilevel_alg1"
     return result

@@ -25,7 +25,10 @@ Goal test at generation: every object within `eps` (5 cm) of its goal in 3-D. A 
 worst object is predicted farther than `confident` (3.5 cm) is kept as a candidate while the search
 looks on, for at most `look_on` more expansions, for one within `confident` reached with no more
 actions; then the closest candidate is returned (our extension: the Dynamics Model's plans predicted
-to end 4-5 cm from the goal failed in execution about as often as they succeeded).
+to end 4-5 cm from the goal failed in execution about as often as they succeeded). A goal state also
+needs a robust plan to end the search (`max_fragility`, our extension): at most 30 % of its rollouts
+with the model's inputs perturbed by 5 mm may miss the goal (`verify.fragility`); candidates are
+ranked by that fraction, then by predicted error.
 
 Duplicate detection:
 positions rounded to a `resolution` grid; a state is pushed again only when reached with fewer
@@ -44,7 +47,7 @@ import numpy as np
 
 from tamp.errors import UserError
 from tamp.planning.structs import OFFSET_STEP, OFFSETS
-from tamp.planning.verify import EPS_SUCCESS, DynamicsModel, states_pair
+from tamp.planning.verify import EPS_SUCCESS, DynamicsModel, fragility, states_pair
 
 _PAIRS = np.array([(g, r) for g in OFFSETS for r in OFFSETS], dtype=np.int64)  # the 9 offset pairs
 # metres: where a placed block's centre ends relative to its target object's, (r - g) * OFFSET_STEP along y
@@ -68,11 +71,17 @@ class SearchConfig:
     batched: bool = True  # one predict_effect call per expansion (False: one per action, for the benchmark)
     prune: bool = True  # goal-oriented pruning (False: all 9 n^2 actions)
     release_targets: bool = True  # also target the object whose release point is closest (False: the paper's rule)
+    max_fragility: float | None = 0.3  # a goal state ends the search at once only if at most this fraction of
+    #   its plan's perturbed rollouts miss the goal (`verify.fragility`); else it is a candidate (None: not checked)
+    noise: float = 0.005  # metres: the input perturbation of `verify.fragility`
 
     def __post_init__(self) -> None:
         if not self.time_limit > 0 or self.max_expansions < 1 or self.max_depth < 1:
             raise UserError(f"the continuous search needs a positive time limit, node limit and depth, got "
                             f"{self.time_limit} s, {self.max_expansions} nodes, depth {self.max_depth}")
+        if self.max_fragility is not None and not 0 <= self.max_fragility < 1 or not self.noise > 0:
+            raise UserError(f"the continuous search needs 0 <= max_fragility < 1 (or None) and a positive noise, "
+                            f"got {self.max_fragility} and {self.noise} m")
         if not 0 < self.confident <= self.eps or self.look_on < 0:
             raise UserError(f"the continuous search needs 0 < confident <= eps and look_on >= 0, got confident "
                             f"{self.confident} m, eps {self.eps} m, look_on {self.look_on}")
@@ -97,11 +106,12 @@ class SearchResult:
     expanded: int = 0
     generated: int = 0
     duplicates: int = 0
-    predict_calls: int = 0
+    predict_calls: int = 0  # Dynamics Model calls for successors (the fragility rollouts not counted)
     best_error: float = float("inf")  # metres: smallest max-object goal distance among generated states
     time: float = 0.0  # seconds
     rejected: Counter = field(default_factory=Counter)  # reason -> successors the feasibility check pruned
     pruned: int = 0  # successors left out as (state, action) pairs known to fail refinement
+    fragility_checks: int = 0  # goal states whose plans were rolled out perturbed (`verify.fragility`)
 
 
     @property
@@ -210,32 +220,50 @@ def continuous_search(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarr
     d0 = np.linalg.norm(X_init[:, :3] - goal, axis=1)
     out = SearchResult(SearchStatus.EXHAUSTED, None, None, "", best_error=float(d0.max(initial=0.0)))
 
+    def path(index: int) -> tuple[list[tuple], list[np.ndarray]]:
+        """The actions and the states from X_init to node `index`."""
+        plan, states = [], []
+        while index >= 0:
+            P, parent, action, _ = nodes[index]
+            states.append(full(P))
+            if action is not None:
+                plan.append(action)
+            index = parent
+        return plan[::-1], states[::-1]
+
+    def fragile(index: int) -> float:
+        """`verify.fragility` of the plan into goal node `index` (0 when not checked)."""
+        if config.max_fragility is None:
+            return 0.0
+        out.fragility_checks += 1
+        return fragility(model, X_init, X_goal, path(index)[0], config.eps, config.noise)
+
     def finish(status: SearchStatus, reason: str, index: int | None = None) -> SearchResult:
         out.status, out.reason, out.time = status, reason, time.perf_counter() - t0
         if index is not None:
-            plan, states = [], []
-            while index >= 0:
-                P, parent, action, _ = nodes[index]
-                states.append(full(P))
-                if action is not None:
-                    plan.append(action)
-                index = parent
-            out.plan, out.trajectory = plan[::-1], np.stack(states[::-1])
+            plan, states = path(index)
+            out.plan, out.trajectory = plan, np.stack(states)
         return out
 
     if np.all(d0 < config.eps):
         return finish(SearchStatus.SOLVED, "the initial state is already within eps of the goal", 0)
     best_g = {key(X_init[:, :3]): 0}
-    candidate: tuple[float, int] | None = None  # (worst object's predicted error, node) of a goal state
+    candidate: tuple[float, float, int] | None = None  # (fragility, worst object's predicted error, node)
     look_until = config.max_expansions  # expansions after which the candidate is returned
 
     def stop(status: SearchStatus, reason: str) -> SearchResult:
         """End at a limit: the candidate goal state if there is one."""
         if candidate is None:
             return finish(status, reason)
-        return finish(SearchStatus.SOLVED, f"solved: {nodes[candidate[1]][3]} actions, predicted "
-                      f"{candidate[0] * 100:.1f} cm from the goal (no goal state within "
-                      f"{config.confident * 100:g} cm after {out.expanded} expansions)", candidate[1])
+        risk, error, index = candidate
+        if config.max_fragility is None:
+            return finish(SearchStatus.SOLVED, f"solved: {nodes[index][3]} actions, predicted {error * 100:.1f} cm "
+                          f"from the goal (no goal state within {config.confident * 100:g} cm after "
+                          f"{out.expanded} expansions)", index)
+        return finish(SearchStatus.SOLVED, f"solved: {nodes[index][3]} actions, predicted {error * 100:.1f} cm "
+                      f"from the goal, {risk:.0%} of perturbed rollouts off it (no goal state within "
+                      f"{config.confident * 100:g} cm with at most {config.max_fragility:.0%} after "
+                      f"{out.expanded} expansions)", index)
 
     frontier = [(config.weight * d0.sum() / config.h_unit, d0.sum(), 0)]  # (f, h, node index)
     n_objects = len(X_init)
@@ -283,17 +311,25 @@ def continuous_search(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarr
             if reached[b] and infeasible(len(nodes) - 1):
                 nodes.pop()
                 continue
-            best_g[k] = g + 1
+            if not reached[b] or candidate is not None and g + 1 > nodes[candidate[2]][3]:
+                best_g[k] = g + 1
             if reached[b]:
-                if candidate is not None and g + 1 > nodes[candidate[1]][3]:
+                if candidate is not None and g + 1 > nodes[candidate[2]][3]:
                     continue  # a longer plan than the candidate's: more actions to go wrong
-                if worst[b] < config.confident or config.look_on == 0:
+                if config.look_on == 0:
                     return finish(SearchStatus.SOLVED, f"solved: {g + 1} actions after {out.expanded} expansions",
                                   len(nodes) - 1)
+                risk = fragile(len(nodes) - 1)
+                robust = risk <= (config.max_fragility or 0.0)
+                if worst[b] < config.confident and robust:
+                    return finish(SearchStatus.SOLVED, f"solved: {g + 1} actions after {out.expanded} expansions",
+                                  len(nodes) - 1)
+                if robust:  # a fragile goal state stays open to other actions: another grasp may reach it robustly
+                    best_g[k] = g + 1
                 if candidate is None:
                     look_until = min(look_until, out.expanded + config.look_on)
-                if candidate is None or worst[b] < candidate[0]:
-                    candidate = (float(worst[b]), len(nodes) - 1)
+                if candidate is None or (risk, float(worst[b])) < candidate[:2]:
+                    candidate = (risk, float(worst[b]), len(nodes) - 1)
                 continue  # a goal state is not expanded
             heapq.heappush(frontier, (g + 1 + config.weight * h[b], h[b], len(nodes) - 1))
     return stop(SearchStatus.EXHAUSTED, f"exhausted: every state reachable within {config.max_depth} actions "
