@@ -392,8 +392,8 @@ def plan_bilevel(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig(),
             result.reasons.append(f"level 1: its verified plan is predicted {chosen.error * 100:.1f} cm from the "
                                   f"goal (over {confident * 100:g} cm); kept while level 2 searches")
         elif chosen is not None and confident is not None and _fragile(models, X_init, X_goal, chosen, cfg):
-            result.reasons.append(f"level 1: its verified plan misses the goal in over "
-                                  f"{cfg.search.max_fragility:.0%} of its perturbed rollouts; kept while level 2 searches")
+            result.reasons.append(f"level 1: its verified plan misses the goal in over {cfg.search.max_fragility:.0%} "
+                                  "of its perturbed rollouts; kept while level 2 searches")
         elif chosen is not None:
             return _take(result, chosen.actions, 1, chosen.trajectory, X_goal)
         result = _level2(models, X_init, X_goal, cfg, result, feas)  # line 16: continuous search fallback

@@ -311,27 +311,28 @@ def continuous_search(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarr
             if reached[b] and infeasible(len(nodes) - 1):
                 nodes.pop()
                 continue
-            if not reached[b] or candidate is not None and g + 1 > nodes[candidate[2]][3]:
+            if not reached[b]:
                 best_g[k] = g + 1
-            if reached[b]:
-                if candidate is not None and g + 1 > nodes[candidate[2]][3]:
-                    continue  # a longer plan than the candidate's: more actions to go wrong
-                if config.look_on == 0:
-                    return finish(SearchStatus.SOLVED, f"solved: {g + 1} actions after {out.expanded} expansions",
-                                  len(nodes) - 1)
-                risk = fragile(len(nodes) - 1)
-                robust = risk <= (config.max_fragility or 0.0)
-                if worst[b] < config.confident and robust:
-                    return finish(SearchStatus.SOLVED, f"solved: {g + 1} actions after {out.expanded} expansions",
-                                  len(nodes) - 1)
-                if robust:  # a fragile goal state stays open to other actions: another grasp may reach it robustly
-                    best_g[k] = g + 1
-                if candidate is None:
-                    look_until = min(look_until, out.expanded + config.look_on)
-                if candidate is None or (risk, float(worst[b])) < candidate[:2]:
-                    candidate = (risk, float(worst[b]), len(nodes) - 1)
-                continue  # a goal state is not expanded
-            heapq.heappush(frontier, (g + 1 + config.weight * h[b], h[b], len(nodes) - 1))
+                heapq.heappush(frontier, (g + 1 + config.weight * h[b], h[b], len(nodes) - 1))
+                continue
+            if candidate is not None and g + 1 > nodes[candidate[2]][3]:
+                best_g[k] = g + 1
+                continue  # a goal state of a longer plan than the candidate's: more actions to go wrong
+            # a goal state (not expanded)
+            if config.look_on == 0:
+                return finish(SearchStatus.SOLVED, f"solved: {g + 1} actions after {out.expanded} expansions",
+                              len(nodes) - 1)
+            risk = fragile(len(nodes) - 1)
+            robust = risk <= (config.max_fragility or 0.0)
+            if worst[b] < config.confident and robust:
+                return finish(SearchStatus.SOLVED, f"solved: {g + 1} actions after {out.expanded} expansions",
+                              len(nodes) - 1)
+            if robust:  # a fragile goal state stays open to other actions: another grasp may reach it robustly
+                best_g[k] = g + 1
+            if candidate is None:
+                look_until = min(look_until, out.expanded + config.look_on)
+            if candidate is None or (risk, float(worst[b])) < candidate[:2]:
+                candidate = (risk, float(worst[b]), len(nodes) - 1)
     return stop(SearchStatus.EXHAUSTED, f"exhausted: every state reachable within {config.max_depth} actions "
                   f"(pruned actions, {config.resolution * 100:g} cm grid) expanded, {out.expanded} expansions; "
                   f"closest predicted state {out.best_error * 100:.1f} cm from the goal")
