@@ -345,6 +345,59 @@ def test_a_kept_level1_plan_follows_its_symbolic_path(domain):
     assert not missed.solved and not missed.kept and missed.reasons[0].startswith("keep:")
 
 
+def test_a_plan_on_course_is_kept_whatever_a_swinging_rollout_of_its_rest_says(domain, capsys):
+    """The world did what the plan predicted (within PlanConfig.on_course): the rest is kept with the plan's
+    own prediction, although the model, given the observed state, predicts the rest far off."""
+    from tamp.planning.bilevel import PlanResult, keep_rest, off_course
+    from tamp.planning.structs import PickPlace
+    from tamp.planning.verify import goal_errors
+
+    class SwingingModel(StubModel):
+        """The toy dynamics, but 20 cm off along x from any scene whose block A is off the 1 cm grid."""
+
+        def predict_effect(self, X, actions):
+            effect = super().predict_effect(X, actions)
+            if abs(X[0, 0] * 100 - round(X[0, 0] * 100)) > 1e-3:
+                effect[:, :, 0] += 0.2
+            return effect
+
+    actions = ((1, 0, 1, 1), (0, 0, 1, 0))
+    goal = execute(X_INIT, actions)
+    predicted = verify(StubModel(), X_INIT, goal, actions).trajectory
+    last = PlanResult("cfs", [PickPlace(*a) for a in actions], level=2, predicted=predicted)
+    swinging = Models(dynamics=SwingingModel(), symbolic=None, domain=None)
+
+    def observed(nudge_m):
+        X = world_step(X_INIT, actions[0])
+        X[0, 0] += nudge_m
+        return X
+
+    assert off_course(observed(0.005), last) == pytest.approx(0.005)
+    kept = keep_rest(swinging, observed(0.005), goal, last, PlanConfig())
+    assert kept.kept and kept.plan == [actions[1]] and "on course" in kept.reasons[-1]
+    assert np.array_equal(kept.predicted[0], observed(0.005)) and np.array_equal(kept.predicted[1], predicted[2])
+    assert kept.predicted_error == pytest.approx(goal_errors(predicted[-1], goal).max())
+    # the rule before: the rollout from the observed state decides, and it ends 20 cm off
+    blind = keep_rest(swinging, observed(0.005), goal, last, PlanConfig(on_course=None))
+    assert not blind.solved and blind.reasons[0].startswith("keep: the rest of the last plan is predicted 2")
+    # 2.5 cm off the plan's prediction is off course: the rollout decides again
+    off = keep_rest(swinging, observed(0.025), goal, last, PlanConfig())
+    assert not off.solved and off.reasons[0].startswith("keep: the rest of the last plan is predicted")
+    # on course, but the plan itself predicted its end beyond search.confident: the rollout decides
+    doubtful = replace(last, predicted=predicted.copy())
+    doubtful.predicted[-1, 1, 1] += 0.04  # block B 4 cm off its goal at the end of the plan
+    assert not keep_rest(swinging, observed(0.005), goal, doubtful, PlanConfig()).solved
+    # `tamp plan --replan` and `tamp demo` say why a round kept the plan
+    from tamp.app.plan_command import print_result
+
+    print_result(kept, 0.07)
+    assert "kept the rest of the last plan: on course" in capsys.readouterr().out
+    # a last plan without a prediction is never on course
+    assert off_course(observed(0.0), PlanResult("cfs", last.plan, level=2)) == float("inf")
+    with pytest.raises(UserError, match="on_course"):
+        PlanConfig(on_course=0.0)
+
+
 def test_unknown_method_is_a_clear_error(domain):
     with pytest.raises(ValueError, match="unknown planning method 'astar'"):
         plan("astar", models(domain), X_INIT, A_ON_B)
@@ -503,3 +556,17 @@ def test_a_failed_keep_is_counted_in_the_round_that_plans_again(domain):
     assert not second.kept and second.timings["keep"] > 0 and second.reasons[0].startswith("keep:")
     assert second.refinements[0]["plan"] == [list(rest)] and second.refinements[0]["failed_action"] == 0
     assert second.rejected[2]["refine_motion"] >= 1
+
+
+def test_on_course_flags():
+    import argparse
+
+    from tamp.app.plan_command import add_planner_arguments, planner_config
+
+    parser = argparse.ArgumentParser()
+    add_planner_arguments(parser)
+    assert planner_config(parser.parse_args([])).on_course == PlanConfig().on_course == 0.015
+    assert planner_config(parser.parse_args(["--on-course", "0.02"])).on_course == 0.02
+    assert planner_config(parser.parse_args(["--no-on-course"])).on_course is None
+    with pytest.raises(SystemExit):
+        parser.parse_args(["--on-course", "0"])

@@ -94,8 +94,8 @@ def print_result(result: PlanResult, tau: float, indent: str = "") -> None:
         print(f"{p}  continuous search: {s.reason}; {s.generated} successors in {s.predict_calls} model calls")
     for k, a in enumerate(result.plan or []):
         print(f"{p}  action {k}: {fmt_action(a)}")
-    for reason in result.reasons if not result.solved else []:
-        print(f"{p}  {reason}")
+    for reason in result.reasons if not result.solved else [r for r in result.reasons if r.startswith("kept")]:
+        print(f"{p}  {reason}")  # why no plan, or why the last plan was kept (on course, or its rollout)
     rejected = result.rejected_dict()
     if rejected is not None:
         for level, counts in rejected.items():
@@ -301,9 +301,18 @@ def add_planner_arguments(p: argparse.ArgumentParser, backends: tuple[str, ...] 
                    "shortens)")
     p.add_argument("--no-keep-plan", dest="keep_plan", action="store_false",
                    help="with --replan (bilevel_replan), plan again in every round, as the paper does (default, for "
-                   "bilevel and cfs: keep the rest of the last plan while, rolled out from the observed state, it "
-                   "ends within --confident of the goal and refines; bilevel_alg1 and the symbolic baselines "
-                   "always plan again)")
+                   "bilevel and cfs: keep the rest of the last plan while it refines and ends within --confident of "
+                   "the goal, as predicted when the plan is on course (--on-course), else rolled out from the "
+                   "observed state; bilevel_alg1 and the symbolic baselines always plan again)")
+    p.add_argument("--on-course", type=positive_float, default=default.on_course, metavar="METRES",
+                   help="with the kept plan (--replan): when every block of the observed state is within this "
+                   "distance of where the last plan predicted it, the plan's own prediction of the rest decides "
+                   "whether it is kept, not a new rollout from the observed state: the world did what the plan "
+                   "expected, and the model's rollouts swing under millimetre changes "
+                   f"(default {default.on_course:g} m)")
+    p.add_argument("--no-on-course", dest="on_course", action="store_const", const=None,
+                   help="keep the rest of the last plan only by its rollout from the observed state (the rule before "
+                   "--on-course)")
     p.add_argument("--max-expansions", type=positive_int, default=default.search.max_expansions,
                    help="continuous search node limit per planning call: it decides when the search gives up, "
                    f"whatever the machine's load (default {default.search.max_expansions}, about 10 s at 4 objects)")
@@ -341,7 +350,7 @@ def planner_config(args: argparse.Namespace) -> PlanConfig:
     return PlanConfig(n_domains=args.n_domains, backend=args.symbolic_backend, level1_budget=args.level1_budget,
                       focus_from=args.focus_from, level1_focus_budget=args.level1_focus_budget,
                       level1_confident=args.level1_confident, level1_cut=args.level1_cut,
-                      keep_plan=args.keep_plan,
+                      keep_plan=args.keep_plan, on_course=args.on_course,
                       symbolic_time_limit=args.symbolic_time_limit, feasibility=getattr(args, "feasibility", True),
                       search=SearchConfig(max_expansions=args.max_expansions, time_limit=args.time_limit,
                                           confident=args.confident, look_on=args.look_on,

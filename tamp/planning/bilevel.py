@@ -19,9 +19,10 @@ Methods (`METHODS`, same signature, same `PlanResult`):
 state is within eps of the goal. (The paper executes the whole plan first and replans only if it
 failed; with a deterministic simulator that differs only in plans that would have succeeded anyway
 being replaced, and it needs no rollback of the world, which a real robot cannot do.) Our extension
-(`PlanConfig.keep_plan`): a round first rolls the rest of the last plan out from the observed state
-and keeps it when it still ends within `search.confident` of the goal and refines; only otherwise
-does it plan again, so a plan on course is not traded for another one.
+(`PlanConfig.keep_plan`): a round keeps the rest of the last plan when it refines and still ends
+within `search.confident` of the goal: as the plan predicted, if the observed state is where the plan
+predicted it (every block within `PlanConfig.on_course`), else rolled out from the observed state;
+only otherwise does it plan again, so a plan on course is not traded for another one.
 """
 from __future__ import annotations
 
@@ -51,6 +52,7 @@ from tamp.planning.verify import (
     at_goal,
     fragility,
     goal_error,
+    goal_errors,
     refine_skeleton,
     states_pair,
     verify,
@@ -94,6 +96,12 @@ class PlanConfig:
     #   the shorter plan is predicted as close (False: the plan as verified, as the paper does)
     keep_plan: bool = True  # closed loop: keep the rest of the last plan while, rolled out from the observed
     #   state, it ends within search.confident of the goal and refines (False: plan again every round)
+    on_course: float | None = 0.015  # metres: closed loop, with keep_plan: when every block of the observed state
+    #   is within this distance (3-D) of where the last plan predicted it, the plan's own prediction of the
+    #   rest decides (within search.confident of the goal), not a new rollout: the world did what the plan
+    #   expected, and the model's prediction of the rest swings by centimetres under millimetre changes of
+    #   its input (the plan passed the fragility test against 5 mm of such noise; 1.5 cm is three of its
+    #   sigmas). None: the new rollout always decides
     # Kinematics in the planning loop (cfs, bilevel; needs a `kinematics` object passed to `plan`):
     feasibility: bool = True  # check actions on the predicted states, refine a plan before returning it
     max_refinements: int = 4  # full refinements per planning call (Level-1 candidates and Level-2 plans)
@@ -102,9 +110,9 @@ class PlanConfig:
     def __post_init__(self) -> None:
         if self.backend not in SYMBOLIC_BACKENDS:
             raise UserError(f"symbolic backend must be one of {', '.join(SYMBOLIC_BACKENDS)}, got {self.backend!r}")
-        for name in ("tau_verify", "eps", "symbolic_time_limit", "level1_confident"):
+        for name in ("tau_verify", "eps", "symbolic_time_limit", "level1_confident", "on_course"):
             value = getattr(self, name)
-            if value is not None and not value > 0:  # level1_confident may be None (the paper's rule)
+            if value is not None and not value > 0:  # level1_confident, on_course may be None
                 raise UserError(f"PlanConfig.{name} must be positive, got {value}")
         if self.n_domains < 1:
             raise UserError(f"the number of sampled domains must be at least 1, got {self.n_domains}")
@@ -708,11 +716,20 @@ def _absorb(result: PlanResult, attempt: PlanResult) -> None:
         result.rejected = rejected
 
 
+def off_course(X: np.ndarray, last: PlanResult) -> float:
+    """Metres: the largest 3-D distance of a block of the observed state X from where `last` predicted
+    it after its first action (inf when `last` has no prediction)."""
+    if last.predicted is None or len(last.predicted) < 2:
+        return float("inf")
+    return float(np.linalg.norm(np.asarray(X)[:, :3] - last.predicted[1][:, :3], axis=1).max(initial=0.0))
+
+
 def keep_rest(models: Models, X: np.ndarray, X_goal: np.ndarray, last: PlanResult, cfg: PlanConfig,
               kinematics: KinematicFeasibility | None = None) -> PlanResult:
-    """The rest of `last` (its first action executed) as this round's plan, if rolled out from the
-    observed state X it ends within cfg.search.confident of X_goal and, with `kinematics` (and
-    cfg.feasibility), passes the check and refines; else a result without a plan (its reasons say
+    """The rest of `last` (its first action executed) as this round's plan, if it ends within
+    cfg.search.confident of X_goal as `last` predicted it, when the observed state X is within
+    cfg.on_course of that prediction, or rolled out from X otherwise; and, with `kinematics` (and
+    cfg.feasibility), it passes the check and refines. Else a result without a plan (its reasons say
     why, its timings what the check cost). The plan keeps the last plan's level."""
     rest = list(last.plan or [])[1:]
     level = last.level or 2
@@ -721,11 +738,24 @@ def keep_rest(models: Models, X: np.ndarray, X_goal: np.ndarray, last: PlanResul
         if not rest:
             result.reasons.append("keep: the last plan has no actions left")
             return result
-        v = verify(models.require_dynamics(), X, X_goal, rest, cfg.tau_verify)
-        if v.error >= cfg.search.confident:
-            result.reasons.append(f"keep: the rest of the last plan is predicted {v.error * 100:.1f} cm from the "
-                                  f"goal from the observed state (over {cfg.search.confident * 100:g} cm)")
-            return result
+        v: Verification | None = None
+        deviation = off_course(X, last)
+        if cfg.on_course is not None and deviation <= cfg.on_course:  # the plan's own prediction of the rest
+            assert last.predicted is not None  # a finite deviation needs the prediction
+            trajectory = np.concatenate([np.asarray(X, dtype=float)[None], last.predicted[2:]])
+            planned = Verification(tuple(tuple(int(a) for a in action) for action in rest), trajectory,
+                                   goal_errors(trajectory[-1], X_goal), cfg.tau_verify)
+            if planned.error < cfg.search.confident:
+                v = planned
+                why = f"on course (every block within {deviation * 100:.1f} cm of its predicted place), " \
+                      f"predicted {v.error * 100:.1f} cm from the goal"
+        if v is None:  # off course: a new rollout from the observed state
+            v = verify(models.require_dynamics(), X, X_goal, rest, cfg.tau_verify)
+            if v.error >= cfg.search.confident:
+                result.reasons.append(f"keep: the rest of the last plan is predicted {v.error * 100:.1f} cm from "
+                                      f"the goal from the observed state (over {cfg.search.confident * 100:g} cm)")
+                return result
+            why = f"predicted {v.error * 100:.1f} cm from the goal from the observed state"
         feas = _Feasibility.of(kinematics, cfg, result)
         if feas is not None and (feas.plan(v.trajectory, v.actions) is not None
                                  or not feas.refine(level, v.trajectory, v.actions).success):
@@ -734,8 +764,7 @@ def keep_rest(models: Models, X: np.ndarray, X_goal: np.ndarray, last: PlanResul
         states = last.plan_states
         if states is not None:  # the same symbolic path from the next state on (the per-step view)
             result.candidates = [Candidate(v.actions, 0, 0.0, v.error, True, states=states[1:])]
-        result.reasons.append(f"kept the rest of the last plan: predicted {v.error * 100:.1f} cm from the goal "
-                              "from the observed state")
+        result.reasons.append(f"kept the rest of the last plan: {why}")
         result.kept = True
         return _take(result, v.actions, level, v.trajectory, X_goal)
 
@@ -748,5 +777,5 @@ def replan_rounds(k: int | None, default: int = 4) -> int:
 
 
 __all__: Sequence[str] = ["Candidate", "ClosedLoopResult", "METHODS", "PlanConfig", "PlanResult", "Planner",
-                          "keep_rest", "plan", "plan_bilevel", "plan_bilevel_alg1", "plan_cfs", "plan_closed_loop",
-                          "plan_deterministic", "plan_probabilistic", "replan_rounds"]
+                          "keep_rest", "off_course", "plan", "plan_bilevel", "plan_bilevel_alg1", "plan_cfs",
+                          "plan_closed_loop", "plan_deterministic", "plan_probabilistic", "replan_rounds"]
