@@ -418,7 +418,9 @@ class Evaluator:
 
         checker, out = self.checker(problem), []
         for s in loop_steps(run):
-            out += _steps(models, s.states, [s.action], s.plan_states, [s.info], checker, errors[s.index:s.index + 1])
+            (step,) = _steps(models, s.states, [s.action], s.plan_states, [s.info], checker,
+                             errors[s.index:s.index + 1])
+            out.append({**step, "round": s.round, "plan": s.plan})  # which round chose it, planned or kept
         return out
 
 

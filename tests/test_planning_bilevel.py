@@ -312,7 +312,8 @@ def test_the_closed_loop_keeps_a_plan_on_course_and_replans_one_off_course(domai
     assert kept.success and len(kept.rounds) == 2 and calls == ["cfs"]  # one planning call
     assert kept.executed == kept.rounds[0].plan and "kept the rest" in kept.rounds[1].reasons[-1]
     assert kept.rounds[1].level == kept.rounds[0].level and kept.rounds[1].kept and not kept.rounds[0].kept
-    assert kept.rounds[1].to_dict()["kept"] is True
+    assert kept.rounds[1].to_dict()["kept"] is True and kept.rounds[1].kept_by == "on course"
+    assert kept.rounds[0].kept_by is None  # planned
     calls.clear()
     fresh = plan_closed_loop("cfs", models(domain), X_INIT, goal, world(), rounds=1, planner=planner,
                              cfg=PlanConfig(keep_plan=False))
@@ -340,6 +341,7 @@ def test_a_kept_level1_plan_follows_its_symbolic_path(domain):
     assert last.plan_states == (10, 11, 12)
     kept = keep_rest(models(domain), world_step(X_INIT, actions[0]), goal, last, PlanConfig())
     assert kept.kept and kept.level == 1 and kept.plan == [actions[1]] and kept.plan_states == (11, 12)
+    assert kept.kept_by == "rollout"  # `last` holds no prediction to be on course with
     # off course (B not shifted): nothing kept, and the result says why
     missed = keep_rest(models(domain), X_INIT, goal, last, PlanConfig())
     assert not missed.solved and not missed.kept and missed.reasons[0].startswith("keep:")
@@ -374,7 +376,7 @@ def test_a_plan_on_course_is_kept_whatever_a_swinging_rollout_of_its_rest_says(d
 
     assert off_course(observed(0.005), last) == pytest.approx(0.005)
     kept = keep_rest(swinging, observed(0.005), goal, last, PlanConfig())
-    assert kept.kept and kept.plan == [actions[1]] and "on course" in kept.reasons[-1]
+    assert kept.kept and kept.kept_by == "on course" and kept.plan == [actions[1]] and "on course" in kept.reasons[-1]
     assert np.array_equal(kept.predicted[0], observed(0.005)) and np.array_equal(kept.predicted[1], predicted[2])
     assert kept.predicted_error == pytest.approx(goal_errors(predicted[-1], goal).max())
     # the rule before: the rollout from the observed state decides, and it ends 20 cm off

@@ -12,7 +12,11 @@ One record per step (JSON keys):
   per motion, the failure stage, where and why when it did not refine;
 - ``dynamics_error_m``: the Dynamics Model's error predicting the step (mean over objects, metres);
 - ``t_start``: seconds into the replay at which the step's motion begins (None: no replay, or the
-  arm never moved).
+  arm never moved);
+- closed loop only: ``round``, the planning round whose plan chose the action, and ``plan``, how
+  that round got it: "planned", "kept on course" (the last plan, judged by its own prediction) or
+  "kept by rollout" (judged by a rollout from the observed state); `tamp evaluate`'s closed-loop
+  rows carry the same two keys in their ``steps``.
 """
 from __future__ import annotations
 
@@ -83,6 +87,7 @@ class LoopStep:
 
     index: int
     round: int  # the planning round whose plan chose it
+    plan: str  # how that round got its plan: "planned", "kept on course" or "kept by rollout" (`keep_rest`)
     states: list  # the observed states before and after (before only: it could not be refined, nothing ran)
     action: tuple
     plan_states: Sequence[int] | None  # that round's plan's symbolic states from this action on (Level 1)
@@ -99,7 +104,9 @@ def loop_steps(run: ClosedLoopRun) -> Iterator[LoopStep]:
             info = run.infos[k] if k < len(run.infos) else None
             ran = info is None or info.changed
             states = result.plan_states
-            yield LoopStep(k, r, loop.states[k:k + (2 if ran else 1)], tuple(loop.executed[k]),
+            how = "planned" if result.kept_by is None else \
+                "kept on course" if result.kept_by == "on course" else "kept by rollout"
+            yield LoopStep(k, r, how, loop.states[k:k + (2 if ran else 1)], tuple(loop.executed[k]),
                            None if states is None else states[j:], info)
             k += 1
 
@@ -111,7 +118,7 @@ def closed_loop_steps(models: Models, run: ClosedLoopRun, names: BitNames) -> li
     for s in loop_steps(run):
         (step,) = symbolic_steps(models, s.states, [s.action], s.plan_states)
         records += step_records([step], [s.info], names, run.action_starts[s.index:s.index + 1])
-        records[-1].update(index=s.index, round=s.round)
+        records[-1].update(index=s.index, round=s.round, plan=s.plan)
     return records
 
 

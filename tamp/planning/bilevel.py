@@ -163,11 +163,17 @@ class PlanResult:
     # (Level 2) the check or full refinement rejected, by reason; None when it was off
     rejected: dict[int, Counter] | None = None
     refinements: list[dict] = field(default_factory=list)  # level, plan, outcome of each full refinement
-    kept: bool = False  # closed loop: the plan is the rest of the last round's (`keep_rest`), not planned anew
+    kept_by: str | None = None  # closed loop: the plan is the rest of the last round's (`keep_rest`), not planned
+    #   anew, judged by the plan's own prediction ("on course") or by a rollout from the observed state ("rollout")
 
     @property
     def solved(self) -> bool:
         return self.plan is not None
+
+    @property
+    def kept(self) -> bool:
+        """Closed loop: the plan is the rest of the last round's, not planned anew."""
+        return self.kept_by is not None
 
     @property
     def plan_states(self) -> tuple[int, ...] | None:
@@ -203,7 +209,8 @@ class PlanResult:
                                                          "duplicates", "predict_calls", "time")},
                 "timings": {k: round(v, 6) for k, v in self.timings.items()},
                 "reasons": list(self.reasons), "symbolic": self.symbolic_stats,
-                "rejected": self.rejected_dict(), "refinements": list(self.refinements), "kept": self.kept}
+                "rejected": self.rejected_dict(), "refinements": list(self.refinements), "kept": self.kept,
+                "kept_by": self.kept_by}
 
 
 # --- the levels -------------------------------------------------------------------------------
@@ -746,7 +753,7 @@ def keep_rest(models: Models, X: np.ndarray, X_goal: np.ndarray, last: PlanResul
             planned = Verification(tuple(tuple(int(a) for a in action) for action in rest), trajectory,
                                    goal_errors(trajectory[-1], X_goal), cfg.tau_verify)
             if planned.error < cfg.search.confident:
-                v = planned
+                v, kept_by = planned, "on course"
                 why = f"on course (every block within {deviation * 100:.1f} cm of its predicted place), " \
                       f"predicted {v.error * 100:.1f} cm from the goal"
         if v is None:  # off course: a new rollout from the observed state
@@ -755,7 +762,7 @@ def keep_rest(models: Models, X: np.ndarray, X_goal: np.ndarray, last: PlanResul
                 result.reasons.append(f"keep: the rest of the last plan is predicted {v.error * 100:.1f} cm from "
                                       f"the goal from the observed state (over {cfg.search.confident * 100:g} cm)")
                 return result
-            why = f"predicted {v.error * 100:.1f} cm from the goal from the observed state"
+            kept_by, why = "rollout", f"predicted {v.error * 100:.1f} cm from the goal from the observed state"
         feas = _Feasibility.of(kinematics, cfg, result)
         if feas is not None and (feas.plan(v.trajectory, v.actions) is not None
                                  or not feas.refine(level, v.trajectory, v.actions).success):
@@ -765,7 +772,7 @@ def keep_rest(models: Models, X: np.ndarray, X_goal: np.ndarray, last: PlanResul
         if states is not None:  # the same symbolic path from the next state on (the per-step view)
             result.candidates = [Candidate(v.actions, 0, 0.0, v.error, True, states=states[1:])]
         result.reasons.append(f"kept the rest of the last plan: {why}")
-        result.kept = True
+        result.kept_by = kept_by
         return _take(result, v.actions, level, v.trajectory, X_goal)
 
     return _timed(last.method, body)
