@@ -162,3 +162,22 @@ def test_tamp_refinability_studies_only_the_methods_asked_for(tmp_path, monkeypa
     assert "cfs: 1 executed steps" in out and "bilevel" not in out
     table = (tmp_path / "refinability.csv").read_text().splitlines()
     assert [line.split(",")[0] for line in table[1:]] == ["a"]
+
+
+def test_closed_loop_steps_name_their_round_and_how_it_got_its_plan(models):
+    from tamp.app.runner import ClosedLoopRun
+    from tamp.app.steps import loop_steps
+    from tamp.planning.bilevel import ClosedLoopResult, PlanResult
+    from tamp.planning.structs import PickPlace
+
+    a, b, c = PickPlace(0, 0, 1, 1), PickPlace(1, 0, 0, 0), PickPlace(0, 1, 1, 0)
+    rounds = [PlanResult("bilevel", [a, b, c], level=2), PlanResult("bilevel", [b, c], level=2, kept_by="on course"),
+              PlanResult("bilevel", [c], level=2)]
+    run = ClosedLoopRun(ClosedLoopResult(rounds, [a, b, c], [X0, ON, ON, ON], ON, 0.05))
+    steps = list(loop_steps(run))
+    assert [(s.index, s.round, s.plan) for s in steps] == [(0, 0, "planned"), (1, 1, "kept on course"),
+                                                           (2, 2, "planned")]
+    (step,) = symbolic_steps(models, steps[1].states, [steps[1].action])
+    records = step_records([step], [], BitNames.none())
+    records[0].update(round=steps[1].round, plan=steps[1].plan)
+    assert "step 1: pick 1 at +0, place on 0 at +0 (round 1: kept on course)" in format_steps(records)[0]

@@ -154,7 +154,8 @@ def format_steps(records: Sequence[dict]) -> list[str]:
     the Dynamics Model's error."""
     lines = []
     for r in records:
-        lines.append(f"step {r['index'] + 1}: {fmt_action(r['action'])}")
+        chosen = f" (round {r['round']}: {r['plan']})" if "round" in r else ""  # closed loop
+        lines.append(f"step {r['index'] + 1}: {fmt_action(r['action'])}{chosen}")
         s = r["symbols"]
         if s is not None:
             before = s["before"]
