@@ -7,7 +7,7 @@ import pytest
 
 from evaluation import refinability
 from learned.interpret import BitNames, interpret_symbols
-from tamp.app.steps import format_steps, step_records
+from tamp.app.steps import format_steps, step_panel_html, step_records
 from tamp.errors import UserError
 from tamp.planning.models import Models, load_bit_names
 from tamp.planning.steps import symbolic_steps
@@ -181,3 +181,4 @@ def test_closed_loop_steps_name_their_round_and_how_it_got_its_plan(models):
     records = step_records([step], [], BitNames.none())
     records[0].update(round=steps[1].round, plan=steps[1].plan)
     assert "step 1: pick 1 at +0, place on 0 at +0 (round 1: kept on course)" in format_steps(records)[0]
+    assert "(round 1: kept on course)" in step_panel_html(records[0], 3)  # the replay's panel says it too

@@ -235,7 +235,8 @@ def step_panel_html(record: dict, total: int) -> str:
     from html import escape
 
     r, s, m = record, record["symbols"], record["motion"]
-    out = [f"<div><b>step {r['index'] + 1} of {total}</b>: {escape(fmt_action(r['action']))}</div>"]
+    chosen = f" (round {r['round']}: {escape(r['plan'])})" if "round" in r else ""  # closed loop
+    out = [f"<div><b>step {r['index'] + 1} of {total}</b>: {escape(fmt_action(r['action']))}{chosen}</div>"]
     if s is not None:
         facts = "; ".join(s["before"]["facts"]) or "no named fact holds"
         out.append(f"<div><b>before</b>: {escape(facts)} ({len(s['before']['set'])} bits set)</div>")
