@@ -87,7 +87,7 @@ class LoopStep:
 
     index: int
     round: int  # the planning round whose plan chose it
-    plan: str  # how that round got its plan: "planned", "kept on course" or "kept by rollout" (`keep_rest`)
+    plan: str  # how that round got its plan (`PlanResult.origin`)
     states: list  # the observed states before and after (before only: it could not be refined, nothing ran)
     action: tuple
     plan_states: Sequence[int] | None  # that round's plan's symbolic states from this action on (Level 1)
@@ -104,9 +104,7 @@ def loop_steps(run: ClosedLoopRun) -> Iterator[LoopStep]:
             info = run.infos[k] if k < len(run.infos) else None
             ran = info is None or info.changed
             states = result.plan_states
-            how = "planned" if result.kept_by is None else \
-                "kept on course" if result.kept_by == "on course" else "kept by rollout"
-            yield LoopStep(k, r, how, loop.states[k:k + (2 if ran else 1)], tuple(loop.executed[k]),
+            yield LoopStep(k, r, result.origin, loop.states[k:k + (2 if ran else 1)], tuple(loop.executed[k]),
                            None if states is None else states[j:], info)
             k += 1
 
@@ -148,14 +146,18 @@ def print_steps(records: Sequence[dict], blank_line: bool = False) -> None:
             print("  " + line)
 
 
+def _chosen_by(record: dict) -> str:
+    """" (round 1: kept on course)" for a closed-loop step, else ""."""
+    return f" (round {record['round']}: {record['plan']})" if "round" in record else ""
+
+
 def format_steps(records: Sequence[dict]) -> list[str]:
     """Text lines of the records: per step the symbols before (as the facts the named bits say),
     the operator with its effect and what it expects to change, the motion, what was observed, and
     the Dynamics Model's error."""
     lines = []
     for r in records:
-        chosen = f" (round {r['round']}: {r['plan']})" if "round" in r else ""  # closed loop
-        lines.append(f"step {r['index'] + 1}: {fmt_action(r['action'])}{chosen}")
+        lines.append(f"step {r['index'] + 1}: {fmt_action(r['action'])}{_chosen_by(r)}")
         s = r["symbols"]
         if s is not None:
             before = s["before"]
@@ -235,8 +237,7 @@ def step_panel_html(record: dict, total: int) -> str:
     from html import escape
 
     r, s, m = record, record["symbols"], record["motion"]
-    chosen = f" (round {r['round']}: {escape(r['plan'])})" if "round" in r else ""  # closed loop
-    out = [f"<div><b>step {r['index'] + 1} of {total}</b>: {escape(fmt_action(r['action']))}{chosen}</div>"]
+    out = [f"<div><b>step {r['index'] + 1} of {total}</b>: {escape(fmt_action(r['action']) + _chosen_by(r))}</div>"]
     if s is not None:
         facts = "; ".join(s["before"]["facts"]) or "no named fact holds"
         out.append(f"<div><b>before</b>: {escape(facts)} ({len(s['before']['set'])} bits set)</div>")

@@ -176,6 +176,12 @@ class PlanResult:
         return self.kept_by is not None
 
     @property
+    def origin(self) -> str:
+        """How this round got its plan: "planned", "kept on course" or "kept by rollout"."""
+        return "planned" if self.kept_by is None else \
+            "kept on course" if self.kept_by == "on course" else "kept by rollout"
+
+    @property
     def plan_states(self) -> tuple[int, ...] | None:
         """The packed symbolic states a Level-1 plan passes through (None: Level 2, or a backend
         that does not give them)."""
