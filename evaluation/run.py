@@ -138,6 +138,7 @@ class EvalConfig:
                "level1_budget": p.level1_budget, "level1_time_budget_s": p.level1_time_budget,
                "level1_focus_from": p.focus_from, "level1_focus_budget": p.level1_focus_budget,
                "level1_confident_m": p.level1_confident, "level1_cut": p.level1_cut,
+               "level1_objects": p.level1_objects, "level1_serial": p.level1_serial,
                "keep_plan": p.keep_plan, "on_course_m": p.on_course,
                "symbolic_backend": p.backend, "oracle_max_plans": self.oracle_max_plans}
         if p.symbolic_time_limit != PlanConfig.symbolic_time_limit:  # older results directories stay resumable

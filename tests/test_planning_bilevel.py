@@ -14,7 +14,7 @@ sys.path.insert(0, str(Path(__file__).parent))
 from planning_stubs import StubModel, two_block_domain, world_step
 
 from tamp.errors import UserError
-from tamp.planning.bilevel import PlanConfig, plan, plan_closed_loop
+from tamp.planning.bilevel import PlanConfig, level1_scene, plan, plan_closed_loop
 from tamp.planning.models import Models
 from tamp.planning.search import SearchConfig, continuous_search
 from tamp.planning.verify import goal_error, verify
@@ -525,7 +525,7 @@ def test_from_focus_from_blocks_on_level1_gives_up_at_its_own_budget(domain):
     stacked = far.copy()
     stacked[0, :3] = far[1, :3] + [0, 0, 0.05]
     X5, G5 = np.vstack([X_INIT, far]), np.vstack([A_ON_B, stacked])  # two blocks to stack: two actions
-    cfg = PlanConfig(n_domains=20, focus_from=5, level1_focus_budget=1)
+    cfg = PlanConfig(n_domains=20, focus_from=5, level1_focus_budget=1, level1_serial=False)
     assert cfg.level1_budget_for(4) == cfg.level1_budget and cfg.level1_budget_for(5) == 1
     five = plan("bilevel", models(domain), X5, G5, cfg)
     assert five.symbolic_stats["outcomes"] == {"timeout": 20} and not five.candidates
@@ -538,6 +538,55 @@ def test_from_focus_from_blocks_on_level1_gives_up_at_its_own_budget(domain):
     assert default.level1_budget_for(6) == default.level1_focus_budget < default.level1_budget_for(4)
     with pytest.raises(UserError, match="level1_focus_budget"):
         PlanConfig(level1_focus_budget=0)
+
+
+def test_from_focus_from_blocks_on_level1_plans_in_the_scene_of_the_objects_the_goal_involves(domain):
+    """`level1_objects`: Level 1 reads the symbols of the misplaced block and its targets only, and its plan
+    names the whole scene's objects; with more objects involved than the limit, Level 2 plans at once."""
+    far = np.array([[0.45, -0.3 + 0.12 * i, 0.025, 1, 0] for i in range(3)])
+    stacked = far.copy()
+    stacked[0, :3] = far[1, :3] + [0, 0, 0.05]
+    X5, G5 = np.vstack([X_INIT, far]), np.vstack([X_INIT, stacked])  # block 2 onto block 3, the rest stay
+    cfg = PlanConfig(n_domains=20, focus_from=5)
+    assert level1_scene(X5, G5, cfg) == (2, 3) and level1_scene(X5[:4], G5[:4], cfg) is None
+    sub = plan("bilevel", models(domain), X5, G5, cfg)
+    assert sub.level == 1 and sub.symbolic_stats["objects"] == [2, 3]
+    assert [tuple(a)[::2] for a in sub.plan] == [(2, 3)] and goal_error(execute(X5, sub.plan), G5) < 0.05
+    assert all(c.objects == (2, 3) for c in sub.candidates)
+    assert sub.plan_states is None  # the sub-scene's symbols: not the whole scene's per-step view
+    whole = plan("bilevel", models(domain), X5, G5, replace(cfg, level1_objects=None))
+    assert whole.level == 1 and whole.symbolic_stats["objects"] is None and whole.plan_states is not None
+    both = np.vstack([A_ON_B, stacked])  # two stacks to build: four objects involved
+    assert level1_scene(X5, both, cfg) == (0, 1, 2, 3)
+    over = plan("bilevel", models(domain), X5, both, replace(cfg, level1_objects=3, level1_serial=False))
+    assert over.level == 2 and not over.candidates and "involves 4 objects" in over.reasons[0]
+    assert goal_error(execute(X5, over.plan), both) < 0.05
+
+
+def test_level1_plans_one_block_at_a_time_when_the_whole_goal_gives_no_plan(domain):
+    """`level1_serial`: with more objects involved than Level 1's scenes hold, it places one misplaced
+    block per stage (lowest goal first, each in its own sub-scene) and the joined plan, verified in the
+    whole scene, is Level 1's; without it, or when a stage places no block, Level 2 plans."""
+    far = np.array([[0.45, -0.3 + 0.12 * i, 0.025, 1, 0] for i in range(3)])
+    stacked = far.copy()
+    stacked[0, :3] = far[1, :3] + [0, 0, 0.05]
+    X5, G5 = np.vstack([X_INIT, far]), np.vstack([A_ON_B, stacked])  # two stacks: four objects involved
+    cfg = PlanConfig(n_domains=20, focus_from=5, level1_objects=3)
+    serial = plan("bilevel", models(domain), X5, G5, cfg)
+    assert serial.level == 1 and serial.symbolic_stats["serial"] == {"placed": [0, 2], "left": [], "error_m": 0.0}
+    assert [tuple(a)[::2] for a in serial.plan] == [(0, 1), (2, 3)] and goal_error(execute(X5, serial.plan), G5) < 0.05
+    assert serial.candidates[-1].verified and serial.plan_states is None
+    assert serial.timings["symbolic"] > 0 and serial.timings["verify"] > 0  # both stages' Level-1 time
+    assert plan("bilevel", models(domain), X5, G5, replace(cfg, level1_serial=False)).level == 2
+    bad = G5.copy()
+    bad[2, :3] = [0.75, -0.25, 0.025]  # block 2 elsewhere on the table: no learned operator moves it there
+    stuck = plan("bilevel", models(domain), X5, bad, cfg)
+    assert stuck.level != 1 and stuck.symbolic_stats["serial"] == {"placed": [0], "left": [2]}
+    assert any("one block at a time: no plan places any of blocks [2]" in r for r in stuck.reasons)
+    alg1 = plan("bilevel_alg1", models(domain), X5, G5, cfg)
+    assert alg1.level == 1 and alg1.symbolic_stats["objects"] is None
+    with pytest.raises(UserError, match="level1_objects"):
+        PlanConfig(level1_objects=1)
 
 
 def test_a_failed_keep_is_counted_in_the_round_that_plans_again(domain):

@@ -288,6 +288,19 @@ def add_planner_arguments(p: argparse.ArgumentParser, backends: tuple[str, ...] 
                    f"{default.level1_focus_budget}: about 40-60 ms; there the learned symbols rarely give a verified "
                    "plan beyond a few thousand states, and a search that ends at its budget only delays the "
                    "continuous search; the --level1-budget value gives one budget at any number of blocks)")
+    p.add_argument("--level1-objects", type=positive_int, default=default.level1_objects, metavar="N",
+                   help="with --focus-from blocks or more, Level 1 plans in the scene of the objects the goal involves "
+                   "(the blocks off their goal and those the continuous search would place them on), which the "
+                   "Symbolic Model reads as a scene of the size it was trained on, and verifies its plans in the "
+                   "whole scene; when more than N objects are involved the continuous search plans at once "
+                   f"(default {default.level1_objects}: the bundled models' 2-4 block training scenes; "
+                   "`bilevel_alg1` always plans in the whole scene)")
+    p.add_argument("--no-level1-objects", dest="level1_objects", action="store_const", const=None,
+                   help="Level 1 plans in the whole scene at any number of blocks (the rule before --level1-objects)")
+    p.add_argument("--no-level1-serial", dest="level1_serial", action="store_false",
+                   help="with --focus-from blocks or more, when Level 1 gives no verified plan it does not plan one "
+                   "misplaced block at a time (default: it does, lowest goal first, each block in the scene of the "
+                   "objects it would be placed on, and verifies the joined plan in the whole scene)")
     p.add_argument("--level1-confident", type=positive_float, default=default.level1_confident, metavar="METRES",
                    help="a verified Level-1 plan predicted farther than this from the goal (worst block) is kept "
                    "while the continuous search looks for a plan, and returned only if it finds none (default "
@@ -349,6 +362,7 @@ def planner_config(args: argparse.Namespace) -> PlanConfig:
     """The PlanConfig of the flags of `add_planner_arguments` (seed 0: callers set the problem's)."""
     return PlanConfig(n_domains=args.n_domains, backend=args.symbolic_backend, level1_budget=args.level1_budget,
                       focus_from=args.focus_from, level1_focus_budget=args.level1_focus_budget,
+                      level1_objects=args.level1_objects, level1_serial=args.level1_serial,
                       level1_confident=args.level1_confident, level1_cut=args.level1_cut,
                       keep_plan=args.keep_plan, on_course=args.on_course,
                       symbolic_time_limit=args.symbolic_time_limit, feasibility=getattr(args, "feasibility", True),

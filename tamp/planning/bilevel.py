@@ -6,7 +6,9 @@ Methods (`METHODS`, same signature, same `PlanResult`):
 - ``bilevel``        Level 1: Sigma_init, Sigma_goal from the Symbolic Model -> probabilistic symbolic
                      planning over N sampled domains -> verify candidates in decreasing frequency, return
                      the first verified one. Level 2 (no verified candidate): continuous search. With
-                     our extensions (`PlanConfig.alternatives`, `PlanConfig.nonempty`).
+                     our extensions (`PlanConfig.alternatives`, `PlanConfig.nonempty`; from 5 blocks on
+                     Level 1 plans in the sub-scene of the objects the goal involves, `level1_scene`,
+                     and else one misplaced block at a time, `_level1_serial`).
 - ``bilevel_alg1``   the paper's Algorithm 1 exactly: `bilevel` with both extensions off.
 - ``probabilistic``  the most frequent plan of the probabilistic symbolic planner, not verified
                      (its verification error is reported).
@@ -40,6 +42,7 @@ from tamp.planning.search import (
     SearchResult,
     SearchStatus,
     continuous_search,
+    goal_oriented_actions,
     misplaced_objects,
     state_key,
 )
@@ -88,6 +91,13 @@ class PlanConfig:
     level1_focus_budget: int | None = 25_000  # from focus_from objects on, Level 1's budget (None: level1_budget):
     #   there the learned symbols rarely give a verified plan beyond a few thousand states, and a search
     #   that ends at the budget only delays Level 2 (tuned on the seed-13 problems of 5 and 6 blocks)
+    level1_objects: int | None = 4  # from focus_from objects on, Level 1 plans in the sub-scene of the objects a
+    #   goal-oriented plan involves (`level1_scene`: the blocks off their goal and the objects the continuous
+    #   search's pruning would place them on), verifying its plans in the whole scene, when they are at most
+    #   this many (the scene sizes the bundled models were trained on); with more, Level 2 plans at once
+    #   (tuned on seeds 13 and 101: Level 1 gave no plan there). None: Level 1 plans in the whole scene
+    level1_serial: bool = True  # from focus_from objects on, when Level 1 gives no verified plan, it plans one
+    #   misplaced block at a time (`_level1_serial`: each stage in its block's sub-scene), lowest goal first
     level1_confident: float | None = EPS_SUCCESS  # metres: a verified Level-1 plan predicted farther than this
     #   from the goal (worst object; the paper verifies up to tau_verify) is kept while Level 2 looks for a
     #   plan, and taken only if Level 2 finds none (None: take it, as the paper does)
@@ -122,6 +132,9 @@ class PlanConfig:
             if getattr(self, name) is not None and getattr(self, name) < 1:
                 raise UserError(f"PlanConfig.{name} must be a positive number of states or None, "
                                 f"got {getattr(self, name)}")
+        if self.level1_objects is not None and self.level1_objects < 2:
+            raise UserError(f"PlanConfig.level1_objects must be at least 2 objects (a block and where it goes) "
+                            f"or None, got {self.level1_objects}")
 
     def focused(self, n_objects: int) -> bool:
         """Whether Level 1 focuses on the blocks off their goal in a scene of `n_objects` blocks."""
@@ -145,6 +158,8 @@ class Candidate:
     verified: bool | None = None
     alternative_of: int | None = None  # index of the ranked symbolic plan whose symbolic states it shares
     states: tuple[int, ...] | None = field(default=None, repr=False)  # packed symbolic states (python backend)
+    objects: tuple[int, ...] | None = None  # the sub-scene's objects the states describe, in the scene's
+    #   indices (`level1_scene`); None: all objects
 
 
 @dataclass
@@ -183,12 +198,14 @@ class PlanResult:
 
     @property
     def plan_states(self) -> tuple[int, ...] | None:
-        """The packed symbolic states a Level-1 plan passes through (None: Level 2, or a backend
-        that does not give them)."""
+        """The packed symbolic states a Level-1 plan passes through (None: Level 2, a backend that does
+        not give them, or a plan of a sub-scene (`level1_scene`), whose symbols describe a smaller scene
+        than the one the per-step view reads)."""
         if self.level != 1 or self.plan is None:
             return None
         actions = tuple(tuple(int(v) for v in a) for a in self.plan)
-        known = [(c.actions, c.states) for c in self.candidates if c.verified and c.states is not None]
+        known = [(c.actions, c.states) for c in self.candidates
+                 if c.verified and c.states is not None and c.objects is None]
         exact = next((states for plan, states in known if plan == actions), None)
         if exact is not None:
             return exact
@@ -220,29 +237,57 @@ class PlanResult:
 
 
 # --- the levels -------------------------------------------------------------------------------
-def _symbolic_problem(models: Models, X_init: np.ndarray, X_goal: np.ndarray, cfg: PlanConfig):
-    """Sigma_init, Sigma_goal; with cfg.nonempty, the empty plan is ruled out when it cannot verify
-    (X_init itself is not within tau of X_goal although the symbols may agree); from cfg.focus_from
-    objects on, plans may pick up only the blocks off their goal."""
+def level1_scene(X_init: np.ndarray, X_goal: np.ndarray, cfg: PlanConfig) -> tuple[int, ...] | None:
+    """The objects Level 1 plans over (our extension, `PlanConfig.level1_objects`); None: every object.
+
+    From cfg.focus_from objects on: the objects of the continuous search's pruned actions in X_init
+    (`search.goal_oriented_actions`), i.e. the blocks off their goal and, for each, the objects it
+    would be placed on. The Symbolic Model then sees a scene of the size it was trained on, and the
+    symbols of blocks that play no part cannot make Sigma_goal unreachable; the Dynamics Model
+    verifies the plans in the whole scene. More than cfg.level1_objects: Level 1 does not plan."""
+    if cfg.level1_objects is None or not cfg.focused(len(X_init)):
+        return None
+    actions = goal_oriented_actions(np.asarray(X_init), np.asarray(X_goal), cfg.search.misplaced, cfg.eps,
+                                    cfg.search.release_targets)
+    return tuple(int(o) for o in np.unique(actions[:, [0, 2]]))
+
+
+def _symbolic_problem(models: Models, X_init: np.ndarray, X_goal: np.ndarray, cfg: PlanConfig,
+                      objects: tuple[int, ...] | None = None):
+    """Sigma_init, Sigma_goal of the scene, or of the sub-scene of `objects` (`level1_scene`); with
+    cfg.nonempty, the empty plan is ruled out when it cannot verify (X_init itself is not within tau
+    of X_goal although the symbols may agree); from cfg.focus_from objects on, plans may pick up only
+    the blocks off their goal."""
     from symbolic import make_problem
 
     assert models.symbolic is not None  # models.symbolic_planner() checked it
-    ui, ri = models.symbolic.symbols(X_init)
-    ug, rg = models.symbolic.symbols(X_goal)
+    X_init, X_goal = np.asarray(X_init), np.asarray(X_goal)
+    scene = slice(None) if objects is None else list(objects)
+    ui, ri = models.symbolic.symbols(X_init[scene])
+    ug, rg = models.symbolic.symbols(X_goal[scene])
     movable = None
     if cfg.focused(len(X_init)):
-        movable = misplaced_objects(X_init, X_goal, cfg.search.misplaced, cfg.search.eps).tolist() or None
+        wrong = misplaced_objects(X_init, X_goal, cfg.search.misplaced, cfg.search.eps).tolist()
+        movable = (wrong if objects is None else [objects.index(o) for o in wrong]) or None
     return make_problem(ui, ri, ug, rg, nonempty=cfg.nonempty and goal_error(X_init, X_goal) >= cfg.tau_verify,
                         movable=movable)
 
 
+def _in_scene(actions, objects: tuple[int, ...] | None) -> tuple[tuple[int, int, int, int], ...]:
+    """Actions on a sub-scene's objects (indices into `objects`) as actions on the whole scene."""
+    if objects is None:
+        return tuple(tuple(int(v) for v in a) for a in actions)
+    return tuple((objects[i], g, objects[j], r) for i, g, j, r in actions)
+
+
 def _level1_plans(models: Models, X_init, X_goal, cfg: PlanConfig, result: PlanResult,
-                  probabilistic: bool = True) -> list[Candidate]:
-    """Symbolic candidates, best first; failures go to result.reasons (prefixed 'level 1')."""
+                  probabilistic: bool = True, objects: tuple[int, ...] | None = None) -> list[Candidate]:
+    """Symbolic candidates, best first, their actions on the whole scene (planned in the sub-scene of
+    `objects` if given); failures go to result.reasons (prefixed 'level 1')."""
     t = time.perf_counter()
     try:
         planner = models.symbolic_planner(cfg.backend, cfg.symbolic_time_limit)
-        problem = _symbolic_problem(models, X_init, X_goal, cfg)
+        problem = _symbolic_problem(models, X_init, X_goal, cfg, objects)
     except ValueError as error:
         result.reasons.append(f"level 1: {error}")
         return []
@@ -257,11 +302,12 @@ def _level1_plans(models: Models, X_init, X_goal, cfg: PlanConfig, result: PlanR
         result.symbolic_stats = {"n_domains": out.n_domains, "unique_plans": len(out.plans),
                                  "outcomes": dict(out.statuses), "expanded": out.expanded,
                                  "generated": out.generated, "movable": problem.movable,
+                                 "objects": None if objects is None else list(objects),
                                  "timings": {k: round(v, 6) for k, v in out.timings.items()}}
         if not out.plans:
             result.reasons.append(f"level 1: no symbolic plan in any of the {out.n_domains} sampled domains "
                                   f"(outcomes: {dict(out.statuses)})")
-        return [Candidate(tuple(tuple(a) for a in p.actions), p.count, p.probability, states=p.states)
+        return [Candidate(_in_scene(p.actions, objects), p.count, p.probability, states=p.states, objects=objects)
                 for p in out.plans]
     out = planner.plan_deterministic(problem)
     result.timings["symbolic"] = time.perf_counter() - t
@@ -407,6 +453,8 @@ def plan_bilevel(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig(),
     def body(result: PlanResult) -> PlanResult:
         feas = _Feasibility.of(kinematics, cfg, result)
         chosen = _level1(models, X_init, X_goal, cfg, result, feas)
+        if chosen is None and cfg.level1_serial and cfg.focused(len(X_init)):
+            chosen = _level1_serial(models, X_init, X_goal, cfg, result, feas)  # our extension
         confident = cfg.level1_confident
         if chosen is not None and confident is not None and chosen.error >= confident:
             # our extension: verified, but predicted to miss the goal
@@ -440,7 +488,14 @@ def _level1(models: Models, X_init, X_goal, cfg: PlanConfig, result: PlanResult,
     Our extensions live in `_Verifier.check`: a ranked plan is verified together with the plans through
     the same symbolic states (`cfg.alternatives`), and a verified plan must pass the kinematic check and
     refine (`feas`)."""
-    ranked = _level1_plans(models, X_init, X_goal, cfg, result)  # lines 5-7
+    t = time.perf_counter()
+    objects = level1_scene(X_init, X_goal, cfg)  # our extension; None: every object, as the paper plans
+    if objects is not None and cfg.level1_objects is not None and len(objects) > cfg.level1_objects:
+        result.timings["symbols"] = time.perf_counter() - t
+        result.reasons.append(f"level 1: the goal involves {len(objects)} objects, more than the "
+                              f"{cfg.level1_objects} of the scenes it plans in (--level1-objects)")
+        return None
+    ranked = _level1_plans(models, X_init, X_goal, cfg, result, objects=objects)  # lines 5-7
     verifier = _Verifier(models, X_init, X_goal, cfg, result, feas, ranked)
     for i in range(len(ranked)):  # line 9: in decreasing order of probability
         verifier.check(i)  # lines 10-11
@@ -450,6 +505,59 @@ def _level1(models: Models, X_init, X_goal, cfg: PlanConfig, result: PlanResult,
             break
     verifier.finish()
     return verifier.chosen
+
+
+def _level1_serial(models: Models, X_init, X_goal, cfg: PlanConfig, result: PlanResult,
+                   feas: _Feasibility | None) -> Verification | None:
+    """Level 1 one misplaced block at a time (our extension, `PlanConfig.level1_serial`).
+
+    Stage by stage, from the state the plan so far is predicted to reach: for the misplaced blocks
+    left, lowest goal first (a support before what stands on it), Level 1 plans to put that block at
+    its goal and leave the others where they are (its sub-scene: the block and the objects it would
+    be placed on, `level1_scene`); the first block with a plan predicted within cfg.eps of that
+    sub-goal is the stage's. The plans are joined and verified against X_goal in the whole scene,
+    then checked and refined as one. None (with the reason) when a stage places no block or the
+    joined plan does not verify. Each stage plans in a scene of two or three objects, where the
+    symbols the models learned on 2-4 blocks are reliable, however many objects the whole goal involves."""
+    X_init, X_goal = np.asarray(X_init, dtype=float), np.asarray(X_goal, dtype=float)
+    left = sorted(misplaced_objects(X_init, X_goal, cfg.search.misplaced, cfg.search.eps).tolist(),
+                  key=lambda i: (X_goal[i, 2], i))
+    if len(left) < 2:
+        return None  # one block: the sub-scene plan above was this plan
+    stage_cfg = replace(cfg, level1_serial=False)
+    X, actions, stages = X_init, [], []
+    while left:
+        for block in left:
+            sub_goal = X.copy()
+            sub_goal[block, :3] = X_goal[block, :3]
+            stage = PlanResult(result.method, None)
+            v = _level1(models, X, sub_goal, stage_cfg, stage, None)
+            for key in ("symbols", "symbolic", "verify"):  # Level 1's time, every stage counted
+                result.timings[key] = result.timings.get(key, 0.0) + stage.timings.get(key, 0.0)
+            if v is not None and v.error < cfg.eps:
+                break
+        else:
+            result.reasons.append(f"level 1, one block at a time: no plan places any of blocks {left} after "
+                                  f"{len(stages)} placed ({stages})")
+            result.symbolic_stats["serial"] = {"placed": stages, "left": left}
+            return None
+        stages.append(block)
+        left.remove(block)
+        actions += v.actions
+        X = v.trajectory[-1]
+    t = time.perf_counter()
+    whole = verify(models.require_dynamics(), X_init, X_goal, actions, cfg.tau_verify)
+    result.timings["verify"] += time.perf_counter() - t
+    result.symbolic_stats["serial"] = {"placed": stages, "left": [], "error_m": round(whole.error, 6)}
+    result.candidates.append(Candidate(whole.actions, 0, 0.0, whole.error, whole.verified))
+    if not whole.verified:
+        result.reasons.append(f"level 1, one block at a time: the joined plan is predicted {whole.error * 100:.1f} "
+                              f"cm from the goal (tau {cfg.tau_verify * 100:g} cm)")
+        return None
+    chosen = _feasible_choice([whole], feas)
+    if chosen is None:
+        result.reasons.append("level 1, one block at a time: the joined plan is not kinematically feasible")
+    return chosen
 
 
 class _Verifier:
@@ -500,14 +608,16 @@ class _Verifier:
         limit = min(self.cfg.alternatives, self.alternatives_left)
         if limit > 0 and candidate.states is not None and candidate.actions:
             planner = self.models.symbolic_planner(self.cfg.backend, self.cfg.symbolic_time_limit)
-            options = planner.skeleton_options(len(self.X_init), candidate.states)
+            objects = candidate.objects
+            options = [list(_in_scene(step, objects)) for step in planner.skeleton_options(
+                len(self.X_init) if objects is None else len(objects), candidate.states)]
             best, own = refine_skeleton(self.model, self.X_init, self.X_goal, options, limit + 1,
                                         self.cfg.tau_verify, also=candidate.actions)
             assert own is not None  # `also` given
             alternatives = [v for v in best if v.actions != candidate.actions][:limit]
             self.alternatives_left -= len(alternatives)
             group += [Candidate(v.actions, candidate.count, candidate.probability, alternative_of=i,
-                                states=candidate.states) for v in alternatives]
+                                states=candidate.states, objects=objects) for v in alternatives]
             checks = [own] + alternatives
         else:
             checks = [self._rollout(i)]
