@@ -236,6 +236,7 @@ def test_unwritable_outputs_are_refused_before_the_work(tmp_path, capsys):
     (["evaluate", "--models", "m", "--problems", "p", "--out", "o", "--time-limit", "inf"], "--time-limit"),
     (["evaluate", "--models", "m", "--problems", "p", "--out", "o", "--level1-focus-budget", "0"],
      "--level1-focus-budget"),
+    (["evaluate", "--models", "m", "--problems", "p", "--out", "o", "--level1-objects", "1"], "--level1-objects"),
 ])
 def test_numeric_flags_are_range_checked_naming_the_flag(capsys, argv, flag):
     with pytest.raises(SystemExit) as info:

@@ -26,6 +26,11 @@ def positive_int(text: str) -> int:
     return _number(text, int, lambda v: v >= 1, "a positive integer")
 
 
+def object_count(text: str) -> int:
+    """argparse type: a number of objects >= 2 (a block and an object to place it on)."""
+    return _number(text, int, lambda v: v >= 2, "an integer >= 2")
+
+
 def non_negative_int(text: str) -> int:
     """argparse type: an integer >= 0."""
     return _number(text, int, lambda v: v >= 0, "an integer >= 0")

@@ -12,7 +12,7 @@ import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
-from tamp.app.args import check_output_file, fraction, non_negative_int, positive_float, positive_int
+from tamp.app.args import check_output_file, fraction, non_negative_int, object_count, positive_float, positive_int
 from tamp.errors import UserError
 from tamp.planning.bilevel import METHODS, SYMBOLIC_BACKENDS, PlanConfig, PlanResult, plan, replan_rounds
 from tamp.planning.search import SearchConfig
@@ -288,11 +288,12 @@ def add_planner_arguments(p: argparse.ArgumentParser, backends: tuple[str, ...] 
                    f"{default.level1_focus_budget}: about 40-60 ms; there the learned symbols rarely give a verified "
                    "plan beyond a few thousand states, and a search that ends at its budget only delays the "
                    "continuous search; the --level1-budget value gives one budget at any number of blocks)")
-    p.add_argument("--level1-objects", type=positive_int, default=default.level1_objects, metavar="N",
+    p.add_argument("--level1-objects", type=object_count, default=default.level1_objects, metavar="N",
                    help="with --focus-from blocks or more, Level 1 plans in the scene of the objects the goal involves "
                    "(the blocks off their goal and those the continuous search would place them on), which the "
                    "Symbolic Model reads as a scene of the size it was trained on, and verifies its plans in the "
-                   "whole scene; when more than N objects are involved the continuous search plans at once "
+                   "whole scene; when more than N objects are involved it plans one block at a time (--no-level1-serial: "
+                   "the continuous search plans at once) "
                    f"(default {default.level1_objects}: the bundled models' 2-4 block training scenes; "
                    "`bilevel_alg1` always plans in the whole scene)")
     p.add_argument("--no-level1-objects", dest="level1_objects", action="store_const", const=None,

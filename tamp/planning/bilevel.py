@@ -94,8 +94,8 @@ class PlanConfig:
     level1_objects: int | None = 4  # from focus_from objects on, Level 1 plans in the sub-scene of the objects a
     #   goal-oriented plan involves (`level1_scene`: the blocks off their goal and the objects the continuous
     #   search's pruning would place them on), verifying its plans in the whole scene, when they are at most
-    #   this many (the scene sizes the bundled models were trained on); with more, Level 2 plans at once
-    #   (tuned on seeds 13 and 101: Level 1 gave no plan there). None: Level 1 plans in the whole scene
+    #   this many (the scene sizes the bundled models were trained on); with more, only `level1_serial`
+    #   (in the whole scene Level 1 gave no plan there: seeds 13 and 101). None: it plans in the whole scene
     level1_serial: bool = True  # from focus_from objects on, when Level 1 gives no verified plan, it plans one
     #   misplaced block at a time (`_level1_serial`: each stage in its block's sub-scene), lowest goal first
     level1_confident: float | None = EPS_SUCCESS  # metres: a verified Level-1 plan predicted farther than this
@@ -276,8 +276,8 @@ def _symbolic_problem(models: Models, X_init: np.ndarray, X_goal: np.ndarray, cf
 def _in_scene(actions, objects: tuple[int, ...] | None) -> tuple[tuple[int, int, int, int], ...]:
     """Actions on a sub-scene's objects (indices into `objects`) as actions on the whole scene."""
     if objects is None:
-        return tuple(tuple(int(v) for v in a) for a in actions)
-    return tuple((objects[i], g, objects[j], r) for i, g, j, r in actions)
+        return tuple((int(i), int(g), int(j), int(r)) for i, g, j, r in actions)
+    return tuple((objects[i], int(g), objects[j], int(r)) for i, g, j, r in actions)
 
 
 def _level1_plans(models: Models, X_init, X_goal, cfg: PlanConfig, result: PlanResult,
@@ -525,7 +525,9 @@ def _level1_serial(models: Models, X_init, X_goal, cfg: PlanConfig, result: Plan
     if len(left) < 2:
         return None  # one block: the sub-scene plan above was this plan
     stage_cfg = replace(cfg, level1_serial=False)
-    X, actions, stages = X_init, [], []
+    X = X_init
+    actions: list[tuple[int, int, int, int]] = []
+    stages: list[int] = []  # the blocks placed, in order
     while left:
         for block in left:
             sub_goal = X.copy()
