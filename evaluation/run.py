@@ -221,14 +221,14 @@ def _has_abstraction(models) -> bool:
 
 
 def _steps(models, states: Sequence[np.ndarray], actions, plan_states, infos, checker,
-           errors: Sequence[float]) -> list[dict]:
+           errors: Sequence[float], scene: Sequence[int] | None = None) -> list[dict]:
     """The `steps` of a row: each step executed or attempted (states: X_0 .. X_m observed, m executed;
     infos: the skill's StepInfo per step, or None where it did not run; errors: `dynamics_errors` of
-    the executed ones), through the abstraction."""
+    the executed ones), through the abstraction (in the plan's sub-scene `scene`, if any)."""
     from tamp.sim.refine import step_failure
 
     out = []
-    for step in symbolic_steps(models, states, actions, plan_states, errors):
+    for step in symbolic_steps(models, states, actions, plan_states, errors, scene):
         info = infos[step.index] if step.index < len(infos) else None
         reason = checker.check(states[step.index], np.asarray([step.action], dtype=np.int64))[0]
         out.append({"operator": step.operator, "probability": _round(step.probability, 4),
@@ -355,17 +355,18 @@ class Evaluator:
                   "rounds": None, "effect_error_m": None, "steps": None}
         if not result.solved:
             return fields
-        plans = [(c.actions, c.states) for c in result.candidates[:self.config.oracle_max_plans]] if method.oracle \
-            else [(result.plan, result.plan_states)]
-        for number, (actions, plan_states) in enumerate(plans, start=1):
-            outcome = self._execute(problem, actions, models, plan_states)
+        plans = [(c.actions, c.states, c.objects) for c in result.candidates[:self.config.oracle_max_plans]] \
+            if method.oracle else [(result.plan, result.plan_states, result.plan_scene)]
+        for number, (actions, plan_states, scene) in enumerate(plans, start=1):
+            outcome = self._execute(problem, actions, models, plan_states, scene)
             fields = {**fields, "plan": _actions(actions), **outcome, "executed_plans": number}
             if outcome["refined"] and outcome["final_error_m"] < self.config.eps:
                 break
         return fields
 
-    def _execute(self, problem: Problem, actions, models, plan_states=None) -> dict:
-        """Refine and execute one plan from X_init: the refinement fields of a row."""
+    def _execute(self, problem: Problem, actions, models, plan_states=None, scene=None) -> dict:
+        """Refine and execute one plan from X_init: the refinement fields of a row (`plan_states` of the
+        sub-scene `scene`: a Level-1 plan's symbolic path)."""
         if not actions:  # the planner says the initial state meets the goal: nothing to refine
             return {"refined": True, "refine_failure": None, "refine_time_s": [], "executed_actions": 0,
                     "final_error_m": _round(goal_error(problem.X_init, problem.X_goal)), "effect_error_m": [],
@@ -376,7 +377,7 @@ class Evaluator:
         states = [problem.X_init, *ex.X_after]
         errors = dynamics_errors(models, states, actions)
         steps = _steps(models, states, actions, plan_states, ex.refined.infos, self.checker(problem),
-                       errors or []) if _has_abstraction(models) else None
+                       errors or [], scene) if _has_abstraction(models) else None
         return {"refined": ex.refined.success, "refine_failure": _failure(ex.refined.failure),
                 "refine_time_s": [_round(s.refine_time) for s in ex.refined.steps],
                 "executed_actions": len(ex.refined.steps), "final_error_m": _round(ex.error),
@@ -420,7 +421,7 @@ class Evaluator:
         checker, out = self.checker(problem), []
         for s in loop_steps(run):
             (step,) = _steps(models, s.states, [s.action], s.plan_states, [s.info], checker,
-                             errors[s.index:s.index + 1])
+                             errors[s.index:s.index + 1], s.scene)
             out.append({**step, "round": s.round, "plan": s.plan})  # which round chose it, planned or kept
         return out
 

@@ -250,7 +250,7 @@ def test_the_oracle_counts_success_iff_some_plan_reaches_the_goal(monkeypatch):
         result.timings["total"], result.predicted_error = 0.01, 0.2
         return result
 
-    def fake_execute(self, problem, actions, models, plan_states=None):
+    def fake_execute(self, problem, actions, models, plan_states=None, scene=None):
         executed.append(actions)
         good = actions == ranked[2].actions
         return {"refined": True, "refine_failure": None, "refine_time_s": [0.1], "executed_actions": 1,

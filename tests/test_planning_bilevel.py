@@ -553,9 +553,10 @@ def test_from_focus_from_blocks_on_level1_plans_in_the_scene_of_the_objects_the_
     assert sub.level == 1 and sub.symbolic_stats["objects"] == [2, 3]
     assert [tuple(a)[::2] for a in sub.plan] == [(2, 3)] and goal_error(execute(X5, sub.plan), G5) < 0.05
     assert all(c.objects == (2, 3) for c in sub.candidates)
-    assert sub.plan_states is None  # the sub-scene's symbols: not the whole scene's per-step view
+    assert sub.plan_scene == (2, 3) and len(sub.plan_states) == 2  # the per-step view reads the sub-scene
     whole = plan("bilevel", models(domain), X5, G5, replace(cfg, level1_objects=None))
-    assert whole.level == 1 and whole.symbolic_stats["objects"] is None and whole.plan_states is not None
+    assert whole.level == 1 and whole.symbolic_stats["objects"] is None and whole.plan_scene is None
+    assert whole.plan_states is not None and whole.plan_states != sub.plan_states
     both = np.vstack([A_ON_B, stacked])  # two stacks to build: four objects involved
     assert level1_scene(X5, both, cfg) == (0, 1, 2, 3)
     over = plan("bilevel", models(domain), X5, both, replace(cfg, level1_objects=3, level1_serial=False))
@@ -575,7 +576,7 @@ def test_level1_plans_one_block_at_a_time_when_the_whole_goal_gives_no_plan(doma
     serial = plan("bilevel", models(domain), X5, G5, cfg)
     assert serial.level == 1 and serial.symbolic_stats["serial"] == {"placed": [0, 2], "left": [], "error_m": 0.0}
     assert [tuple(a)[::2] for a in serial.plan] == [(0, 1), (2, 3)] and goal_error(execute(X5, serial.plan), G5) < 0.05
-    assert serial.candidates[-1].verified and serial.plan_states is None
+    assert serial.candidates[-1].verified and serial.candidates[-1].stages == (0, 2) and serial.plan_states is None
     assert serial.timings["symbolic"] > 0 and serial.timings["verify"] > 0  # both stages' Level-1 time
     assert plan("bilevel", models(domain), X5, G5, replace(cfg, level1_serial=False)).level == 2
     bad = G5.copy()

@@ -79,6 +79,33 @@ def test_a_step_that_did_not_run_is_not_judged_and_the_plan_states_choose_the_ef
     assert "none of the learned operators" in "\n".join(format_steps(step_records([other], [], BitNames.none())))
 
 
+def test_a_plan_of_a_sub_scene_is_read_in_that_sub_scene_and_named_by_the_whole_scenes_objects(models):
+    """A Level-1 plan made in the sub-scene of blocks 2 and 3 of a four-block scene (`PlanResult.plan_scene`):
+    its steps read the symbols of those two blocks only, as the plan's symbolic states do, so the plan's
+    effect is recognised; the records name the blocks o2 and o3."""
+    from symbolic.atoms import pack_state
+
+    far = np.array([[0.45, -0.3, 0.025, 1, 0], [0.45, -0.18, 0.025, 1, 0]])
+    X = np.vstack([far, X0])  # blocks 2 and 3 are `two_block_domain`'s pair
+    after = np.vstack([far, ON])
+    plan = (pack_state(*models.symbolic.symbols(X0)), pack_state(*models.symbolic.symbols(ON)))
+    (step,) = symbolic_steps(models, [X, after], [(2, 0, 3, 1)], plan, objects=(2, 3))
+    assert step.objects == (2, 3) and step.before.n == 2 and step.on_plan is True and step.match is True
+    assert step.action == (2, 0, 3, 1) and step.binding == (0, 1)
+    record = step.to_dict(names_of(models))
+    assert record["objects"] == ["o2", "o3"] and record["binding"] == ["o2", "o3"]
+    assert {c["bit"] for c in record["expected_changes"]} == {"u0(o2)", "r0(o2,o3)"}
+    assert "o2 on o3" in record["expected"]["facts"]
+    text = "\n".join(format_steps(step_records([step], [], names_of(models))))
+    assert "symbols before (of o2, o3: the plan's sub-scene)" in text and "the plan's symbols" in text
+    # the same plan states without the sub-scene describe two objects of a four-object scene: not on plan
+    (whole,) = symbolic_steps(models, [X, after], [(2, 0, 3, 1)])
+    assert whole.objects is None and whole.before.n == 4 and whole.to_dict(names_of(models))["objects"] is None
+    # an action outside the sub-scene: read in the whole scene, without the plan's states
+    (beyond,) = symbolic_steps(models, [X, X], [(0, 0, 1, 1)], plan, objects=(2, 3))
+    assert beyond.objects is None and beyond.on_plan is None
+
+
 def test_bit_names_come_from_the_symbols_table(tmp_path):
     """`tamp symbols --json` is what names the bits: a bit with a strong agreement by its fact, the
     others by their raw name; a models directory without the file gives raw names, a bad file is an error."""

@@ -25,7 +25,9 @@ reading the per-step output (printed after execution; the same in OUT.steps.json
                    the named bits say hold. A bit is named (u0(o2)=0 ~ o2 elevated) where `tamp symbols`
                    finds a strong agreement (|phi| >= 0.7) with a geometric fact; the table is read from
                    MODELS/symbols.json (`tamp symbols --model MODELS/symbolic.pt --problems P --json
-                   MODELS/symbols.json`); other bits keep their raw names (r0(o1,o2)=1)
+                   MODELS/symbols.json`); other bits keep their raw names (r0(o1,o2)=1). A Level-1
+                   plan made in a sub-scene (from 5 blocks on, --level1-objects) is read on its
+                   objects only, as it was planned: "(of o3, o4: the plan's sub-scene)"
   operator         the learned operator grounding the action in those symbols, the effect expected
                    (the one a Level-1 plan counted on, else the most probable), its probability, and
                    the bits it expects to change
@@ -64,7 +66,7 @@ def _ms(t: float) -> str:
 
 def _rank(result: PlanResult, ranked_index: int) -> int:
     """The printed number (1-based position in result.candidates) of ranked symbolic plan `ranked_index`."""
-    ranked = [i for i, c in enumerate(result.candidates) if c.alternative_of is None]
+    ranked = [i for i, c in enumerate(result.candidates) if c.alternative_of is None and c.stages is None]
     return ranked[ranked_index] + 1
 
 
@@ -84,8 +86,9 @@ def print_result(result: PlanResult, tau: float, indent: str = "") -> None:
             check = "not checked" if c.error is None else \
                 f"error {c.error * 100:.1f} cm, {'verified' if c.verified else 'unverified'}"
             chosen = "  <- plan" if result.level == 1 and result.plan == list(c.actions) else ""
-            source = f"{c.count:3d} domains ({c.probability:.2f})" if c.alternative_of is None else \
-                f"same symbols as plan {_rank(result, c.alternative_of)}"
+            source = f"same symbols as plan {_rank(result, c.alternative_of)}" if c.alternative_of is not None \
+                else f"one block at a time (blocks {', '.join(map(str, c.stages))})" if c.stages is not None \
+                else f"{c.count:3d} domains ({c.probability:.2f})"
             print(f"{p}    {i + 1}. {source}: {list(c.actions)}; {check}{chosen}")
         if len(result.candidates) > 10:
             print(f"{p}    ... {len(result.candidates) - 10} more")
@@ -292,8 +295,8 @@ def add_planner_arguments(p: argparse.ArgumentParser, backends: tuple[str, ...] 
                    help="with --focus-from blocks or more, Level 1 plans in the scene of the objects the goal involves "
                    "(the blocks off their goal and those the continuous search would place them on), which the "
                    "Symbolic Model reads as a scene of the size it was trained on, and verifies its plans in the "
-                   "whole scene; when more than N objects are involved it plans one block at a time (--no-level1-serial: "
-                   "the continuous search plans at once) "
+                   "whole scene; when more than N objects are involved it plans one block at a time "
+                   "(--no-level1-serial: the continuous search plans at once) "
                    f"(default {default.level1_objects}: the bundled models' 2-4 block training scenes; "
                    "`bilevel_alg1` always plans in the whole scene)")
     p.add_argument("--no-level1-objects", dest="level1_objects", action="store_const", const=None,

@@ -5,8 +5,9 @@ symbols (`tamp.planning.steps`) beside what refinement and execution made of it 
 
 One record per step (JSON keys):
 - ``symbols``: `SymbolicStep.to_dict` (before / expected / observed states, the operator, its effect
-  and probability, the changes expected and observed, the mismatches), or None without a Symbolic
-  Model;
+  and probability, the changes expected and observed, the mismatches, and ``objects``: the objects
+  the symbols were read on when a Level-1 plan was made in a sub-scene, else None), or None without
+  a Symbolic Model;
 - ``motion``: the refinement of the action: IK solver per waypoint (one branch: elbow up, wrist
   down), planner ("direct": the straight joint segment was free; "rrtconnect") and planning time
   per motion, the failure stage, where and why when it did not refine;
@@ -77,7 +78,8 @@ def open_loop_steps(models: Models, result: PlanResult, X_init, execution: Execu
                     starts: Sequence[float | None] = ()) -> list[dict]:
     """The records of a plan refined and executed open loop (`runner.execute_plan`)."""
     assert result.plan is not None
-    steps = symbolic_steps(models, [X_init, *execution.X_after], result.plan, result.plan_states)
+    steps = symbolic_steps(models, [X_init, *execution.X_after], result.plan, result.plan_states,
+                           objects=result.plan_scene)
     return step_records(steps, execution.refined.infos, names, starts)
 
 
@@ -92,6 +94,7 @@ class LoopStep:
     action: tuple
     plan_states: Sequence[int] | None  # that round's plan's symbolic states from this action on (Level 1)
     info: StepInfo | None
+    scene: tuple[int, ...] | None = None  # the sub-scene of plan_states (`PlanResult.plan_scene`); None: all objects
 
 
 def loop_steps(run: ClosedLoopRun) -> Iterator[LoopStep]:
@@ -105,7 +108,7 @@ def loop_steps(run: ClosedLoopRun) -> Iterator[LoopStep]:
             ran = info is None or info.changed
             states = result.plan_states
             yield LoopStep(k, r, result.origin, loop.states[k:k + (2 if ran else 1)], tuple(loop.executed[k]),
-                           None if states is None else states[j:], info)
+                           None if states is None else states[j:], info, result.plan_scene)
             k += 1
 
 
@@ -114,7 +117,7 @@ def closed_loop_steps(models: Models, run: ClosedLoopRun, names: BitNames) -> li
     no observed symbols, no prediction error."""
     records: list[dict] = []
     for s in loop_steps(run):
-        (step,) = symbolic_steps(models, s.states, [s.action], s.plan_states)
+        (step,) = symbolic_steps(models, s.states, [s.action], s.plan_states, objects=s.scene)
         records += step_records([step], [s.info], names, run.action_starts[s.index:s.index + 1])
         records[-1].update(index=s.index, round=s.round, plan=s.plan)
     return records
@@ -151,6 +154,12 @@ def _chosen_by(record: dict) -> str:
     return f" (round {record['round']}: {record['plan']})" if "round" in record else ""
 
 
+def _of_scene(symbols: dict) -> str:
+    """" (of o3, o4: the plan's sub-scene)" when the symbols were read on a Level-1 plan's sub-scene."""
+    objects = symbols.get("objects")
+    return "" if not objects else f" (of {', '.join(objects)}: the plan's sub-scene)"
+
+
 def format_steps(records: Sequence[dict]) -> list[str]:
     """Text lines of the records: per step the symbols before (as the facts the named bits say),
     the operator with its effect and what it expects to change, the motion, what was observed, and
@@ -162,7 +171,7 @@ def format_steps(records: Sequence[dict]) -> list[str]:
         if s is not None:
             before = s["before"]
             facts = "; ".join(before["facts"]) or "no named fact holds"
-            lines.append(f"  symbols before: {facts} ({len(before['set'])} bits set)")
+            lines.append(f"  symbols before{_of_scene(s)}: {facts} ({len(before['set'])} bits set)")
             if s["operator"] is None:
                 lines.append("  operator: none of the learned operators grounds this action in these symbols")
             else:
@@ -240,7 +249,8 @@ def step_panel_html(record: dict, total: int) -> str:
     out = [f"<div><b>step {r['index'] + 1} of {total}</b>: {escape(fmt_action(r['action']) + _chosen_by(r))}</div>"]
     if s is not None:
         facts = "; ".join(s["before"]["facts"]) or "no named fact holds"
-        out.append(f"<div><b>before</b>: {escape(facts)} ({len(s['before']['set'])} bits set)</div>")
+        out.append(f"<div><b>before</b>{escape(_of_scene(s))}: {escape(facts)} ({len(s['before']['set'])} bits "
+                   "set)</div>")
         if s["operator"] is None:
             out.append("<div>no learned operator grounds this action in these symbols</div>")
         else:

@@ -160,6 +160,8 @@ class Candidate:
     states: tuple[int, ...] | None = field(default=None, repr=False)  # packed symbolic states (python backend)
     objects: tuple[int, ...] | None = None  # the sub-scene's objects the states describe, in the scene's
     #   indices (`level1_scene`); None: all objects
+    stages: tuple[int, ...] | None = None  # a plan joined one block at a time (`_level1_serial`): the blocks
+    #   its stages placed, in order (count 0: no sampled domain gave it whole)
 
 
 @dataclass
@@ -196,21 +198,33 @@ class PlanResult:
         return "planned" if self.kept_by is None else \
             "kept on course" if self.kept_by == "on course" else "kept by rollout"
 
-    @property
-    def plan_states(self) -> tuple[int, ...] | None:
-        """The packed symbolic states a Level-1 plan passes through (None: Level 2, a backend that does
-        not give them, or a plan of a sub-scene (`level1_scene`), whose symbols describe a smaller scene
-        than the one the per-step view reads)."""
+    def _plan_path(self) -> tuple[tuple[int, ...], tuple[int, ...] | None] | None:
+        """The packed symbolic states a Level-1 plan passes through and the sub-scene they describe."""
         if self.level != 1 or self.plan is None:
             return None
         actions = tuple(tuple(int(v) for v in a) for a in self.plan)
-        known = [(c.actions, c.states) for c in self.candidates
-                 if c.verified and c.states is not None and c.objects is None]
-        exact = next((states for plan, states in known if plan == actions), None)
-        if exact is not None:
-            return exact
-        # a plan cut where it reaches the goal (level1_cut): the start of its candidate's path
-        return next((states[:len(actions) + 1] for plan, states in known if plan[:len(actions)] == actions), None)
+        known = [c for c in self.candidates if c.verified and c.states is not None]
+        for c in known:
+            if c.actions == actions and c.states is not None:
+                return c.states, c.objects
+        for c in known:  # a plan cut where it reaches the goal (level1_cut): the start of its candidate's path
+            if c.actions[:len(actions)] == actions and c.states is not None:
+                return c.states[:len(actions) + 1], c.objects
+        return None
+
+    @property
+    def plan_states(self) -> tuple[int, ...] | None:
+        """The packed symbolic states a Level-1 plan passes through (None: Level 2, one block at a time
+        (`_level1_serial`), or a backend that does not give them); of the sub-scene `plan_scene`."""
+        path = self._plan_path()
+        return None if path is None else path[0]
+
+    @property
+    def plan_scene(self) -> tuple[int, ...] | None:
+        """The objects whose symbols `plan_states` describe, in the scene's indices (`level1_scene`); None:
+        every object."""
+        path = self._plan_path()
+        return None if path is None else path[1]
 
     def rejected_dict(self) -> dict | None:
         """`rejected` with string keys (JSON): {"level 1": {"no_grasp": 3, ...}, "level 2": {...}}."""
@@ -551,7 +565,7 @@ def _level1_serial(models: Models, X_init, X_goal, cfg: PlanConfig, result: Plan
     whole = verify(models.require_dynamics(), X_init, X_goal, actions, cfg.tau_verify)
     result.timings["verify"] += time.perf_counter() - t
     result.symbolic_stats["serial"] = {"placed": stages, "left": [], "error_m": round(whole.error, 6)}
-    result.candidates.append(Candidate(whole.actions, 0, 0.0, whole.error, whole.verified))
+    result.candidates.append(Candidate(whole.actions, 0, 0.0, whole.error, whole.verified, stages=tuple(stages)))
     if not whole.verified:
         result.reasons.append(f"level 1, one block at a time: the joined plan is predicted {whole.error * 100:.1f} "
                               f"cm from the goal (tau {cfg.tau_verify * 100:g} cm)")
@@ -888,7 +902,8 @@ def keep_rest(models: Models, X: np.ndarray, X_goal: np.ndarray, last: PlanResul
             return result
         states = last.plan_states
         if states is not None:  # the same symbolic path from the next state on (the per-step view)
-            result.candidates = [Candidate(v.actions, 0, 0.0, v.error, True, states=states[1:])]
+            result.candidates = [Candidate(v.actions, 0, 0.0, v.error, True, states=states[1:],
+                                           objects=last.plan_scene)]
         result.reasons.append(f"kept the rest of the last plan: {why}")
         result.kept_by = kept_by
         return _take(result, v.actions, level, v.trajectory, X_goal)

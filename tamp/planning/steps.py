@@ -18,6 +18,11 @@ For step k, from the states the world was in before and after it (`symbolic_step
 
 A step whose action could not be refined has no observed symbols (it changed nothing). Steps after
 it were not reached and have no record.
+
+A Level-1 plan made in a sub-scene (`bilevel.level1_scene`: from 5 blocks on, the objects the goal
+involves) is read in that sub-scene, as it was planned: the symbols are those of its objects only,
+named by their indices in the whole scene (the raw bit arrays are in the sub-scene's object order,
+`SymbolicStep.objects`).
 """
 from __future__ import annotations
 
@@ -67,15 +72,21 @@ class Symbols:
         return {"unary": self.unary.tolist(), "relations": self.rel.tolist()}
 
 
-def _obj(i: int | None) -> str | None:
-    return None if i is None else f"o{i}"
+def _name(i: int, objects: Sequence[int] | None = None) -> str:
+    """The name of object i of a state (of the sub-scene `objects`: by its index in the whole scene)."""
+    return f"o{i if objects is None else objects[i]}"
 
 
-def named_facts(symbols: Symbols, names: BitNames) -> list[str]:
-    """The facts the named bits of a state say hold (e.g. "o2 on a block"), negative ones left out."""
+def _obj(j: int | None, objects: Sequence[int] | None = None) -> str | None:
+    return None if j is None else _name(j, objects)
+
+
+def named_facts(symbols: Symbols, names: BitNames, objects: Sequence[int] | None = None) -> list[str]:
+    """The facts the named bits of a state say hold (e.g. "o2 on a block"), negative ones left out;
+    `objects`: the sub-scene the state describes."""
     out = []
     for kind, k, i, j, v in symbols.bits():
-        meaning = names.meaning(kind, k, v, f"o{i}", _obj(j))
+        meaning = names.meaning(kind, k, v, _name(i, objects), _obj(j, objects))
         if meaning is not None and " not " not in f" {meaning} ":
             out.append(meaning)
     return out
@@ -89,7 +100,7 @@ class SymbolicStep:
     action: tuple[int, int, int, int]
     before: Symbols | None  # read on the observed state before the step (None: no Symbolic Model)
     operator: str | None = None  # the learned operator grounding the action (None: no operator applies)
-    binding: tuple[int, ...] | None = None  # its parameters' objects
+    binding: tuple[int, ...] | None = None  # its parameters' objects (indices into the state's objects)
     effect: int | None = None  # index of the effect expected (into the operator's effects)
     n_effects: int | None = None
     probability: float | None = None  # of that effect
@@ -98,6 +109,7 @@ class SymbolicStep:
     on_plan: bool | None = None  # the symbols before equal the Level-1 plan's (None: no plan symbols)
     observed_effect: int | None = None  # the operator's effect that gives the observed symbols (None: none does)
     dynamics_error_m: float | None = None  # mean over objects of |predicted - observed| position
+    objects: tuple[int, ...] | None = None  # the sub-scene the symbols describe (whole-scene indices); None: all
 
     @property
     def executed(self) -> bool:
@@ -119,30 +131,36 @@ class SymbolicStep:
     def to_dict(self, names: BitNames) -> dict:
         """JSON-ready: raw bits, set bits by name, the changes expected and observed, the mismatches (the
         step's index, action and Dynamics Model error sit beside it in `tamp.app.steps.step_records`)."""
+        def n(i: int) -> str:
+            return _name(i, self.objects)
+
+        def o(j: int | None) -> str | None:
+            return _obj(j, self.objects)
+
         def changes(a: Symbols | None, b: Symbols | None) -> list[dict] | None:
             if a is None or b is None:
                 return None
-            return [{"bit": names.bit(kind, k, f"o{i}", _obj(j)), "value": w,
-                     "meaning": names.meaning(kind, k, w, f"o{i}", _obj(j))}
-                    for kind, k, i, j, _, w in a.differences(b)]
+            return [{"bit": names.bit(kind, k, n(i), o(j)), "value": w,
+                     "meaning": names.meaning(kind, k, w, n(i), o(j))} for kind, k, i, j, _, w in a.differences(b)]
 
         def state(s: Symbols | None) -> dict | None:
             if s is None:
                 return None
-            return {**s.to_dict(), "set": [names.bit(kind, k, f"o{i}", _obj(j)) for kind, k, i, j, v in s.bits() if v],
-                    "facts": named_facts(s, names)}
+            return {**s.to_dict(), "set": [names.bit(kind, k, n(i), o(j)) for kind, k, i, j, v in s.bits() if v],
+                    "facts": named_facts(s, names, self.objects)}
 
         return {"executed": self.executed,
-                "operator": self.operator, "binding": None if self.binding is None else [f"o{b}" for b in self.binding],
+                "objects": None if self.objects is None else [n(i) for i in range(len(self.objects))],
+                "operator": self.operator, "binding": None if self.binding is None else [n(b) for b in self.binding],
                 "effect": self.effect, "n_effects": self.n_effects,
                 "probability": None if self.probability is None else round(self.probability, 4),
                 "before": state(self.before), "expected": state(self.expected), "observed": state(self.observed),
                 "expected_changes": changes(self.before, self.expected),
                 "observed_changes": changes(self.before, self.observed),
                 "match": self.match, "on_plan": self.on_plan, "observed_effect": self.observed_effect,
-                "mismatches": [{"bit": names.bit(kind, k, f"o{i}", _obj(j)), "expected": e, "observed": o,
-                                "meaning_observed": names.meaning(kind, k, o, f"o{i}", _obj(j))}
-                               for kind, k, i, j, e, o in self.mismatches()]}
+                "mismatches": [{"bit": names.bit(kind, k, n(i), o(j)), "expected": e, "observed": w,
+                                "meaning_observed": names.meaning(kind, k, w, n(i), o(j))}
+                               for kind, k, i, j, e, w in self.mismatches()]}
 
 
 def dynamics_errors(models: Models, states: Sequence[np.ndarray], actions) -> list[float] | None:
@@ -159,21 +177,29 @@ def dynamics_errors(models: Models, states: Sequence[np.ndarray], actions) -> li
 
 def symbolic_steps(models: Models, states: Sequence[np.ndarray], actions: Sequence,
                    plan_states: Sequence[int] | None = None,
-                   errors: Sequence[float] | None = None) -> list[SymbolicStep]:
+                   errors: Sequence[float] | None = None,
+                   objects: Sequence[int] | None = None) -> list[SymbolicStep]:
     """The steps of a plan as executed: `states` are the observed states X_0 .. X_m (m executed
     actions), `actions` the plan (m actions, or more when action m could not be refined: its step is
-    recorded without observed symbols). `plan_states`: a Level-1 plan's packed symbolic states.
-    `errors`: `dynamics_errors` of these states and actions when the caller has them already."""
+    recorded without observed symbols). `plan_states`: a Level-1 plan's packed symbolic states, of
+    the sub-scene `objects` if given (`PlanResult.plan_scene`: the symbols are then read on those
+    objects only). `errors`: `dynamics_errors` of these states and actions when the caller has them
+    already (whole scene)."""
     actions = [tuple(int(v) for v in a) for a in actions]
     m = len(states) - 1
     steps: list[SymbolicStep] = []
     if errors is None:
         errors = dynamics_errors(models, states, actions[:m]) or []
+    scene = None if objects is None else tuple(int(o) for o in objects)
+    if scene is not None and any(a[0] not in scene or a[2] not in scene for a in actions):
+        scene, plan_states = None, None  # an action beyond the sub-scene: read the whole scene
+    if scene is not None:
+        states = [np.asarray(X)[list(scene)] for X in states]
     symbols = models.symbolic
     observed = [None if symbols is None else Symbols.of(*symbols.symbols(X)) for X in states]
     for k, action in enumerate(actions[:m + 1]):
         step = SymbolicStep(k, action, observed[k], observed=observed[k + 1] if k < m else None,
-                            dynamics_error_m=errors[k] if k < min(m, len(errors)) else None)
+                            dynamics_error_m=errors[k] if k < min(m, len(errors)) else None, objects=scene)
         if step.before is not None and models.domain is not None:
             planned = _plan_symbols(models, plan_states, k, step.before.n)
             _ground(models, step, planned)
@@ -201,7 +227,11 @@ def _ground(models: Models, step: SymbolicStep, planned: tuple[Symbols, Symbols]
     ops = models.domain
     task = models.symbolic_planner().task(step.before.n)
     state = pack_state(step.before.unary, step.before.rel)
-    candidates = [g for g in task.applicable(state) if task.action(g) == step.action]
+    i, g_offset, j, r_offset = step.action
+    if step.objects is not None:  # the action on the sub-scene's objects
+        i, j = step.objects.index(i), step.objects.index(j)
+    action = (i, g_offset, j, r_offset)
+    candidates = [g for g in task.applicable(state) if task.action(g) == action]
     if planned is not None:
         step.on_plan = planned[0] == step.before
     if not candidates:
