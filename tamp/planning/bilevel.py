@@ -258,7 +258,8 @@ def level1_scene(X_init: np.ndarray, X_goal: np.ndarray, cfg: PlanConfig) -> tup
     (`search.goal_oriented_actions`), i.e. the blocks off their goal and, for each, the objects it
     would be placed on. The Symbolic Model then sees a scene of the size it was trained on, and the
     symbols of blocks that play no part cannot make Sigma_goal unreachable; the Dynamics Model
-    verifies the plans in the whole scene. More than cfg.level1_objects: Level 1 does not plan."""
+    verifies the plans in the whole scene. With more than cfg.level1_objects, Level 1 plans only one
+    block at a time (`_level1_serial`)."""
     if cfg.level1_objects is None or not cfg.focused(len(X_init)):
         return None
     actions = goal_oriented_actions(np.asarray(X_init), np.asarray(X_goal), cfg.search.misplaced, cfg.eps,
@@ -499,9 +500,10 @@ def _level1(models: Models, X_init, X_goal, cfg: PlanConfig, result: PlanResult,
     """Level 1 of Algorithm 1 (lines 4-14): Sigma_init, Sigma_goal -> plans of N sampled domains, ranked
     by frequency -> the first plan whose Dynamics Model rollout ends within tau of X_goal.
 
-    Our extensions live in `_Verifier.check`: a ranked plan is verified together with the plans through
-    the same symbolic states (`cfg.alternatives`), and a verified plan must pass the kinematic check and
-    refine (`feas`)."""
+    Our extensions: from cfg.focus_from objects on, Sigma is read on the sub-scene of the objects the
+    goal involves (`level1_scene`; none when they are more than cfg.level1_objects); and in
+    `_Verifier.check`, a ranked plan is verified together with the plans through the same symbolic
+    states (`cfg.alternatives`), and a verified plan must pass the kinematic check and refine (`feas`)."""
     t = time.perf_counter()
     objects = level1_scene(X_init, X_goal, cfg)  # our extension; None: every object, as the paper plans
     if objects is not None and cfg.level1_objects is not None and len(objects) > cfg.level1_objects:
@@ -538,7 +540,6 @@ def _level1_serial(models: Models, X_init, X_goal, cfg: PlanConfig, result: Plan
                   key=lambda i: (X_goal[i, 2], i))
     if len(left) < 2:
         return None  # one block: the sub-scene plan above was this plan
-    stage_cfg = replace(cfg, level1_serial=False)
     X = X_init
     actions: list[tuple[int, int, int, int]] = []
     stages: list[int] = []  # the blocks placed, in order
@@ -547,7 +548,7 @@ def _level1_serial(models: Models, X_init, X_goal, cfg: PlanConfig, result: Plan
             sub_goal = X.copy()
             sub_goal[block, :3] = X_goal[block, :3]
             stage = PlanResult(result.method, None)
-            v = _level1(models, X, sub_goal, stage_cfg, stage, None)
+            v = _level1(models, X, sub_goal, cfg, stage, None)
             for key in ("symbols", "symbolic", "verify"):  # Level 1's time, every stage counted
                 result.timings[key] = result.timings.get(key, 0.0) + stage.timings.get(key, 0.0)
             if v is not None and v.error < cfg.eps:
