@@ -62,7 +62,7 @@ from tamp.app.args import check_output_dir
 from tamp.app.parallel import BACKENDS, run_tasks
 from tamp.app.problem import Problem
 from tamp.errors import UserError
-from tamp.planning.bilevel import PlanConfig
+from tamp.planning.bilevel import LEVEL1_STAGES, PlanConfig
 from tamp.planning.steps import dynamics_errors, symbolic_steps
 from tamp.planning.structs import OUTCOMES, Outcome
 from tamp.planning.verify import goal_error
@@ -86,7 +86,6 @@ MAX_CANDIDATES = 20
 # meta.json fields that define the rows: a results directory is resumed only if all of them match.
 # The inputs' contents, not their paths: moved models or a copied problem set resume the same rows.
 DEFINING_KEYS = ("model_files", "problems_sha256", "config")
-LEVEL1_STAGES = ("symbols", "symbolic", "verify")
 
 
 @dataclass(frozen=True)

@@ -64,6 +64,7 @@ from tamp.planning.verify import (
 )
 
 SYMBOLIC_BACKENDS = ("python", "fd", "fd-naive")  # in-process search; Fast Downward, batched or one call per domain
+LEVEL1_STAGES = ("symbols", "symbolic", "verify")  # the `PlanResult.timings` keys that make up Level 1's time
 
 
 @dataclass(frozen=True)
@@ -203,13 +204,13 @@ class PlanResult:
         if self.level != 1 or self.plan is None:
             return None
         actions = tuple(tuple(int(v) for v in a) for a in self.plan)
-        known = [c for c in self.candidates if c.verified and c.states is not None]
-        for c in known:
-            if c.actions == actions and c.states is not None:
-                return c.states, c.objects
-        for c in known:  # a plan cut where it reaches the goal (level1_cut): the start of its candidate's path
-            if c.actions[:len(actions)] == actions and c.states is not None:
-                return c.states[:len(actions) + 1], c.objects
+        known = [(c.states, c.actions, c.objects) for c in self.candidates if c.verified and c.states is not None]
+        for states, plan, objects in known:
+            if plan == actions:
+                return states, objects
+        for states, plan, objects in known:  # a plan cut where it reaches the goal (level1_cut): its path's start
+            if plan[:len(actions)] == actions:
+                return states[:len(actions) + 1], objects
         return None
 
     @property
@@ -549,7 +550,7 @@ def _level1_serial(models: Models, X_init, X_goal, cfg: PlanConfig, result: Plan
             sub_goal[block, :3] = X_goal[block, :3]
             stage = PlanResult(result.method, None)
             v = _level1(models, X, sub_goal, cfg, stage, None)
-            for key in ("symbols", "symbolic", "verify"):  # Level 1's time, every stage counted
+            for key in LEVEL1_STAGES:  # Level 1's time, every stage counted
                 result.timings[key] = result.timings.get(key, 0.0) + stage.timings.get(key, 0.0)
             if v is not None and v.error < cfg.eps:
                 break
@@ -917,6 +918,7 @@ def replan_rounds(k: int | None, default: int = 4) -> int:
     return default if k is None else max(k - 1, 0)
 
 
-__all__: Sequence[str] = ["Candidate", "ClosedLoopResult", "METHODS", "PlanConfig", "PlanResult", "Planner",
-                          "keep_rest", "off_course", "plan", "plan_bilevel", "plan_bilevel_alg1", "plan_cfs",
-                          "plan_closed_loop", "plan_deterministic", "plan_probabilistic", "replan_rounds"]
+__all__: Sequence[str] = ["Candidate", "ClosedLoopResult", "LEVEL1_STAGES", "METHODS", "PlanConfig", "PlanResult",
+                          "Planner", "keep_rest", "level1_scene", "off_course", "plan", "plan_bilevel",
+                          "plan_bilevel_alg1", "plan_cfs", "plan_closed_loop", "plan_deterministic",
+                          "plan_probabilistic", "replan_rounds"]
