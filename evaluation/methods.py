@@ -11,11 +11,14 @@ Each method is a `tamp.planning.bilevel` planner, a model variant and open or cl
     cfs                   continuous forward search with the (Sigmoid) Dynamics Model
     bilevel               Algorithm 1 with our Level-1 extensions (look-alike alternatives, non-empty plans)
     bilevel_alg1          the paper's Algorithm 1 exactly (both extensions off)
-    bilevel_replan        `bilevel` in closed loop, up to k - 1 replanning rounds
+    bilevel_replan        `bilevel` in the paper's closed loop, up to k - 1 replanning rounds (Table IV)
+    bilevel_loop          `bilevel` in the closed loop that does not know k: plan again after every action
+                          until the goal or the loop's action budget, widening the search when a round
+                          finds no plan (the default of `tamp plan --replan` and `tamp demo`)
     symbolic_sigmoid      deterministic symbolic planner, Sigmoid Symbolic Model and its own domain (Fig. 4)
     cfs_gumbel            continuous forward search, Gumbel-Sigmoid Dynamics Model (Fig. 4)
 
-`cfs`, `bilevel` and `bilevel_replan` plan with kinematics in the loop (tamp.sim.feasibility: actions
+`cfs`, `bilevel`, `bilevel_replan` and `bilevel_loop` plan with kinematics in the loop (tamp.sim.feasibility: actions
 checked on the predicted states, plans refined before they are returned); `cfs_nofeas`,
 `bilevel_nofeas` and `bilevel_replan_nofeas` are the same planners without it (before / after on the
 same problems: `tamp evaluate --methods cfs,cfs_nofeas,...`). The symbolic baselines never use it.
@@ -44,9 +47,13 @@ class Method:
     name: str
     planner: str  # a tamp.planning.bilevel.METHODS key
     models: str  # model set: "default" | "symbolic_sigmoid" | "dynamics_gumbel"
-    closed_loop: bool = False
+    loop: str | None = None  # closed loop: "paper" (k - 1 rounds) or "goal" (until the goal); None: open loop
     oracle: bool = False  # execute the ranked plans until one succeeds (the authors' measure)
     feasibility: bool = False  # kinematic check and refinement in the planning loop (tamp.sim.feasibility)
+
+    @property
+    def closed_loop(self) -> bool:
+        return self.loop is not None
 
     @property
     def symbolic(self) -> bool:
@@ -61,16 +68,17 @@ METHODS: dict[str, Method] = {m.name: m for m in (
     Method("cfs", "cfs", "default", feasibility=True),
     Method("bilevel", "bilevel", "default", feasibility=True),
     Method("bilevel_alg1", "bilevel_alg1", "default"),
-    Method("bilevel_replan", "bilevel", "default", closed_loop=True, feasibility=True),
+    Method("bilevel_replan", "bilevel", "default", loop="paper", feasibility=True),
+    Method("bilevel_loop", "bilevel", "default", loop="goal", feasibility=True),
     Method("symbolic_sigmoid", "deterministic", "symbolic_sigmoid"),
     Method("cfs_gumbel", "cfs", "dynamics_gumbel"),
     Method("cfs_nofeas", "cfs", "default"),
     Method("bilevel_nofeas", "bilevel", "default"),
-    Method("bilevel_replan_nofeas", "bilevel", "default", closed_loop=True),
+    Method("bilevel_replan_nofeas", "bilevel", "default", loop="paper"),
 )}
 FEASIBILITY_PAIRS = (("cfs", "cfs_nofeas"), ("bilevel", "bilevel_nofeas"), ("bilevel_replan", "bilevel_replan_nofeas"))
 DEFAULT_METHODS = ("deterministic", "probabilistic", "probabilistic_oracle", "cfs", "bilevel", "bilevel_alg1",
-                   "bilevel_replan")
+                   "bilevel_replan", "bilevel_loop")
 VARIANT_METHODS = ("symbolic_sigmoid", "cfs_gumbel")
 
 

@@ -19,6 +19,13 @@ them, and `plan` and the refinement fields are those of the last one executed.
 objects) predicting that action's effect from the state the world was in before it: how well the
 model the method plans with knows the world on the actions it chose (None without one).
 
+`step_miss_m`: the same with the worst block instead of the mean (how far the block the model missed
+most landed from its prediction). `stop`: how a closed loop ended (`ClosedLoopResult.stop`; None: open
+loop) and the last planning call's search status, kinematic rejections and predicted error. `cause`:
+[cause, sentence] of a failed row (`tamp.planning.causes`, recomputed from these fields by
+`row_cause`; None for a success). `bilevel_loop` rows are judged by where the loop ended: an action
+it could not carry out changed nothing, and the loop went on.
+
 `steps`: per step executed or attempted (a refinement failure stops the plan; closed loop: every
 action sent to the world), the step through the learned abstraction (`tamp.planning.steps`):
 `operator` (None: no learned operator grounds the action in the observed symbols), `probability`
@@ -63,6 +70,8 @@ from tamp.app.parallel import BACKENDS, run_tasks
 from tamp.app.problem import Problem
 from tamp.errors import UserError
 from tamp.planning.bilevel import LEVEL1_STAGES, PlanConfig
+from tamp.planning.causes import cause_of, stop_record
+from tamp.planning.config import LoopConfig
 from tamp.planning.steps import dynamics_errors, symbolic_steps
 from tamp.planning.structs import OUTCOMES, Outcome
 from tamp.planning.verify import goal_error
@@ -77,7 +86,8 @@ ROW_KEYS = ("problem", "n", "k", "run", "protocol", "moved", "method", "solved",
             "level1_time_s", "predicted_error_m", "candidates", "refined", "refine_failure", "refine_time_s",
             "executed_actions", "executed_plans", "final_error_m", "success", "outcome", "rounds", "fidelity",
             "eps_m", "tau_verify_m", "symbolic_backend", "feasibility", "search_time_s", "feasibility_time_s",
-            "plan_refine_time_s", "level1_stages_s", "search_expanded", "effect_error_m", "steps")
+            "plan_refine_time_s", "level1_stages_s", "search_expanded", "effect_error_m", "step_miss_m", "stop",
+            "cause", "steps")
 # the only fields that vary between runs
 TIMING_KEYS = ("planning_time_s", "level1_time_s", "refine_time_s", "search_time_s", "feasibility_time_s",
                "plan_refine_time_s", "level1_stages_s")
@@ -142,6 +152,8 @@ class EvalConfig:
                "symbolic_backend": p.backend, "oracle_max_plans": self.oracle_max_plans}
         if p.symbolic_time_limit != PlanConfig.symbolic_time_limit:  # older results directories stay resumable
             out["symbolic_time_limit_s"] = p.symbolic_time_limit
+        if p.loop != LoopConfig():  # (the loop that does not know k: the same)
+            out["loop"] = dataclasses.asdict(p.loop)
         return out
 
     def plan_config(self, seed: int, feasibility: bool = True) -> PlanConfig:
@@ -239,12 +251,18 @@ def _steps(models, states: Sequence[np.ndarray], actions, plan_states, infos, ch
     return out
 
 
+def row_cause(row: dict) -> list[str] | None:
+    """[cause, sentence] of a failed row (`tamp.planning.causes`), from the row's own fields; None for a
+    success or an error row."""
+    if row.get("outcome") in (None, ERROR_OUTCOME):
+        return None
+    found = cause_of(row["outcome"], row.get("step_miss_m"), row.get("stop"), row.get("refine_failure"))
+    return None if found is None else [str(found[0]), found[1]]
+
+
 def _failure(failure) -> dict | None:
     """A row's `refine_failure` from a tamp.sim.trajectory.RefinementFailure (None: none)."""
-    if failure is None:
-        return None
-    return {"action": int(failure.action_index), "stage": str(failure.stage), "where": failure.where,
-            "reason": failure.reason}
+    return None if failure is None else failure.record()
 
 
 class Evaluator:
@@ -315,8 +333,11 @@ class Evaluator:
                "protocol": problem.protocol, "moved": problem.moved, "method": method_name, **fields,
                "fidelity": c.fidelity, "eps_m": c.eps, "tau_verify_m": c.tau_verify,
                "symbolic_backend": c.symbolic_backend if method.symbolic else None}
-        row["outcome"] = row_outcome(row["solved"], row["refine_failure"], row["final_error_m"], c.eps)
+        # the loop that does not know k goes on after an action it could not carry out: judged by where it ended
+        failure = None if method.loop == "goal" and row["final_error_m"] < c.eps else row["refine_failure"]
+        row["outcome"] = row_outcome(row["solved"], failure, row["final_error_m"], c.eps)
         row["success"] = row["outcome"] == Outcome.SUCCESS
+        row["cause"] = row_cause(row)
         return {k: row[k] for k in ROW_KEYS}
 
     def error_row(self, problem: Problem, method_name: str, error: BaseException) -> dict:
@@ -351,7 +372,8 @@ class Evaluator:
                   "predicted_error_m": _round(result.predicted_error), "candidates": _candidates(result),
                   "refined": None, "refine_failure": None, "refine_time_s": [], "executed_actions": 0,
                   "executed_plans": 0, "final_error_m": _round(goal_error(problem.X_init, problem.X_goal)),
-                  "rounds": None, "effect_error_m": None, "steps": None}
+                  "rounds": None, "effect_error_m": None, "step_miss_m": None, "stop": stop_record(None, result),
+                  "steps": None}
         if not result.solved:
             return fields
         plans = [(c.actions, c.states, c.objects) for c in result.candidates[:self.config.oracle_max_plans]] \
@@ -369,7 +391,7 @@ class Evaluator:
         if not actions:  # the planner says the initial state meets the goal: nothing to refine
             return {"refined": True, "refine_failure": None, "refine_time_s": [], "executed_actions": 0,
                     "final_error_m": _round(goal_error(problem.X_init, problem.X_goal)), "effect_error_m": [],
-                    "steps": []}
+                    "step_miss_m": [], "steps": []}
         from tamp.app.runner import execute_plan
 
         ex = execute_plan(actions, problem.X_init, problem.X_goal, self.config.fidelity, world=self.world("fast"))
@@ -380,14 +402,16 @@ class Evaluator:
         return {"refined": ex.refined.success, "refine_failure": _failure(ex.refined.failure),
                 "refine_time_s": [_round(s.refine_time) for s in ex.refined.steps],
                 "executed_actions": len(ex.refined.steps), "final_error_m": _round(ex.error),
-                "effect_error_m": _rounded(errors), "steps": steps}
+                "effect_error_m": _rounded(errors),
+                "step_miss_m": _rounded(dynamics_errors(models, states, actions, worst=True)), "steps": steps}
 
     def _closed_loop(self, problem: Problem, method: Method, models) -> dict:
         from tamp.app.runner import run_closed_loop
-        from tamp.planning.bilevel import replan_rounds
+        from tamp.planning.closed_loop import replan_rounds
 
         kinematics = self.checker(problem) if method.feasibility else None
-        run = run_closed_loop(method.planner, models, problem.X_init, problem.X_goal, replan_rounds(problem.k),
+        rounds = replan_rounds(problem.k) if method.loop == "paper" else None
+        run = run_closed_loop(method.planner, models, problem.X_init, problem.X_goal, rounds,
                               self.config.plan_config(problem.seed, method.feasibility), self.config.fidelity,
                               world=self.world(self.config.fidelity), kinematics=kinematics)
         out = run.loop
@@ -408,8 +432,10 @@ class Evaluator:
                 "refined": (failure is None) if solved else None, "refine_failure": _failure(failure),
                 "refine_time_s": [_round(sum(t)) for t in run.step_times], "executed_actions": executed,
                 "executed_plans": None, "final_error_m": _round(goal_error(X_final, problem.X_goal)),
-                "rounds": max(len(out.rounds) - 1, 0),
-                "effect_error_m": _rounded(errors), "steps": self._loop_steps(problem, models, run, errors or [])}
+                "rounds": max(len(out.rounds) - 1, 0), "effect_error_m": _rounded(errors),
+                "step_miss_m": _rounded(dynamics_errors(models, out.states, out.executed, worst=True)),
+                "stop": stop_record(out.stop, out.rounds[-1] if out.rounds else None),
+                "steps": self._loop_steps(problem, models, run, errors or [])}
 
     def _loop_steps(self, problem: Problem, models, run, errors: Sequence[float]) -> list[dict] | None:
         """The `steps` of a closed loop: each action sent to the world (`tamp.app.steps.loop_steps`)."""
@@ -611,5 +637,5 @@ def strip_timings(row: dict) -> dict:
     return {k: v for k, v in row.items() if k not in TIMING_KEYS}
 
 
-__all__ = ["ERROR_OUTCOME", "EvalConfig", "Evaluator", "OUTCOMES", "ROW_KEYS", "evaluate", "read_rows", "row_outcome",
-           "strip_timings"]
+__all__ = ["ERROR_OUTCOME", "EvalConfig", "Evaluator", "OUTCOMES", "ROW_KEYS", "evaluate", "read_rows", "row_cause",
+           "row_outcome", "strip_timings"]

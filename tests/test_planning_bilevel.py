@@ -14,7 +14,8 @@ sys.path.insert(0, str(Path(__file__).parent))
 from planning_stubs import StubModel, two_block_domain, world_step
 
 from tamp.errors import UserError
-from tamp.planning.bilevel import PlanConfig, level1_scene, plan, plan_closed_loop
+from tamp.planning.bilevel import PlanConfig, level1_scene, plan
+from tamp.planning.closed_loop import plan_closed_loop
 from tamp.planning.models import Models
 from tamp.planning.search import SearchConfig, continuous_search
 from tamp.planning.verify import goal_error, verify
@@ -331,7 +332,8 @@ def test_the_closed_loop_keeps_a_plan_on_course_and_replans_one_off_course(domai
 
 
 def test_a_kept_level1_plan_follows_its_symbolic_path(domain):
-    from tamp.planning.bilevel import Candidate, PlanResult, keep_rest
+    from tamp.planning.bilevel import Candidate, PlanResult
+    from tamp.planning.closed_loop import keep_rest
     from tamp.planning.structs import PickPlace
 
     goal = execute(X_INIT, [(1, 0, 1, 1), (0, 0, 1, 0)])
@@ -350,7 +352,8 @@ def test_a_kept_level1_plan_follows_its_symbolic_path(domain):
 def test_a_plan_on_course_is_kept_whatever_a_swinging_rollout_of_its_rest_says(domain, capsys):
     """The world did what the plan predicted (within PlanConfig.on_course): the rest is kept with the plan's
     own prediction, although the model, given the observed state, predicts the rest far off."""
-    from tamp.planning.bilevel import PlanResult, keep_rest, off_course
+    from tamp.planning.bilevel import PlanResult
+    from tamp.planning.closed_loop import keep_rest, off_course
     from tamp.planning.structs import PickPlace
     from tamp.planning.verify import goal_errors
 

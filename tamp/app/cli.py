@@ -580,7 +580,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="replay file (default demo_replay.html)")
     p.add_argument("--open-loop", action="store_true",
                    help="execute one plan to its end (the paper's Algorithm 1) instead of the closed loop "
-                   "that executes the first action, observes the scene and replans, up to k - 1 rounds")
+                   "that executes the first action, observes the scene and plans again until the goal")
     p.add_argument("--candidates", type=non_negative_int, default=0, metavar="N",
                    help="also execute the first N symbolic candidates that failed verification and write "
                    "a replay of each (OUT.candidateI.html, I their number in the candidate list)")

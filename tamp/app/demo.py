@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tamp.app.plan_command import LEVELS, fmt_action, print_result
+from tamp.app.plan_command import LEVELS, fmt_action, print_cause, print_result
 from tamp.app.problem import Problem, random_problem
 from tamp.app.runner import ClosedLoopRun, Execution, execute_plan, kinematics_for, run_closed_loop
 from tamp.app.steps import (
@@ -29,7 +29,10 @@ from tamp.app.steps import (
     write_steps,
 )
 from tamp.errors import UserError
-from tamp.planning.bilevel import ClosedLoopResult, PlanConfig, PlanResult, plan, replan_rounds
+from tamp.planning.bilevel import PlanConfig, PlanResult, plan
+from tamp.planning.causes import stop_record
+from tamp.planning.closed_loop import ClosedLoopResult, loop_outcome
+from tamp.planning.steps import dynamics_errors
 from tamp.planning.structs import TYPE_NAMES, Outcome, PickPlace
 from tamp.planning.verify import goal_error, goal_errors, rollout
 from tamp.sim.feasibility import FeasibilityChecker
@@ -50,7 +53,8 @@ class DemoConfig:
     fidelity: str = "full"  # full: the arm under physics; fast: the refinement's own world
     replay: Path | None = DEFAULT_REPLAY
     candidates: int = 0  # also replay this many symbolic candidates that failed verification
-    replan: bool = True  # closed loop: execute, observe, replan (up to k - 1 rounds); False: one plan
+    replan: bool = True  # closed loop: execute, observe, plan again until the goal (or the action budget); False:
+    #   one plan, executed open loop
 
 
 @dataclass
@@ -68,9 +72,7 @@ class DemoResult:
     def outcome(self) -> Outcome:
         """As `tamp evaluate` counts it (closed loop: no plan, wrong plan or success)."""
         if self.loop is not None:
-            if self.loop.success:
-                return Outcome.SUCCESS
-            return Outcome.NO_PLAN if not self.loop.executed else Outcome.WRONG_PLAN
+            return loop_outcome(self.loop)
         if self.execution is None:
             return Outcome.NO_PLAN
         failure = self.execution.refined.failure
@@ -117,6 +119,9 @@ def run_demo(cfg: DemoConfig = DemoConfig()) -> DemoResult:
         out.loop, out.steps = run.loop, closed_loop_steps(models, run, names)
         print_steps(out.steps, blank_line=True)
         _print_loop_summary(out, cfg)
+        print_cause(out.outcome, dynamics_errors(models, run.loop.states, run.loop.executed, worst=True),
+                    stop_record(run.loop.stop, run.loop.rounds[-1] if run.loop.rounds else None), None,
+                    indent="  ")
         if timeline is not None:
             timeline.caption = [f"tamp demo --seed {cfg.seed}: {problem.n} blocks, goal from {problem.k} random "
                                 f"actions, closed loop", _verdict(out)]
@@ -281,15 +286,14 @@ def _print_summary(out: DemoResult, cfg: DemoConfig) -> None:
 def _closed_loop(problem: Problem, models, plan_cfg: PlanConfig, kinematics: FeasibilityChecker | None,
                  cfg: DemoConfig, first: PlanResult, timeline: Timeline | None,
                  step_times: list[tuple[float, float]]) -> ClosedLoopRun:
-    """Execute the first action of the plan, observe the scene, replan from it (up to k - 1 rounds;
-    the last plan runs to its end, and a round keeps the rest of the last plan while it is on course),
-    in a World of the demo's fidelity: each action is refined and executed there, an action that
-    cannot be refined changes nothing and the loop goes on. The first round reuses the plan already
-    printed. The replay shows each round's prediction of the action it
-    executed (the last round: of each of its actions)."""
-    rounds = replan_rounds(problem.k)
-    print(f"\nclosed loop ({cfg.fidelity} world): execute, observe, replan; up to {rounds} replanning "
-          f"round(s)", flush=True)
+    """Execute the first action of the plan, observe the scene, plan again from it until the goal is
+    reached or the loop's action budget is spent (a round keeps the rest of the last plan while it is
+    on course, and widens its search when it finds no plan), in a World of the demo's fidelity: each
+    action is refined and executed there, an action that cannot be refined changes nothing and the
+    loop goes on. The first round reuses the plan already printed. The replay shows each round's
+    prediction of the action it executed."""
+    print(f"\nclosed loop ({cfg.fidelity} world): execute, observe, plan again until the goal; at most "
+          f"{plan_cfg.loop.max_actions} actions", flush=True)
     planned: list[tuple[int, PlanResult]] = []  # (index of the round's first executed action, result)
     executed: list[PickPlace] = []
 
@@ -299,7 +303,9 @@ def _closed_loop(problem: Problem, models, plan_cfg: PlanConfig, kinematics: Fea
     def on_round(r: int, result: PlanResult) -> None:  # every round, planned anew or kept
         planned.append((len(executed), result))
         if r > 0:
-            how = "kept the rest of the last plan" if result.kept else "replanned from the observed scene"
+            how = "kept the rest of the last plan" if result.kept else \
+                "searched over every action from the observed scene" if result.widened else \
+                "replanned from the observed scene"
             print(f"round {r}: {how}", flush=True)
             print_result(result, plan_cfg.tau_verify, indent="  ")
 
@@ -309,7 +315,7 @@ def _closed_loop(problem: Problem, models, plan_cfg: PlanConfig, kinematics: Fea
         print(f"  executed {fmt_action(action)}: {info.status}{why}; blocks {goal_error(X, problem.X_goal) * 100:.1f} "
               f"cm from the goal, {seconds:.1f} s", flush=True)
 
-    run = run_closed_loop("bilevel", models, problem.X_init, problem.X_goal, rounds, plan_cfg, cfg.fidelity,
+    run = run_closed_loop("bilevel", models, problem.X_init, problem.X_goal, None, plan_cfg, cfg.fidelity,
                           kinematics=kinematics, timeline=timeline, planner=plan_round, on_round=on_round,
                           on_step=show_step)
     step_times.extend(run.step_times)
@@ -361,5 +367,5 @@ def _print_loop_summary(out: DemoResult, cfg: DemoConfig) -> None:
     print(f"  final error {loop.error * 100:.1f} cm (max over blocks; eps {out.eps * 100:g} cm)")
     outcome = {Outcome.SUCCESS: "success: every block within eps of its goal",
                Outcome.NO_PLAN: "failure: the planner found no plan",
-               Outcome.WRONG_PLAN: "failure: the goal was not reached within the replanning rounds"}[out.outcome]
+               Outcome.WRONG_PLAN: f"failure: the goal was not reached ({loop.reason})"}[out.outcome]
     print(f"  outcome     {outcome}", flush=True)

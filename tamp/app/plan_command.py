@@ -3,7 +3,8 @@
 Open loop: plan with the chosen method, then (unless --execute none) refine the plan and execute it
 in the Drake world: `fast` (the refinement's own world: planned, checked motions, kinematic carry,
 physics after release) or `full` (the refined trajectory under physics). --replan executes action
-by action in a World of that fidelity and replans from each observed state (up to k - 1 rounds).
+by action in a World of that fidelity and plans again from each observed state until the goal (with
+--rounds: the paper's loop of that many rounds).
 """
 from __future__ import annotations
 
@@ -14,8 +15,13 @@ from pathlib import Path
 
 from tamp.app.args import check_output_file, fraction, non_negative_int, object_count, positive_float, positive_int
 from tamp.errors import UserError
-from tamp.planning.bilevel import METHODS, SYMBOLIC_BACKENDS, PlanConfig, PlanResult, plan, replan_rounds
+from tamp.planning.bilevel import METHODS, SYMBOLIC_BACKENDS, PlanConfig, PlanResult, plan
+from tamp.planning.causes import cause_of, stop_record
+from tamp.planning.closed_loop import loop_outcome
+from tamp.planning.config import LoopConfig
 from tamp.planning.search import SearchConfig
+from tamp.planning.steps import dynamics_errors
+from tamp.planning.structs import Outcome
 from tamp.planning.verify import goal_error
 
 STEPS_HELP = """\
@@ -50,7 +56,7 @@ class PlanOptions:
     method: str = "bilevel"
     execute: str = "fast"  # none | fast | full
     replan: bool = False
-    rounds: int | None = None  # replanning rounds (default k - 1 of the problem, else 4)
+    rounds: int | None = None  # the paper's loop with this many replanning rounds; None: until the goal
     replay: Path | None = None
     planner: PlanConfig = PlanConfig()  # its seed is replaced by the problem's
     steps: Path | None = None  # per-step JSON (default: beside the replay, if any)
@@ -126,6 +132,7 @@ def _open_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timeline,
     result = plan(options.method, models, problem.X_init, problem.X_goal, cfg, kinematics=kinematics)
     print_result(result, cfg.tau_verify)
     if not result.solved:
+        print_cause("no_plan", None, stop_record(None, result), None)
         return 1, []
     if options.execute == "none" or not result.plan:
         if not result.plan:
@@ -143,7 +150,18 @@ def _open_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timeline,
     ok = ex.error < cfg.eps
     print(f"execution ({options.execute}): final error {ex.error * 100:.1f} cm (max over objects) -> "
           f"{'success' if ok else 'failure'} (eps {cfg.eps * 100:g} cm)")
+    failure = ex.refined.failure
+    outcome = Outcome.of(True, None if failure is None else failure.stage, ex.error, cfg.eps)
+    print_cause(outcome, dynamics_errors(models, [problem.X_init, *ex.X_after], result.plan, worst=True),
+                stop_record(None, result), None if failure is None else failure.record())
     return (0 if ok and ex.success else 1), records
+
+
+def print_cause(outcome: str, step_miss_m, stop: dict, refine_failure: dict | None, indent: str = "") -> None:
+    """The cause of a failed run (`tamp.planning.causes`), in one line; nothing for a success."""
+    found = cause_of(outcome, step_miss_m, stop, refine_failure)
+    if found is not None:
+        print(f"{indent}cause: {found[1]} ({found[0]})")
 
 
 def _print_steps(records: list[dict]) -> None:
@@ -164,9 +182,14 @@ def _closed_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timelin
         print(f"round {r}:")
         print_result(result, cfg.tau_verify, indent="  ")
 
-    rounds = replan_rounds(problem.k) if options.rounds is None else options.rounds
-    print(f"closed loop: up to {rounds} replanning round(s), executing in the {options.execute} world")
-    run = run_closed_loop(options.method, models, problem.X_init, problem.X_goal, rounds, cfg, options.execute,
+    if options.rounds is None:
+        print(f"closed loop: plan again after every action until the goal, at most {cfg.loop.max_actions} actions, "
+              f"executing in the {options.execute} world")
+    else:
+        print(f"closed loop (the paper's): up to {options.rounds} replanning round(s), executing in the "
+              f"{options.execute} world")
+    run = run_closed_loop(options.method, models, problem.X_init, problem.X_goal, options.rounds, cfg,
+                          options.execute,
                           kinematics=kinematics_for(options.method, cfg), timeline=timeline,
                           on_round=show_round, on_step=show_step)
     out = run.loop
@@ -175,6 +198,8 @@ def _closed_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timelin
     print(f"closed loop ended: {out.reason}")
     print(f"execution ({options.execute}): {len(out.executed)} action(s), final error {out.error * 100:.1f} cm "
           f"(max over objects) -> {'success' if out.success else 'failure'} (eps {cfg.eps * 100:g} cm)")
+    print_cause(loop_outcome(out), dynamics_errors(models, out.states, out.executed, worst=True),
+                stop_record(out.stop, out.rounds[-1] if out.rounds else None), None)
     return (0 if out.success else 1), records
 
 
@@ -189,6 +214,8 @@ def run_plan(problem_path: Path, models_dir: Path, options: PlanOptions) -> int:
     # process keeps the second core busy (a 2-thread pass then waits for it: 20-40x slower, measured).
     torch.set_num_threads(1)
     problem = load_problem(problem_path)
+    if options.rounds is not None and not options.replan:
+        raise UserError("--rounds sets the replanning rounds of the closed loop; give it with --replan")
     if options.replan and options.execute == "none":
         raise UserError("--replan executes actions and observes the world; it needs --execute fast or full")
     if options.replay is not None and options.execute == "none":
@@ -246,9 +273,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="planner (default bilevel: verified symbolic plan, else continuous search; "
                    "bilevel_alg1: the paper's Algorithm 1 without our Level-1 extensions)")
     p.add_argument("--replan", action="store_true",
-                   help="closed loop: execute the first action, observe, replan (up to k - 1 rounds)")
+                   help="closed loop: execute the first action, observe, plan again, until the goal is reached or "
+                   "--max-actions actions were sent; a round that finds no plan first searches again over every "
+                   "action (--no-widen: it stops)")
     p.add_argument("--rounds", type=non_negative_int, default=None,
-                   help="replanning rounds (default: k - 1 of the problem)")
+                   help="with --replan, the paper's loop instead: this many replanning rounds (the paper gives k - 1 "
+                   "for a goal of k random actions), the last plan executed to its end, and it stops when a round "
+                   "finds no plan")
     p.add_argument("--execute", choices=("none", "fast", "full"), default="fast",
                    help="refine and execute the plan in the fast world (default) or with the arm under "
                    "physics (full), or not at all")
@@ -330,6 +361,14 @@ def add_planner_arguments(p: argparse.ArgumentParser, backends: tuple[str, ...] 
     p.add_argument("--no-on-course", dest="on_course", action="store_const", const=None,
                    help="keep the rest of the last plan only by its rollout from the observed state (the rule before "
                    "--on-course)")
+    p.add_argument("--max-actions", type=positive_int, default=default.loop.max_actions,
+                   help="the closed loop (--replan; bilevel_loop) gives up after sending this many actions to the "
+                   f"world (default {default.loop.max_actions}: a goal of up to 5 random actions, with room to "
+                   "recover from misses)")
+    p.add_argument("--no-widen", dest="widen", action="store_false",
+                   help="the closed loop stops at a round without a plan (default: it first searches again over "
+                   "all 9 n^2 actions, which can move a block out of the way, unstack, or move a block already "
+                   "at its goal)")
     p.add_argument("--max-expansions", type=positive_int, default=default.search.max_expansions,
                    help="continuous search node limit per planning call: it decides when the search gives up, "
                    f"whatever the machine's load (default {default.search.max_expansions}, about 10 s at 4 objects)")
@@ -369,6 +408,7 @@ def planner_config(args: argparse.Namespace) -> PlanConfig:
                       level1_objects=args.level1_objects, level1_serial=args.level1_serial,
                       level1_confident=args.level1_confident, level1_cut=args.level1_cut,
                       keep_plan=args.keep_plan, on_course=args.on_course,
+                      loop=LoopConfig(max_actions=args.max_actions, widen=args.widen),
                       symbolic_time_limit=args.symbolic_time_limit, feasibility=getattr(args, "feasibility", True),
                       search=SearchConfig(max_expansions=args.max_expansions, time_limit=args.time_limit,
                                           confident=args.confident, look_on=args.look_on,

@@ -6,8 +6,9 @@ and `tamp evaluate`:
   outcome, `full` runs the time-parameterized trajectory with the arm under physics. Actions before
   a refinement failure run, none after it.
 - closed loop (`run_closed_loop`): in a World of the chosen fidelity, execute the first action of
-  each plan, observe the scene and replan (`tamp.planning.bilevel.plan_closed_loop`); an action that
-  cannot be refined changes nothing and the loop goes on from the observed scene.
+  each plan, observe the scene and plan again (`tamp.planning.closed_loop.plan_closed_loop`: until the
+  goal or the loop's action budget, or the paper's k - 1 rounds); an action that cannot be refined
+  changes nothing and the loop goes on from the observed scene.
 
 Both take an optional `Timeline` to record a replay, and a `World` to reuse (its Drake plants are
 cached per block layout); the planners see the simulator only through `kinematics_for`.
@@ -21,7 +22,8 @@ from typing import Callable, Sequence
 import numpy as np
 
 from tamp.errors import UserError
-from tamp.planning.bilevel import KINEMATIC_METHODS, ClosedLoopResult, PlanConfig, PlanResult, plan_closed_loop
+from tamp.planning.bilevel import KINEMATIC_METHODS, PlanConfig, PlanResult
+from tamp.planning.closed_loop import ClosedLoopResult, plan_closed_loop
 from tamp.planning.models import Models
 from tamp.planning.structs import PickPlace
 from tamp.planning.verify import goal_error
@@ -122,14 +124,15 @@ class ClosedLoopRun:
 StepCallback = Callable[[PickPlace, np.ndarray, StepInfo, float], None]  # (action, X observed, info, wall s)
 
 
-def run_closed_loop(method: str, models: Models, X_init: np.ndarray, X_goal: np.ndarray, rounds: int,
+def run_closed_loop(method: str, models: Models, X_init: np.ndarray, X_goal: np.ndarray, rounds: int | None,
                     config: PlanConfig, fidelity: str = "fast", *, world: World | None = None,
                     kinematics: FeasibilityChecker | None = None, timeline: Timeline | None = None,
                     planner: Callable[..., PlanResult] | None = None,
                     on_round: Callable[[int, PlanResult], None] | None = None,
                     on_step: StepCallback | None = None) -> ClosedLoopRun:
-    """Plan, execute the first action in a World of `fidelity`, observe, replan, up to `rounds`
-    replanning rounds (the last plan runs to its end). `kinematics` observes every scene the world
+    """Plan, execute the first action in a World of `fidelity`, observe, plan again: until the goal or
+    config.loop's action budget (`rounds` None), or the paper's `rounds` replanning rounds (the last
+    plan runs to its end). `kinematics` observes every scene the world
     reaches; `planner` and `on_round` are passed to `plan_closed_loop`, `on_step` is called after
     every executed action."""
     world = world or executing_world(fidelity)

@@ -15,16 +15,8 @@ Methods (`METHODS`, same signature, same `PlanResult`):
 - ``deterministic``  the plan in the most-frequent-effect domain (baseline), not verified.
 - ``cfs``            continuous forward search alone.
 
-`plan_closed_loop` is the replanning variant: plan, execute the first action with a caller-given
-`step` (a World, or any simulator), observe the real state and plan again from it, up to `rounds`
-(= k - 1) replanning rounds; the last plan is executed to its end. It stops early once the observed
-state is within eps of the goal. (The paper executes the whole plan first and replans only if it
-failed; with a deterministic simulator that differs only in plans that would have succeeded anyway
-being replaced, and it needs no rollback of the world, which a real robot cannot do.) Our extension
-(`PlanConfig.keep_plan`): a round keeps the rest of the last plan when it refines and still ends
-within `search.confident` of the goal: as the plan predicted, if the observed state is where the plan
-predicted it (every block within `PlanConfig.on_course`), else rolled out from the observed state;
-only otherwise does it plan again, so a plan on course is not traded for another one.
+The closed loops (the paper's replanning variant and the loop that does not know k) are in
+`tamp.planning.closed_loop`.
 """
 from __future__ import annotations
 
@@ -36,6 +28,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from tamp.errors import UserError
+from tamp.planning.config import LoopConfig
 from tamp.planning.models import Models
 from tamp.planning.search import (
     SearchConfig,
@@ -52,10 +45,8 @@ from tamp.planning.verify import (
     EPS_SUCCESS,
     TAU_VERIFY,
     Verification,
-    at_goal,
     fragility,
     goal_error,
-    goal_errors,
     refine_skeleton,
     states_pair,
     verify,
@@ -117,6 +108,7 @@ class PlanConfig:
     feasibility: bool = True  # check actions on the predicted states, refine a plan before returning it
     max_refinements: int = 4  # full refinements per planning call (Level-1 candidates and Level-2 plans)
     search: SearchConfig = SearchConfig()
+    loop: LoopConfig = LoopConfig()  # the closed loop that does not know k (`closed_loop.plan_closed_loop`)
 
     def __post_init__(self) -> None:
         if self.backend not in SYMBOLIC_BACKENDS:
@@ -183,6 +175,7 @@ class PlanResult:
     refinements: list[dict] = field(default_factory=list)  # level, plan, outcome of each full refinement
     kept_by: str | None = None  # closed loop: the plan is the rest of the last round's (`keep_rest`), not planned
     #   anew, judged by the plan's own prediction ("on course") or by a rollout from the observed state ("rollout")
+    widened: bool = False  # closed loop: the plan of a search over every action, after the planner found none
 
     @property
     def solved(self) -> bool:
@@ -195,9 +188,10 @@ class PlanResult:
 
     @property
     def origin(self) -> str:
-        """How this round got its plan: "planned", "kept on course" or "kept by rollout"."""
-        return "planned" if self.kept_by is None else \
-            "kept on course" if self.kept_by == "on course" else "kept by rollout"
+        """How this round got its plan: "planned", "widened search", "kept on course" or "kept by rollout"."""
+        if self.kept_by is None:
+            return "widened search" if self.widened else "planned"
+        return "kept on course" if self.kept_by == "on course" else "kept by rollout"
 
     def _plan_path(self) -> tuple[tuple[int, ...], tuple[int, ...] | None] | None:
         """The packed symbolic states a Level-1 plan passes through and the sub-scene they describe."""
@@ -248,7 +242,7 @@ class PlanResult:
                 "timings": {k: round(v, 6) for k, v in self.timings.items()},
                 "reasons": list(self.reasons), "symbolic": self.symbolic_stats,
                 "rejected": self.rejected_dict(), "refinements": list(self.refinements), "kept": self.kept,
-                "kept_by": self.kept_by}
+                "kept_by": self.kept_by, "widened": self.widened}
 
 
 # --- the levels -------------------------------------------------------------------------------
@@ -769,156 +763,6 @@ def plan(method: str, models: Models, X_init, X_goal, cfg: PlanConfig = PlanConf
     return METHODS[method](models, X_init, X_goal, cfg, kinematics=kinematics)
 
 
-# --- closed loop ------------------------------------------------------------------------------
-@dataclass
-class ClosedLoopResult:
-    rounds: list[PlanResult]  # one planning call per round, the first from X_init
-    executed: list[PickPlace]  # actions sent to `step`, in order
-    states: list[np.ndarray]  # observed states: X_init, then after each executed action
-    X_goal: np.ndarray
-    eps: float
-    reason: str = ""
-
-    @property
-    def X_final(self) -> np.ndarray:
-        return self.states[-1]
-
-    @property
-    def error(self) -> float:
-        """Metres: max per-object distance of the observed final state to the goal."""
-        return goal_error(self.X_final, self.X_goal)
-
-    @property
-    def success(self) -> bool:
-        return self.error < self.eps
-
-
-def plan_closed_loop(method: str, models: Models, X_init, X_goal,
-                     step: Callable[[PickPlace], np.ndarray], rounds: int,
-                     cfg: PlanConfig = PlanConfig(),
-                     on_round: Callable[[int, PlanResult], None] | None = None,
-                     planner: Callable[..., PlanResult] | None = None,
-                     kinematics: KinematicFeasibility | None = None) -> ClosedLoopResult:
-    """Plan, execute the first action, observe, replan (at most `rounds` times); see the module doc.
-
-    `step(action)` executes one action in the real (simulated) world and returns the observed (n, 5)
-    state; `on_round(r, result)` is called after each planning call, before anything is executed.
-    `planner` (default `plan`, same signature) lets a caller reuse a plan it already has.
-    `kinematics` is passed to every planning call; `step` must let it observe the new scene
-    (`FeasibilityChecker.observe`), since only the simulator knows the blocks' orientations.
-    """
-    X_goal = np.asarray(X_goal, dtype=float)
-    out = ClosedLoopResult([], [], [np.asarray(X_init, dtype=float)], X_goal, cfg.eps)
-    for r in range(rounds + 1):
-        X = out.states[-1]
-        if at_goal(X, X_goal, cfg.eps):
-            out.reason = "the observed state is within eps of the goal"
-            break
-        extra = {} if kinematics is None else {"kinematics": kinematics}
-        keep = cfg.keep_plan and method in KEEPING_METHODS and bool(out.rounds)
-        kept = keep_rest(models, X, X_goal, out.rounds[-1], cfg, kinematics) if keep else None
-        if kept is not None and kept.solved:
-            result = kept
-        else:
-            result = (planner or plan)(method, models, X, X_goal, cfg, **extra)
-            if kept is not None:
-                _absorb(result, kept)
-        out.rounds.append(result)
-        if on_round is not None:
-            on_round(r, result)
-        if not result.solved:
-            out.reason = f"round {r}: no plan ({'; '.join(result.reasons)})"
-            break
-        if not result.plan:
-            out.reason = f"round {r}: the planner returned an empty plan"
-            break
-        last = r == rounds
-        for action in (result.plan if last else result.plan[:1]):
-            out.executed.append(action)
-            out.states.append(np.asarray(step(action), dtype=float))
-        if last:
-            out.reason = f"executed the plan of round {r} to its end (no replanning rounds left)"
-    return out
-
-
-def _absorb(result: PlanResult, attempt: PlanResult) -> None:
-    """Count a failed `keep_rest` attempt in the round that planned anew: its time (`timings["keep"]`,
-    and in the total), reasons, full refinements and kinematic rejections."""
-    for stage in ("total", "feasibility", "refine"):
-        if stage in attempt.timings:
-            result.timings[stage] = result.timings.get(stage, 0.0) + attempt.timings[stage]
-    result.timings["keep"] = attempt.timings["total"]
-    result.reasons[:0] = attempt.reasons
-    result.refinements[:0] = attempt.refinements
-    if attempt.rejected is not None:
-        rejected = result.rejected if result.rejected is not None else {1: Counter(), 2: Counter()}
-        for level, counts in attempt.rejected.items():
-            rejected.setdefault(level, Counter()).update(counts)
-        result.rejected = rejected
-
-
-def off_course(X: np.ndarray, last: PlanResult) -> float:
-    """Metres: the largest 3-D distance of a block of the observed state X from where `last` predicted
-    it after its first action (inf when `last` has no prediction)."""
-    if last.predicted is None or len(last.predicted) < 2:
-        return float("inf")
-    return float(np.linalg.norm(np.asarray(X)[:, :3] - last.predicted[1][:, :3], axis=1).max(initial=0.0))
-
-
-def keep_rest(models: Models, X: np.ndarray, X_goal: np.ndarray, last: PlanResult, cfg: PlanConfig,
-              kinematics: KinematicFeasibility | None = None) -> PlanResult:
-    """The rest of `last` (its first action executed) as this round's plan, if it ends within
-    cfg.search.confident of X_goal as `last` predicted it, when the observed state X is within
-    cfg.on_course of that prediction, or rolled out from X otherwise; and, with `kinematics` (and
-    cfg.feasibility), it passes the check and refines. Else a result without a plan (its reasons say
-    why, its timings what the check cost). The plan keeps the last plan's level."""
-    rest = list(last.plan or [])[1:]
-    level = last.level or 2
-
-    def body(result: PlanResult) -> PlanResult:
-        if not rest:
-            result.reasons.append("keep: the last plan has no actions left")
-            return result
-        v: Verification | None = None
-        deviation = off_course(X, last)
-        if cfg.on_course is not None and deviation <= cfg.on_course:  # the plan's own prediction of the rest
-            assert last.predicted is not None  # a finite deviation needs the prediction
-            trajectory = np.concatenate([np.asarray(X, dtype=float)[None], last.predicted[2:]])
-            planned = Verification(tuple(tuple(int(a) for a in action) for action in rest), trajectory,
-                                   goal_errors(trajectory[-1], X_goal), cfg.tau_verify)
-            if planned.error < cfg.search.confident:
-                v, kept_by = planned, "on course"
-                why = f"on course (every block within {deviation * 100:.1f} cm of its predicted place), " \
-                      f"predicted {v.error * 100:.1f} cm from the goal"
-        if v is None:  # off course: a new rollout from the observed state
-            v = verify(models.require_dynamics(), X, X_goal, rest, cfg.tau_verify)
-            if v.error >= cfg.search.confident:
-                result.reasons.append(f"keep: the rest of the last plan is predicted {v.error * 100:.1f} cm from "
-                                      f"the goal from the observed state (over {cfg.search.confident * 100:g} cm)")
-                return result
-            kept_by, why = "rollout", f"predicted {v.error * 100:.1f} cm from the goal from the observed state"
-        feas = _Feasibility.of(kinematics, cfg, result)
-        if feas is not None and (feas.plan(v.trajectory, v.actions) is not None
-                                 or not feas.refine(level, v.trajectory, v.actions).success):
-            result.reasons.append("keep: the rest of the last plan is not kinematically feasible from here")
-            return result
-        states = last.plan_states
-        if states is not None:  # the same symbolic path from the next state on (the per-step view)
-            result.candidates = [Candidate(v.actions, 0, 0.0, v.error, True, states=states[1:],
-                                           objects=last.plan_scene)]
-        result.reasons.append(f"kept the rest of the last plan: {why}")
-        result.kept_by = kept_by
-        return _take(result, v.actions, level, v.trajectory, X_goal)
-
-    return _timed(last.method, body)
-
-
-def replan_rounds(k: int | None, default: int = 4) -> int:
-    """k - 1 replanning rounds for a problem generated with k actions."""
-    return default if k is None else max(k - 1, 0)
-
-
-__all__: Sequence[str] = ["Candidate", "ClosedLoopResult", "LEVEL1_STAGES", "METHODS", "PlanConfig", "PlanResult",
-                          "Planner", "keep_rest", "level1_scene", "off_course", "plan", "plan_bilevel",
-                          "plan_bilevel_alg1", "plan_cfs", "plan_closed_loop", "plan_deterministic",
-                          "plan_probabilistic", "replan_rounds"]
+__all__: Sequence[str] = ["Candidate", "LEVEL1_STAGES", "METHODS", "PlanConfig", "PlanResult", "Planner",
+                          "level1_scene", "plan", "plan_bilevel", "plan_bilevel_alg1", "plan_cfs",
+                          "plan_deterministic", "plan_probabilistic"]

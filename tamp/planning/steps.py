@@ -163,15 +163,17 @@ class SymbolicStep:
                                for kind, k, i, j, e, w in self.mismatches()]}
 
 
-def dynamics_errors(models: Models, states: Sequence[np.ndarray], actions) -> list[float] | None:
-    """Per executed action: the Dynamics Model's position error (metres, mean over objects) predicting
-    its effect from the state the world was in before it; None without a Dynamics Model."""
+def dynamics_errors(models: Models, states: Sequence[np.ndarray], actions, worst: bool = False) -> list[float] | None:
+    """Per executed action: the Dynamics Model's position error (metres, mean over objects, or with
+    `worst` the largest: how far the block it missed most landed from its prediction) predicting its
+    effect from the state the world was in before it; None without a Dynamics Model."""
     if models.dynamics is None:
         return None
     out = []
     for X, X_next, action in zip(states, states[1:], actions):
         e_hat = models.dynamics.predict_effect(X, np.asarray([tuple(action)], dtype=np.int64))[0]
-        out.append(float(np.linalg.norm(X[:, :3] + e_hat - X_next[:, :3], axis=1).mean()))
+        distances = np.linalg.norm(X[:, :3] + e_hat - X_next[:, :3], axis=1)
+        out.append(float(distances.max() if worst else distances.mean()))
     return out
 
 

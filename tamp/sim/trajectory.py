@@ -158,6 +158,10 @@ class RefinementFailure:
     where: str  # waypoint or motion name
     reason: str
 
+    def record(self) -> dict:
+        """As an evaluation row and `tamp.planning.causes` store it."""
+        return {"action": int(self.action_index), "stage": str(self.stage), "where": self.where, "reason": self.reason}
+
     def __str__(self) -> str:
         a = self.action
         return (f"action {self.action_index} (pick {a.pick} at {a.grasp_offset:+d}, place on {a.place} at "

@@ -1,0 +1,245 @@
+"""Closed-loop planning: execute an action, observe the world, plan again.
+
+Two loops share one round (plan, or keep the rest of the last plan while it is on course):
+
+- `plan_closed_loop(..., rounds=k - 1)`: the paper's replanning variant (`bilevel_replan`, Table IV).
+  Plan, execute the first action with a caller-given `step` (a World, or any simulator), observe and
+  plan again, up to `rounds` replanning rounds; the last plan is executed to its end. It stops at the
+  goal, and when a round finds no plan or an empty one. (The paper executes the whole plan first and
+  replans only if it failed; with a deterministic simulator that differs only in plans that would
+  have succeeded anyway being replaced, and it needs no rollback of the world, which a real robot
+  cannot do.)
+- `plan_closed_loop(..., rounds=None)`: the loop that does not know k (`bilevel_loop`, the default of
+  `tamp plan --replan` and `tamp demo`). Every round executes one action and observes; it goes on
+  until the observed state is within eps of the goal or `LoopConfig.max_actions` actions were sent, so
+  a plan that ends short of the goal is followed by another round. A round that finds no plan, or
+  only the empty plan while a block is off its goal, widens the search (`widened_search`: every one of
+  the 9 n^2 actions, so blocks can be moved out of the way, unstacked, or moved although at their
+  goal) before the loop gives up.
+
+Keeping a plan (`PlanConfig.keep_plan`, our extension, both loops): a round keeps the rest of the last
+plan when it refines and still ends within `search.confident` of the goal: as the plan predicted, if
+the observed state is where the plan predicted it (every block within `PlanConfig.on_course`), else
+rolled out from the observed state; only otherwise does it plan again, so a plan on course is not
+traded for another one.
+"""
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass, replace
+from typing import Callable, Sequence
+
+import numpy as np
+
+from tamp.planning.bilevel import (
+    KEEPING_METHODS,
+    Candidate,
+    PlanConfig,
+    PlanResult,
+    _Feasibility,
+    _take,
+    _timed,
+    plan,
+    plan_cfs,
+)
+from tamp.planning.models import Models
+from tamp.planning.structs import KinematicFeasibility, Outcome, PickPlace
+from tamp.planning.verify import Verification, at_goal, goal_error, goal_errors, verify
+
+
+@dataclass
+class ClosedLoopResult:
+    rounds: list[PlanResult]  # one planning call per round, the first from X_init
+    executed: list[PickPlace]  # actions sent to `step`, in order
+    states: list[np.ndarray]  # observed states: X_init, then after each executed action
+    X_goal: np.ndarray
+    eps: float
+    reason: str = ""
+    stop: str = ""  # how the loop ended: "goal", "no_plan", "empty_plan", "rounds" (the paper's loop ran its
+    #   k - 1 rounds) or "budget" (`LoopConfig.max_actions` used up)
+
+    @property
+    def X_final(self) -> np.ndarray:
+        return self.states[-1]
+
+    @property
+    def error(self) -> float:
+        """Metres: max per-object distance of the observed final state to the goal."""
+        return goal_error(self.X_final, self.X_goal)
+
+    @property
+    def success(self) -> bool:
+        return self.error < self.eps
+
+
+def loop_outcome(loop: ClosedLoopResult) -> Outcome:
+    """A closed loop's outcome, judged by where it ended: success, no plan (nothing executed) or wrong plan."""
+    if loop.success:
+        return Outcome.SUCCESS
+    return Outcome.NO_PLAN if not loop.executed else Outcome.WRONG_PLAN
+
+
+def plan_closed_loop(method: str, models: Models, X_init, X_goal,
+                     step: Callable[[PickPlace], np.ndarray], rounds: int | None,
+                     cfg: PlanConfig = PlanConfig(),
+                     on_round: Callable[[int, PlanResult], None] | None = None,
+                     planner: Callable[..., PlanResult] | None = None,
+                     kinematics: KinematicFeasibility | None = None) -> ClosedLoopResult:
+    """Plan, execute, observe, plan again; see the module doc. `rounds`: the paper's loop with that many
+    replanning rounds (k - 1, `replan_rounds`); None: the loop that does not know k (cfg.loop).
+
+    `step(action)` executes one action in the real (simulated) world and returns the observed (n, 5)
+    state; `on_round(r, result)` is called after each planning call, before anything is executed.
+    `planner` (default `plan`, same signature) lets a caller reuse a plan it already has.
+    `kinematics` is passed to every planning call; `step` must let it observe the new scene
+    (`FeasibilityChecker.observe`), since only the simulator knows the blocks' orientations.
+    """
+    X_goal = np.asarray(X_goal, dtype=float)
+    out = ClosedLoopResult([], [], [np.asarray(X_init, dtype=float)], X_goal, cfg.eps)
+    until_goal = rounds is None
+    r = 0
+    while True:
+        X = out.states[-1]
+        if at_goal(X, X_goal, cfg.eps):
+            out.reason, out.stop = "the observed state is within eps of the goal", "goal"
+            break
+        if until_goal and len(out.executed) >= cfg.loop.max_actions:
+            out.reason, out.stop = (f"{cfg.loop.max_actions} actions sent without reaching the goal "
+                                    f"(the loop's action budget)"), "budget"
+            break
+        result = _round(method, models, X, X_goal, out, cfg, planner, kinematics)
+        if until_goal and cfg.loop.widen and not (result.solved and result.plan):
+            result = widened_search(method, models, X, X_goal, cfg, kinematics, result)
+        out.rounds.append(result)
+        if on_round is not None:
+            on_round(r, result)
+        if not result.solved:
+            out.reason, out.stop = f"round {r}: no plan ({'; '.join(result.reasons)})", "no_plan"
+            break
+        if not result.plan:
+            out.reason, out.stop = f"round {r}: the planner returned an empty plan", "empty_plan"
+            break
+        last = not until_goal and r == rounds
+        for action in (result.plan if last else result.plan[:1]):
+            out.executed.append(action)
+            out.states.append(np.asarray(step(action), dtype=float))
+        if last:
+            out.reason, out.stop = f"executed the plan of round {r} to its end (no replanning rounds left)", "rounds"
+            break
+        r += 1
+    return out
+
+
+def _round(method: str, models: Models, X: np.ndarray, X_goal: np.ndarray, out: ClosedLoopResult,
+           cfg: PlanConfig, planner: Callable[..., PlanResult] | None,
+           kinematics: KinematicFeasibility | None) -> PlanResult:
+    """One round's plan from the observed X: the rest of the last plan if it is kept, else a new one."""
+    extra = {} if kinematics is None else {"kinematics": kinematics}
+    keep = cfg.keep_plan and method in KEEPING_METHODS and bool(out.rounds)
+    kept = keep_rest(models, X, X_goal, out.rounds[-1], cfg, kinematics) if keep else None
+    if kept is not None and kept.solved:
+        return kept
+    result = (planner or plan)(method, models, X, X_goal, cfg, **extra)
+    if kept is not None:
+        _absorb(result, kept)
+    return result
+
+
+def widened_search(method: str, models: Models, X: np.ndarray, X_goal: np.ndarray, cfg: PlanConfig,
+                   kinematics: KinematicFeasibility | None, failed: PlanResult) -> PlanResult:
+    """The continuous search over all 9 n^2 actions (cfg.loop.widen_expansions nodes), after a round
+    whose planner found no plan (`failed`, or only the empty plan while a block is off its goal): the
+    goal-oriented actions only move misplaced blocks toward their goal, and cannot move a block out of
+    the way, unstack one, or move a block already at its goal. The failed round's time, reasons and
+    rejections are counted in the result (`PlanResult.widened`)."""
+    wide = replace(cfg, search=replace(cfg.search, prune=False, max_expansions=cfg.loop.widen_expansions))
+    result = plan_cfs(models, X, X_goal, wide, kinematics=kinematics)
+    result.method, result.widened = method, True
+    _absorb(result, failed, "planned")
+    if failed.solved and not failed.plan:
+        result.reasons.insert(0, "the planner returned an empty plan with a block off its goal")
+    result.reasons.append("searched again over every action (the goal-oriented ones gave no plan)"
+                          if result.solved else "no plan over every action either")
+    return result
+
+
+def _absorb(result: PlanResult, attempt: PlanResult, stage: str = "keep") -> None:
+    """Count an earlier attempt of the round in the result that replaced it (a failed `keep_rest`, or the
+    planning call before a widened search): its time (`timings[stage]`, and in the total), reasons,
+    full refinements and kinematic rejections."""
+    for key in ("total", "feasibility", "refine"):
+        if key in attempt.timings:
+            result.timings[key] = result.timings.get(key, 0.0) + attempt.timings[key]
+    result.timings[stage] = result.timings.get(stage, 0.0) + attempt.timings["total"]
+    result.reasons[:0] = attempt.reasons
+    result.refinements[:0] = attempt.refinements
+    if attempt.rejected is not None:
+        rejected = result.rejected if result.rejected is not None else {1: Counter(), 2: Counter()}
+        for level, counts in attempt.rejected.items():
+            rejected.setdefault(level, Counter()).update(counts)
+        result.rejected = rejected
+
+
+def off_course(X: np.ndarray, last: PlanResult) -> float:
+    """Metres: the largest 3-D distance of a block of the observed state X from where `last` predicted
+    it after its first action (inf when `last` has no prediction)."""
+    if last.predicted is None or len(last.predicted) < 2:
+        return float("inf")
+    return float(np.linalg.norm(np.asarray(X)[:, :3] - last.predicted[1][:, :3], axis=1).max(initial=0.0))
+
+
+def keep_rest(models: Models, X: np.ndarray, X_goal: np.ndarray, last: PlanResult, cfg: PlanConfig,
+              kinematics: KinematicFeasibility | None = None) -> PlanResult:
+    """The rest of `last` (its first action executed) as this round's plan, if it ends within
+    cfg.search.confident of X_goal as `last` predicted it, when the observed state X is within
+    cfg.on_course of that prediction, or rolled out from X otherwise; and, with `kinematics` (and
+    cfg.feasibility), it passes the check and refines. Else a result without a plan (its reasons say
+    why, its timings what the check cost). The plan keeps the last plan's level."""
+    rest = list(last.plan or [])[1:]
+    level = last.level or 2
+
+    def body(result: PlanResult) -> PlanResult:
+        if not rest:
+            result.reasons.append("keep: the last plan has no actions left")
+            return result
+        v: Verification | None = None
+        deviation = off_course(X, last)
+        if cfg.on_course is not None and deviation <= cfg.on_course:  # the plan's own prediction of the rest
+            assert last.predicted is not None  # a finite deviation needs the prediction
+            trajectory = np.concatenate([np.asarray(X, dtype=float)[None], last.predicted[2:]])
+            planned = Verification(tuple(tuple(int(a) for a in action) for action in rest), trajectory,
+                                   goal_errors(trajectory[-1], X_goal), cfg.tau_verify)
+            if planned.error < cfg.search.confident:
+                v, kept_by = planned, "on course"
+                why = f"on course (every block within {deviation * 100:.1f} cm of its predicted place), " \
+                      f"predicted {v.error * 100:.1f} cm from the goal"
+        if v is None:  # off course: a new rollout from the observed state
+            v = verify(models.require_dynamics(), X, X_goal, rest, cfg.tau_verify)
+            if v.error >= cfg.search.confident:
+                result.reasons.append(f"keep: the rest of the last plan is predicted {v.error * 100:.1f} cm from "
+                                      f"the goal from the observed state (over {cfg.search.confident * 100:g} cm)")
+                return result
+            kept_by, why = "rollout", f"predicted {v.error * 100:.1f} cm from the goal from the observed state"
+        feas = _Feasibility.of(kinematics, cfg, result)
+        if feas is not None and (feas.plan(v.trajectory, v.actions) is not None
+                                 or not feas.refine(level, v.trajectory, v.actions).success):
+            result.reasons.append("keep: the rest of the last plan is not kinematically feasible from here")
+            return result
+        states = last.plan_states
+        if states is not None:  # the same symbolic path from the next state on (the per-step view)
+            result.candidates = [Candidate(v.actions, 0, 0.0, v.error, True, states=states[1:],
+                                           objects=last.plan_scene)]
+        result.reasons.append(f"kept the rest of the last plan: {why}")
+        result.kept_by = kept_by
+        return _take(result, v.actions, level, v.trajectory, X_goal)
+
+    return _timed(last.method, body)
+
+
+def replan_rounds(k: int | None, default: int = 4) -> int:
+    """k - 1 replanning rounds for a problem generated with k actions (the paper's loop)."""
+    return default if k is None else max(k - 1, 0)
+
+
+__all__: Sequence[str] = ["ClosedLoopResult", "keep_rest", "loop_outcome", "off_course", "plan_closed_loop",
+                          "replan_rounds", "widened_search"]

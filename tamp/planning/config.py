@@ -1,0 +1,26 @@
+"""Small configuration structs of the planner that several planning modules share.
+
+`PlanConfig` (tamp.planning.bilevel) composes them; each says what one concern does and why its
+defaults.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from tamp.errors import UserError
+
+
+@dataclass(frozen=True)
+class LoopConfig:
+    """The closed loop that does not know k (`tamp.planning.closed_loop.plan_until_goal`)."""
+
+    max_actions: int = 12  # actions sent to the world before the loop gives up: a goal of k <= 5 random
+    #   actions needs at most 5, the rest is room to recover from misses and to make room
+    widen: bool = True  # a round without a plan searches again over all 9 n^2 actions (moves that make room,
+    #   unstack, move blocks already at their goal), not only the goal-oriented ones
+    widen_expansions: int = 400  # node budget of the widened search (about 2-4 s at 4 blocks with kinematics)
+
+    def __post_init__(self) -> None:
+        if self.max_actions < 1 or self.widen_expansions < 1:
+            raise UserError(f"the closed loop needs at least 1 action and 1 expansion of its widened search, got "
+                            f"{self.max_actions} actions and {self.widen_expansions} expansions")

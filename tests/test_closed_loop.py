@@ -1,0 +1,120 @@
+"""The closed loop that does not know k: it goes on until the goal, plans again when a plan ends
+short, widens its search when a round finds nothing, and stops at its action budget. Stub models and
+the stub world (no Drake, no torch model)."""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).parent))
+from planning_stubs import StubModel, two_block_domain, world_step
+
+from tamp.errors import UserError
+from tamp.planning.bilevel import PlanConfig, PlanResult, plan
+from tamp.planning.closed_loop import plan_closed_loop
+from tamp.planning.config import LoopConfig
+from tamp.planning.models import Models
+from tamp.planning.structs import Infeasible
+
+X_INIT = np.array([[0.6, 0.0, 0.025, 1, 0], [0.7, 0.1, 0.025, 1, 0]])
+A_ON_B = np.array([[0.7, 0.1, 0.075, 1, 0], [0.7, 0.1, 0.025, 1, 0]])
+
+
+@pytest.fixture(scope="module")
+def models() -> Models:
+    stub = StubModel()
+    return Models(dynamics=stub, symbolic=stub, domain=two_block_domain())
+
+
+def slipping_world(slips: int):
+    """The stub world whose first `slips` actions grasp nothing (the blocks stay where they are)."""
+    sent: list = []
+
+    def step(action):
+        sent.append(tuple(action))
+        X = step.X
+        step.X = X if len(sent) <= slips else world_step(X, action)
+        return step.X
+    step.X = X_INIT
+    return step
+
+
+def test_the_loop_goes_on_after_the_rounds_the_paper_would_give(models):
+    # a goal of k = 1 action: the paper's loop has k - 1 = 0 rounds, one plan executed to its end
+    paper = plan_closed_loop("bilevel", models, X_INIT, A_ON_B, slipping_world(2), rounds=0)
+    assert not paper.success and paper.stop == "rounds" and len(paper.executed) == 1
+    goal = plan_closed_loop("bilevel", models, X_INIT, A_ON_B, slipping_world(2), rounds=None)
+    assert goal.success and goal.stop == "goal" and len(goal.executed) == 3
+    assert len(goal.rounds) == 3  # one action per round: a plan that ended short is followed by a round
+
+
+def test_the_loop_stops_at_its_action_budget(models):
+    cfg = PlanConfig(loop=LoopConfig(max_actions=4))
+    out = plan_closed_loop("bilevel", models, X_INIT, A_ON_B, slipping_world(100), rounds=None, cfg=cfg)
+    assert not out.success and out.stop == "budget" and len(out.executed) == 4
+    assert "4 actions sent" in out.reason
+
+
+def test_a_round_without_a_plan_widens_the_search_to_every_action(models):
+    def planner_without_plans(method, models_, X, X_goal, cfg, **kwargs):
+        result = PlanResult(method, None)
+        result.reasons.append("level 2: exhausted (a stub that never plans)")
+        result.timings["total"] = 0.001
+        return result
+
+    out = plan_closed_loop("bilevel", models, X_INIT, A_ON_B, slipping_world(0), rounds=None,
+                           planner=planner_without_plans)
+    assert out.success and out.rounds[0].widened and out.rounds[0].origin == "widened search"
+    assert out.rounds[0].search is not None and out.rounds[0].timings["planned"] == pytest.approx(0.001)
+    assert out.rounds[0].reasons[0] == "level 2: exhausted (a stub that never plans)"
+    narrow = plan_closed_loop("bilevel", models, X_INIT, A_ON_B, slipping_world(0), rounds=None,
+                              planner=planner_without_plans, cfg=PlanConfig(loop=LoopConfig(widen=False)))
+    assert not narrow.success and narrow.stop == "no_plan" and not narrow.executed
+    # the paper's loop never widens
+    paper = plan_closed_loop("bilevel", models, X_INIT, A_ON_B, slipping_world(0), rounds=3,
+                             planner=planner_without_plans)
+    assert paper.stop == "no_plan" and not paper.rounds[0].widened
+
+
+def test_an_empty_plan_while_a_block_is_off_its_goal_widens_the_search(models):
+    def planner_empty(method, models_, X, X_goal, cfg, **kwargs):
+        result = PlanResult(method, [], level=1, predicted=np.asarray(X)[None])
+        result.timings["total"] = 0.0
+        return result
+
+    out = plan_closed_loop("bilevel", models, X_INIT, A_ON_B, slipping_world(0), rounds=None, planner=planner_empty)
+    assert out.success and out.rounds[0].widened
+    assert out.rounds[0].reasons[0] == "the planner returned an empty plan with a block off its goal"
+
+
+class RejectGoalMoves:
+    """A kinematic check that rejects every action onto the other block: the goal-oriented actions
+    (A onto B, A onto itself) are then useless, and the widened search finds nothing either."""
+
+    def check(self, X, actions):
+        return [Infeasible.COLLISION if a[0] != a[2] else None for a in np.asarray(actions)]
+
+    def refine(self, actions, trajectory):
+        raise AssertionError("nothing to refine: no plan passes the check")
+
+
+def test_the_loop_says_why_it_stopped_when_no_action_is_left(models):
+    out = plan_closed_loop("bilevel", models, X_INIT, A_ON_B, slipping_world(0), rounds=None,
+                           kinematics=RejectGoalMoves())
+    assert not out.success and out.stop == "no_plan" and out.rounds[-1].widened
+    assert "no plan over every action either" in out.reason
+
+
+def test_loop_config_is_checked():
+    with pytest.raises(UserError, match="at least 1 action"):
+        LoopConfig(max_actions=0)
+
+
+def test_the_loop_is_deterministic(models):
+    a = plan_closed_loop("bilevel", models, X_INIT, A_ON_B, slipping_world(1), rounds=None)
+    b = plan_closed_loop("bilevel", models, X_INIT, A_ON_B, slipping_world(1), rounds=None)
+    assert a.executed == b.executed and a.stop == b.stop == "goal"
+    assert plan("bilevel", models, X_INIT, A_ON_B).solved
