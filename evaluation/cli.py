@@ -49,14 +49,40 @@ def _write_report(directory: Path, ablation: Path | None = None) -> Path:
     return write_report(directory, ablation=ablation)
 
 
+def _metres_below(limit: float):
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a distance in metres, got {text!r}") from None
+        if not 0 <= value < limit:
+            raise argparse.ArgumentTypeError(f"expected 0 <= metres < {limit:g}, got {text}")
+        return value
+    return parse
+
+
+def _push_range(text: str) -> tuple[float, float]:
+    """MIN,MAX metres of `--push` (a single value: exactly that far)."""
+    parts = text.split(",")
+    try:
+        low, high = (float(parts[0]), float(parts[-1])) if len(parts) <= 2 else (None, None)
+    except ValueError:
+        low = high = None
+    if low is None or high is None or not 0 < low <= high < 0.3:
+        raise argparse.ArgumentTypeError(f"expected MIN,MAX metres with 0 < MIN <= MAX < 0.3, got {text!r}")
+    return low, high
+
+
 def _eval_config(args: argparse.Namespace):
     """The EvalConfig of the flags of `_add_run_arguments` (`tamp evaluate`, `tamp refinability`)."""
     from evaluation.run import EvalConfig
+    from tamp.app.faults import Faults
     from tamp.app.plan_command import planner_config
 
     return EvalConfig(planner=planner_config(args), fidelity=args.fidelity, workers=args.workers,
                       backend=args.backend, address=args.address,
-                      oracle_max_plans=args.oracle_max_plans, progress=not args.quiet)
+                      oracle_max_plans=args.oracle_max_plans, progress=not args.quiet,
+                      faults=Faults(noise_m=args.noise, push_m=args.push))
 
 
 def _add_run_arguments(p: argparse.ArgumentParser, models_help: str, out_help: str, methods_default,
@@ -72,6 +98,12 @@ def _add_run_arguments(p: argparse.ArgumentParser, models_help: str, out_help: s
     add_planner_arguments(p, backends=SYMBOLIC_BACKENDS, feasibility=False)
     p.add_argument("--oracle-max-plans", type=positive_int, default=20,
                    help="probabilistic_oracle: ranked plans executed at most per problem (default 20)")
+    p.add_argument("--noise", type=_metres_below(0.05), default=0.0, metavar="METRES",
+                   help="closed loops: Gaussian noise of this standard deviation on every position the planner "
+                   "observes, as a camera's would (default 0; the world itself is not moved)")
+    p.add_argument("--push", type=_push_range, default=None, metavar="MIN,MAX",
+                   help="closed loops: once per problem, after the first action, push one free block MIN-MAX "
+                   "metres in a random horizontal direction (e.g. 0.03,0.05), as a person or a slip would")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
 
 

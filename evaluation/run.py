@@ -66,6 +66,7 @@ import numpy as np
 from evaluation.methods import METHODS, SYMBOLIC_BACKENDS, Method, load_method_models, required_files, resolve_methods
 from evaluation.problems import read_problems
 from tamp.app.args import check_output_dir
+from tamp.app.faults import Faults
 from tamp.app.parallel import BACKENDS, run_tasks
 from tamp.app.problem import Problem
 from tamp.errors import UserError
@@ -110,6 +111,7 @@ class EvalConfig:
     backend: str = "local"  # "local" process pool or "ray"
     address: str | None = None  # with backend "ray": the cluster to join (None: start a local one)
     progress: bool = True  # progress bar on stderr
+    faults: Faults = Faults()  # closed loops: observation noise and a push (`tamp.app.faults`); none by default
 
     def __post_init__(self) -> None:
         if self.fidelity not in ("fast", "full"):
@@ -154,6 +156,8 @@ class EvalConfig:
             out["symbolic_time_limit_s"] = p.symbolic_time_limit
         if p.loop != LoopConfig():  # (the loop that does not know k: the same)
             out["loop"] = dataclasses.asdict(p.loop)
+        if self.faults.any:
+            out["faults"] = {"noise_m": self.faults.noise_m, "push_m": self.faults.push_m}
         return out
 
     def plan_config(self, seed: int, feasibility: bool = True) -> PlanConfig:
@@ -413,12 +417,13 @@ class Evaluator:
         rounds = replan_rounds(problem.k) if method.loop == "paper" else None
         run = run_closed_loop(method.planner, models, problem.X_init, problem.X_goal, rounds,
                               self.config.plan_config(problem.seed, method.feasibility), self.config.fidelity,
-                              world=self.world(self.config.fidelity), kinematics=kinematics)
+                              world=self.world(self.config.fidelity), kinematics=kinematics,
+                              faults=self.config.faults if self.config.faults.any else None, fault_seed=problem.seed)
         out = run.loop
         first = out.rounds[0] if out.rounds else None
         solved = first is None or first.solved  # no round: the initial state already met the goal
         executed = len(out.executed)
-        X_final = out.X_final if executed else problem.X_init
+        X_final = run.X_final if executed else problem.X_init  # the world's, not the (noisy) observation
         failure = run.first_failure
         errors = dynamics_errors(models, out.states, out.executed)
         return {**_feasibility_fields(out.rounds), "level1_stages_s": _level1_stages(out.rounds),
@@ -434,7 +439,8 @@ class Evaluator:
                 "executed_plans": None, "final_error_m": _round(goal_error(X_final, problem.X_goal)),
                 "rounds": max(len(out.rounds) - 1, 0), "effect_error_m": _rounded(errors),
                 "step_miss_m": _rounded(dynamics_errors(models, out.states, out.executed, worst=True)),
-                "stop": stop_record(out.stop, out.rounds[-1] if out.rounds else None),
+                "stop": {**stop_record(out.stop, out.rounds[-1] if out.rounds else None),
+                         **({"faults": run.faults} if run.faults else {})},
                 "steps": self._loop_steps(problem, models, run, errors or [])}
 
     def _loop_steps(self, problem: Problem, models, run, errors: Sequence[float]) -> list[dict] | None:

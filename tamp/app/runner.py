@@ -21,6 +21,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from tamp.app.faults import Faults, push
 from tamp.errors import UserError
 from tamp.planning.bilevel import KINEMATIC_METHODS, PlanConfig, PlanResult
 from tamp.planning.closed_loop import ClosedLoopResult, plan_closed_loop
@@ -109,6 +110,18 @@ class ClosedLoopRun:
     step_times: list[tuple[float, float]] = field(default_factory=list)  # (refine, execute) wall s per action
     # replay time each action began (None: the arm never moved)
     action_starts: list[float | None] = field(default_factory=list)
+    X_true: list[np.ndarray] = field(default_factory=list)  # the world's states (loop.states: as observed)
+    faults: list[str] = field(default_factory=list)  # the faults injected (`Faults`), in words
+
+    @property
+    def X_final(self) -> np.ndarray:
+        """The world's final state (with observation noise, the loop saw it otherwise)."""
+        return self.X_true[-1] if self.X_true else self.loop.X_final
+
+    @property
+    def error(self) -> float:
+        """Metres: max per-object distance of the world's final state to the goal."""
+        return goal_error(self.X_final, self.loop.X_goal)
 
     @property
     def first_failure(self) -> RefinementFailure | None:
@@ -129,12 +142,13 @@ def run_closed_loop(method: str, models: Models, X_init: np.ndarray, X_goal: np.
                     kinematics: FeasibilityChecker | None = None, timeline: Timeline | None = None,
                     planner: Callable[..., PlanResult] | None = None,
                     on_round: Callable[[int, PlanResult], None] | None = None,
-                    on_step: StepCallback | None = None) -> ClosedLoopRun:
+                    on_step: StepCallback | None = None, faults: Faults | None = None,
+                    fault_seed: int = 0) -> ClosedLoopRun:
     """Plan, execute the first action in a World of `fidelity`, observe, plan again: until the goal or
     config.loop's action budget (`rounds` None), or the paper's `rounds` replanning rounds (the last
-    plan runs to its end). `kinematics` observes every scene the world
-    reaches; `planner` and `on_round` are passed to `plan_closed_loop`, `on_step` is called after
-    every executed action."""
+    plan runs to its end). `kinematics` observes every scene the world reaches; `planner` and
+    `on_round` are passed to `plan_closed_loop`, `on_step` is called after every executed action.
+    `faults` disturb the world and the observations (`tamp.app.faults`, drawn from `fault_seed`)."""
     world = world or executing_world(fidelity)
     world.observer = timeline
     X0 = world.reset(X=X_init)
@@ -143,11 +157,19 @@ def run_closed_loop(method: str, models: Models, X_init: np.ndarray, X_goal: np.
     infos: list[StepInfo] = []
     step_times: list[tuple[float, float]] = []
     action_starts: list[float | None] = []
+    rng = np.random.default_rng(fault_seed)
+    X_true, injected = [X0], []
 
     def step(action: PickPlace) -> np.ndarray:
         t, marks = time.perf_counter(), len(timeline.action_starts) if timeline is not None else 0
         X, info = world.step(action)
         seconds = time.perf_counter() - t
+        if faults is not None and faults.push_m is not None and len(infos) == 0:  # the one push, after action 1
+            scene, note = push(world.scene, faults, rng)
+            world.set_scene(scene, world.q)
+            X = world.X
+            injected.append(note)
+        X_true.append(X)
         if kinematics is not None:
             kinematics.observe(world.scene, world.q)
         started = timeline is not None and len(timeline.action_starts) > marks  # it moved the arm
@@ -155,13 +177,18 @@ def run_closed_loop(method: str, models: Models, X_init: np.ndarray, X_goal: np.
         execute = info.timings.get("execute", 0.0)  # full fidelity; the fast world's step is all refinement
         step_times.append((seconds - execute, execute))
         infos.append(info)
+        if faults is not None:
+            X = faults.observe(X, rng)
         if on_step is not None:
             on_step(action, X, info, seconds)
         return X
 
+    if faults is not None and faults.noise_m > 0:
+        injected.append(f"observations with {faults.noise_m * 1000:g} mm noise")
     try:
-        loop = plan_closed_loop(method, models, X0, X_goal, step, rounds, config, on_round=on_round,
+        seen = X0 if faults is None else faults.observe(X0, rng)
+        loop = plan_closed_loop(method, models, seen, X_goal, step, rounds, config, on_round=on_round,
                                 planner=planner, kinematics=kinematics)
     finally:
         world.observer = None
-    return ClosedLoopRun(loop, infos, step_times, action_starts)
+    return ClosedLoopRun(loop, infos, step_times, action_starts, X_true, injected)

@@ -1,0 +1,109 @@
+"""Faults of a real cell, injected into a closed loop to measure how it recovers.
+
+- Observation noise: every position the planner observes carries Gaussian noise of `noise_m`
+  (metres, per coordinate), as a camera's block poses would. The world itself is not moved, and the
+  kinematic checker sees the true scene (orientations are not in X; a real system would estimate them).
+- A push: once per run, after the first action, one free block (on the table, nothing on it) is
+  moved `push_m` (metres, uniform in the range) in a random horizontal direction, as a person or a
+  slipping block would, to a place where it touches no other block. The planner observes it there.
+
+Both draw from one generator seeded per run, so a run is the same for any number of workers.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from tamp.errors import UserError
+from tamp.planning.structs import BLOCK_SIZES
+
+if TYPE_CHECKING:  # the configuration loads no Drake: `tamp evaluate --help` stays fast
+    from tamp.sim.skill import Scene
+
+_CLEARANCE = 0.005  # metres: a pushed block's footprint keeps this gap to every other block's
+_ON_TABLE = 0.04  # metres: a block whose centre is lower stands on the table (both types are 5 cm tall)
+
+
+@dataclass(frozen=True)
+class Faults:
+    """Disturbances of the world during a closed loop (see the module docstring)."""
+
+    noise_m: float = 0.0  # std of the noise on every observed coordinate (0: exact observations)
+    push_m: tuple[float, float] | None = None  # (min, max) distance of the one push (None: no push)
+
+    def __post_init__(self) -> None:
+        if not 0 <= self.noise_m < 0.05:
+            raise UserError(f"the observation noise must be between 0 and 5 cm, got {self.noise_m} m")
+        if self.push_m is not None and not 0 < self.push_m[0] <= self.push_m[1] < 0.3:
+            raise UserError(f"a push needs 0 < min <= max < 0.3 m, got {self.push_m}")
+
+    @property
+    def any(self) -> bool:
+        return self.noise_m > 0 or self.push_m is not None
+
+    def observe(self, X: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """X as the planner observes it: positions with noise."""
+        if self.noise_m <= 0:
+            return X
+        seen = np.array(X, dtype=float)
+        seen[:, :3] += rng.normal(0.0, self.noise_m, size=(len(X), 3))
+        return seen
+
+
+def footprint(scene: Scene, i: int, at: np.ndarray | None = None) -> np.ndarray:
+    """The four (x, y) corners of block i's footprint (metres), centred at `at` if given."""
+    X_WB = scene.X_WB[i]
+    half = np.asarray(BLOCK_SIZES[int(scene.types[i])][:2]) / 2
+    R = X_WB.rotation().matrix()[:2, :2]
+    centre = X_WB.translation()[:2] if at is None else at
+    corners = np.array([[sx * half[0], sy * half[1]] for sx in (-1, 1) for sy in (-1, 1)])
+    return centre + corners @ R.T
+
+
+def _apart(a: np.ndarray, b: np.ndarray, gap: float) -> bool:
+    """Whether two convex footprints (corner arrays) are at least `gap` apart along a separating axis."""
+    for poly in (a, b):
+        for k in range(len(poly)):
+            edge = poly[(k + 1) % len(poly)] - poly[k]
+            normal = np.array([-edge[1], edge[0]])
+            norm = np.linalg.norm(normal)
+            if norm == 0:
+                continue
+            normal /= norm
+            pa, pb = a @ normal, b @ normal
+            if pa.max() + gap <= pb.min() or pb.max() + gap <= pa.min():
+                return True
+    return False
+
+
+def push(scene: Scene, faults: Faults, rng: np.random.Generator, tries: int = 32) -> tuple[Scene, str]:
+    """The scene after one push (see the module docstring) and what was pushed; the scene unchanged (and
+    why) when no free block has room to move."""
+    from pydrake.math import RigidTransform
+
+    from tamp.sim.skill import Scene
+
+    assert faults.push_m is not None  # a push was asked for
+    n = scene.n
+    positions = np.array([p.translation() for p in scene.X_WB])
+    free = [i for i in range(n) if positions[i, 2] < _ON_TABLE and not any(
+        positions[j, 2] > positions[i, 2] + 0.02 and not _apart(footprint(scene, i), footprint(scene, j), 0.0)
+        for j in range(n) if j != i)]
+    for _ in range(tries):
+        if not free:
+            break
+        i = int(rng.choice(free))
+        distance = float(rng.uniform(*faults.push_m))
+        angle = float(rng.uniform(0, 2 * np.pi))
+        shift = distance * np.array([np.cos(angle), np.sin(angle)])
+        moved = footprint(scene, i, positions[i, :2] + shift)
+        if all(_apart(moved, footprint(scene, j), _CLEARANCE) for j in range(n) if j != i):
+            poses = list(scene.X_WB)
+            poses[i] = RigidTransform(poses[i].rotation(), positions[i] + np.array([*shift, 0.0]))
+            return Scene(np.array(scene.types), poses), f"block {i} pushed {distance * 100:.1f} cm"
+    return scene, "no free block had room to be pushed"
+
+
+__all__ = ["Faults", "footprint", "push"]
