@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from tamp.app.args import check_output_file, fraction, non_negative_int, object_count, positive_float, positive_int
+from tamp.app.plan_file import fmt_action
 from tamp.errors import UserError
 from tamp.planning.bilevel import METHODS, SYMBOLIC_BACKENDS, PlanConfig, PlanResult, plan, replan_rounds
 from tamp.planning.search import SearchConfig
@@ -54,10 +55,6 @@ class PlanOptions:
     replay: Path | None = None
     planner: PlanConfig = PlanConfig()  # its seed is replaced by the problem's
     steps: Path | None = None  # per-step JSON (default: beside the replay, if any)
-
-
-def fmt_action(a) -> str:
-    return f"pick {a[0]} at {a[1]:+d}, place on {a[2]} at {a[3]:+d}"
 
 
 def _ms(t: float) -> str:
@@ -147,7 +144,7 @@ def _open_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timeline,
 
 
 def _print_steps(records: list[dict]) -> None:
-    from tamp.app.steps import print_steps  # tamp.app.steps imports this module
+    from tamp.app.steps import print_steps  # it loads torch: imported when steps are printed
 
     print_steps(records)
 
