@@ -16,7 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
-from tamp.app.plan_command import LEVELS, fmt_action, print_cause, print_result
+from tamp.app.plan_command import LEVELS, print_cause, print_result
+from tamp.app.plan_file import fmt_action
 from tamp.app.problem import Problem, random_problem
 from tamp.app.runner import ClosedLoopRun, Execution, execute_plan, kinematics_for, run_closed_loop
 from tamp.app.steps import (

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from tamp.app.args import check_output_file, fraction, non_negative_int, object_count, positive_float, positive_int
+from tamp.app.plan_file import fmt_action
 from tamp.errors import UserError
 from tamp.planning.bilevel import METHODS, SYMBOLIC_BACKENDS, PlanConfig, PlanResult, plan
 from tamp.planning.causes import cause_of, stop_record
@@ -60,10 +61,6 @@ class PlanOptions:
     replay: Path | None = None
     planner: PlanConfig = PlanConfig()  # its seed is replaced by the problem's
     steps: Path | None = None  # per-step JSON (default: beside the replay, if any)
-
-
-def fmt_action(a) -> str:
-    return f"pick {a[0]} at {a[1]:+d}, place on {a[2]} at {a[3]:+d}"
 
 
 def _ms(t: float) -> str:
@@ -165,7 +162,7 @@ def print_cause(outcome: str, step_miss_m, stop: dict, refine_failure: dict | No
 
 
 def _print_steps(records: list[dict]) -> None:
-    from tamp.app.steps import print_steps  # tamp.app.steps imports this module
+    from tamp.app.steps import print_steps  # it loads torch: imported when steps are printed
 
     print_steps(records)
 

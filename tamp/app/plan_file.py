@@ -18,6 +18,11 @@ from tamp.planning.structs import PickPlace
 from tamp.planning.validate import check_scene
 
 
+def fmt_action(a) -> str:
+    """An action as `tamp plan`, `tamp demo` and the per-step view print it."""
+    return f"pick {a[0]} at {a[1]:+d}, place on {a[2]} at {a[3]:+d}"
+
+
 def read_json_file(path: str | Path, kind: str):
     """The parsed content of a JSON file; a missing file or bad JSON is an error naming the file."""
     path = Path(path)

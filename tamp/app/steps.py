@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Iterator, Sequence
 
 from learned.interpret import BitNames
-from tamp.app.plan_command import fmt_action
+from tamp.app.plan_file import fmt_action
 from tamp.planning.steps import SymbolicStep, symbolic_steps
 from tamp.records import atomic_write_text
 
