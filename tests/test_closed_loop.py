@@ -118,3 +118,45 @@ def test_the_loop_is_deterministic(models):
     b = plan_closed_loop("bilevel", models, X_INIT, A_ON_B, slipping_world(1), rounds=None)
     assert a.executed == b.executed and a.stop == b.stop == "goal"
     assert plan("bilevel", models, X_INIT, A_ON_B).solved
+
+
+class AcceptAll:
+    """A kinematic check that accepts every action, and a refinement that always succeeds."""
+
+    def check(self, X, actions):
+        return [None] * len(np.asarray(actions))
+
+    def refine(self, actions, trajectory):
+        from tamp.planning.structs import RefinementOutcome
+
+        return RefinementOutcome()
+
+
+def test_back_at_an_earlier_state_the_loop_leaves_out_the_action_it_took_from_there(models):
+    from tamp.planning.search import state_key
+
+    away, back = (1, 0, 1, 1), (1, 0, 1, -1)  # B shifted 7.5 cm along y, then shifted back
+    seen: list[frozenset] = []
+
+    def cycling_planner(method, models_, X, X_goal, cfg, avoid=frozenset(), **kwargs):
+        seen.append(avoid)
+        if any(action == away for _, action in avoid):
+            return plan(method, models_, X, X_goal, cfg, avoid=avoid, **kwargs)
+        at_start = np.allclose(X, X_INIT)
+        result = PlanResult(method, [away if at_start else back], level=2,
+                            predicted=np.stack([X, world_step(X, away if at_start else back)]))
+        result.timings["total"] = 0.0
+        return result
+
+    cfg = PlanConfig(keep_plan=False)
+    out = plan_closed_loop("bilevel", models, X_INIT, A_ON_B, slipping_world(0), rounds=None, cfg=cfg,
+                           planner=cycling_planner, kinematics=AcceptAll())
+    assert out.executed[:2] == [away, back] and out.success and len(out.executed) == 3
+    assert seen[:2] == [frozenset(), frozenset()]
+    assert seen[2] == frozenset({(state_key(X_INIT, cfg.search.resolution), away)})  # back at X_INIT
+    # the planners leave such a pair out: their first choice from X_INIT, avoided, gives another plan
+    for method in ("cfs", "bilevel"):
+        first = tuple(plan(method, models, X_INIT, A_ON_B, cfg, kinematics=AcceptAll()).plan[0])
+        avoid = frozenset({(state_key(X_INIT, cfg.search.resolution), first)})
+        other = plan(method, models, X_INIT, A_ON_B, cfg, kinematics=AcceptAll(), avoid=avoid)
+        assert other.solved and tuple(other.plan[0]) != first

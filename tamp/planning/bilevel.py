@@ -23,7 +23,7 @@ from __future__ import annotations
 import time
 from collections import Counter
 from dataclasses import dataclass, field, replace
-from typing import Callable, Sequence
+from typing import AbstractSet, Callable, Sequence
 
 import numpy as np
 
@@ -348,20 +348,23 @@ class _Feasibility:
     """The kinematic check and refinement of one planning call: results cached per (state, action),
     rejections counted per level and reason, time and refinement budget tracked."""
 
-    def __init__(self, kinematics: KinematicFeasibility, cfg: PlanConfig, result: PlanResult) -> None:
+    def __init__(self, kinematics: KinematicFeasibility, cfg: PlanConfig, result: PlanResult,
+                 avoid: AbstractSet[tuple[bytes, tuple]] = frozenset()) -> None:
         self.kinematics, self.cfg, self.result = kinematics, cfg, result
         self.resolution = cfg.search.resolution
-        self.cache: dict[tuple[bytes, tuple], Infeasible | None] = {}
-        self.pruned: set[tuple[bytes, tuple]] = set()  # (state key, action) that failed refinement
+        # (state key, action) known to fail: the closed loop's revisits (`avoid`), then failed refinements
+        self.cache: dict[tuple[bytes, tuple], Infeasible | None] = {key: Infeasible.REVISIT for key in avoid}
+        self.pruned: set[tuple[bytes, tuple]] = set(avoid)
         self.rejected: dict[int, Counter] = {1: Counter(), 2: Counter()}
         result.rejected = self.rejected
         result.timings.setdefault("feasibility", 0.0)
         result.timings.setdefault("refine", 0.0)
 
     @classmethod
-    def of(cls, kinematics: KinematicFeasibility | None, cfg: PlanConfig, result: PlanResult) -> "_Feasibility | None":
+    def of(cls, kinematics: KinematicFeasibility | None, cfg: PlanConfig, result: PlanResult,
+           avoid: AbstractSet[tuple[bytes, tuple]] = frozenset()) -> "_Feasibility | None":
         """The feasibility of a planning call, or None when it is off (no kinematics, or cfg.feasibility False)."""
-        return cls(kinematics, cfg, result) if kinematics is not None and cfg.feasibility else None
+        return cls(kinematics, cfg, result, avoid) if kinematics is not None and cfg.feasibility else None
 
     def action(self, X: np.ndarray, action) -> Infeasible | None:
         """The check of one action in the predicted state X (cached)."""
@@ -454,14 +457,16 @@ def _timed(method: str, body: Callable[[PlanResult], PlanResult]) -> PlanResult:
 
 # --- the methods ------------------------------------------------------------------------------
 def plan_bilevel(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig(),
-                 kinematics: KinematicFeasibility | None = None) -> PlanResult:
+                 kinematics: KinematicFeasibility | None = None,
+                 avoid: AbstractSet[tuple[bytes, tuple]] = frozenset()) -> PlanResult:
     """Algorithm 1 of the paper: a verified plan of Level 1, else Level 2's continuous search.
 
     With `kinematics` (and cfg.feasibility) a verified plan must also pass the kinematic check on its
     predicted states and refine, else the next one is tried; Level 2 then prunes infeasible
-    successors and the (state, action) pairs that failed refinement."""
+    successors and the (state, action) pairs that failed refinement, and those of `avoid`
+    ((`search.state_key`, action) pairs a closed loop came back from)."""
     def body(result: PlanResult) -> PlanResult:
-        feas = _Feasibility.of(kinematics, cfg, result)
+        feas = _Feasibility.of(kinematics, cfg, result, avoid)
         chosen = _level1(models, X_init, X_goal, cfg, result, feas)
         if chosen is None and cfg.level1_serial and cfg.focused(len(X_init)):
             chosen = _level1_serial(models, X_init, X_goal, cfg, result, feas)  # our extension
@@ -731,11 +736,13 @@ plan_deterministic = _symbolic_only("deterministic", False)
 
 
 def plan_cfs(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig(),
-             kinematics: KinematicFeasibility | None = None) -> PlanResult:
+             kinematics: KinematicFeasibility | None = None,
+             avoid: AbstractSet[tuple[bytes, tuple]] = frozenset()) -> PlanResult:
     """Continuous forward search alone; with `kinematics` (and cfg.feasibility) infeasible successors
-    are pruned and the plan is refined before it is returned."""
+    are pruned, as are the pairs of `avoid` (see `plan_bilevel`), and the plan is refined before it is
+    returned."""
     def body(result: PlanResult) -> PlanResult:
-        feas = _Feasibility.of(kinematics, cfg, result)
+        feas = _Feasibility.of(kinematics, cfg, result, avoid)
         return _level2(models, X_init, X_goal, cfg, result, feas)
     return _timed("cfs", body)
 
@@ -751,16 +758,19 @@ KEEPING_METHODS = frozenset({"cfs", "bilevel"})
 
 
 def plan(method: str, models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig(),
-         kinematics: KinematicFeasibility | None = None) -> PlanResult:
+         kinematics: KinematicFeasibility | None = None,
+         avoid: AbstractSet[tuple[bytes, tuple]] = frozenset()) -> PlanResult:
     """Run one of METHODS on (X_init, X_goal), both (n, 5) arrays. `kinematics` (e.g. a
     tamp.sim.feasibility.FeasibilityChecker that observed the scene of X_init) puts kinematic feasibility
-    into the planning loop of KINEMATIC_METHODS (unless cfg.feasibility is False)."""
+    into the planning loop of KINEMATIC_METHODS (unless cfg.feasibility is False); with it, those
+    methods also leave out the (state key, action) pairs of `avoid` (a closed loop's revisits)."""
     if method not in METHODS:
         raise ValueError(f"unknown planning method {method!r}; choose one of {', '.join(METHODS)}")
     X_init, X_goal = states_pair(X_init, X_goal)
     # an observed X_init may hold tilted blocks: checked as any scene, not as one placed upright
     check_problem(X_init, X_goal, where="plan()", n_max=getattr(models, "n_max", None), init_upright=False)
-    return METHODS[method](models, X_init, X_goal, cfg, kinematics=kinematics)
+    extra = {"avoid": avoid} if avoid and method in KINEMATIC_METHODS else {}
+    return METHODS[method](models, X_init, X_goal, cfg, kinematics=kinematics, **extra)
 
 
 __all__: Sequence[str] = ["Candidate", "LEVEL1_STAGES", "METHODS", "PlanConfig", "PlanResult", "Planner",

@@ -15,7 +15,8 @@ Two loops share one round (plan, or keep the rest of the last plan while it is o
   a plan that ends short of the goal is followed by another round. A round that finds no plan, or
   only the empty plan while a block is off its goal, widens the search (`widened_search`: every one of
   the 9 n^2 actions, so blocks can be moved out of the way, unstacked, or moved although at their
-  goal) before the loop gives up.
+  goal) before the loop gives up. Back at a state it observed before (`revisits`), it leaves out the
+  actions it took from there, which would start the same cycle again in a deterministic world.
 
 Keeping a plan (`PlanConfig.keep_plan`, our extension, both loops): a round keeps the rest of the last
 plan when it refines and still ends within `search.confident` of the goal: as the plan predicted, if
@@ -43,6 +44,7 @@ from tamp.planning.bilevel import (
     plan_cfs,
 )
 from tamp.planning.models import Models
+from tamp.planning.search import state_key
 from tamp.planning.structs import KinematicFeasibility, Outcome, PickPlace
 from tamp.planning.verify import Verification, at_goal, goal_error, goal_errors, verify
 
@@ -107,9 +109,10 @@ def plan_closed_loop(method: str, models: Models, X_init, X_goal,
             out.reason, out.stop = (f"{cfg.loop.max_actions} actions sent without reaching the goal "
                                     f"(the loop's action budget)"), "budget"
             break
-        result = _round(method, models, X, X_goal, out, cfg, planner, kinematics)
+        avoid = revisits(out, cfg) if until_goal else frozenset()
+        result = _round(method, models, X, X_goal, out, cfg, planner, kinematics, avoid)
         if until_goal and cfg.loop.widen and not (result.solved and result.plan):
-            result = widened_search(method, models, X, X_goal, cfg, kinematics, result)
+            result = widened_search(method, models, X, X_goal, cfg, kinematics, result, avoid)
         out.rounds.append(result)
         if on_round is not None:
             on_round(r, result)
@@ -130,13 +133,26 @@ def plan_closed_loop(method: str, models: Models, X_init, X_goal,
     return out
 
 
+def revisits(out: ClosedLoopResult, cfg: PlanConfig) -> frozenset[tuple[bytes, tuple]]:
+    """The (state key of the observed state, action) pairs to leave out: the actions the loop executed from
+    an earlier observed state that every block is within `LoopConfig.revisit` of now (it came back, and the
+    same action would start the same cycle again)."""
+    X = out.states[-1]
+    key = state_key(X, cfg.search.resolution)
+    return frozenset((key, tuple(int(v) for v in action)) for before, action in zip(out.states, out.executed)
+                     if np.linalg.norm(before[:, :3] - X[:, :3], axis=1).max() < cfg.loop.revisit)
+
+
 def _round(method: str, models: Models, X: np.ndarray, X_goal: np.ndarray, out: ClosedLoopResult,
            cfg: PlanConfig, planner: Callable[..., PlanResult] | None,
-           kinematics: KinematicFeasibility | None) -> PlanResult:
-    """One round's plan from the observed X: the rest of the last plan if it is kept, else a new one."""
-    extra = {} if kinematics is None else {"kinematics": kinematics}
+           kinematics: KinematicFeasibility | None, avoid: frozenset = frozenset()) -> PlanResult:
+    """One round's plan from the observed X: the rest of the last plan if it is kept, else a new one; both
+    without the actions of `avoid` from here (`revisits`)."""
+    extra: dict = {} if kinematics is None else {"kinematics": kinematics}
+    if avoid:
+        extra["avoid"] = avoid
     keep = cfg.keep_plan and method in KEEPING_METHODS and bool(out.rounds)
-    kept = keep_rest(models, X, X_goal, out.rounds[-1], cfg, kinematics) if keep else None
+    kept = keep_rest(models, X, X_goal, out.rounds[-1], cfg, kinematics, avoid) if keep else None
     if kept is not None and kept.solved:
         return kept
     result = (planner or plan)(method, models, X, X_goal, cfg, **extra)
@@ -146,14 +162,15 @@ def _round(method: str, models: Models, X: np.ndarray, X_goal: np.ndarray, out: 
 
 
 def widened_search(method: str, models: Models, X: np.ndarray, X_goal: np.ndarray, cfg: PlanConfig,
-                   kinematics: KinematicFeasibility | None, failed: PlanResult) -> PlanResult:
+                   kinematics: KinematicFeasibility | None, failed: PlanResult,
+                   avoid: frozenset = frozenset()) -> PlanResult:
     """The continuous search over all 9 n^2 actions (cfg.loop.widen_expansions nodes), after a round
     whose planner found no plan (`failed`, or only the empty plan while a block is off its goal): the
     goal-oriented actions only move misplaced blocks toward their goal, and cannot move a block out of
     the way, unstack one, or move a block already at its goal. The failed round's time, reasons and
     rejections are counted in the result (`PlanResult.widened`)."""
     wide = replace(cfg, search=replace(cfg.search, prune=False, max_expansions=cfg.loop.widen_expansions))
-    result = plan_cfs(models, X, X_goal, wide, kinematics=kinematics)
+    result = plan_cfs(models, X, X_goal, wide, kinematics=kinematics, avoid=avoid)
     result.method, result.widened = method, True
     _absorb(result, failed, "planned")
     if failed.solved and not failed.plan:
@@ -189,7 +206,7 @@ def off_course(X: np.ndarray, last: PlanResult) -> float:
 
 
 def keep_rest(models: Models, X: np.ndarray, X_goal: np.ndarray, last: PlanResult, cfg: PlanConfig,
-              kinematics: KinematicFeasibility | None = None) -> PlanResult:
+              kinematics: KinematicFeasibility | None = None, avoid: frozenset = frozenset()) -> PlanResult:
     """The rest of `last` (its first action executed) as this round's plan, if it ends within
     cfg.search.confident of X_goal as `last` predicted it, when the observed state X is within
     cfg.on_course of that prediction, or rolled out from X otherwise; and, with `kinematics` (and
@@ -220,7 +237,7 @@ def keep_rest(models: Models, X: np.ndarray, X_goal: np.ndarray, last: PlanResul
                                       f"the goal from the observed state (over {cfg.search.confident * 100:g} cm)")
                 return result
             kept_by, why = "rollout", f"predicted {v.error * 100:.1f} cm from the goal from the observed state"
-        feas = _Feasibility.of(kinematics, cfg, result)
+        feas = _Feasibility.of(kinematics, cfg, result, avoid)
         if feas is not None and (feas.plan(v.trajectory, v.actions) is not None
                                  or not feas.refine(level, v.trajectory, v.actions).success):
             result.reasons.append("keep: the rest of the last plan is not kinematically feasible from here")

@@ -43,6 +43,7 @@ class Infeasible(StrEnum):
     REFINE_IK = "refine_ik"
     REFINE_MOTION = "refine_motion"
     REFINE_GRASP = "refine_grasp"
+    REVISIT = "revisit"  # a closed loop took this action from this state before and came back to it
 
 
 @dataclass(frozen=True)
