@@ -539,6 +539,25 @@ def test_the_abstraction_fidelity_is_recomputed_from_rows(full_report):
         assert int(line["no operator"]) == sum(x["operator"] is None for r in mine for x in r["steps"])
 
 
+def test_the_failure_causes_are_recomputed_from_rows(full_report):
+    """Section 15: failed problems per cause, method and n. The synthetic rows hold no search status
+    nor step misses: a row without a plan is a symbolic planner's, one that could not be carried out
+    an execution failure, a wrong plan a sum of small errors."""
+    _, data, s = full_report
+    (t,) = s["15"]["tables"]
+    expected_cause = {"no_plan": "no_symbolic_plan", "kinematic_failure": "execution",
+                      "refinement_failure": "execution", "wrong_plan": "small_errors"}
+    rows = [r for r in data.rows if r["outcome"] != "error"]
+    assert {line["method"].strip("`") for line in t} == {r["method"] for r in rows}
+    for line in t:
+        mine = [r for r in rows if r["method"] == line["method"].strip("`") and
+                (line["n"] == "all" or r["n"] == int(line["n"]))]
+        failed = [expected_cause[r["outcome"]] for r in mine if not r["success"]]
+        assert int(line["failed"]) == len(failed)
+        for cause in ("no_symbolic_plan", "execution", "small_errors"):
+            assert int(line[f"`{cause}`"]) == failed.count(cause), (line, cause)
+
+
 def test_figures_and_json(full_report):
     out, data, s = full_report
     for name in ("dual_model", "verifier_tau", "verifier_confusion", "success", "planning_time", "scaling"):

@@ -21,7 +21,7 @@ sys.path.insert(0, str(Path(__file__).parent))
 from planning_stubs import StubModel, two_block_domain
 
 from evaluation.problems import generate_problems, read_problems, write_problems
-from evaluation.run import OUTCOMES, ROW_KEYS, EvalConfig, evaluate, read_rows, strip_timings
+from evaluation.run import OUTCOMES, ROW_KEYS, EvalConfig, evaluate, read_rows, row_cause, strip_timings
 from tamp.app.problem import Problem
 from tamp.planning.bilevel import PlanConfig
 from tamp.planning.models import Models
@@ -30,7 +30,8 @@ from tamp.planning.verify import goal_error
 
 SET = dict(ns=(2,), ks=(1, 2, 3), per_cell=1, seed=0)
 METHODS = ("deterministic", "probabilistic", "probabilistic_oracle", "cfs", "bilevel", "bilevel_alg1",
-           "bilevel_replan")
+           "bilevel_replan", "bilevel_loop")
+LOOPS = ("bilevel_replan", "bilevel_loop")
 CONFIG = EvalConfig(planner=PlanConfig(search=SearchConfig(max_expansions=300)), progress=False)
 
 
@@ -163,17 +164,19 @@ def test_rows_follow_the_schema_and_their_outcomes_agree(serial, problems_file):
         assert (r["n"], r["k"], r["fidelity"], r["eps_m"], r["tau_verify_m"]) == (p.n, p.k, "fast", 0.05, 0.07)
         assert r["outcome"] in OUTCOMES
         assert r["success"] == (r["outcome"] == "success")
-        assert r["success"] == (r["solved"] and r["refined"] is True and r["final_error_m"] < r["eps_m"])
+        assert r["cause"] == row_cause(r) and (r["cause"] is None) == r["success"]  # recomputed from the row
+        assert len(r["step_miss_m"] or []) == r["executed_actions"] and r["stop"]["loop"] in (None, "goal", "rounds",
+                                                                                             "no_plan", "empty_plan")
         assert (r["refine_failure"] is None) == (r["refined"] is not False)
         assert r["planning_time_s"] > 0 and 0 <= r["level1_time_s"] <= r["planning_time_s"]
         assert len(r["candidates"]) <= 20
-        assert (r["rounds"] is None) == (r["method"] != "bilevel_replan")
+        assert (r["rounds"] is None) == (r["method"] not in LOOPS)
         assert (r["run"], r["protocol"], r["moved"]) == ((0, "strict", p.k) if p.actions else (0, None, None))
         assert r["symbolic_backend"] == (None if r["method"] == "cfs" else "python")
-        if r["method"] == "bilevel_replan":
+        if r["method"] in LOOPS:
             assert r["executed_plans"] is None
             steps = r["steps"] or []  # each executed action names its round, and whether that round planned or kept
-            assert all(s["plan"] in ("planned", "kept on course", "kept by rollout") for s in steps)
+            assert all(s["plan"] in ("planned", "widened search", "kept on course", "kept by rollout") for s in steps)
             assert [s["plan"] for s in steps[:1]] in ([], ["planned"])  # round 0 plans
             assert [s["round"] for s in steps] == sorted(s["round"] for s in steps)
         elif r["method"] != "probabilistic_oracle":
@@ -188,14 +191,14 @@ def test_rows_follow_the_schema_and_their_outcomes_agree(serial, problems_file):
         assert all(0 <= e < 0.1 for e in r["effect_error_m"])
         assert r["level"] in (1, 2) and r["predicted_error_m"] >= 0
         assert r["executed_actions"] == len(r["refine_time_s"]) <= len(r["plan"])
-        if r["refine_failure"] is not None:
+        if r["refine_failure"] is not None and not (r["method"] == "bilevel_loop" and r["success"]):
             stage = r["refine_failure"]["stage"]
             assert r["outcome"] == ("kinematic_failure" if stage == "ik" else "refinement_failure")
-            if r["method"] != "bilevel_replan":  # open loop: execution stops at the failing action
+            if r["method"] not in LOOPS:  # open loop: execution stops at the failing action
                 assert r["refine_failure"]["action"] == r["executed_actions"]
         else:
             assert r["outcome"] == ("success" if r["final_error_m"] < 0.05 else "wrong_plan")
-            if r["method"] != "bilevel_replan":
+            if r["method"] not in LOOPS:
                 assert r["executed_actions"] == len(r["plan"])
     outcomes = {r["outcome"] for r in rows}
     assert {"success", "no_plan", "wrong_plan"} <= outcomes  # the set exercises the branches
@@ -203,7 +206,7 @@ def test_rows_follow_the_schema_and_their_outcomes_agree(serial, problems_file):
     bits = {b["name"]: b for b in json.loads((serial.parent / "symbols.json").read_text())}
     assert set(bits) == {"u0", "r0", "r0(i,i)"} and bits["u0"]["count"] == 2 * 2 * len(problems)
     assert bits["u0"]["best"] == "elevated (z > 4 cm)" and bits["u0"]["negated"]["elevated (z > 4 cm)"]
-    assert all(not r["solved"] for r in rows if r["problem"] == "n2-unreachable" and r["method"] != "bilevel_replan")
+    assert all(not r["solved"] for r in rows if r["problem"] == "n2-unreachable" and r["method"] not in LOOPS)
     assert [r["level"] for r in rows if r["method"] == "cfs" and r["solved"]] == [2] * sum(
         r["solved"] for r in rows if r["method"] == "cfs")
 

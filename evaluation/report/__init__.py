@@ -10,7 +10,7 @@ decimals; the paper's numbers (`evaluation.paper`) are quoted as printed. A sect
 files are absent says so in one line.
 
 The package holds one module per group of sections (`setup`: 1, 2, 11; `symbolic_planning`: 3-5;
-`planning`: 6-8, 10, 13; `execution`: 9, 12, 14), the row readers (`rows`) and what the sections
+`planning`: 6-8, 10, 13; `execution`: 9, 12, 14; `causes`: 15), the row readers (`rows`) and what the sections
 share (`results`: `Results`, the groups, `Section`); this module assembles the report.
 """
 from __future__ import annotations
@@ -24,6 +24,7 @@ from tamp.errors import UserError
 from tamp.planning.structs import OUTCOMES
 from tamp.records import atomic_write_text
 
+from .causes import section_causes
 from .execution import section_feasibility, section_fidelity, section_refinement
 from .planning import section_level1, section_replanning, section_scaling, section_success, section_table3
 from .results import (
@@ -68,6 +69,7 @@ def build_report(res: Results, figures: Path, ablation: dict | None = None,
         sections.append(section_feasibility(res, figures))
     sections.append(section_scaling(res, figures))
     sections.append(section_fidelity(res))
+    sections.append(section_causes(res, figures))
     lines = ["# Evaluation report", "",
              f"From `{source}` ({len(res.rows)} rows, {len(res.cells)} problems). Ours next to the paper's "
              "numbers (Dogangun et al., quoted as printed). Success in % of problems (one decimal), times in "
@@ -114,6 +116,7 @@ def write_report(results_dir: Path, ablation: Path | None = None) -> Path:
 
 __all__ = ["BACKEND_INFO", "ERROR_OUTCOME", "FEASIBILITY_PAIRS", "Keep", "METHOD_INFO", "METHOD_ORDER", "OUTCOMES",
            "PROTOCOL_INFO", "Results", "STAGES", "Section", "TAUS_CM", "build_report", "compare_success",
+           "section_causes",
            "fmt_paper_p", "load_ablation", "load_rows", "read_json_object", "section_dual_model",
            "section_feasibility", "section_fidelity", "section_level1", "section_refinement", "section_replanning",
            "section_scaling", "section_setup", "section_success", "section_symbols", "section_table1",

@@ -10,7 +10,7 @@ from .. import paper
 from ..stats import mean_std, paired_ttest, rate_pct
 
 METHOD_ORDER = ("deterministic", "probabilistic", "probabilistic_oracle", "cfs", "bilevel", "bilevel_alg1",
-                "bilevel_replan", "symbolic_sigmoid", "cfs_gumbel", "cfs_nofeas", "bilevel_nofeas",
+                "bilevel_replan", "bilevel_loop", "symbolic_sigmoid", "cfs_gumbel", "cfs_nofeas", "bilevel_nofeas",
                 "bilevel_replan_nofeas")
 FEASIBILITY_PAIRS = (("cfs", "cfs_nofeas"), ("bilevel", "bilevel_nofeas"), ("bilevel_replan", "bilevel_replan_nofeas"))
 METHOD_INFO = {
@@ -23,7 +23,9 @@ METHOD_INFO = {
                "continuous search (Level 2)",
     "bilevel_alg1": "the paper's Algorithm 1 exactly: verified probabilistic plan (Level 1), else continuous "
                     "search (Level 2)",
-    "bilevel_replan": "bilevel in closed loop, up to k - 1 replanning rounds",
+    "bilevel_replan": "bilevel in the paper's closed loop, up to k - 1 replanning rounds",
+    "bilevel_loop": "bilevel in the closed loop that does not know k: until the goal or 12 actions, widening the "
+                    "search when a round finds no plan (the default of `tamp plan --replan` and `tamp demo`)",
     "symbolic_sigmoid": "deterministic symbolic planner, Sigmoid Symbolic Model and its domain (Fig. 4)",
     "cfs_gumbel": "continuous forward search, Gumbel-Sigmoid Dynamics Model (Fig. 4)",
     "cfs_nofeas": "`cfs` without kinematics in the planning loop (no feasibility check, no refinement)",

@@ -1,0 +1,59 @@
+"""Faults of a real cell: observation noise and one push, as `tamp evaluate --noise/--push` inject them
+into closed loops. The push needs Drake's poses (no simulation runs)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pydrake.math import RigidTransform, RotationMatrix
+
+from tamp.app.faults import Faults, _apart, footprint, push
+from tamp.errors import UserError
+from tamp.planning.structs import LARGE, SMALL
+from tamp.sim.skill import Scene
+
+pytestmark = pytest.mark.sim
+
+
+def scene() -> Scene:
+    """A bar turned 30 degrees with a cube on it, and a free cube on the table."""
+    R = RotationMatrix.MakeZRotation(np.pi / 6)
+    return Scene(np.array([LARGE, SMALL, SMALL]), [RigidTransform(R, [0.6, 0.0, 0.025]),
+                                                    RigidTransform(R, [0.6, 0.0, 0.075]),
+                                                    RigidTransform([0.7, 0.25, 0.025])])
+
+
+def test_a_push_moves_one_free_block_by_the_asked_distance_to_free_space():
+    faults = Faults(push_m=(0.03, 0.05))
+    for seed in range(20):
+        before = scene()
+        after, note = push(before, faults, np.random.default_rng(seed))
+        moved = [i for i in range(3) if not np.allclose(before.X_WB[i].translation(), after.X_WB[i].translation())]
+        # the bar has a cube on it, the cube on the bar is not on the table: only block 2 may move
+        assert moved == [2] and note.startswith("block 2 pushed")
+        shift = after.X_WB[2].translation() - before.X_WB[2].translation()
+        assert 0.03 <= np.linalg.norm(shift[:2]) <= 0.05 and shift[2] == 0
+        assert np.allclose(after.X_WB[2].rotation().matrix(), before.X_WB[2].rotation().matrix())
+        assert all(_apart(footprint(after, 2), footprint(after, j), 0.005) for j in (0, 1))
+
+
+def test_no_free_block_no_push():
+    boxed = Scene(np.array([SMALL, SMALL]), [RigidTransform([0.6, 0.0, 0.025]), RigidTransform([0.6, 0.0, 0.075])])
+    boxed_in = Scene(np.array([SMALL, LARGE]), [RigidTransform([0.6, 0.0, 0.025]), RigidTransform([0.6, 0.0, 0.075])])
+    for s in (boxed, boxed_in):
+        after, note = push(s, Faults(push_m=(0.03, 0.05)), np.random.default_rng(0))
+        assert note == "no free block had room to be pushed" and after is s
+
+
+def test_observation_noise_has_the_asked_spread_and_leaves_types():
+    X = np.tile([[0.6, 0.0, 0.025, 1.0, 0.0]], (2000, 1))
+    seen = Faults(noise_m=0.005).observe(X, np.random.default_rng(1))
+    assert np.std(seen[:, :3] - X[:, :3]) == pytest.approx(0.005, rel=0.05)
+    assert np.array_equal(seen[:, 3:], X[:, 3:]) and seen is not X
+    assert Faults().observe(X, np.random.default_rng(1)) is X
+
+
+@pytest.mark.parametrize("kwargs, words", [({"noise_m": -0.001}, "noise"), ({"noise_m": 0.2}, "noise"),
+                                           ({"push_m": (0.05, 0.03)}, "push"), ({"push_m": (0.0, 0.03)}, "push")])
+def test_bad_faults_are_user_errors(kwargs, words):
+    with pytest.raises(UserError, match=words):
+        Faults(**kwargs)
