@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tamp.app.plan_command import LEVELS, fmt_action, print_result
+from tamp.app.plan_command import LEVELS, fmt_action, print_result, write_executed_trajectory
 from tamp.app.problem import Problem, random_problem
 from tamp.app.runner import ClosedLoopRun, Execution, execute_plan, kinematics_for, run_closed_loop
 from tamp.app.steps import (
@@ -51,6 +51,7 @@ class DemoConfig:
     replay: Path | None = DEFAULT_REPLAY
     candidates: int = 0  # also replay this many symbolic candidates that failed verification
     replan: bool = True  # closed loop: execute, observe, replan (up to k - 1 rounds); False: one plan
+    trajectory: Path | None = None  # write the executed arm motion here (docs/trajectories.md)
 
 
 @dataclass
@@ -128,6 +129,8 @@ def run_demo(cfg: DemoConfig = DemoConfig()) -> DemoResult:
             print(f"replay written to {path} ({path.stat().st_size / 1e6:.1f} MB): open it in a browser", flush=True)
         if cfg.candidates:
             _replay_candidates(out, models, cfg)
+        if cfg.trajectory is not None:
+            write_executed_trajectory(run, cfg.trajectory, _source(cfg))
         return out
     if result.solved:
         assert result.plan is not None  # solved
@@ -154,7 +157,15 @@ def run_demo(cfg: DemoConfig = DemoConfig()) -> DemoResult:
         _write_replay(timeline, problem.X_goal, None if out.execution is None else result.predicted, cfg.replay, out)
     if cfg.candidates:
         _replay_candidates(out, models, cfg)
+    if cfg.trajectory is not None:
+        write_executed_trajectory(out.execution, cfg.trajectory, _source(cfg))
     return out
+
+
+def _source(cfg: DemoConfig) -> str:
+    """The command line of a demo, as a trajectory file records it."""
+    return (f"tamp demo --seed {cfg.seed} --objects {cfg.objects} --actions {cfg.actions} --fidelity {cfg.fidelity}"
+            + ("" if cfg.replan else " --open-loop") + ("" if cfg.models is None else f" --models {cfg.models}"))
 
 
 def _write_steps(timeline: Timeline, out: DemoResult, cfg: DemoConfig, names) -> None:
