@@ -45,7 +45,7 @@ FORMAT = "tamp-trajectory"
 VERSION = 1  # bumped when a reader of the old version would misread a new file
 ROBOT = "UR10e"
 SAMPLE_PERIOD = 0.02  # s between samples inside a segment, besides the knots of the time parameterization
-DECIMALS = 6  # positions, velocities, accelerations and block positions rounded to 1e-6 (rad, rad/s, ...)
+DECIMALS = 9  # positions, velocities, accelerations, block positions rounded to 1e-9 (rad, rad/s, ..., m)
 ROUND_TRIP_TOLERANCE = 0.002  # m: a file recorded in the full world, executed again, ends this close to the record
 TOLERANCE = 1e-5  # rad, rad/s, rad/s^2 and s: slack of the limit and continuity checks (rounding)
 DWELLS = {"descend": "grasp", "lower": "release"}  # a still segment follows these motions: jaws close / open
@@ -158,20 +158,15 @@ class PlanTrajectory:
 
 # --- from refined actions --------------------------------------------------------------------------
 def _sample_times(a: float, b: float, knots: np.ndarray) -> np.ndarray:
-    """Times in [a, b]: its knots and a grid of SAMPLE_PERIOD, grid points near a knot left out."""
-    inside = knots[(knots > a + 1e-9) & (knots < b - 1e-9)]
-    grid = a + SAMPLE_PERIOD * np.arange(1, int((b - a) / SAMPLE_PERIOD) + 1)
-    edges = np.concatenate([[a, b], inside])
-    grid = grid[np.min(np.abs(grid[:, None] - edges[None, :]), axis=1) > SAMPLE_PERIOD / 4]
-    times = np.unique(np.concatenate([edges, grid]))
-    # knots closer than a microsecond (a vanishing polyline piece) are one sample: the time stamps are
-    # whole nanoseconds, and the motion between them is below the file's resolution
-    keep = [times[0]]
-    for t in times[1:]:
-        if t - keep[-1] > 1e-6:
-            keep.append(t)
-    keep[-1] = b
-    return np.array(keep)
+    """Times in [a, b]: its knots, and between two knots equal steps of at most SAMPLE_PERIOD."""
+    edges = np.concatenate([[a], knots[(knots > a + 1e-6) & (knots < b - 1e-6)], [b]])
+    # (knots closer than a microsecond, a vanishing polyline piece, are one sample: the time stamps are
+    # whole nanoseconds, and the motion between them is below the file's resolution)
+    edges = edges[np.concatenate([np.diff(edges) > 1e-6, [True]])]
+    edges[-1] = b
+    parts = [np.linspace(t0, t1, int(np.ceil((t1 - t0) / SAMPLE_PERIOD - 1e-9)) + 1)[:-1]
+             for t0, t1 in zip(edges[:-1], edges[1:])]
+    return np.concatenate(parts + [[b]])
 
 
 def segment_intervals(step: RefinedAction) -> list[tuple[str, float, float]]:
