@@ -269,15 +269,15 @@ def to_document(plan: PlanTrajectory) -> dict[str, Any]:
         points = [{"positions": _rounded(seg.q[k]), "velocities": _rounded(seg.qdot[k]),
                    "accelerations": _rounded(seg.qddot[k]), "time_from_start": _duration(float(seg.t[k]))}
                   for k in range(len(seg.t))]
-        return {"name": seg.name, "start_time": round(seg.start, 9),
+        return {"name": seg.name, "start_time": round(float(seg.start), 9),
                 "trajectory": {"joint_names": names, "points": points}}
 
     def action(a: ActionMotion) -> dict:
-        return {"index": a.index, "action": list(map(int, a.action)), "duration": round(a.duration, 9),
+        return {"index": a.index, "action": list(map(int, a.action)), "duration": round(float(a.duration), 9),
                 "segments": [segment(s) for s in a.segments],
-                "gripper": [{"event": "close", "time": round(a.t_close, 9), "block": a.block,
+                "gripper": [{"event": "close", "time": round(float(a.t_close), 9), "block": a.block,
                              "carried": a.carried, "block_in_tcp": _pose(a.X_GC)},
-                            {"event": "open", "time": round(a.t_open, 9)}],
+                            {"event": "open", "time": round(float(a.t_open), 9)}],
                 "blocks_after": _rounded(a.X_after[:, :3])}
 
     scene = plan.scene_init
