@@ -215,3 +215,26 @@ def test_tamp_pddl_exports_the_bundled_domain_and_a_problem_that_an_independent_
     assert main(["pddl", "--out", str(tmp_path / "o2"), "--problem", str(tmp_path / "missing.json")]) == 2
     err = capsys.readouterr().err
     assert "missing.json" in err and "Traceback" not in err
+
+
+@pytest.mark.sim
+def test_cli_writes_the_executed_trajectory(models_dir, tmp_path, capsys):
+    """`tamp plan --trajectory`, open and closed loop: the executed actions' motion, readable and checked."""
+    from tamp.sim.trajectory_file import read_trajectory
+
+    path = _problem_reachable_by_the_model(models_dir, tmp_path)
+    out = tmp_path / "motion.json"
+    assert main(["plan", "--problem", str(path), "--models", str(models_dir), "--execute", "none",
+                 "--trajectory", str(out)]) == 2
+    assert "--trajectory records the executed motion" in capsys.readouterr().err and not out.exists()
+    for loop in ([], ["--replan", "--rounds", "1"]):
+        main(["plan", "--problem", str(path), "--models", str(models_dir), "--method", "cfs", "--execute", "fast",
+              "--trajectory", str(out)] + loop)
+        text = capsys.readouterr().out
+        written = re.search(r"trajectory written to \S+ \((\d+) action\(s\)", text)
+        assert written is not None, text
+        plan = read_trajectory(out)
+        assert plan.world == "fast" and plan.source.startswith("tamp plan")
+        assert ("--replan" in plan.source) == bool(loop)
+        assert len(plan.actions) == int(written.group(1)) >= 1
+        out.unlink()

@@ -105,3 +105,11 @@ def _html_path(text: str) -> Path:
     if path.suffix.lower() not in (".html", ".htm"):
         raise argparse.ArgumentTypeError(f"the replay is an HTML file; give a path ending in .html, got {text!r}")
     return path
+
+
+def json_path(text: str) -> Path:
+    """argparse type: a path ending in .json."""
+    path = Path(text)
+    if path.suffix.lower() != ".json":
+        raise argparse.ArgumentTypeError(f"expected a JSON file path ending in .json, got {text!r}")
+    return path

@@ -72,7 +72,12 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
 
 def cmd_view(args: argparse.Namespace) -> int:
-    """Refine a plan file, execute it with the arm under physics and write the replay."""
+    """Refine a plan file, execute it with the arm under physics and write the replay; or execute
+    an exported trajectory file (--trajectory)."""
+    if (args.plan is None) == (args.trajectory is None):
+        raise UserError("give a plan file or --trajectory FILE (one of them)")
+    if args.trajectory is not None:
+        return view_trajectory(args.trajectory, args.out)
     from tamp.app.plan_file import load_plan_file
     from tamp.sim.execute import execute
     from tamp.sim.refine import refine
@@ -102,6 +107,42 @@ def cmd_view(args: argparse.Namespace) -> int:
     path = timeline.write_html(args.out)
     print(f"replay written to {path} ({path.stat().st_size / 1e6:.1f} MB)")
     return 0 if refined.failure is None else 1
+
+
+def view_trajectory(path: Path, out: Path) -> int:
+    """`tamp view --trajectory`: check a trajectory file, execute it in the full world from its initial
+    scene, compare with the recorded execution and write the replay. Exit 0 if every grasp held and,
+    for a file recorded in the full world, every block ends within ROUND_TRIP_TOLERANCE of the
+    recorded final scene; 1 otherwise."""
+    import time
+
+    from tamp.sim.replay import Timeline
+    from tamp.sim.trajectory_file import ROUND_TRIP_TOLERANCE, execute_trajectory, read_trajectory
+
+    trajectory = read_trajectory(path)
+    check_output_file(out, "--out")
+    by = f" by {trajectory.source}" if trajectory.source else ""
+    print(f"{path}: {len(trajectory.actions)} action(s), {trajectory.samples} samples within the UR10e's limits, "
+          f"continuous; recorded in the {trajectory.world} world{by}")
+    for skipped in trajectory.skipped:
+        print(f"  (executed action {skipped.get('index')} moved nothing: {skipped.get('reason', '')})")
+    timeline = Timeline()
+    t = time.perf_counter()
+    result = execute_trajectory(trajectory, observer=timeline)
+    seconds = time.perf_counter() - t
+    for motion, entry in zip(trajectory.actions, result.log):
+        print(f"executed action {motion.index} {tuple(motion.action)}: {'grasped' if entry.grasped else entry.note}; "
+              f"blocks within {entry.prediction_error * 1e3:.2f} mm of the recorded execution; tracking error "
+              f"{entry.max_tracking_error:.4f} rad; {entry.sim_time:.1f} s simulated")
+    deviation = float(np.max(np.linalg.norm(result.X_final[:, :3] - trajectory.X_final[:, :3], axis=1)))
+    print(f"executed in the full world in {seconds:.1f} s; final scene: every block within {deviation * 1e3:.2f} mm "
+          f"of the recorded one ({trajectory.world} world)")
+    for i, x in enumerate(result.X_final):
+        print(f"  {i}: ({x[0]:.4f}, {x[1]:.4f}, {x[2]:.4f}) m")
+    written = timeline.write_html(out)
+    print(f"replay written to {written} ({written.stat().st_size / 1e6:.1f} MB)")
+    held = all(entry.grasped for entry in result.log)
+    return 0 if held and (trajectory.world != "full" or deviation <= ROUND_TRIP_TOLERANCE) else 1
 
 
 def _object_counts(text: str) -> tuple[int, ...]:
@@ -320,9 +361,11 @@ def cmd_demo(args: argparse.Namespace) -> int:
     from tamp.app.demo import DemoConfig, run_demo
 
     check_output_file(args.replay, "--replay")
+    if args.trajectory is not None:
+        check_output_file(args.trajectory, "--trajectory")
     cfg = DemoConfig(seed=args.seed, objects=args.objects, actions=args.actions, models=args.models,
                      fidelity=args.fidelity, replay=args.replay, candidates=args.candidates,
-                     replan=not args.open_loop)
+                     replan=not args.open_loop, trajectory=args.trajectory)
     return 0 if run_demo(cfg).success else 1
 
 
@@ -383,14 +426,21 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser(
         "view",
-        help="refine a plan file, execute it with the full arm under physics, write a replay",
+        help="execute a plan file or an exported trajectory with the full arm under physics, write a replay",
         description="Refine a plan (JSON: {\"X\": [[x, y, z, small, large], ...], \"actions\": "
         "[[pick, grasp_offset, place, release_offset], ...]}) into collision-free joint "
         "trajectories, execute them with the arm under Drake physics, and write a self-contained "
         "Meshcat HTML replay. If an action cannot be refined, the actions before it are executed and "
-        "the command exits with status 1.",
+        "the command exits with status 1. With --trajectory FILE (written by `tamp plan` or `tamp demo "
+        "--trajectory`), execute that file's motion instead, to check it before sending it to an arm.",
     )
-    p.add_argument("plan", help="plan file (JSON)")
+    p.add_argument("plan", nargs="?", type=Path, default=None, help="plan file (JSON)")
+    p.add_argument("--trajectory", type=Path, default=None, metavar="FILE",
+                   help="instead of a plan, execute a trajectory file (`tamp plan/demo --trajectory`) with the arm "
+                   "under physics from its recorded initial scene: the file is checked first (format, robot, "
+                   "joint limits, continuity; a bad file is a one-line error, exit 2, nothing written), then "
+                   "each action's and the final scene are compared with the recorded execution (exit 1 if a "
+                   "grasp missed or, for a file recorded in the full world, a block ends over 2 mm away)")
     p.add_argument("--out", type=_html_path, default=Path("replay.html"), metavar="OUT.html",
                    help="replay file (default replay.html)")
     p.set_defaults(func=cmd_view)
@@ -536,6 +586,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     from tamp.app.plan_command import STEPS_HELP as PLAN_STEPS_HELP
     from tamp.app.plan_command import add_arguments as add_plan_arguments
+    from tamp.app.plan_command import add_trajectory_argument
 
     p = sub.add_parser(
         "plan",
@@ -584,6 +635,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--candidates", type=non_negative_int, default=0, metavar="N",
                    help="also execute the first N symbolic candidates that failed verification and write "
                    "a replay of each (OUT.candidateI.html, I their number in the candidate list)")
+    add_trajectory_argument(p)
     p.set_defaults(func=cmd_demo)
     _add_plugin_commands(sub)
     return parser

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tamp.app.plan_command import LEVELS, print_cause, print_result
+from tamp.app.plan_command import LEVELS, print_cause, print_result, write_executed_trajectory
 from tamp.app.plan_file import fmt_action
 from tamp.app.problem import Problem, random_problem
 from tamp.app.runner import ClosedLoopRun, Execution, execute_plan, kinematics_for, run_closed_loop
@@ -56,6 +56,7 @@ class DemoConfig:
     candidates: int = 0  # also replay this many symbolic candidates that failed verification
     replan: bool = True  # closed loop: execute, observe, plan again until the goal (or the action budget); False:
     #   one plan, executed open loop
+    trajectory: Path | None = None  # write the executed arm motion here (docs/trajectories.md)
 
 
 @dataclass
@@ -134,6 +135,8 @@ def run_demo(cfg: DemoConfig = DemoConfig()) -> DemoResult:
             print(f"replay written to {path} ({path.stat().st_size / 1e6:.1f} MB): open it in a browser", flush=True)
         if cfg.candidates:
             _replay_candidates(out, models, cfg)
+        if cfg.trajectory is not None:
+            write_executed_trajectory(run, cfg.trajectory, _source(cfg))
         return out
     if result.solved:
         assert result.plan is not None  # solved
@@ -160,7 +163,15 @@ def run_demo(cfg: DemoConfig = DemoConfig()) -> DemoResult:
         _write_replay(timeline, problem.X_goal, None if out.execution is None else result.predicted, cfg.replay, out)
     if cfg.candidates:
         _replay_candidates(out, models, cfg)
+    if cfg.trajectory is not None:
+        write_executed_trajectory(out.execution, cfg.trajectory, _source(cfg))
     return out
+
+
+def _source(cfg: DemoConfig) -> str:
+    """The command line of a demo, as a trajectory file records it."""
+    return (f"tamp demo --seed {cfg.seed} --objects {cfg.objects} --actions {cfg.actions} --fidelity {cfg.fidelity}"
+            + ("" if cfg.replan else " --open-loop") + ("" if cfg.models is None else f" --models {cfg.models}"))
 
 
 def _write_steps(timeline: Timeline, out: DemoResult, cfg: DemoConfig, names) -> None:

@@ -12,8 +12,17 @@ import argparse
 import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
-from tamp.app.args import check_output_file, fraction, non_negative_int, object_count, positive_float, positive_int
+from tamp.app.args import (
+    check_output_file,
+    fraction,
+    json_path,
+    non_negative_int,
+    object_count,
+    positive_float,
+    positive_int,
+)
 from tamp.app.plan_file import fmt_action
 from tamp.errors import UserError
 from tamp.planning.bilevel import METHODS, SYMBOLIC_BACKENDS, PlanConfig, PlanResult, plan
@@ -61,6 +70,7 @@ class PlanOptions:
     replay: Path | None = None
     planner: PlanConfig = PlanConfig()  # its seed is replaced by the problem's
     steps: Path | None = None  # per-step JSON (default: beside the replay, if any)
+    trajectory: Path | None = None  # the executed joint trajectory (docs/trajectories.md)
 
 
 def _ms(t: float) -> str:
@@ -119,7 +129,9 @@ def print_result(result: PlanResult, tau: float, indent: str = "") -> None:
 # The runners load the simulator (Drake): imported when a plan is run, so that `tamp --help` and
 # argument errors stay fast.
 
-def _open_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timeline, names) -> tuple[int, list[dict]]:
+# Each runner returns (exit code, per-step records, what was executed: an Execution, a ClosedLoopRun or None).
+
+def _open_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timeline, names) -> tuple[int, list[dict], Any]:
     from tamp.app.runner import execute_plan, kinematics_for
     from tamp.app.steps import open_loop_steps
 
@@ -130,11 +142,11 @@ def _open_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timeline,
     print_result(result, cfg.tau_verify)
     if not result.solved:
         print_cause("no_plan", None, stop_record(None, result), None)
-        return 1, []
+        return 1, [], None
     if options.execute == "none" or not result.plan:
         if not result.plan:
             print("empty plan: the initial state already meets the goal; nothing to execute")
-        return 0, []
+        return 0, [], None
     ex = execute_plan(result.plan, problem.X_init, problem.X_goal, options.execute, timeline=timeline)
     records = open_loop_steps(models, result, problem.X_init, ex, names,
                               timeline.action_starts if timeline is not None else ())
@@ -151,7 +163,7 @@ def _open_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timeline,
     outcome = Outcome.of(True, None if failure is None else failure.stage, ex.error, cfg.eps)
     print_cause(outcome, dynamics_errors(models, [problem.X_init, *ex.X_after], result.plan, worst=True),
                 stop_record(None, result), None if failure is None else failure.record())
-    return (0 if ok and ex.success else 1), records
+    return (0 if ok and ex.success else 1), records, ex
 
 
 def print_cause(outcome: str, step_miss_m, stop: dict, refine_failure: dict | None, indent: str = "") -> None:
@@ -167,7 +179,8 @@ def _print_steps(records: list[dict]) -> None:
     print_steps(records)
 
 
-def _closed_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timeline, names) -> tuple[int, list[dict]]:
+def _closed_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timeline,
+                 names) -> tuple[int, list[dict], Any]:
     from tamp.app.runner import kinematics_for, run_closed_loop
     from tamp.app.steps import closed_loop_steps
 
@@ -197,7 +210,7 @@ def _closed_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timelin
           f"(max over objects) -> {'success' if out.success else 'failure'} (eps {cfg.eps * 100:g} cm)")
     print_cause(loop_outcome(out), dynamics_errors(models, out.states, out.executed, worst=True),
                 stop_record(out.stop, out.rounds[-1] if out.rounds else None), None)
-    return (0 if out.success else 1), records
+    return (0 if out.success else 1), records, run
 
 
 def run_plan(problem_path: Path, models_dir: Path, options: PlanOptions) -> int:
@@ -224,6 +237,10 @@ def run_plan(problem_path: Path, models_dir: Path, options: PlanOptions) -> int:
         from tamp.app.steps import steps_path
 
         steps_file = steps_path(options.replay)
+    if options.trajectory is not None:
+        if options.execute == "none":
+            raise UserError("--trajectory records the executed motion; it needs --execute fast or full")
+        check_output_file(options.trajectory, "--trajectory")
     if steps_file is not None:
         if options.execute == "none":
             raise UserError("--steps records executed steps; it needs --execute fast or full")
@@ -241,8 +258,8 @@ def run_plan(problem_path: Path, models_dir: Path, options: PlanOptions) -> int:
         from tamp.sim.replay import Timeline
 
         timeline = Timeline()
-    run = _closed_loop if options.replan else _open_loop
-    code, records = run(problem, models, options, cfg, timeline, names)
+    runner = _closed_loop if options.replan else _open_loop
+    code, records, executed = runner(problem, models, options, cfg, timeline, names)
     if steps_file is not None and records:
         from tamp.app.steps import steps_document, write_steps
 
@@ -258,7 +275,33 @@ def run_plan(problem_path: Path, models_dir: Path, options: PlanOptions) -> int:
             print(f"replay written to {path} ({path.stat().st_size / 1e6:.1f} MB)")
         else:
             print("nothing was executed; no replay written")
+    if options.trajectory is not None:
+        source = (f"tamp plan --problem {problem_path} --method {options.method} --execute {options.execute}"
+                  + (" --replan" if options.replan else ""))
+        write_executed_trajectory(executed, options.trajectory, source)
     return code
+
+
+def write_executed_trajectory(executed, path: Path, source: str) -> None:
+    """`--trajectory` of `tamp plan` and `tamp demo`: write what `executed` (an Execution or a
+    ClosedLoopRun; None: nothing ran) moved, and say so."""
+    import time
+
+    from tamp.app.runner import executed_trajectory
+    from tamp.sim.trajectory_file import write_trajectory
+
+    if executed is None:
+        print("nothing was executed; no trajectory written")
+        return
+    t = time.perf_counter()
+    trajectory = executed_trajectory(executed, source)
+    if not trajectory.actions:
+        print("no executed action moved the arm; no trajectory written")
+        return
+    written = write_trajectory(path, trajectory)
+    segments = sum(len(a.segments) for a in trajectory.actions)
+    print(f"trajectory written to {written} ({len(trajectory.actions)} action(s), {segments} segments, "
+          f"{trajectory.samples} samples, {written.stat().st_size / 1e3:.0f} kB, in {time.perf_counter() - t:.2f} s)")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -286,7 +329,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    "OUT.steps.json")
     p.add_argument("--steps", type=Path, default=None, metavar="OUT.json",
                    help="write the per-step record as JSON (default: beside the replay, if any)")
+    add_trajectory_argument(p)
     add_planner_arguments(p)
+
+
+def add_trajectory_argument(p: argparse.ArgumentParser) -> None:
+    """--trajectory of `tamp plan` and `tamp demo`."""
+    p.add_argument("--trajectory", type=json_path, default=None, metavar="OUT.json",
+                   help="write the executed arm motion for a real UR10e or another simulator: per action and "
+                   "motion, joint positions (rad), velocities (rad/s), accelerations (rad/s^2) and times, each "
+                   "motion shaped as a ROS trajectory_msgs/JointTrajectory, the gripper's close and open events, "
+                   "the joint names and limits; checked against the UR10e model's limits (docs/trajectories.md; "
+                   "`tamp view --trajectory OUT.json` executes it again)")
 
 
 def add_planner_arguments(p: argparse.ArgumentParser, backends: tuple[str, ...] = SYMBOLIC_BACKENDS,
@@ -418,6 +472,6 @@ def options_from_args(args: argparse.Namespace) -> PlanOptions:
     if args.steps is not None and args.steps.suffix.lower() != ".json":
         raise UserError(f"the steps file is JSON; give a path ending in .json, got {args.steps}")
     return PlanOptions(args.method, args.execute, args.replan, args.rounds, args.replay, planner_config(args),
-                       args.steps)
+                       args.steps, args.trajectory)
 
 

@@ -33,8 +33,10 @@ from tamp.sim.execute import execute
 from tamp.sim.feasibility import FeasibilityChecker
 from tamp.sim.refine import FAILURE_STAGES, failed_at, refine
 from tamp.sim.replay import Timeline
+from tamp.sim.skill import Scene
 from tamp.sim.structs import StepInfo, StepStatus
-from tamp.sim.trajectory import FailureStage, RefinedPlan, RefinementFailure
+from tamp.sim.trajectory import FailureStage, RefinedPlan, RefinementFailure, refined_action
+from tamp.sim.trajectory_file import PlanTrajectory, TrajectoryError, action_motion
 
 FIDELITIES = ("fast", "full")
 
@@ -64,6 +66,7 @@ class Execution:
     execute_time: float  # wall clock; 0 in the fast world, where refinement already executed the plan
     sim_time: float  # simulated seconds of execution (arm motion and settling); fast: arm motion alone
     notes: list[str] = field(default_factory=list)  # per-action remarks of the executor (missed grasps)
+    fidelity: str = "fast"  # the world that executed it
 
     @property
     def success(self) -> bool:
@@ -98,7 +101,7 @@ def execute_plan(actions: Sequence[PickPlace | Sequence[int]], X_init: np.ndarra
     if timeline is not None and not timeline.times:  # nothing ran: show the initial scene
         timeline.scene_started(refined.scene_init, refined.q_init)
     return Execution(refined, X_after, X_final, goal_error(X_final, X_goal), refined.refine_time,
-                     execute_time, sim_time, notes)
+                     execute_time, sim_time, notes, fidelity)
 
 
 @dataclass
@@ -110,13 +113,19 @@ class ClosedLoopRun:
     step_times: list[tuple[float, float]] = field(default_factory=list)  # (refine, execute) wall s per action
     # replay time each action began (None: the arm never moved)
     action_starts: list[float | None] = field(default_factory=list)
-    X_true: list[np.ndarray] = field(default_factory=list)  # the world's states (loop.states: as observed)
+    scene_init: Scene | None = None  # the world's exact scene and arm joints before the first action
+    q_init: np.ndarray | None = None
+    # the world's state after each executed action (loop.states: as observed, with `faults` noise and all)
+    X_after: list[np.ndarray] = field(default_factory=list)
+    fidelity: str = "fast"  # the world that executed the actions
     faults: list[str] = field(default_factory=list)  # the faults injected (`Faults`), in words
 
     @property
     def X_final(self) -> np.ndarray:
         """The world's final state (with observation noise, the loop saw it otherwise)."""
-        return self.X_true[-1] if self.X_true else self.loop.X_final
+        if self.X_after:
+            return self.X_after[-1]
+        return self.scene_init.X() if self.scene_init is not None else self.loop.states[0]
 
     @property
     def error(self) -> float:
@@ -152,13 +161,15 @@ def run_closed_loop(method: str, models: Models, X_init: np.ndarray, X_goal: np.
     world = world or executing_world(fidelity)
     world.observer = timeline
     X0 = world.reset(X=X_init)
+    scene_init, q_init = world.scene, world.q.copy()
+    X_after: list[np.ndarray] = []
     if kinematics is not None:
         kinematics.observe(world.scene, world.q)
     infos: list[StepInfo] = []
     step_times: list[tuple[float, float]] = []
     action_starts: list[float | None] = []
     rng = np.random.default_rng(fault_seed)
-    X_true, injected = [X0], []
+    injected: list[str] = []
 
     def step(action: PickPlace) -> np.ndarray:
         t, marks = time.perf_counter(), len(timeline.action_starts) if timeline is not None else 0
@@ -169,7 +180,7 @@ def run_closed_loop(method: str, models: Models, X_init: np.ndarray, X_goal: np.
             world.set_scene(scene, world.q)
             X = world.X
             injected.append(note)
-        X_true.append(X)
+        X_after.append(X)
         if kinematics is not None:
             kinematics.observe(world.scene, world.q)
         started = timeline is not None and len(timeline.action_starts) > marks  # it moved the arm
@@ -191,4 +202,32 @@ def run_closed_loop(method: str, models: Models, X_init: np.ndarray, X_goal: np.
                                 planner=planner, kinematics=kinematics)
     finally:
         world.observer = None
-    return ClosedLoopRun(loop, infos, step_times, action_starts, X_true, injected)
+    return ClosedLoopRun(loop, infos, step_times, action_starts, scene_init, q_init, X_after, world.config.fidelity,
+                         injected)
+
+
+def executed_trajectory(run: Execution | ClosedLoopRun, source: str = "") -> PlanTrajectory:
+    """The motion a run executed, action by action in order, from its exact initial scene, as the
+    trajectory file holds it (`tamp.sim.trajectory_file.write_trajectory` writes it). Open loop:
+    the refined actions that ran. Closed loop: each executed action's refined trajectory (rebuilt
+    from the paths its world planned, as the world timed them); actions that moved nothing are
+    listed as skipped. TrajectoryError if the arm was put home without a motion (the fast world,
+    when the retreat after a release was blocked): that run is not one continuous trajectory."""
+    if isinstance(run, Execution):
+        steps = run.refined.steps[:len(run.X_after)]
+        motions = [action_motion(k, step, X) for k, (step, X) in enumerate(zip(steps, run.X_after))]
+        return PlanTrajectory(run.refined.scene_init, run.refined.q_init, motions, run.fidelity, source)
+    assert run.scene_init is not None and run.q_init is not None  # set by run_closed_loop
+    motions, skipped = [], []
+    X_before = run.scene_init.X()
+    for k, (info, X) in enumerate(zip(run.infos, run.X_after)):
+        if info.status != StepStatus.OK:
+            skipped.append({"index": k, "action": list(map(int, info.action)), "reason": info.reason})
+        elif "retreat" not in info.paths:
+            raise TrajectoryError(f"executed action {k}: {info.reason}; the arm was put home without a motion, "
+                                  "so the run is not one continuous trajectory (no trajectory written)")
+        else:
+            step = refined_action(info.action, info, X_before, X, info.paths["approach"][0])
+            motions.append(action_motion(k, step, X))
+        X_before = X
+    return PlanTrajectory(run.scene_init, run.q_init, motions, run.fidelity, source, skipped)
