@@ -91,8 +91,8 @@ def test_an_empty_plan_while_a_block_is_off_its_goal_widens_the_search(models):
 
 
 class RejectGoalMoves:
-    """A kinematic check that rejects every action onto the other block: the goal-oriented actions
-    (A onto B, A onto itself) are then useless, and the widened search finds nothing either."""
+    """A kinematic check that rejects every action onto the other block: no plan can put A on B, and the
+    widened search finds none either; only shifts of a block on itself are left."""
 
     def check(self, X, actions):
         return [Infeasible.COLLISION if a[0] != a[2] else None for a in np.asarray(actions)]
@@ -160,3 +160,19 @@ def test_back_at_an_earlier_state_the_loop_leaves_out_the_action_it_took_from_th
         avoid = frozenset({(state_key(X_INIT, cfg.search.resolution), first)})
         other = plan(method, models, X_INIT, A_ON_B, cfg, kinematics=AcceptAll(), avoid=avoid)
         assert other.solved and tuple(other.plan[0]) != first
+
+
+def test_without_a_plan_the_loop_steps_toward_the_closest_state_while_that_makes_progress(models):
+    goal = A_ON_B.copy()
+    out = plan_closed_loop("bilevel", models, X_INIT, goal, slipping_world(0), rounds=None,
+                           kinematics=RejectGoalMoves())
+    toward = [r for r in out.rounds if r.toward]
+    assert toward and all(r.origin == "toward the closest state" and r.widened and r.level == 2 for r in toward)
+    assert all(a[0] == a[2] for a in out.executed)  # only shifts were possible
+    distances = [np.linalg.norm(X[:, :3] - goal[:, :3], axis=1).sum() for X in out.states]
+    assert all(b <= a - 0.02 + 1e-9 for a, b in zip(distances, distances[1:]))  # every step made progress
+    assert not out.success and out.stop == "no_plan"  # A cannot get onto B: it stops when no step helps
+    assert "toward the closest state" in toward[0].reasons[-1]
+    still = plan_closed_loop("bilevel", models, X_INIT, goal, slipping_world(0), rounds=None,
+                             kinematics=RejectGoalMoves(), cfg=PlanConfig(loop=LoopConfig(progress=1.0)))
+    assert not still.executed and still.stop == "no_plan"

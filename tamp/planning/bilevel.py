@@ -176,6 +176,7 @@ class PlanResult:
     kept_by: str | None = None  # closed loop: the plan is the rest of the last round's (`keep_rest`), not planned
     #   anew, judged by the plan's own prediction ("on course") or by a rollout from the observed state ("rollout")
     widened: bool = False  # closed loop: the plan of a search over every action, after the planner found none
+    toward: bool = False  # closed loop, widened: no plan reaches the goal; the path to the closest state found
 
     @property
     def solved(self) -> bool:
@@ -188,9 +189,10 @@ class PlanResult:
 
     @property
     def origin(self) -> str:
-        """How this round got its plan: "planned", "widened search", "kept on course" or "kept by rollout"."""
+        """How this round got its plan: "planned", "widened search", "toward the closest state", "kept on
+        course" or "kept by rollout"."""
         if self.kept_by is None:
-            return "widened search" if self.widened else "planned"
+            return "toward the closest state" if self.toward else "widened search" if self.widened else "planned"
         return "kept on course" if self.kept_by == "on course" else "kept by rollout"
 
     def _plan_path(self) -> tuple[tuple[int, ...], tuple[int, ...] | None] | None:
@@ -242,7 +244,7 @@ class PlanResult:
                 "timings": {k: round(v, 6) for k, v in self.timings.items()},
                 "reasons": list(self.reasons), "symbolic": self.symbolic_stats,
                 "rejected": self.rejected_dict(), "refinements": list(self.refinements), "kept": self.kept,
-                "kept_by": self.kept_by, "widened": self.widened}
+                "kept_by": self.kept_by, "widened": self.widened, "toward": self.toward}
 
 
 # --- the levels -------------------------------------------------------------------------------

@@ -15,7 +15,9 @@ Two loops share one round (plan, or keep the rest of the last plan while it is o
   a plan that ends short of the goal is followed by another round. A round that finds no plan, or
   only the empty plan while a block is off its goal, widens the search (`widened_search`: every one of
   the 9 n^2 actions, so blocks can be moved out of the way, unstacked, or moved although at their
-  goal) before the loop gives up. Back at a state it observed before (`revisits`), it leaves out the
+  goal); when that finds none either, it takes the first action toward the closest state the widened
+  search reached, if that is `LoopConfig.progress` closer (the world may do better than the model
+  predicts, and the next round plans from there). Back at a state it observed before (`revisits`), it leaves out the
   actions it took from there, which would start the same cycle again in a deterministic world.
 
 Keeping a plan (`PlanConfig.keep_plan`, our extension, both loops): a round keeps the rest of the last
@@ -175,9 +177,25 @@ def widened_search(method: str, models: Models, X: np.ndarray, X_goal: np.ndarra
     _absorb(result, failed, "planned")
     if failed.solved and not failed.plan:
         result.reasons.insert(0, "the planner returned an empty plan with a block off its goal")
-    result.reasons.append("searched again over every action (the goal-oriented ones gave no plan)"
-                          if result.solved else "no plan over every action either")
-    return result
+    if result.solved:
+        result.reasons.append("searched again over every action (the goal-oriented ones gave no plan)")
+        return result
+    search = result.search
+    closest = None if search is None else search.closest_trajectory
+    if closest is None or not _progress(X, closest[-1], X_goal, cfg.loop.progress):
+        result.reasons.append("no plan over every action either")
+        return result
+    assert search is not None and search.closest_plan is not None  # set with closest_trajectory
+    result.reasons.append(f"no plan over every action either; toward the closest state found (predicted "
+                          f"{goal_error(closest[-1], X_goal) * 100:.1f} cm from the goal, from "
+                          f"{goal_error(X, X_goal) * 100:.1f} cm)")
+    result.toward = True
+    return _take(result, search.closest_plan, 2, closest, X_goal)
+
+
+def _progress(X: np.ndarray, X_then: np.ndarray, X_goal: np.ndarray, margin: float) -> bool:
+    """Whether X_then is `margin` metres closer to the goal than X, in the search's h (summed distances)."""
+    return float(goal_errors(X_then, X_goal).sum()) <= float(goal_errors(X, X_goal).sum()) - margin
 
 
 def _absorb(result: PlanResult, attempt: PlanResult, stage: str = "keep") -> None:

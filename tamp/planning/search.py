@@ -112,6 +112,10 @@ class SearchResult:
     rejected: Counter = field(default_factory=Counter)  # reason -> successors the feasibility check pruned
     pruned: int = 0  # successors left out as (state, action) pairs known to fail refinement
     fragility_checks: int = 0  # goal states whose plans were rolled out perturbed (`verify.fragility`)
+    # unsolved: the path to the expanded state closest to the goal (least h), if closer than X_init; a closed
+    # loop may take its first action to make progress from where the world is (`closed_loop.widened_search`)
+    closest_plan: list[tuple[int, int, int, int]] | None = None
+    closest_trajectory: np.ndarray | None = None
 
 
     @property
@@ -243,6 +247,9 @@ def continuous_search(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarr
         if index is not None:
             plan, states = path(index)
             out.plan, out.trajectory = plan, np.stack(states)
+        elif closest[1] > 0:
+            plan, states = path(closest[1])
+            out.closest_plan, out.closest_trajectory = plan, np.stack(states)
         return out
 
     if np.all(d0 < config.eps):
@@ -266,6 +273,7 @@ def continuous_search(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarr
                       f"{out.expanded} expansions)", index)
 
     frontier = [(config.weight * d0.sum() / config.h_unit, d0.sum(), 0)]  # (f, h, node index)
+    closest = (d0.sum() / config.h_unit, 0)  # (h, node index) of the expanded state closest to the goal
     n_objects = len(X_init)
     every = all_actions(n_objects)
     while frontier:
@@ -277,7 +285,7 @@ def continuous_search(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarr
         if time.perf_counter() - t0 > config.time_limit:
             return stop(SearchStatus.TIME_LIMIT, f"time limit: {config.time_limit:g} s ({out.expanded} expansions) "
                           f"without reaching the goal (closest predicted state {out.best_error * 100:.1f} cm from it)")
-        _, _, index = heapq.heappop(frontier)
+        _, h_here, index = heapq.heappop(frontier)
         P, _, _, g = nodes[index]
         if best_g.get(key(P), -1) < g or g >= config.max_depth:
             continue  # reached again with fewer actions since it was pushed / too deep
@@ -285,6 +293,7 @@ def continuous_search(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarr
             del best_g[key(P)]  # the state may still be reached by a feasible action
             continue
         out.expanded += 1
+        closest = min(closest, (h_here, index))
         actions = goal_oriented_actions(full(P), X_goal, config.misplaced, config.eps,
                                         config.release_targets) if config.prune else every
         if len(actions) == 0:
