@@ -58,6 +58,14 @@ def test_the_loop_stops_at_its_action_budget(models):
     assert "4 actions sent" in out.reason
 
 
+def test_the_loop_stops_when_its_rounds_have_spent_its_search_budget(models):
+    cfg = PlanConfig(loop=LoopConfig(search_budget=3))
+    out = plan_closed_loop("cfs", models, X_INIT, A_ON_B, slipping_world(100), rounds=None, cfg=cfg)
+    spent = sum(r.search.expanded for r in out.rounds)
+    assert out.stop == "budget" and "search budget" in out.reason and spent >= 3 and len(out.executed) < 12
+    assert all(r.search.expanded <= 3 for r in out.rounds)  # no round searches past what the budget had left
+
+
 def test_a_round_without_a_plan_widens_the_search_to_every_action(models):
     def planner_without_plans(method, models_, X, X_goal, cfg, **kwargs):
         result = PlanResult(method, None)

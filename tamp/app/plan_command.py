@@ -416,6 +416,10 @@ def add_planner_arguments(p: argparse.ArgumentParser, backends: tuple[str, ...] 
                    help="the closed loop (--replan; bilevel_loop) gives up after sending this many actions to the "
                    f"world (default {default.loop.max_actions}: a goal of up to 5 random actions, with room to "
                    "recover from misses)")
+    p.add_argument("--loop-search-budget", type=positive_int, default=default.loop.search_budget, metavar="EXPANSIONS",
+                   help="the closed loop (--replan; bilevel_loop) gives up when its rounds' continuous searches have "
+                   f"spent this many expansions (default {default.loop.search_budget}: twice one search's budget, "
+                   "so that a loop whose rounds keep failing ends in about the time of two failed searches)")
     p.add_argument("--no-widen", dest="widen", action="store_false",
                    help="the closed loop stops at a round without a plan (default: it first searches again over "
                    "all 9 n^2 actions, which can move a block out of the way, unstack, or move a block already "
@@ -459,7 +463,8 @@ def planner_config(args: argparse.Namespace) -> PlanConfig:
                       level1_objects=args.level1_objects, level1_serial=args.level1_serial,
                       level1_confident=args.level1_confident, level1_cut=args.level1_cut,
                       keep_plan=args.keep_plan, on_course=args.on_course,
-                      loop=LoopConfig(max_actions=args.max_actions, widen=args.widen),
+                      loop=LoopConfig(max_actions=args.max_actions, widen=args.widen,
+                                      search_budget=args.loop_search_budget),
                       symbolic_time_limit=args.symbolic_time_limit, feasibility=getattr(args, "feasibility", True),
                       search=SearchConfig(max_expansions=args.max_expansions, time_limit=args.time_limit,
                                           confident=args.confident, look_on=args.look_on,

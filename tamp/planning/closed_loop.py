@@ -101,7 +101,7 @@ def plan_closed_loop(method: str, models: Models, X_init, X_goal,
     X_goal = np.asarray(X_goal, dtype=float)
     out = ClosedLoopResult([], [], [np.asarray(X_init, dtype=float)], X_goal, cfg.eps)
     until_goal = rounds is None
-    r = 0
+    r, spent = 0, 0  # spent: continuous-search expansions of every round so far
     while True:
         X = out.states[-1]
         if at_goal(X, X_goal, cfg.eps):
@@ -111,10 +111,18 @@ def plan_closed_loop(method: str, models: Models, X_init, X_goal,
             out.reason, out.stop = (f"{cfg.loop.max_actions} actions sent without reaching the goal "
                                     f"(the loop's action budget)"), "budget"
             break
+        if until_goal and spent >= cfg.loop.search_budget:
+            out.reason, out.stop = (f"{spent} search expansions spent without reaching the goal (the loop's "
+                                    f"search budget)"), "budget"
+            break
         avoid = revisits(out, cfg) if until_goal else frozenset()
-        result = _round(method, models, X, X_goal, out, cfg, planner, kinematics, avoid)
-        if until_goal and cfg.loop.widen and not (result.solved and result.plan):
-            result = widened_search(method, models, X, X_goal, cfg, kinematics, result, avoid)
+        round_cfg = _within(cfg, cfg.search.max_expansions, spent) if until_goal else cfg
+        result = _round(method, models, X, X_goal, out, round_cfg, planner, kinematics, avoid)
+        spent += _expanded(result)
+        if until_goal and cfg.loop.widen and not (result.solved and result.plan) and spent < cfg.loop.search_budget:
+            result = widened_search(method, models, X, X_goal, _within(cfg, cfg.loop.widen_expansions, spent),
+                                    kinematics, result, avoid)
+            spent += _expanded(result)
         out.rounds.append(result)
         if on_round is not None:
             on_round(r, result)
@@ -133,6 +141,19 @@ def plan_closed_loop(method: str, models: Models, X_init, X_goal,
             break
         r += 1
     return out
+
+
+def _within(cfg: PlanConfig, expansions: int, spent: int) -> PlanConfig:
+    """cfg with a continuous search of at most `expansions` nodes, and no more than the loop's search budget
+    has left after `spent`."""
+    allowed = max(1, min(expansions, cfg.loop.search_budget - spent))
+    return cfg if allowed == cfg.search.max_expansions else replace(cfg, search=replace(cfg.search,
+                                                                                         max_expansions=allowed))
+
+
+def _expanded(result: PlanResult) -> int:
+    """The continuous-search expansions a round's planning call spent (0: it did not search)."""
+    return 0 if result.search is None else result.search.expanded
 
 
 def revisits(out: ClosedLoopResult, cfg: PlanConfig) -> frozenset[tuple[bytes, tuple]]:
@@ -166,12 +187,12 @@ def _round(method: str, models: Models, X: np.ndarray, X_goal: np.ndarray, out: 
 def widened_search(method: str, models: Models, X: np.ndarray, X_goal: np.ndarray, cfg: PlanConfig,
                    kinematics: KinematicFeasibility | None, failed: PlanResult,
                    avoid: frozenset = frozenset()) -> PlanResult:
-    """The continuous search over all 9 n^2 actions (cfg.loop.widen_expansions nodes), after a round
+    """The continuous search over all 9 n^2 actions (cfg.search.max_expansions nodes), after a round
     whose planner found no plan (`failed`, or only the empty plan while a block is off its goal): the
     goal-oriented actions only move misplaced blocks toward their goal, and cannot move a block out of
     the way, unstack one, or move a block already at its goal. The failed round's time, reasons and
     rejections are counted in the result (`PlanResult.widened`)."""
-    wide = replace(cfg, search=replace(cfg.search, prune=False, max_expansions=cfg.loop.widen_expansions))
+    wide = replace(cfg, search=replace(cfg.search, prune=False))  # cfg.search.max_expansions: the caller's
     result = plan_cfs(models, X, X_goal, wide, kinematics=kinematics, avoid=avoid)
     result.method, result.widened = method, True
     _absorb(result, failed, "planned")
