@@ -33,7 +33,7 @@ def row(outcome: str, **fields) -> dict:
     (row("kinematic_failure", refine_failure={"action": 0, "stage": "ik", "where": None, "reason": "x"}),
      Cause.EXECUTION, "(ik)"),
     # closed loops
-    (row("wrong_plan", loop="budget", misses=[0.1]), Cause.OUT_OF_ROUNDS, "action budget"),
+    (row("wrong_plan", loop="budget", misses=[0.1]), Cause.OUT_OF_ROUNDS, "action or search budget"),
     (row("wrong_plan", loop="no_plan", search="exhausted", rejected=3, misses=[0.01]), Cause.KINEMATICS,
      "after executed actions"),
     (row("wrong_plan", loop="empty_plan", misses=[0.01]), Cause.EMPTY_PLAN, "no action"),

@@ -85,7 +85,7 @@ def failure_cause(f: Failure) -> tuple[Cause, str] | None:
     if f.outcome == "success":
         return None
     if f.loop in ("budget",):
-        return Cause.OUT_OF_ROUNDS, "the closed loop used up its action budget without reaching the goal"
+        return Cause.OUT_OF_ROUNDS, "the closed loop used up its action or search budget without reaching the goal"
     if f.outcome in ("kinematic_failure", "refinement_failure") and f.refine_failure is not None:
         r = f.refine_failure
         return Cause.EXECUTION, (f"action {r.get('action')} could not be carried out at execution "

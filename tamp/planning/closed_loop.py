@@ -127,7 +127,10 @@ def plan_closed_loop(method: str, models: Models, X_init, X_goal,
         if on_round is not None:
             on_round(r, result)
         if not result.solved:
-            out.reason, out.stop = f"round {r}: no plan ({'; '.join(result.reasons)})", "no_plan"
+            out_of_budget = until_goal and spent >= cfg.loop.search_budget
+            out.reason = f"round {r}: no plan ({'; '.join(result.reasons)})" + (
+                f"; the loop's search budget ({cfg.loop.search_budget} expansions) is spent" if out_of_budget else "")
+            out.stop = "budget" if out_of_budget else "no_plan"
             break
         if not result.plan:
             out.reason, out.stop = f"round {r}: the planner returned an empty plan", "empty_plan"
