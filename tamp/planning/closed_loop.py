@@ -24,7 +24,8 @@ Keeping a plan (`PlanConfig.keep_plan`, our extension, both loops): a round keep
 plan when it refines and still ends within `search.confident` of the goal: as the plan predicted, if
 the observed state is where the plan predicted it (every block within `PlanConfig.on_course`), else
 rolled out from the observed state; only otherwise does it plan again, so a plan on course is not
-traded for another one.
+traded for another one. The loop that does not know k keeps a plan on course while its own prediction
+still ends within eps (the plan was taken by that prediction, and the world is doing what it said).
 """
 from __future__ import annotations
 
@@ -117,7 +118,7 @@ def plan_closed_loop(method: str, models: Models, X_init, X_goal,
             break
         avoid = revisits(out, cfg) if until_goal else frozenset()
         round_cfg = _within(cfg, cfg.search.max_expansions, spent) if until_goal else cfg
-        result = _round(method, models, X, X_goal, out, round_cfg, planner, kinematics, avoid)
+        result = _round(method, models, X, X_goal, out, round_cfg, planner, kinematics, avoid, until_goal)
         spent += _expanded(result)
         if until_goal and cfg.loop.widen and not (result.solved and result.plan) and spent < cfg.loop.search_budget:
             result = widened_search(method, models, X, X_goal, _within(cfg, cfg.loop.widen_expansions, spent),
@@ -171,14 +172,17 @@ def revisits(out: ClosedLoopResult, cfg: PlanConfig) -> frozenset[tuple[bytes, t
 
 def _round(method: str, models: Models, X: np.ndarray, X_goal: np.ndarray, out: ClosedLoopResult,
            cfg: PlanConfig, planner: Callable[..., PlanResult] | None,
-           kinematics: KinematicFeasibility | None, avoid: frozenset = frozenset()) -> PlanResult:
+           kinematics: KinematicFeasibility | None, avoid: frozenset = frozenset(), until_goal: bool = False
+           ) -> PlanResult:
     """One round's plan from the observed X: the rest of the last plan if it is kept, else a new one; both
-    without the actions of `avoid` from here (`revisits`)."""
+    without the actions of `avoid` from here (`revisits`). `until_goal`: the loop that does not know k, which
+    keeps a plan on course while it still predicts success (`keep_rest`)."""
     extra: dict = {} if kinematics is None else {"kinematics": kinematics}
     if avoid:
         extra["avoid"] = avoid
     keep = cfg.keep_plan and method in KEEPING_METHODS and bool(out.rounds)
-    kept = keep_rest(models, X, X_goal, out.rounds[-1], cfg, kinematics, avoid) if keep else None
+    kept = keep_rest(models, X, X_goal, out.rounds[-1], cfg, kinematics, avoid, cfg.eps if until_goal else None) \
+        if keep else None
     if kept is not None and kept.solved:
         return kept
     result = (planner or plan)(method, models, X, X_goal, cfg, **extra)
@@ -248,12 +252,14 @@ def off_course(X: np.ndarray, last: PlanResult) -> float:
 
 
 def keep_rest(models: Models, X: np.ndarray, X_goal: np.ndarray, last: PlanResult, cfg: PlanConfig,
-              kinematics: KinematicFeasibility | None = None, avoid: frozenset = frozenset()) -> PlanResult:
+              kinematics: KinematicFeasibility | None = None, avoid: frozenset = frozenset(),
+              on_course_within: float | None = None) -> PlanResult:
     """The rest of `last` (its first action executed) as this round's plan, if it ends within
     cfg.search.confident of X_goal as `last` predicted it, when the observed state X is within
-    cfg.on_course of that prediction, or rolled out from X otherwise; and, with `kinematics` (and
-    cfg.feasibility), it passes the check and refines. Else a result without a plan (its reasons say
-    why, its timings what the check cost). The plan keeps the last plan's level."""
+    cfg.on_course of that prediction (or within `on_course_within`, if given: the loop that does not know
+    k keeps a plan on course while it still predicts success, cfg.eps), or rolled out from X otherwise;
+    and, with `kinematics` (and cfg.feasibility), it passes the check and refines. Else a result without
+    a plan (its reasons say why, its timings what the check cost). The plan keeps the last plan's level."""
     rest = list(last.plan or [])[1:]
     level = last.level or 2
 
@@ -268,7 +274,7 @@ def keep_rest(models: Models, X: np.ndarray, X_goal: np.ndarray, last: PlanResul
             trajectory = np.concatenate([np.asarray(X, dtype=float)[None], last.predicted[2:]])
             planned = Verification(tuple(tuple(int(a) for a in action) for action in rest), trajectory,
                                    goal_errors(trajectory[-1], X_goal), cfg.tau_verify)
-            if planned.error < cfg.search.confident:
+            if planned.error < (cfg.search.confident if on_course_within is None else on_course_within):
                 v, kept_by = planned, "on course"
                 why = f"on course (every block within {deviation * 100:.1f} cm of its predicted place), " \
                       f"predicted {v.error * 100:.1f} cm from the goal"
