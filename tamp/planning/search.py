@@ -333,7 +333,7 @@ def continuous_search(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarr
                 look_until = min(look_until, out.expanded + config.look_on)
             if candidate is None or (risk, float(worst[b])) < candidate[:2]:
                 candidate = (risk, float(worst[b]), len(nodes) - 1)
-    actions = "goal-oriented actions" if config.prune else "all actions"
+    offered = "goal-oriented actions" if config.prune else "all actions"
     return stop(SearchStatus.EXHAUSTED, f"exhausted: every state reachable within {config.max_depth} actions "
-                  f"({actions}, {config.resolution * 100:g} cm grid) expanded, {out.expanded} expansions; "
+                  f"({offered}, {config.resolution * 100:g} cm grid) expanded, {out.expanded} expansions; "
                   f"closest predicted state {out.best_error * 100:.1f} cm from the goal")
