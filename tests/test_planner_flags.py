@@ -86,3 +86,26 @@ def test_validation_lives_with_the_fields():
         with pytest.raises(UserError, match=field):
             bad()
     assert PlanConfig().with_seed(7).level1 == Level1Config(seed=7)
+
+
+def test_the_defining_settings_of_a_results_directory_are_unchanged():
+    """`EvalConfig.defining()` keeps the keys and values it had with the flat PlanConfig, so that existing
+    results directories stay resumable; the closed loop's `keep_plan` and `on_course` are not in "loop"."""
+    from evaluation.run import EvalConfig
+
+    default = {"eps_m": 0.05, "fidelity": "fast", "keep_plan": True, "level1_budget": 100000,
+               "level1_confident_m": 0.05, "level1_cut": True, "level1_focus_budget": 25000, "level1_focus_from": 5,
+               "level1_objects": 4, "level1_serial": True, "level1_time_budget_s": None, "n_domains": 100,
+               "on_course_m": 0.015, "oracle_max_plans": 20, "search_confident_m": 0.035, "search_look_on": 30,
+               "search_max_expansions": 1500, "search_max_fragility": 0.3, "search_noise_m": 0.005,
+               "search_release_targets": True, "search_time_limit_s": 60.0, "symbolic_backend": "python",
+               "tau_verify_m": 0.07}
+    assert EvalConfig().defining() == default
+    kept = EvalConfig(planner=PlanConfig(loop=LoopConfig(keep_plan=False, on_course=None))).defining()
+    assert kept == {**default, "keep_plan": False, "on_course_m": None}
+    short = EvalConfig(planner=PlanConfig(loop=LoopConfig(max_actions=5))).defining()
+    assert short["loop"] == {"max_actions": 5, "widen": True, "widen_expansions": 400, "revisit": 0.01}
+    slow = EvalConfig(planner=PlanConfig(level1=Level1Config(symbolic_time_limit=3.0))).defining()
+    assert slow == {**default, "symbolic_time_limit_s": 3.0}
+    assert EvalConfig().plan_config(5, False) == PlanConfig(level1=Level1Config(seed=5),
+                                                            kinematics=KinematicsConfig(feasibility=False))

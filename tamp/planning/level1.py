@@ -1,9 +1,10 @@
 """Level 1 of Algorithm 1 (lines 4-14) and, beside it, our extensions to it.
 
-    Sigma_init, Sigma_goal <- Symbolic Model(X_init), (X_goal)              lines 4-5   `symbolic_problem`
-    plans of N sampled domains, ranked by frequency                         lines 6-8   `level1_plans`
-    for each plan, most frequent first: roll it out with the Dynamics Model line 9-11   `Verifier.check`
-        return the first whose rollout ends within tau of X_goal            lines 12-14 `level1`
+    `level1` (lines 4-14):
+      Sigma_init, Sigma_goal -> plans of N sampled domains, by frequency   lines 5-7    `level1_plans`
+      for each plan, in decreasing order of probability                    line 9
+          roll it out with the Dynamics Model: within tau of X_goal?       lines 10-11  `Verifier.check`
+          the first verified plan is Level 1's                             line 12
 
 Our extensions (`Level1Config`; `bilevel_alg1` turns them off): the plans through the same symbolic
 states verified with each ranked plan (`alternatives`), a non-empty plan when X_init is not at the
@@ -224,7 +225,8 @@ class Verifier:
                                  f"tau {self.cfg.verify.tau_verify * 100:g} cm)")
 
 
-def verify_candidate(models: Models, X_init, X_goal, candidate: Candidate, cfg: PlanConfig):
+def verify_candidate(models: Models, X_init, X_goal, candidate: Candidate, cfg: PlanConfig) -> Verification:
+    """Verify one candidate alone (its error and verdict recorded on it); the baselines report it."""
     v = verify(models.require_dynamics(), X_init, X_goal, candidate.actions, cfg.verify.tau_verify)
     candidate.error, candidate.verified = v.error, v.verified
     return v
@@ -255,7 +257,7 @@ def in_scene(actions, objects: tuple[int, ...] | None) -> tuple[tuple[int, int, 
 
 
 def level1_serial(models: Models, X_init, X_goal, cfg: PlanConfig, result: PlanResult,
-                   feas: Feasibility | None) -> Verification | None:
+                  feas: Feasibility | None) -> Verification | None:
     """Level 1 one misplaced block at a time (our extension, `Level1Config.serial`).
 
     Stage by stage, from the state the plan so far is predicted to reach: for the misplaced blocks
