@@ -125,7 +125,8 @@ def main() -> int:
 
     import torch
     torch.set_num_threads(1)
-    from tamp.planning.bilevel import PlanConfig, plan
+    from tamp.planning.config import Level1Config, PlanConfig
+    from tamp.planning.methods import plan
     from tamp.planning.models import load_models
     from tamp.planning.search import SearchConfig, continuous_search
 
@@ -137,7 +138,7 @@ def main() -> int:
         print(f"training toy models into {directory} ...", flush=True)
         make_synthetic_models(directory, seconds=args.train_seconds)
     models = load_models(directory)
-    cfg = PlanConfig(symbolic_time_limit=args.symbolic_time_limit,
+    cfg = PlanConfig(level1=Level1Config(symbolic_time_limit=args.symbolic_time_limit),
                      search=SearchConfig(time_limit=args.time_limit, max_expansions=10**6))
     drake = args.models is not None  # real models plan in the Drake world; toy models in the toy one
     problems = drake_problem_set(args.per_cell) if drake else problem_set(args.per_cell)
@@ -147,7 +148,7 @@ def main() -> int:
     rows = []
     for n in (2, 3, 4):
         t = time.perf_counter()
-        models.symbolic_planner(cfg.backend, cfg.symbolic_time_limit).task(n)
+        models.symbolic_planner(cfg.level1.backend, cfg.level1.symbolic_time_limit).task(n)
         print(f"n = {n}: symbolic grounding (one-off, not timed below) {time.perf_counter() - t:.2f} s", flush=True)
         for pn, k, X, G in problems:
             if pn != n:

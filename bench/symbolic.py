@@ -84,7 +84,9 @@ def main() -> None:
 
     from symbolic.grounding import problem_states
     from symbolic.reference import GroundTask, plan_each_domain
-    from tamp.planning.bilevel import PlanConfig, _symbolic_problem, plan
+    from tamp.planning.config import KinematicsConfig, PlanConfig
+    from tamp.planning.level1 import symbolic_problem
+    from tamp.planning.methods import plan
     from tamp.planning.models import load_models, pretrained_dir
     from tamp.planning.search import SearchConfig
 
@@ -94,20 +96,22 @@ def main() -> None:
         m.config = dataclasses.replace(m.config, n_max=max(6, max(args.sizes)))
     assert models.domain is not None
     problems = problems_for(args)
-    cfg = PlanConfig(feasibility=False, search=SearchConfig(max_expansions=1))  # Level 2 not run
-    print(f"domain: {len(models.domain)} operators; N = {cfg.n_domains}; Level-1 budget {cfg.level1_budget} "
-          f"generated states ({cfg.level1_focus_budget} from {cfg.focus_from} objects on); {len(problems)} problems")
+    cfg = PlanConfig(kinematics=KinematicsConfig(feasibility=False),  # Level 2 not run
+                     search=SearchConfig(max_expansions=1))
+    level1 = cfg.level1
+    print(f"domain: {len(models.domain)} operators; N = {level1.n_domains}; Level-1 budget {level1.budget} "
+          f"generated states ({level1.focus_budget} from {level1.focus_from} objects on); {len(problems)} problems")
     rows: dict[int, list[dict]] = {}
     old: dict[int, list[float]] = {}
     for n in sorted({p.n for p in problems}):
         batch = [p for p in problems if p.n == n]
         t0 = time.perf_counter()
-        models.symbolic_planner(cfg.backend, cfg.symbolic_time_limit).task(n)
+        models.symbolic_planner(cfg.level1.backend, cfg.level1.symbolic_time_limit).task(n)
         setup = time.perf_counter() - t0
         plan("bilevel", models, batch[0].X_init, batch[0].X_goal, cfg)  # warm-up: first forward passes
         rows[n] = []
         for p in batch:
-            r = plan("bilevel", models, p.X_init, p.X_goal, dataclasses.replace(cfg, seed=p.seed))
+            r = plan("bilevel", models, p.X_init, p.X_goal, cfg.with_seed(p.seed))
             t = r.timings
             sym = r.symbolic_stats.get("timings", {})
             row = {"symbols": t.get("symbols", 0.0), "sampling": sym.get("sampling", 0.0),
@@ -124,9 +128,9 @@ def main() -> None:
                   f"{time.perf_counter() - t0:.1f} s (once per n)", flush=True)
             old[n] = []
             for p in batch:
-                sp = _symbolic_problem(models, p.X_init, p.X_goal, cfg)
+                sp = symbolic_problem(models, p.X_init, p.X_goal, cfg)
                 init, goal = problem_states(sp)
-                out = plan_each_domain(models.domain, ground, init, goal, cfg.n_domains, p.seed, sp.nonempty)
+                out = plan_each_domain(models.domain, ground, init, goal, cfg.level1.n_domains, p.seed, sp.nonempty)
                 old[n].append(out["sampling"] + out["search"])
 
     print("\nLevel 1 per problem, ms: median / p90 / max / mean (new); the old planner's sampling + search")

@@ -1,6 +1,6 @@
 """The methods compared by the evaluation, and the model sets they plan with.
 
-Each method is a `tamp.planning.bilevel` planner, a model variant and open or closed loop:
+Each method is a `tamp.planning.methods` planner, a model variant and open or closed loop:
 
     deterministic         deterministic symbolic planner (baseline), Gumbel-Sigmoid Symbolic Model
     probabilistic         probabilistic symbolic planner, N sampled domains, top plan, unverified
@@ -38,14 +38,14 @@ from tamp.errors import UserError
 from tamp.planning.models import DOMAIN_DIR, DYNAMICS_FILE, SYMBOLIC_FILE, Models
 
 VARIANTS_DIR = "variants"
-SYMBOLIC_BACKENDS = ("python", "fd")  # in-process search, Fast Downward (tamp.planning.bilevel.PlanConfig.backend)
+SYMBOLIC_BACKENDS = ("python", "fd")  # in-process search, Fast Downward (tamp.planning.config.Level1Config.backend)
 SYMBOLIC_SIGMOID, DOMAIN_SIGMOID, DYNAMICS_GUMBEL = "symbolic_sigmoid.pt", "domain_sigmoid", "dynamics_gumbel.pt"
 
 
 @dataclass(frozen=True)
 class Method:
     name: str
-    planner: str  # a tamp.planning.bilevel.METHODS key
+    planner: str  # a tamp.planning.methods.METHODS key
     models: str  # model set: "default" | "symbolic_sigmoid" | "dynamics_gumbel"
     loop: str | None = None  # closed loop: "paper" (k - 1 rounds) or "goal" (until the goal); None: open loop
     oracle: bool = False  # execute the ranked plans until one succeeds (the authors' measure)

@@ -286,12 +286,13 @@ def _evaluate_stages(out: Path, stages: Stages, scale: Scale, models: Path, work
     results_dir = out / "results"
     if not stages.done("evaluate"):
         from evaluation.run import EvalConfig, evaluate
-        from tamp.planning.bilevel import PlanConfig
+        from tamp.planning.config import Level1Config, PlanConfig
         from tamp.planning.search import SearchConfig
 
         _say(f"evaluate every method on {problems} ({fidelity} world)")
         t = time.perf_counter()
-        planner = PlanConfig(backend=symbolic_backend, search=SearchConfig(time_limit=scale.search_time_limit_s))
+        planner = PlanConfig(level1=Level1Config(backend=symbolic_backend),
+                             search=SearchConfig(time_limit=scale.search_time_limit_s))
         evaluate(models, problems, results_dir,
                  config=EvalConfig(planner=planner, fidelity=fidelity, workers=workers, backend=backend,
                                    address=address))

@@ -70,9 +70,9 @@ from tamp.app.faults import Faults
 from tamp.app.parallel import BACKENDS, run_tasks
 from tamp.app.problem import Problem
 from tamp.errors import UserError
-from tamp.planning.bilevel import LEVEL1_STAGES, PlanConfig
 from tamp.planning.causes import cause_of, stop_record
-from tamp.planning.config import LoopConfig
+from tamp.planning.config import Level1Config, LoopConfig, PlanConfig
+from tamp.planning.results import LEVEL1_STAGES
 from tamp.planning.steps import dynamics_errors, symbolic_steps
 from tamp.planning.structs import OUTCOMES, Outcome
 from tamp.planning.verify import goal_error
@@ -118,9 +118,9 @@ class EvalConfig:
             raise UserError(f"--fidelity must be 'fast' or 'full', got {self.fidelity!r}")
         if self.backend not in BACKENDS:
             raise UserError(f"--backend must be one of {', '.join(BACKENDS)}, got {self.backend!r}")
-        if self.planner.backend not in SYMBOLIC_BACKENDS:
+        if self.planner.level1.backend not in SYMBOLIC_BACKENDS:
             raise UserError(f"--symbolic-backend must be one of {', '.join(SYMBOLIC_BACKENDS)}, "
-                            f"got {self.planner.backend!r}")
+                            f"got {self.planner.level1.backend!r}")
         for name in ("oracle_max_plans", "workers"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
@@ -128,40 +128,44 @@ class EvalConfig:
 
     @property
     def eps(self) -> float:
-        return self.planner.eps
+        return self.planner.verify.eps
 
     @property
     def tau_verify(self) -> float:
-        return self.planner.tau_verify
+        return self.planner.verify.tau_verify
 
     @property
     def symbolic_backend(self) -> str:
-        return self.planner.backend
+        return self.planner.level1.backend
 
     def defining(self) -> dict[str, Any]:
         """The settings rows depend on (a results directory holds rows of one setting only)."""
         p = self.planner
-        out = {"fidelity": self.fidelity, "eps_m": p.eps, "tau_verify_m": p.tau_verify, "n_domains": p.n_domains,
+        out = {"fidelity": self.fidelity, "eps_m": p.verify.eps, "tau_verify_m": p.verify.tau_verify,
+               "n_domains": p.level1.n_domains,
                "search_time_limit_s": p.search.time_limit, "search_max_expansions": p.search.max_expansions,
                "search_confident_m": p.search.confident, "search_look_on": p.search.look_on,
                "search_release_targets": p.search.release_targets,
                "search_max_fragility": p.search.max_fragility, "search_noise_m": p.search.noise,
-               "level1_budget": p.level1_budget, "level1_time_budget_s": p.level1_time_budget,
-               "level1_focus_from": p.focus_from, "level1_focus_budget": p.level1_focus_budget,
-               "level1_confident_m": p.level1_confident, "level1_cut": p.level1_cut,
-               "level1_objects": p.level1_objects, "level1_serial": p.level1_serial,
-               "keep_plan": p.keep_plan, "on_course_m": p.on_course,
-               "symbolic_backend": p.backend, "oracle_max_plans": self.oracle_max_plans}
-        if p.symbolic_time_limit != PlanConfig.symbolic_time_limit:  # older results directories stay resumable
-            out["symbolic_time_limit_s"] = p.symbolic_time_limit
-        if p.loop != LoopConfig():  # (the loop that does not know k: the same)
-            out["loop"] = dataclasses.asdict(p.loop)
+               "level1_budget": p.level1.budget, "level1_time_budget_s": p.level1.time_budget,
+               "level1_focus_from": p.level1.focus_from, "level1_focus_budget": p.level1.focus_budget,
+               "level1_confident_m": p.level1.confident, "level1_cut": p.level1.cut,
+               "level1_objects": p.level1.objects, "level1_serial": p.level1.serial,
+               "keep_plan": p.loop.keep_plan, "on_course_m": p.loop.on_course,
+               "symbolic_backend": p.level1.backend, "oracle_max_plans": self.oracle_max_plans}
+        if p.level1.symbolic_time_limit != Level1Config.symbolic_time_limit:  # older directories stay resumable
+            out["symbolic_time_limit_s"] = p.level1.symbolic_time_limit
+        # the loop that does not know k: the same, by the fields other than keep_plan and on_course (above)
+        loop = {k: v for k, v in dataclasses.asdict(p.loop).items() if k not in ("keep_plan", "on_course")}
+        if loop != {k: v for k, v in dataclasses.asdict(LoopConfig()).items() if k not in ("keep_plan", "on_course")}:
+            out["loop"] = loop
         if self.faults.any:
             out["faults"] = {"noise_m": self.faults.noise_m, "push_m": self.faults.push_m}
         return out
 
     def plan_config(self, seed: int, feasibility: bool = True) -> PlanConfig:
-        return dataclasses.replace(self.planner, seed=seed, feasibility=feasibility)
+        p = self.planner.with_seed(seed)
+        return dataclasses.replace(p, kinematics=dataclasses.replace(p.kinematics, feasibility=feasibility))
 
 
 # --------------------------------------------------------------------------- one (problem, method)
@@ -316,7 +320,7 @@ class Evaluator:
             return
         cfg = self.config.plan_config(problem.seed)
         if models.symbolic is not None and models.domain is not None:
-            models.symbolic_planner(cfg.backend, cfg.symbolic_time_limit).task(problem.n)
+            models.symbolic_planner(cfg.level1.backend, cfg.level1.symbolic_time_limit).task(problem.n)
             models.symbolic.symbols(problem.X_init)
         if models.dynamics is not None:
             models.dynamics.predict_effect(problem.X_init, np.zeros((1, 4), dtype=np.int64))
@@ -363,7 +367,7 @@ class Evaluator:
         return row
 
     def _open_loop(self, problem: Problem, method: Method, models) -> dict:
-        from tamp.planning.bilevel import plan
+        from tamp.planning.methods import plan
 
         kinematics = self.checker(problem) if method.feasibility else None
         extra = {} if kinematics is None else {"kinematics": kinematics}

@@ -4,7 +4,8 @@ import json
 import pytest
 
 import learned
-from tamp.app.cli import BOTTLENECKS, main
+from tamp.app.cli import main
+from tamp.app.commands_learning import BOTTLENECKS
 
 
 def test_bottleneck_choices_match_the_model():
@@ -50,9 +51,11 @@ def test_domain_with_a_corrupt_model_is_a_clear_error(tiny_dataset, tmp_path, ca
 
 
 def test_train_defaults_match_the_train_settings():
-    """tamp/app/cli.py spells the fast training defaults out (no torch import for --help); they must agree."""
+    """tamp/app/commands_learning.py spells the fast training defaults out (no torch import for --help);
+    they must agree."""
     from learned import TrainConfig
-    from tamp.app.cli import TRAIN_PATIENCE, _train_config, build_parser
+    from tamp.app.cli import build_parser
+    from tamp.app.commands_learning import TRAIN_PATIENCE, _train_config
 
     for command in (["train", "--out", "m.pt"], ["ablate-activations"]):
         args = build_parser().parse_args([*command, "--data", "d"])

@@ -13,10 +13,11 @@ sys.path.insert(0, str(Path(__file__).parent))
 from planning_stubs import StubModel, two_block_domain, world_step
 
 from tamp.errors import UserError
-from tamp.planning.bilevel import PlanConfig, PlanResult, plan
 from tamp.planning.closed_loop import plan_closed_loop
-from tamp.planning.config import LoopConfig
+from tamp.planning.config import LoopConfig, PlanConfig
+from tamp.planning.methods import plan
 from tamp.planning.models import Models
+from tamp.planning.results import PlanResult
 from tamp.planning.structs import Infeasible
 
 X_INIT = np.array([[0.6, 0.0, 0.025, 1, 0], [0.7, 0.1, 0.025, 1, 0]])
@@ -156,7 +157,7 @@ def test_back_at_an_earlier_state_the_loop_leaves_out_the_action_it_took_from_th
         result.timings["total"] = 0.0
         return result
 
-    cfg = PlanConfig(keep_plan=False)
+    cfg = PlanConfig(loop=LoopConfig(keep_plan=False))
     out = plan_closed_loop("bilevel", models, X_INIT, A_ON_B, slipping_world(0), rounds=None, cfg=cfg,
                            planner=cycling_planner, kinematics=AcceptAll())
     assert out.executed[:2] == [away, back] and out.success and len(out.executed) == 3

@@ -22,7 +22,8 @@ def test_the_shipped_models_are_small_load_and_plan():
     import torch
 
     from tamp.app.problem import random_problem
-    from tamp.planning.bilevel import PlanConfig, plan
+    from tamp.planning.config import PlanConfig
+    from tamp.planning.methods import plan
 
     torch.set_num_threads(1)
     directory = pretrained_dir()
@@ -32,10 +33,10 @@ def test_the_shipped_models_are_small_load_and_plan():
     assert sum(f.stat().st_size for f in directory.rglob("*") if f.is_file()) < 5e6  # "a few MB at most"
     models = load_models(directory)
     problem = random_problem(2, 1, seed=0)
-    result = plan("bilevel", models, problem.X_init, problem.X_goal, PlanConfig(seed=0))
+    result = plan("bilevel", models, problem.X_init, problem.X_goal, PlanConfig().with_seed(0))
     assert result.solved, result.reasons
     assert result.predicted.shape == (len(result.plan) + 1, 2, 5)
-    assert result.predicted_error < PlanConfig().tau_verify
+    assert result.predicted_error < PlanConfig().verify.tau_verify
 
 
 @pytest.mark.sim

@@ -23,7 +23,7 @@ from planning_stubs import StubModel, two_block_domain
 from evaluation.problems import generate_problems, read_problems, write_problems
 from evaluation.run import OUTCOMES, ROW_KEYS, EvalConfig, evaluate, read_rows, row_cause, strip_timings
 from tamp.app.problem import Problem
-from tamp.planning.bilevel import PlanConfig
+from tamp.planning.config import Level1Config, PlanConfig
 from tamp.planning.models import Models
 from tamp.planning.search import SearchConfig
 from tamp.planning.verify import goal_error
@@ -243,7 +243,7 @@ def test_the_oracle_counts_success_iff_some_plan_reaches_the_goal(monkeypatch):
     with a cap of two plans, failure after two."""
     import evaluation.run as er
     from evaluation.run import Evaluator
-    from tamp.planning.bilevel import Candidate, PlanResult
+    from tamp.planning.results import Candidate, PlanResult
 
     problem = Problem(np.zeros((2, 5)), np.ones((2, 5)), k=1, seed=0, name="p")
     ranked = [Candidate(((0, 0, 1, 0),), 5, 0.5), Candidate(((0, 1, 1, 0),), 3, 0.3),
@@ -261,9 +261,9 @@ def test_the_oracle_counts_success_iff_some_plan_reaches_the_goal(monkeypatch):
         return {"refined": True, "refine_failure": None, "refine_time_s": [0.1], "executed_actions": 1,
                 "final_error_m": 0.0 if good else 0.3, "effect_error_m": [0.01]}
 
-    import tamp.planning.bilevel
+    import tamp.planning.methods
 
-    monkeypatch.setattr(tamp.planning.bilevel, "plan", fake_plan)
+    monkeypatch.setattr(tamp.planning.methods, "plan", fake_plan)
     monkeypatch.setattr(Evaluator, "_execute", fake_execute)
     monkeypatch.setattr(Evaluator, "warm_up", lambda self, models, problem: None)
     for cap, success, tried in ((20, True, 3), (2, False, 2)):
@@ -338,7 +338,8 @@ def test_fast_downward_plans_like_the_in_process_search(serial, problems_file, t
     """--symbolic-backend fd: recorded in meta.json and the rows, and the symbolic planners reach the
     same success on every problem as with the in-process search (both find shortest plans)."""
     (tmp_path / "models").mkdir()
-    config = EvalConfig(planner=PlanConfig(backend="fd", search=SearchConfig(max_expansions=300)), progress=False)
+    config = EvalConfig(planner=PlanConfig(level1=Level1Config(backend="fd"), search=SearchConfig(max_expansions=300)),
+                        progress=False)
     rows = read_rows(evaluate(tmp_path / "models", problems_file, tmp_path / "results", config=config,
                               methods=["deterministic", "probabilistic"], models=stub_models()))
     assert json.loads((tmp_path / "results" / "meta.json").read_text())["config"]["symbolic_backend"] == "fd"

@@ -57,7 +57,7 @@ def test_impossible_scenes_are_refused_naming_the_file_field_and_row(tmp_path, c
 
 @pytest.mark.sim
 def test_the_python_api_checks_its_scenes():
-    from tamp.planning.bilevel import plan
+    from tamp.planning.methods import plan
     from tamp.sim.refine import refine
 
     stub = StubModel()
@@ -164,7 +164,7 @@ class _Failing(StubModel):
 def test_a_pair_that_fails_mid_run_is_an_error_row_and_the_run_goes_on(tmp_path):
     from evaluation.report import write_report
     from evaluation.run import EvalConfig, evaluate, read_rows
-    from tamp.planning.bilevel import PlanConfig
+    from tamp.planning.config import PlanConfig
     from tamp.planning.search import SearchConfig
 
     three = np.array(INIT + [[0.6, -0.2, 0.025, 1, 0]], float)

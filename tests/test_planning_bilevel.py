@@ -14,8 +14,10 @@ sys.path.insert(0, str(Path(__file__).parent))
 from planning_stubs import StubModel, two_block_domain, world_step
 
 from tamp.errors import UserError
-from tamp.planning.bilevel import PlanConfig, level1_scene, plan
 from tamp.planning.closed_loop import plan_closed_loop
+from tamp.planning.config import KinematicsConfig, Level1Config, LoopConfig, PlanConfig, VerifyConfig
+from tamp.planning.level1 import level1_scene
+from tamp.planning.methods import plan
 from tamp.planning.models import Models
 from tamp.planning.search import SearchConfig, continuous_search
 from tamp.planning.verify import goal_error, verify
@@ -54,7 +56,8 @@ def test_a_verified_plan_is_cut_where_it_reaches_the_goal():
 
 
 def test_a_pick_that_the_next_action_repeats_is_dropped_when_the_shorter_plan_is_as_good(domain):
-    from tamp.planning.bilevel import PlanResult, _Verifier
+    from tamp.planning.level1 import Verifier
+    from tamp.planning.results import PlanResult
     from tamp.planning.verify import without_repicks
 
     assert without_repicks([(4, 0, 0, 1), (4, -1, 1, 0)]) == ((4, -1, 1, 0),)
@@ -63,12 +66,12 @@ def test_a_pick_that_the_next_action_repeats_is_dropped_when_the_shorter_plan_is
     # A first released beside B, then picked again and put on B: A on B in one action does the same
     twice = verify(StubModel(), X_INIT, A_ON_B, [(0, 0, 1, 1), (0, 0, 1, 0)])
     assert twice.verified and twice.error < 1e-9
-    verifier = _Verifier(models(domain), X_INIT, A_ON_B, PlanConfig(), PlanResult("bilevel", None), None, [])
+    verifier = Verifier(models(domain), X_INIT, A_ON_B, PlanConfig(), PlanResult("bilevel", None), None, [])
     assert verifier._shortened(twice).actions == ((0, 0, 1, 0),)
     # a repeated pick that matters stays: B shifted twice along y (15 cm); once ends 7.5 cm off
     goal = execute(X_INIT, [(1, 0, 1, 1), (1, 0, 1, 1)])
     two = verify(StubModel(), X_INIT, goal, [(1, 0, 1, 1), (1, 0, 1, 1)])
-    shifts = _Verifier(models(domain), X_INIT, goal, PlanConfig(), PlanResult("bilevel", None), None, [])
+    shifts = Verifier(models(domain), X_INIT, goal, PlanConfig(), PlanResult("bilevel", None), None, [])
     assert two.verified and shifts._shortened(two) is two
 
 
@@ -87,8 +90,13 @@ def test_verify_rolls_out_and_uses_the_per_object_max():
 PAPER = dict(alternatives=0, nonempty=False)  # Algorithm 1 exactly, without our two additions
 
 
+def with_level1(**fields) -> PlanConfig:
+    """The default configuration with these Level-1 settings."""
+    return PlanConfig(level1=Level1Config(**fields))
+
+
 def test_most_frequent_plan_fails_verification_and_the_next_verified_one_is_returned(domain):
-    result = plan("bilevel", models(domain), X_INIT, A_ON_B, PlanConfig(n_domains=100, seed=0, **PAPER))
+    result = plan("bilevel", models(domain), X_INIT, A_ON_B, with_level1(n_domains=100, seed=0, **PAPER))
     first, second = result.candidates[:2]
     # the setting: the most frequent symbolic plan is the bad one
     assert first.actions == ((0, 0, 1, 1),) and first.count > second.count
@@ -100,7 +108,7 @@ def test_most_frequent_plan_fails_verification_and_the_next_verified_one_is_retu
     assert {"symbols", "symbolic", "verify", "total"} <= set(result.timings)
     # the unverified baselines take the most frequent plan and fail when executed
     for method in ("probabilistic", "deterministic"):
-        base = plan(method, models(domain), X_INIT, A_ON_B, PlanConfig(n_domains=100, seed=0))
+        base = plan(method, models(domain), X_INIT, A_ON_B, with_level1(n_domains=100, seed=0))
         assert base.plan == [(0, 0, 1, 1)] and base.candidates[0].verified is False
         assert goal_error(execute(X_INIT, base.plan), A_ON_B) > 0.05
 
@@ -108,7 +116,7 @@ def test_most_frequent_plan_fails_verification_and_the_next_verified_one_is_retu
 def test_an_alternative_through_the_same_symbols_is_verified_before_the_next_ranked_plan(domain):
     # the most frequent plan (release at +1) fails; (0, 0, 1, 0) reaches the same symbolic states
     # (it is an operator of the same pre-state with the same 'on' effect), so it is tried right after
-    result = plan("bilevel", models(domain), X_INIT, A_ON_B, PlanConfig(n_domains=100, seed=0))
+    result = plan("bilevel", models(domain), X_INIT, A_ON_B, with_level1(n_domains=100, seed=0))
     first, alternative = result.candidates[:2]
     assert first.actions == ((0, 0, 1, 1),) and first.verified is False and first.alternative_of is None
     assert alternative.actions == ((0, 0, 1, 0),) and alternative.alternative_of == 0 and alternative.verified
@@ -145,22 +153,22 @@ def test_a_verified_plan_predicted_to_miss_the_goal_waits_for_the_continuous_sea
     # B first and ends 1.5 cm off
     goal = A_ON_B.copy()
     goal[:, 1] += 0.06
-    ours = plan("bilevel", models(domain), X_INIT, goal, PlanConfig(n_domains=100, seed=0))
+    ours = plan("bilevel", models(domain), X_INIT, goal, with_level1(n_domains=100, seed=0))
     assert any(c.verified and 0.05 <= c.error < 0.07 for c in ours.candidates)
     assert ours.level == 2 and len(ours.plan) == 2 and ours.predicted_error < 0.02
     assert goal_error(execute(X_INIT, ours.plan), goal) < 0.05
     assert any("kept while level 2 searches" in r for r in ours.reasons)
     # the paper's rule takes the verified plan, which misses the goal; so does its Algorithm 1
-    paper = plan("bilevel", models(domain), X_INIT, goal, PlanConfig(n_domains=100, seed=0, level1_confident=None))
+    paper = plan("bilevel", models(domain), X_INIT, goal, with_level1(n_domains=100, seed=0, confident=None))
     assert paper.level == 1 and paper.search is None and goal_error(execute(X_INIT, paper.plan), goal) > 0.05
-    alg1 = plan("bilevel_alg1", models(domain), X_INIT, goal, PlanConfig(n_domains=100, seed=0))
+    alg1 = plan("bilevel_alg1", models(domain), X_INIT, goal, with_level1(n_domains=100, seed=0))
     assert alg1.level == 1 and alg1.search is None and goal_error(execute(X_INIT, alg1.plan), goal) > 0.05
     # when the continuous search finds nothing, the kept plan is returned
-    shallow = PlanConfig(n_domains=100, seed=0, search=SearchConfig(max_depth=1))
+    shallow = PlanConfig(level1=Level1Config(n_domains=100, seed=0), search=SearchConfig(max_depth=1))
     kept = plan("bilevel", models(domain), X_INIT, goal, shallow)
     assert kept.level == 1 and kept.plan == paper.plan and kept.search is not None and not kept.search.solved
-    with pytest.raises(UserError, match="level1_confident"):
-        PlanConfig(level1_confident=0.0)
+    with pytest.raises(UserError, match="Level1Config.confident"):
+        with_level1(confident=0.0)
 
 
 class _FragileStub(StubModel):
@@ -177,15 +185,15 @@ class _FragileStub(StubModel):
 def test_a_fragile_verified_plan_waits_for_the_continuous_search(domain):
     stub = _FragileStub()
     fragile = Models(dynamics=stub, symbolic=stub, domain=domain)
-    ours = plan("bilevel", fragile, X_INIT, A_ON_B, PlanConfig(n_domains=100, seed=0))
+    ours = plan("bilevel", fragile, X_INIT, A_ON_B, with_level1(n_domains=100, seed=0))
     assert any("perturbed rollouts" in r and "kept while level 2 searches" in r for r in ours.reasons)
     # the continuous search's goal states are as fragile: it returns its best after looking on
     assert ours.level == 2 and ours.search.fragility_checks >= 1 and "perturbed rollouts off it" in ours.search.reason
-    blind = plan("bilevel", fragile, X_INIT, A_ON_B, PlanConfig(n_domains=100, seed=0,
+    blind = plan("bilevel", fragile, X_INIT, A_ON_B, PlanConfig(level1=Level1Config(n_domains=100, seed=0),
                                                                  search=SearchConfig(max_fragility=None)))
     assert blind.level == 1 and blind.search is None
     # the same plan with the exact stub: taken at level 1
-    assert plan("bilevel", models(domain), X_INIT, A_ON_B, PlanConfig(n_domains=100, seed=0)).level == 1
+    assert plan("bilevel", models(domain), X_INIT, A_ON_B, with_level1(n_domains=100, seed=0)).level == 1
 
 
 def test_same_symbols_but_goal_elsewhere_needs_a_nonempty_plan():
@@ -196,10 +204,10 @@ def test_same_symbols_but_goal_elsewhere_needs_a_nonempty_plan():
     X = np.array([[0.6, 0.0, 0.025, 0, 1], [0.75, -0.2, 0.025, 1, 0]])
     goal = X.copy()
     goal[0, 1] = 0.15
-    ours = plan("bilevel", models(domain), X, goal, PlanConfig(n_domains=20))
+    ours = plan("bilevel", models(domain), X, goal, with_level1(n_domains=20))
     assert ours.level == 1 and ours.plan == [(0, -1, 0, 1)] and ours.search is None
     assert goal_error(execute(X, ours.plan), goal) < 0.05
-    paper = plan("bilevel", models(domain), X, goal, PlanConfig(n_domains=20, **PAPER))
+    paper = plan("bilevel", models(domain), X, goal, with_level1(n_domains=20, **PAPER))
     assert paper.candidates[0].actions == () and paper.candidates[0].verified is False
     assert paper.level == 2 and paper.plan == [(0, -1, 0, 1)]
 
@@ -210,7 +218,7 @@ def test_bilevel_alg1_never_returns_an_alternative_or_a_forced_nonempty_plan(dom
 
     # where `bilevel` takes an alternative through the same symbols, Algorithm 1 verifies the ranked
     # plans alone and takes the second ranked plan
-    alg1 = plan("bilevel_alg1", models(domain), X_INIT, A_ON_B, PlanConfig(n_domains=100, seed=0))
+    alg1 = plan("bilevel_alg1", models(domain), X_INIT, A_ON_B, with_level1(n_domains=100, seed=0))
     assert alg1.method == "bilevel_alg1" and all(c.alternative_of is None for c in alg1.candidates)
     assert alg1.level == 1 and alg1.plan == [(0, 0, 1, 0)] and alg1.candidates[1].count < alg1.candidates[0].count
     # where `bilevel` forces a non-empty symbolic plan, Algorithm 1 tries the empty one and falls through
@@ -218,21 +226,22 @@ def test_bilevel_alg1_never_returns_an_alternative_or_a_forced_nonempty_plan(dom
     X = np.array([[0.6, 0.0, 0.025, 0, 1], [0.75, -0.2, 0.025, 1, 0]])
     goal = X.copy()
     goal[0, 1] = 0.15
-    alg1_shift = plan("bilevel_alg1", models(shift), X, goal, PlanConfig(n_domains=20))
+    alg1_shift = plan("bilevel_alg1", models(shift), X, goal, with_level1(n_domains=20))
     assert [c.actions for c in alg1_shift.candidates] == [()] and alg1_shift.level == 2
     # its Level 2 is the paper's search: the paper's pruning rule, the first goal state returned
-    import tamp.planning.bilevel as bilevel
+    import tamp.planning.level2 as level2
     searched = []
-    monkeypatch.setattr(bilevel, "continuous_search", lambda model, x, g, config, *rest:
+    monkeypatch.setattr(level2, "continuous_search", lambda model, x, g, config, *rest:
                         searched.append(config) or continuous_search(model, x, g, config, *rest))
-    plan("bilevel_alg1", models(shift), X, goal, PlanConfig(n_domains=20))
+    plan("bilevel_alg1", models(shift), X, goal, with_level1(n_domains=20))
     assert searched and all(not c.release_targets and c.look_on == 0 for c in searched)
     assert alg1_shift.level == 2  # Level 1's plan was not cut or kept: alg1's rules are the paper's
     monkeypatch.undo()
     # whatever the configuration says, it is `bilevel` with both extensions off
-    for m, x, g, cfg in ((models(domain), X_INIT, A_ON_B, PlanConfig(n_domains=100, seed=0)),
-                         (models(shift), X, goal, PlanConfig(n_domains=20))):
-        assert summary(plan("bilevel_alg1", m, x, g, cfg)) == summary(plan("bilevel", m, x, g, replace(cfg, **PAPER)))
+    for m, x, g, cfg in ((models(domain), X_INIT, A_ON_B, with_level1(n_domains=100, seed=0)),
+                         (models(shift), X, goal, with_level1(n_domains=20))):
+        paper = replace(cfg, level1=replace(cfg.level1, **PAPER))
+        assert summary(plan("bilevel_alg1", m, x, g, cfg)) == summary(plan("bilevel", m, x, g, paper))
 
 
 def test_symbolic_failure_falls_through_to_continuous_search(domain):
@@ -241,7 +250,7 @@ def test_symbolic_failure_falls_through_to_continuous_search(domain):
     X = np.array([[0.6, 0.0, 0.025, 0, 1], [0.75, -0.2, 0.025, 1, 0]])
     goal = X.copy()
     goal[0, 1] = 0.15
-    result = plan("bilevel", models(domain), X, goal, PlanConfig(n_domains=20))
+    result = plan("bilevel", models(domain), X, goal, with_level1(n_domains=20))
     assert result.candidates and all(c.verified is False for c in result.candidates)
     assert result.level == 2 and result.search.solved
     assert any(r.startswith("level 1: none of the") for r in result.reasons)
@@ -253,7 +262,7 @@ def test_symbolic_failure_falls_through_to_continuous_search(domain):
 def test_unsolvable_problem_ends_within_limits_with_reasons_from_both_levels(domain):
     goal = X_INIT.copy()
     goal[0, :2] = (1.0, 0.5)  # on the table within reach, but no pick-place of the stub world puts it there
-    cfg = PlanConfig(n_domains=20, search=SearchConfig(max_expansions=300, time_limit=10.0))
+    cfg = PlanConfig(level1=Level1Config(n_domains=20), search=SearchConfig(max_expansions=300, time_limit=10.0))
     t0 = time.perf_counter()
     result = plan("bilevel", models(domain), X_INIT, goal, cfg)
     assert time.perf_counter() - t0 < 10.0
@@ -265,7 +274,7 @@ def test_unsolvable_problem_ends_within_limits_with_reasons_from_both_levels(dom
     X4 = np.array([[0.6, 0.0, 0.025, 1, 0], [0.7, 0.1, 0.025, 1, 0], [0.8, -0.2, 0.025, 1, 0], [0.5, 0.3, 0.025, 0, 1]])
     goal4 = X4.copy()
     goal4[0, :2] = (1.0, 0.5)
-    cfg = PlanConfig(n_domains=20, search=SearchConfig(max_expansions=10**9, time_limit=0.3))
+    cfg = PlanConfig(level1=Level1Config(n_domains=20), search=SearchConfig(max_expansions=10**9, time_limit=0.3))
     t0 = time.perf_counter()
     result = plan("cfs", models(domain), X4, goal4, cfg)
     assert time.perf_counter() - t0 < 2.0 and result.search.status == "time_limit"
@@ -317,7 +326,7 @@ def test_the_closed_loop_keeps_a_plan_on_course_and_replans_one_off_course(domai
     assert kept.rounds[0].kept_by is None  # planned
     calls.clear()
     fresh = plan_closed_loop("cfs", models(domain), X_INIT, goal, world(), rounds=1, planner=planner,
-                             cfg=PlanConfig(keep_plan=False))
+                             cfg=PlanConfig(loop=LoopConfig(keep_plan=False)))
     assert fresh.success and calls == ["cfs", "cfs"]  # the paper's replanning: a planning call per round
     # the first move lands 4 cm off: the rest of the plan no longer reaches the goal, so it plans again
     calls.clear()
@@ -332,8 +341,8 @@ def test_the_closed_loop_keeps_a_plan_on_course_and_replans_one_off_course(domai
 
 
 def test_a_kept_level1_plan_follows_its_symbolic_path(domain):
-    from tamp.planning.bilevel import Candidate, PlanResult
     from tamp.planning.closed_loop import keep_rest
+    from tamp.planning.results import Candidate, PlanResult
     from tamp.planning.structs import PickPlace
 
     goal = execute(X_INIT, [(1, 0, 1, 1), (0, 0, 1, 0)])
@@ -350,10 +359,10 @@ def test_a_kept_level1_plan_follows_its_symbolic_path(domain):
 
 
 def test_a_plan_on_course_is_kept_whatever_a_swinging_rollout_of_its_rest_says(domain, capsys):
-    """The world did what the plan predicted (within PlanConfig.on_course): the rest is kept with the plan's
+    """The world did what the plan predicted (within LoopConfig.on_course): the rest is kept with the plan's
     own prediction, although the model, given the observed state, predicts the rest far off."""
-    from tamp.planning.bilevel import PlanResult
     from tamp.planning.closed_loop import keep_rest, off_course
+    from tamp.planning.results import PlanResult
     from tamp.planning.structs import PickPlace
     from tamp.planning.verify import goal_errors
 
@@ -383,7 +392,7 @@ def test_a_plan_on_course_is_kept_whatever_a_swinging_rollout_of_its_rest_says(d
     assert np.array_equal(kept.predicted[0], observed(0.005)) and np.array_equal(kept.predicted[1], predicted[2])
     assert kept.predicted_error == pytest.approx(goal_errors(predicted[-1], goal).max())
     # the rule before: the rollout from the observed state decides, and it ends 20 cm off
-    blind = keep_rest(swinging, observed(0.005), goal, last, PlanConfig(on_course=None))
+    blind = keep_rest(swinging, observed(0.005), goal, last, PlanConfig(loop=LoopConfig(on_course=None)))
     assert not blind.solved and blind.reasons[0].startswith("keep: the rest of the last plan is predicted 2")
     # 2.5 cm off the plan's prediction is off course: the rollout decides again
     off = keep_rest(swinging, observed(0.025), goal, last, PlanConfig())
@@ -399,8 +408,8 @@ def test_a_plan_on_course_is_kept_whatever_a_swinging_rollout_of_its_rest_says(d
     assert "kept the rest of the last plan: on course" in capsys.readouterr().out
     # a last plan without a prediction is never on course
     assert off_course(observed(0.0), PlanResult("cfs", last.plan, level=2)) == float("inf")
-    with pytest.raises(UserError, match="on_course"):
-        PlanConfig(on_course=0.0)
+    with pytest.raises(UserError, match="LoopConfig.on_course"):
+        PlanConfig(loop=LoopConfig(on_course=0.0))
 
 
 def test_unknown_method_is_a_clear_error(domain):
@@ -480,7 +489,8 @@ class StubKinematics:
 
 
 # both ranked plans verify (9 cm, 0 cm) and a verified plan is taken however close it is predicted
-LOOSE = PlanConfig(n_domains=100, seed=0, tau_verify=0.1, level1_confident=None, **PAPER)
+LOOSE = PlanConfig(level1=Level1Config(n_domains=100, seed=0, confident=None, **PAPER),
+                   verify=VerifyConfig(tau_verify=0.1))
 
 
 def test_a_refinement_failure_of_the_first_level1_candidate_returns_the_second(domain):
@@ -496,7 +506,8 @@ def test_a_refinement_failure_of_the_first_level1_candidate_returns_the_second(d
     assert [r["failed_action"] for r in result.refinements] == [0, None]
     assert result.to_dict()["rejected"] == {"level 1": {"refine_motion": 1}, "level 2": {}}
     # the switch: feasibility off, the kinematics are not consulted
-    off = plan("bilevel", models(domain), X_INIT, A_ON_B, replace(LOOSE, feasibility=False), kinematics=kin)
+    unchecked = replace(LOOSE, kinematics=KinematicsConfig(feasibility=False))
+    off = plan("bilevel", models(domain), X_INIT, A_ON_B, unchecked, kinematics=kin)
     assert off.plan == [(0, 0, 1, 1)] and off.rejected is None and len(kin.refined) == 2
 
 
@@ -513,7 +524,7 @@ def test_refinement_failures_send_the_planner_to_level2_with_the_failing_pair_pr
     # every plan starting with the direct action fails refinement: Level 1 has nothing left, Level 2
     # must find a plan that starts otherwise
     kin = StubKinematics(unrefinable={(0, 0, 1, 0), (0, 0, 1, 1)})
-    result = plan("bilevel", models(domain), X_INIT, A_ON_B, replace(PlanConfig(seed=0), max_refinements=6),
+    result = plan("bilevel", models(domain), X_INIT, A_ON_B, PlanConfig(kinematics=KinematicsConfig(max_refinements=6)),
                   kinematics=kin)
     assert result.solved and result.level == 2 and result.plan[0] not in kin.unrefinable
     assert result.refinements[0]["level"] == 1 and result.refinements[0]["plan"] == [[0, 0, 1, 0]]
@@ -528,8 +539,8 @@ def test_from_focus_from_blocks_on_level1_gives_up_at_its_own_budget(domain):
     stacked = far.copy()
     stacked[0, :3] = far[1, :3] + [0, 0, 0.05]
     X5, G5 = np.vstack([X_INIT, far]), np.vstack([A_ON_B, stacked])  # two blocks to stack: two actions
-    cfg = PlanConfig(n_domains=20, focus_from=5, level1_focus_budget=1, level1_serial=False)
-    assert cfg.level1_budget_for(4) == cfg.level1_budget and cfg.level1_budget_for(5) == 1
+    cfg = with_level1(n_domains=20, focus_from=5, focus_budget=1, serial=False)
+    assert cfg.level1.budget_for(4) == cfg.level1.budget and cfg.level1.budget_for(5) == 1
     five = plan("bilevel", models(domain), X5, G5, cfg)
     assert five.symbolic_stats["outcomes"] == {"timeout": 20} and not five.candidates
     assert five.level == 2 and goal_error(execute(X5, five.plan), G5) < 0.05
@@ -538,9 +549,9 @@ def test_from_focus_from_blocks_on_level1_gives_up_at_its_own_budget(domain):
     alg1 = plan("bilevel_alg1", models(domain), X5, G5, cfg)
     assert alg1.symbolic_stats["outcomes"].get("timeout", 0) == 0 and alg1.level == 1
     default = PlanConfig()
-    assert default.level1_budget_for(6) == default.level1_focus_budget < default.level1_budget_for(4)
-    with pytest.raises(UserError, match="level1_focus_budget"):
-        PlanConfig(level1_focus_budget=0)
+    assert default.level1.budget_for(6) == default.level1.focus_budget < default.level1.budget_for(4)
+    with pytest.raises(UserError, match="Level1Config.focus_budget"):
+        with_level1(focus_budget=0)
 
 
 def test_from_focus_from_blocks_on_level1_plans_in_the_scene_of_the_objects_the_goal_involves(domain):
@@ -550,19 +561,19 @@ def test_from_focus_from_blocks_on_level1_plans_in_the_scene_of_the_objects_the_
     stacked = far.copy()
     stacked[0, :3] = far[1, :3] + [0, 0, 0.05]
     X5, G5 = np.vstack([X_INIT, far]), np.vstack([X_INIT, stacked])  # block 2 onto block 3, the rest stay
-    cfg = PlanConfig(n_domains=20, focus_from=5)
+    cfg = with_level1(n_domains=20, focus_from=5)
     assert level1_scene(X5, G5, cfg) == (2, 3) and level1_scene(X5[:4], G5[:4], cfg) is None
     sub = plan("bilevel", models(domain), X5, G5, cfg)
     assert sub.level == 1 and sub.symbolic_stats["objects"] == [2, 3]
     assert [tuple(a)[::2] for a in sub.plan] == [(2, 3)] and goal_error(execute(X5, sub.plan), G5) < 0.05
     assert all(c.objects == (2, 3) for c in sub.candidates)
     assert sub.plan_scene == (2, 3) and len(sub.plan_states) == 2  # the per-step view reads the sub-scene
-    whole = plan("bilevel", models(domain), X5, G5, replace(cfg, level1_objects=None))
+    whole = plan("bilevel", models(domain), X5, G5, replace(cfg, level1=replace(cfg.level1, objects=None)))
     assert whole.level == 1 and whole.symbolic_stats["objects"] is None and whole.plan_scene is None
     assert whole.plan_states is not None and whole.plan_states != sub.plan_states
     both = np.vstack([A_ON_B, stacked])  # two stacks to build: four objects involved
     assert level1_scene(X5, both, cfg) == (0, 1, 2, 3)
-    over = plan("bilevel", models(domain), X5, both, replace(cfg, level1_objects=3, level1_serial=False))
+    over = plan("bilevel", models(domain), X5, both, replace(cfg, level1=replace(cfg.level1, objects=3, serial=False)))
     assert over.level == 2 and not over.candidates and "involves 4 objects" in over.reasons[0]
     assert goal_error(execute(X5, over.plan), both) < 0.05
 
@@ -575,13 +586,13 @@ def test_level1_plans_one_block_at_a_time_when_the_whole_goal_gives_no_plan(doma
     stacked = far.copy()
     stacked[0, :3] = far[1, :3] + [0, 0, 0.05]
     X5, G5 = np.vstack([X_INIT, far]), np.vstack([A_ON_B, stacked])  # two stacks: four objects involved
-    cfg = PlanConfig(n_domains=20, focus_from=5, level1_objects=3)
+    cfg = with_level1(n_domains=20, focus_from=5, objects=3)
     serial = plan("bilevel", models(domain), X5, G5, cfg)
     assert serial.level == 1 and serial.symbolic_stats["serial"] == {"placed": [0, 2], "left": [], "error_m": 0.0}
     assert [tuple(a)[::2] for a in serial.plan] == [(0, 1), (2, 3)] and goal_error(execute(X5, serial.plan), G5) < 0.05
     assert serial.candidates[-1].verified and serial.candidates[-1].stages == (0, 2) and serial.plan_states is None
     assert serial.timings["symbolic"] > 0 and serial.timings["verify"] > 0  # both stages' Level-1 time
-    assert plan("bilevel", models(domain), X5, G5, replace(cfg, level1_serial=False)).level == 2
+    assert plan("bilevel", models(domain), X5, G5, replace(cfg, level1=replace(cfg.level1, serial=False))).level == 2
     bad = G5.copy()
     bad[2, :3] = [0.75, -0.25, 0.025]  # block 2 elsewhere on the table: no learned operator moves it there
     stuck = plan("bilevel", models(domain), X5, bad, cfg)
@@ -589,8 +600,8 @@ def test_level1_plans_one_block_at_a_time_when_the_whole_goal_gives_no_plan(doma
     assert any("one block at a time: no plan places any of blocks [2]" in r for r in stuck.reasons)
     alg1 = plan("bilevel_alg1", models(domain), X5, G5, cfg)
     assert alg1.level == 1 and alg1.symbolic_stats["objects"] is None
-    with pytest.raises(UserError, match="level1_objects"):
-        PlanConfig(level1_objects=1)
+    with pytest.raises(UserError, match="Level1Config.objects"):
+        with_level1(objects=1)
 
 
 def test_a_failed_keep_is_counted_in_the_round_that_plans_again(domain):
@@ -620,8 +631,8 @@ def test_on_course_flags():
 
     parser = argparse.ArgumentParser()
     add_planner_arguments(parser)
-    assert planner_config(parser.parse_args([])).on_course == PlanConfig().on_course == 0.015
-    assert planner_config(parser.parse_args(["--on-course", "0.02"])).on_course == 0.02
-    assert planner_config(parser.parse_args(["--no-on-course"])).on_course is None
+    assert planner_config(parser.parse_args([])).loop.on_course == PlanConfig().loop.on_course == 0.015
+    assert planner_config(parser.parse_args(["--on-course", "0.02"])).loop.on_course == 0.02
+    assert planner_config(parser.parse_args(["--no-on-course"])).loop.on_course is None
     with pytest.raises(SystemExit):
         parser.parse_args(["--on-course", "0"])

@@ -194,8 +194,8 @@ def test_tamp_refinability_studies_only_the_methods_asked_for(tmp_path, monkeypa
 def test_closed_loop_steps_name_their_round_and_how_it_got_its_plan(models):
     from tamp.app.runner import ClosedLoopRun
     from tamp.app.steps import loop_steps
-    from tamp.planning.bilevel import PlanResult
     from tamp.planning.closed_loop import ClosedLoopResult
+    from tamp.planning.results import PlanResult
     from tamp.planning.structs import PickPlace
 
     a, b, c = PickPlace(0, 0, 1, 1), PickPlace(1, 0, 0, 0), PickPlace(0, 1, 1, 0)

@@ -175,7 +175,8 @@ def _write(problems_file: str) -> None:
     import torch
 
     from tamp.app.problem import read_problem_set
-    from tamp.planning.bilevel import PlanConfig, _symbolic_problem
+    from tamp.planning.config import PlanConfig
+    from tamp.planning.level1 import symbolic_problem
     from tamp.planning.models import load_models, pretrained_dir
 
     torch.set_num_threads(1)
@@ -184,14 +185,14 @@ def _write(problems_file: str) -> None:
     planner = SymbolicPlanner(models.domain)
     entries = []
     for p in read_problem_set(problems_file):
-        sp = _symbolic_problem(models, p.X_init, p.X_goal, cfg)
-        out = planner.plan_probabilistic(sp, cfg.n_domains, p.seed, budget=cfg.level1_budget)
+        sp = symbolic_problem(models, p.X_init, p.X_goal, cfg)
+        out = planner.plan_probabilistic(sp, cfg.level1.n_domains, p.seed, budget=cfg.level1.budget)
         entries.append({"name": p.name, "n": sp.n, "seed": p.seed, "nonempty": sp.nonempty,
                         "init": str(pack_state(sp.init_unary, sp.init_rel)),
                         "goal": str(pack_state(sp.goal_unary, sp.goal_rel)),
                         "ranked": _ranked(out), "statuses": out.statuses})
     GOLDEN.write_text(json.dumps({"source": f"{Path(problems_file).name} with the bundled models",
-                                  "n_domains": cfg.n_domains, "budget": cfg.level1_budget,
+                                  "n_domains": cfg.level1.n_domains, "budget": cfg.level1.budget,
                                   "problems": entries}, indent=0) + "\n")
     print(f"wrote {len(entries)} problems to {GOLDEN}")
 

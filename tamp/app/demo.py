@@ -30,9 +30,11 @@ from tamp.app.steps import (
     write_steps,
 )
 from tamp.errors import UserError
-from tamp.planning.bilevel import PlanConfig, PlanResult, plan
 from tamp.planning.causes import stop_record
 from tamp.planning.closed_loop import ClosedLoopResult, loop_outcome
+from tamp.planning.config import PlanConfig
+from tamp.planning.methods import plan
+from tamp.planning.results import PlanResult
 from tamp.planning.steps import dynamics_errors
 from tamp.planning.structs import TYPE_NAMES, Outcome, PickPlace
 from tamp.planning.verify import goal_error, goal_errors, rollout
@@ -103,17 +105,17 @@ def run_demo(cfg: DemoConfig = DemoConfig()) -> DemoResult:
     models = load_models(models_dir)
     names = load_bit_names(models_dir)
     models.require_objects(cfg.objects, f"--objects {cfg.objects}: the scene")
-    plan_cfg = PlanConfig(seed=cfg.seed)
+    plan_cfg = PlanConfig().with_seed(cfg.seed)
     kinematics = kinematics_for("bilevel", plan_cfg)
 
     problem = random_problem(cfg.objects, cfg.actions, cfg.seed)
     _print_problem(problem, models_dir)
-    print(f"\nplanning (bilevel, {plan_cfg.n_domains} sampled domains):", flush=True)
+    print(f"\nplanning (bilevel, {plan_cfg.level1.n_domains} sampled domains):", flush=True)
     if kinematics is not None:
         kinematics.reset(problem.X_init)
     result = plan("bilevel", models, problem.X_init, problem.X_goal, plan_cfg, kinematics=kinematics)
-    print_result(result, plan_cfg.tau_verify, indent="  ")
-    out = DemoResult(problem, result, None, plan_cfg.eps)
+    print_result(result, plan_cfg.verify.tau_verify, indent="  ")
+    out = DemoResult(problem, result, None, plan_cfg.verify.eps)
 
     timeline = Timeline() if cfg.replay is not None else None
     if cfg.replan:
@@ -319,7 +321,7 @@ def _closed_loop(problem: Problem, models, plan_cfg: PlanConfig, kinematics: Fea
                 "searched over every action from the observed scene" if result.widened else \
                 "replanned from the observed scene"
             print(f"round {r}: {how}", flush=True)
-            print_result(result, plan_cfg.tau_verify, indent="  ")
+            print_result(result, plan_cfg.verify.tau_verify, indent="  ")
 
     def show_step(action: PickPlace, X: np.ndarray, info, seconds: float) -> None:
         executed.append(action)

@@ -23,9 +23,11 @@ import numpy as np
 
 from tamp.app.faults import Faults, push
 from tamp.errors import UserError
-from tamp.planning.bilevel import KINEMATIC_METHODS, PlanConfig, PlanResult
 from tamp.planning.closed_loop import ClosedLoopResult, plan_closed_loop
+from tamp.planning.config import PlanConfig
+from tamp.planning.methods import KINEMATIC_METHODS
 from tamp.planning.models import Models
+from tamp.planning.results import PlanResult
 from tamp.planning.structs import PickPlace
 from tamp.planning.verify import goal_error
 from tamp.sim import World, WorldConfig
@@ -43,8 +45,8 @@ FIDELITIES = ("fast", "full")
 
 def kinematics_for(method: str, config: PlanConfig) -> FeasibilityChecker | None:
     """The kinematic feasibility checker a planning call uses: one for the methods that put
-    kinematics in the planning loop (`KINEMATIC_METHODS`) when `config.feasibility`, else None."""
-    return FeasibilityChecker() if config.feasibility and method in KINEMATIC_METHODS else None
+    kinematics in the planning loop (`KINEMATIC_METHODS`) when `config.kinematics.feasibility`, else None."""
+    return FeasibilityChecker() if config.kinematics.feasibility and method in KINEMATIC_METHODS else None
 
 
 def executing_world(fidelity: str = "fast") -> World:

@@ -33,8 +33,8 @@ from tamp.records import atomic_write_text
 
 if TYPE_CHECKING:
     from tamp.app.runner import ClosedLoopRun, Execution
-    from tamp.planning.bilevel import PlanResult
     from tamp.planning.models import Models
+    from tamp.planning.results import PlanResult
     from tamp.sim.structs import StepInfo
 
 

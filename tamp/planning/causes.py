@@ -30,7 +30,7 @@ from enum import StrEnum
 from typing import TYPE_CHECKING, Sequence
 
 if TYPE_CHECKING:
-    from tamp.planning.bilevel import PlanResult
+    from tamp.planning.results import PlanResult
 
 MISS = 0.02  # metres: a step whose worst block landed this far from the prediction is a model miss
 AIMED = 0.02  # metres: a plan predicted this far from the goal was aimed near the 5 cm tolerance

@@ -17,12 +17,12 @@ Two loops share one round (plan, or keep the rest of the last plan while it is o
   the 9 n^2 actions, so blocks can be moved out of the way, unstacked, or moved although at their
   goal); when that finds none either, it takes the first action toward the closest state the widened
   search reached, if that is `LoopConfig.progress` closer (the world may do better than the model
-  predicts, and the next round plans from there). Back at a state it observed before (`revisits`), it leaves out the
-  actions it took from there, which would start the same cycle again in a deterministic world.
+  predicts, and the next round plans from there). Back at a state it observed before (`revisits`), it
+  leaves out the actions it took from there, which would start the same cycle again in a deterministic world.
 
-Keeping a plan (`PlanConfig.keep_plan`, our extension, both loops): a round keeps the rest of the last
+Keeping a plan (`LoopConfig.keep_plan`, our extension, both loops): a round keeps the rest of the last
 plan when it refines and still ends within `search.confident` of the goal: as the plan predicted, if
-the observed state is where the plan predicted it (every block within `PlanConfig.on_course`), else
+the observed state is where the plan predicted it (every block within `LoopConfig.on_course`), else
 rolled out from the observed state; only otherwise does it plan again, so a plan on course is not
 traded for another one. The loop that does not know k keeps a plan on course while its own prediction
 still ends within eps (the plan was taken by that prediction, and the world is doing what it said).
@@ -35,18 +35,11 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from tamp.planning.bilevel import (
-    KEEPING_METHODS,
-    Candidate,
-    PlanConfig,
-    PlanResult,
-    _Feasibility,
-    _take,
-    _timed,
-    plan,
-    plan_cfs,
-)
+from tamp.planning.config import PlanConfig
+from tamp.planning.feasibility import Feasibility
+from tamp.planning.methods import KEEPING_METHODS, plan, plan_cfs
 from tamp.planning.models import Models
+from tamp.planning.results import Candidate, PlanResult, take_plan, timed
 from tamp.planning.search import state_key
 from tamp.planning.structs import KinematicFeasibility, Outcome, PickPlace
 from tamp.planning.verify import Verification, at_goal, goal_error, goal_errors, verify
@@ -100,12 +93,12 @@ def plan_closed_loop(method: str, models: Models, X_init, X_goal,
     (`FeasibilityChecker.observe`), since only the simulator knows the blocks' orientations.
     """
     X_goal = np.asarray(X_goal, dtype=float)
-    out = ClosedLoopResult([], [], [np.asarray(X_init, dtype=float)], X_goal, cfg.eps)
+    out = ClosedLoopResult([], [], [np.asarray(X_init, dtype=float)], X_goal, cfg.verify.eps)
     until_goal = rounds is None
     r, spent = 0, 0  # spent: continuous-search expansions of every round so far
     while True:
         X = out.states[-1]
-        if at_goal(X, X_goal, cfg.eps):
+        if at_goal(X, X_goal, cfg.verify.eps):
             out.reason, out.stop = "the observed state is within eps of the goal", "goal"
             break
         if until_goal and len(out.executed) >= cfg.loop.max_actions:
@@ -180,9 +173,9 @@ def _round(method: str, models: Models, X: np.ndarray, X_goal: np.ndarray, out: 
     extra: dict = {} if kinematics is None else {"kinematics": kinematics}
     if avoid:
         extra["avoid"] = avoid
-    keep = cfg.keep_plan and method in KEEPING_METHODS and bool(out.rounds)
-    kept = keep_rest(models, X, X_goal, out.rounds[-1], cfg, kinematics, avoid, cfg.eps if until_goal else None) \
-        if keep else None
+    keep = cfg.loop.keep_plan and method in KEEPING_METHODS and bool(out.rounds)
+    kept = keep_rest(models, X, X_goal, out.rounds[-1], cfg, kinematics, avoid,
+                     cfg.verify.eps if until_goal else None) if keep else None
     if kept is not None and kept.solved:
         return kept
     result = (planner or plan)(method, models, X, X_goal, cfg, **extra)
@@ -218,7 +211,7 @@ def widened_search(method: str, models: Models, X: np.ndarray, X_goal: np.ndarra
                           f"{goal_error(closest[-1], X_goal) * 100:.1f} cm from the goal, from "
                           f"{goal_error(X, X_goal) * 100:.1f} cm)")
     result.toward = True
-    return _take(result, search.closest_plan, 2, closest, X_goal)
+    return take_plan(result, search.closest_plan, 2, closest, X_goal)
 
 
 def _progress(X: np.ndarray, X_then: np.ndarray, X_goal: np.ndarray, margin: float) -> bool:
@@ -256,10 +249,11 @@ def keep_rest(models: Models, X: np.ndarray, X_goal: np.ndarray, last: PlanResul
               on_course_within: float | None = None) -> PlanResult:
     """The rest of `last` (its first action executed) as this round's plan, if it ends within
     cfg.search.confident of X_goal as `last` predicted it, when the observed state X is within
-    cfg.on_course of that prediction (or within `on_course_within`, if given: the loop that does not know
-    k keeps a plan on course while it still predicts success, cfg.eps), or rolled out from X otherwise;
-    and, with `kinematics` (and cfg.feasibility), it passes the check and refines. Else a result without
-    a plan (its reasons say why, its timings what the check cost). The plan keeps the last plan's level."""
+    cfg.loop.on_course of that prediction (or within `on_course_within`, if given: the loop that does not
+    know k keeps a plan on course while it still predicts success, cfg.verify.eps), or rolled out from X
+    otherwise; and, with `kinematics` (and cfg.kinematics.feasibility), it passes the check and refines.
+    Else a result without a plan (its reasons say why, its timings what the check cost). The plan keeps
+    the last plan's level."""
     rest = list(last.plan or [])[1:]
     level = last.level or 2
 
@@ -269,23 +263,23 @@ def keep_rest(models: Models, X: np.ndarray, X_goal: np.ndarray, last: PlanResul
             return result
         v: Verification | None = None
         deviation = off_course(X, last)
-        if cfg.on_course is not None and deviation <= cfg.on_course:  # the plan's own prediction of the rest
+        if cfg.loop.on_course is not None and deviation <= cfg.loop.on_course:  # the plan's own prediction of the rest
             assert last.predicted is not None  # a finite deviation needs the prediction
             trajectory = np.concatenate([np.asarray(X, dtype=float)[None], last.predicted[2:]])
             planned = Verification(tuple(tuple(int(a) for a in action) for action in rest), trajectory,
-                                   goal_errors(trajectory[-1], X_goal), cfg.tau_verify)
+                                   goal_errors(trajectory[-1], X_goal), cfg.verify.tau_verify)
             if planned.error < (cfg.search.confident if on_course_within is None else on_course_within):
                 v, kept_by = planned, "on course"
                 why = f"on course (every block within {deviation * 100:.1f} cm of its predicted place), " \
                       f"predicted {v.error * 100:.1f} cm from the goal"
         if v is None:  # off course: a new rollout from the observed state
-            v = verify(models.require_dynamics(), X, X_goal, rest, cfg.tau_verify)
+            v = verify(models.require_dynamics(), X, X_goal, rest, cfg.verify.tau_verify)
             if v.error >= cfg.search.confident:
                 result.reasons.append(f"keep: the rest of the last plan is predicted {v.error * 100:.1f} cm from "
                                       f"the goal from the observed state (over {cfg.search.confident * 100:g} cm)")
                 return result
             kept_by, why = "rollout", f"predicted {v.error * 100:.1f} cm from the goal from the observed state"
-        feas = _Feasibility.of(kinematics, cfg, result, avoid)
+        feas = Feasibility.of(kinematics, cfg, result, avoid)
         if feas is not None and (feas.plan(v.trajectory, v.actions) is not None
                                  or not feas.refine(level, v.trajectory, v.actions).success):
             result.reasons.append("keep: the rest of the last plan is not kinematically feasible from here")
@@ -296,9 +290,9 @@ def keep_rest(models: Models, X: np.ndarray, X_goal: np.ndarray, last: PlanResul
                                            objects=last.plan_scene)]
         result.reasons.append(f"kept the rest of the last plan: {why}")
         result.kept_by = kept_by
-        return _take(result, v.actions, level, v.trajectory, X_goal)
+        return take_plan(result, v.actions, level, v.trajectory, X_goal)
 
-    return _timed(last.method, body)
+    return timed(last.method, body)
 
 
 def replan_rounds(k: int | None, default: int = 4) -> int:

@@ -1,32 +1,118 @@
-"""Small configuration structs of the planner that several planning modules share.
+"""The planner's configuration: one small frozen struct per concern, composed into `PlanConfig`.
 
-`PlanConfig` (tamp.planning.bilevel) composes them; each says what one concern does and why its
-defaults.
+    PlanConfig(level1=Level1Config(seed=7), kinematics=KinematicsConfig(feasibility=False))
+
+Each option's comment says what it does and why its default, in a line; the measurements behind the
+defaults are in docs/beyond-the-paper.md and BUILD_NOTES.md. `tamp plan`, `tamp demo` and `tamp
+evaluate` take their flags from these fields (`tamp.app.plan_command.PLANNER_FLAGS`; a test checks
+that every field has a flag or is listed as not exposed, and that the defaults agree).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from tamp.errors import UserError
+from tamp.planning.search import SearchConfig
+from tamp.planning.verify import EPS_SUCCESS, TAU_VERIFY
+
+SYMBOLIC_BACKENDS = ("python", "fd", "fd-naive")  # in-process search; Fast Downward, batched or one call per domain
+
+
+def _positive(owner: str, **values: float | None) -> None:
+    """UserError unless each value is positive (None allowed: the option is off)."""
+    for name, value in values.items():
+        if value is not None and not value > 0:
+            raise UserError(f"{owner}.{name} must be positive, got {value}")
+
+
+@dataclass(frozen=True)
+class Level1Config:
+    """Level 1 (Algorithm 1, lines 4-14): symbolic planning over N sampled domains, then verification.
+
+    The fields from `alternatives` on are our extensions (bilevel only; `bilevel_alg1` turns them off,
+    the unverified baselines never use them); docs/beyond-the-paper.md measures each."""
+
+    n_domains: int = 100  # N sampled PDDL domains (the paper's N)
+    seed: int = 0  # seed of the sampled domains; callers set the problem's
+    backend: str = "python"  # symbolic planner, one of SYMBOLIC_BACKENDS: in-process is fastest
+    symbolic_time_limit: float = 10.0  # seconds per symbolic planner call: a safety net behind `budget`
+    budget: int | None = 100_000  # symbolic states one search for all N domains may generate: deterministic
+    time_budget: float | None = None  # seconds for all N symbolic calls (off: it would depend on the machine)
+    verify_all: bool = False  # verify every candidate (default: stop at the first verified one, as Alg. 1)
+    alternatives: int = 64  # per symbolic plan, verify the best plans of a beam this wide over its skeleton
+    alternatives_total: int = 256  # per problem (later symbolic plans are verified alone): bounds the time
+    nonempty: bool = True  # X_init not within tau of X_goal: the symbolic plan needs >= 1 action
+    focus_from: int | None = 5  # from this many objects on, plans pick up only misplaced blocks (None: never)
+    focus_budget: int | None = 25_000  # from focus_from objects on, `budget`'s stand-in: later plans rarely verify
+    objects: int | None = 4  # from focus_from on, plan in the goal's sub-scene up to this many objects (training size)
+    serial: bool = True  # from focus_from on, with no verified plan, plan one misplaced block at a time
+    confident: float | None = EPS_SUCCESS  # metres: a verified plan predicted farther waits for Level 2 (None: paper)
+    cut: bool = True  # end a verified plan where it reaches the goal, drop repeated picks (False: paper)
+
+    def __post_init__(self) -> None:
+        if self.backend not in SYMBOLIC_BACKENDS:
+            raise UserError(f"symbolic backend must be one of {', '.join(SYMBOLIC_BACKENDS)}, got {self.backend!r}")
+        _positive("Level1Config", symbolic_time_limit=self.symbolic_time_limit, confident=self.confident)
+        if self.n_domains < 1:
+            raise UserError(f"the number of sampled domains must be at least 1, got {self.n_domains}")
+        if self.focus_from is not None and self.focus_from < 1:
+            raise UserError(f"Level1Config.focus_from must be a positive object count or None, got {self.focus_from}")
+        for name in ("budget", "focus_budget"):
+            if getattr(self, name) is not None and getattr(self, name) < 1:
+                raise UserError(f"Level1Config.{name} must be a positive number of states or None, "
+                                f"got {getattr(self, name)}")
+        if self.objects is not None and self.objects < 2:
+            raise UserError(f"Level1Config.objects must be at least 2 objects (a block and where it goes) "
+                            f"or None, got {self.objects}")
+
+    def focused(self, n_objects: int) -> bool:
+        """Whether Level 1 focuses on the blocks off their goal in a scene of `n_objects` blocks."""
+        return self.focus_from is not None and n_objects >= self.focus_from
+
+    def budget_for(self, n_objects: int) -> int | None:
+        """Level 1's budget (generated symbolic states) in a scene of `n_objects` blocks."""
+        if not self.focused(n_objects) or self.focus_budget is None:
+            return self.budget
+        return min(self.focus_budget, self.budget or self.focus_budget)
+
+
+@dataclass(frozen=True)
+class VerifyConfig:
+    """When a predicted state counts as the goal: for verifying a plan, and for success."""
+
+    tau_verify: float = TAU_VERIFY  # metres: Level 1 takes a plan whose rollout ends this close (the paper's)
+    eps: float = EPS_SUCCESS  # metres: success tolerance (the search's goal test, the closed loop, evaluation)
+
+    def __post_init__(self) -> None:
+        _positive("VerifyConfig", tau_verify=self.tau_verify, eps=self.eps)
+
+
+@dataclass(frozen=True)
+class KinematicsConfig:
+    """Kinematics in the planning loop (cfs, bilevel; needs a `kinematics` object passed to `plan`)."""
+
+    feasibility: bool = True  # check actions on the predicted states, refine a plan before returning it
+    max_refinements: int = 4  # full refinements per planning call (Level-1 candidates and Level-2 plans): bounds time
 
 
 @dataclass(frozen=True)
 class LoopConfig:
-    """The closed loop that does not know k (`tamp.planning.closed_loop.plan_until_goal`)."""
+    """The closed loops (`tamp.planning.closed_loop`): keeping a plan (both), and the loop that does not know k."""
 
-    max_actions: int = 12  # actions sent to the world before the loop gives up: a goal of k <= 5 random
-    #   actions needs at most 5, the rest is room to recover from misses and to make room
-    widen: bool = True  # a round without a plan searches again over all 9 n^2 actions (moves that make room,
-    #   unstack, move blocks already at their goal), not only the goal-oriented ones
+    keep_plan: bool = True  # keep the rest of the last plan while it ends within search.confident and refines
+    on_course: float | None = 0.015  # metres: blocks this close to the plan's prediction: its own prediction
+    #   decides, not a rollout that swings under mm changes (3 sigmas of the fragility test's noise; None: rollout)
+    max_actions: int = 12  # actions sent before the loop gives up: k <= 5 needs 5, the rest is room to recover
+    widen: bool = True  # a round without a plan searches again over all 9 n^2 actions (make room, unstack)
     widen_expansions: int = 400  # node budget of the widened search (about 2-4 s at 4 blocks with kinematics)
-    search_budget: int = 3000  # continuous-search expansions over all rounds: twice one search's default budget,
-    #   so that a loop whose rounds keep failing ends in about the time of two failed searches
-    progress: float = 0.02  # metres (summed over blocks): without a plan, the loop takes a step toward the closest
-    #   state its widened search reached only if that is at least this much closer to the goal
-    revisit: float = 0.01  # metres: back within this of an earlier observed state (every block), the loop leaves
-    #   out the actions it took from there: in a deterministic world they would start the same cycle again
+    search_budget: int = 3000  # search expansions over all rounds: a loop whose rounds keep failing ends in about
+    #   the time of two failed searches
+    progress: float = 0.02  # metres, summed over blocks: without a plan, a step toward the closest state the widened
+    #   search reached is taken only if that state is this much closer to the goal
+    revisit: float = 0.01  # metres: back this close to an observed state, leave out the actions taken from there
 
     def __post_init__(self) -> None:
+        _positive("LoopConfig", on_course=self.on_course)
         if not self.revisit >= 0 or not self.progress >= 0:
             raise UserError(f"LoopConfig.revisit and .progress must be distances of 0 m or more, got {self.revisit} "
                             f"and {self.progress}")
@@ -34,3 +120,21 @@ class LoopConfig:
             raise UserError(f"the closed loop needs at least 1 action and 1 expansion of its searches, got "
                             f"{self.max_actions} actions, {self.widen_expansions} expansions widened and a search "
                             f"budget of {self.search_budget}")
+
+
+@dataclass(frozen=True)
+class PlanConfig:
+    """The planner's settings, one configuration for `tamp plan`, `tamp demo` and `tamp evaluate`."""
+
+    level1: Level1Config = Level1Config()
+    verify: VerifyConfig = VerifyConfig()
+    search: SearchConfig = SearchConfig()  # Level 2, the continuous search (`tamp.planning.search`)
+    kinematics: KinematicsConfig = KinematicsConfig()
+    loop: LoopConfig = LoopConfig()
+
+    def with_seed(self, seed: int) -> PlanConfig:
+        """This configuration with Level 1's domains sampled from `seed` (callers give the problem's)."""
+        return replace(self, level1=replace(self.level1, seed=seed))
+
+
+__all__ = ["KinematicsConfig", "Level1Config", "LoopConfig", "PlanConfig", "SYMBOLIC_BACKENDS", "VerifyConfig"]

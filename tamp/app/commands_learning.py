@@ -1,0 +1,177 @@
+"""`tamp train` and `tamp ablate-activations`: the networks and the paper's Table I."""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from tamp.app.args import (
+    check_output_dir,
+    check_output_file,
+    fraction,
+    non_negative_int,
+    positive_float,
+    positive_int,
+)
+from tamp.errors import UserError
+
+# learned.ACTIVATIONS, spelled out so that `tamp --help` does not import torch (tests check they agree).
+BOTTLENECKS = ("gumbel_sigmoid", "sigmoid", "tanh", "none")
+TRAIN_PATIENCE = 100  # learned.TrainConfig.fast().patience_epochs, for the same reason
+
+
+def cmd_train(args: argparse.Namespace) -> int:
+    """Train a Symbolic (gumbel_sigmoid) or Dynamics (sigmoid) Model on a dataset."""
+    from learned import ModelConfig, read_meta, train_model
+    from learned.train import last_path
+
+    check_output_file(args.out, "--out")
+    if args.resume and not last_path(Path(args.out)).is_file():
+        raise UserError(f"--resume: no training state at {last_path(Path(args.out))} to continue from "
+                         "(leave out --resume to start a new training)")
+    asked = {k: v for k, v in (("activation", args.bottleneck), ("d_z", args.d_z), ("heads", args.heads),
+                               ("arm_input", False if args.no_arm_input else None)) if v is not None}
+    asked["n_max"] = max(int(read_meta(d)["n_max"]) for d in args.data)  # the object limit of the data
+    if args.init is None:
+        config = ModelConfig.from_dict(asked)
+    else:  # fine-tuning: the network of --init, which the flags given must agree with
+        from learned import load_model
+
+        config = ModelConfig.from_dict({**load_model(args.init).config.to_dict(), **asked})
+    settings = _train_config(args, only_moved=args.only_moved, val_fraction=args.val_fraction,
+                             time_limit_s=None if args.time_limit_min is None else 60 * args.time_limit_min)
+    result = train_model(args.data, config, settings, args.out, resume=args.resume, init=args.init)
+    print(f"best validation effect error {result.best_val_cm:.2f} cm (epoch {result.best_epoch}) -> {result.out_path}")
+    print(f"stopped: {result.stop_reason.value} after {result.epochs_reached} epochs (batch {settings.batch_size}, "
+          f"lr {settings.lr:.3g}, {settings.precision})"
+          + ("" if result.finished else "; unfinished: rerun with --resume to continue"))
+    return 0
+
+
+def _add_train_arguments(p: argparse.ArgumentParser) -> None:
+    """How to train, for `train` and `ablate-activations`: learned.TrainConfig.fast()'s defaults, spelled
+    out so that --help does not import torch (a test checks they agree); `_train_config` reads them."""
+    p.add_argument("--batch-size", type=positive_int, default=1024,
+                   help="Adam batch size (default 1024; the paper's: 128)")
+    p.add_argument("--lr", type=positive_float, default=None,
+                   help="Adam learning rate (default 1e-4 * batch size / 128; the paper's: 1e-4 at batch 128)")
+    p.add_argument("--patience", type=non_negative_int, default=TRAIN_PATIENCE, metavar="EPOCHS",
+                   help=f"stop once the validation error has not improved for this many epochs (default "
+                   f"{TRAIN_PATIENCE}; 0: train all --epochs)")
+    p.add_argument("--precision", choices=("float32", "bfloat16"), default=None,
+                   help="forward/backward precision (default: bfloat16 autocast where the CPU has native "
+                   "bfloat16, else float32; weights and loss stay float32)")
+    p.add_argument("--seed", type=non_negative_int, default=0,
+                   help="seed of the split, the initial weights and the batches")
+    p.add_argument("--threads", type=positive_int, default=1, help="torch threads (default 1)")
+
+
+def _train_config(args: argparse.Namespace, **changes):
+    """The learned.TrainConfig of the flags of `_add_train_arguments` (and --epochs), with `changes`."""
+    from learned import TrainConfig
+
+    given = {"epochs": args.epochs, "patience_epochs": args.patience or None, "seed": args.seed,
+             "threads": args.threads, **({"lr": args.lr} if args.lr is not None else {}),
+             **({"precision": args.precision} if args.precision is not None else {})}
+    return TrainConfig.fast(args.batch_size, **given, **changes)
+
+
+def cmd_ablate(args: argparse.Namespace) -> int:
+    """Table I of the paper: effect error per bottleneck activation over several seeds."""
+    from learned import ablate_activations, format_ablation_markdown, summarize_ablation_dir
+
+    check_output_dir(args.out_dir, "--out-dir")
+    if args.finish is not None and args.resume:
+        raise UserError("--finish resumes the runs its table lacks in --out-dir by itself: give it without --resume")
+    if args.finish is not None:
+        from learned.ablation import finish_ablation, read_table
+
+        try:
+            table = read_table(args.finish)
+            result = finish_ablation(args.data, table, args.out_dir, args.runs, train=_train_config(args),
+                                     workers=args.workers, summarize=args.summarize)
+        except ValueError as e:
+            raise UserError(f"--finish {args.finish}: {e}") from e
+    elif args.summarize:
+        try:
+            result = summarize_ablation_dir(args.data, args.out_dir, args.runs, train=_train_config(args))
+        except ValueError as e:
+            raise UserError(f"--summarize: {e}") from e
+    else:
+        result = ablate_activations(args.data, runs=args.runs, train=_train_config(args), out_dir=args.out_dir,
+                                    resume=args.resume)
+    print(format_ablation_markdown(result))
+    print(f"written to {args.out_dir}/ablation.md and ablation.json")
+    return 0
+
+
+def add_train(sub) -> None:
+    """`tamp train`."""
+    p = sub.add_parser(
+        "train",
+        help="train the Symbolic (gumbel_sigmoid) or Dynamics (sigmoid) Model on a dataset",
+        description="Train the effect-prediction network of the paper on a dataset written by "
+        "`tamp collect`. The best checkpoint by validation error is written to --out; "
+        "<out>.last.pt holds the state to resume from (--resume).",
+    )
+    p.add_argument("--data", required=True, nargs="+", metavar="DIR",
+                   help="dataset directory (tamp collect --out); several are trained on together, e.g. one "
+                   "collected with --objects 2,3,4 and one with --objects 5,6 (same world, checked)")
+    p.add_argument("--bottleneck", choices=BOTTLENECKS, default=None,
+                   help="bottleneck activation: gumbel_sigmoid = Symbolic Model, sigmoid = Dynamics Model "
+                   "(default, or --init's)")
+    p.add_argument("--epochs", type=positive_int, default=1000,
+                   help="training epochs at most (default 1000; --patience usually stops earlier)")
+    p.add_argument("--out", required=True, help="checkpoint file to write (e.g. models/dynamics.pt)")
+    p.add_argument("--d-z", type=positive_int, default=None,
+                   help="unary symbol bits per object (default: learned.ModelConfig's; more bits, more operators)")
+    p.add_argument("--heads", type=positive_int, default=None,
+                   help="relation types = attention heads (default: learned.ModelConfig's)")
+    _add_train_arguments(p)
+    p.add_argument("--time-limit-min", type=positive_float, default=None, metavar="MIN",
+                   help="stop after the epoch that passes this wall time; the run is unfinished, --resume continues")
+    p.add_argument("--val-fraction", type=fraction, default=0.1, help="validation fraction, in [0, 1) (default 0.1)")
+    p.add_argument("--resume", action="store_true", help="continue from <out>.last.pt")
+    p.add_argument("--init", type=Path, default=None, metavar="CHECKPOINT",
+                   help="fine-tune: start from this model's weights and input normalisation (e.g. "
+                   "tamp/pretrained/dynamics.pt, trained on 2-4 blocks, on data with 5 and 6) instead of random "
+                   "ones; its network settings are kept (--bottleneck, --d-z, --heads, --no-arm-input must agree "
+                   "if given) and the object limit is the data's")
+    p.add_argument("--no-arm-input", action="store_true",
+                   help="leave the arm's pick-to-place displacement out of the action encoding, so that "
+                   "positions reach the decoder only through the symbols (the Symbolic Model)")
+    p.add_argument("--only-moved", action="store_true",
+                   help="train on the transitions that moved the picked block (as the paper's authors do for "
+                   "the Symbolic Model; grasps of nothing and blocked motions left out)")
+    p.set_defaults(func=cmd_train)
+
+
+def add_ablate_activations(sub) -> None:
+    """`tamp ablate-activations`."""
+    p = sub.add_parser(
+        "ablate-activations",
+        help="Table I: effect error of the four bottleneck activations over several seeds",
+        description="Train one model per activation (gumbel_sigmoid, tanh, none, sigmoid) and seed, "
+        "and report the mean effect-prediction error (cm) on a held-out test split, as Markdown and JSON.",
+    )
+    p.add_argument("--data", required=True, help="dataset directory")
+    p.add_argument("--runs", type=positive_int, default=3, help="seeds per activation (default 3; the paper: 10)")
+    p.add_argument("--epochs", type=positive_int, default=20, help="epochs per run (default 20)")
+    p.add_argument("--out-dir", default="runs/ablation", help="where ablation.md / ablation.json go")
+    p.add_argument("--resume", action="store_true",
+                   help="continue the runs begun in --out-dir (a finished run is read back, not trained again)")
+    p.add_argument("--summarize", action="store_true",
+                   help="train nothing: write the table from the runs already in --out-dir (the finished runs are "
+                   "averaged; a run still training is listed with its best model so far). Give the flags the runs "
+                   "were trained with; `tamp reproduce --scale paper` keeps its runs in OUT/ablation, trained with "
+                   "--epochs 4000 --lr 0.0008 --precision bfloat16")
+    p.add_argument("--finish", type=Path, default=None, metavar="ABLATION_JSON",
+                   help="complete this table (an ablation.json) to --runs runs per activation: its finished runs "
+                   "are kept as it lists them, the others (still training when it was written, or missing) are "
+                   "trained in --out-dir, resuming there. For a table whose models are gone, e.g. "
+                   "results/paper-scale/ablation.json with --data from `tamp collect --samples 160000 --seed 0`; "
+                   "the settings must be the table's (checked). With --summarize: train nothing, write the "
+                   "table with those runs as they stand in --out-dir")
+    p.add_argument("--workers", type=positive_int, default=1,
+                   help="with --finish: runs trained at a time, one process and one torch thread each (default 1)")
+    _add_train_arguments(p)
+    p.set_defaults(func=cmd_ablate)

@@ -1,0 +1,181 @@
+"""`tamp domain`, `tamp pddl` and `tamp symbols`: the learned symbolic domain and what its bits mean."""
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+
+from tamp.app.args import (
+    check_output_dir,
+    check_output_file,
+    fraction,
+    non_negative_int,
+    positive_int,
+    probability,
+)
+from tamp.errors import UserError
+
+
+def cmd_symbols(args: argparse.Namespace) -> int:
+    """What each learned bit of a Symbolic Model means, on held-out scenes."""
+    from learned import load_model
+    from learned.interpret import format_symbols_markdown, interpret_symbols, write_symbols_png
+
+    for path, flag in ((args.json, "--json"), (args.png, "--png")):
+        if path is not None:
+            check_output_file(path, flag)
+    model = load_model(args.model)
+    scenes = symbol_scenes(args.problems, args.data, args.max_scenes, args.seed)
+    report = interpret_symbols(model.symbols, scenes)
+    print(f"{args.model}: d_z = {model.config.d_z} unary bit(s), K = {model.config.heads} relation(s), read on "
+          f"{len(scenes)} scenes of {args.problems or args.data}")
+    print(format_symbols_markdown(report))
+    if args.json is not None:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps([b.to_dict() for b in report], indent=1) + "\n")
+        print(f"written {args.json}")
+    if args.png is not None:
+        write_symbols_png(report, args.png)
+        print(f"written {args.png}")
+    return 0
+
+
+def symbol_scenes(problems: Path | None, data: Path | None, max_scenes: int, seed: int = 0) -> list[np.ndarray]:
+    """Scenes to read symbols on: X_init and X_goal of a problem set, or (at most `max_scenes`,
+    drawn with `seed`) the states of a dataset's transitions."""
+    if (problems is None) == (data is None):
+        raise UserError("give exactly one of --problems (a problem set) or --data (a dataset directory)")
+    if problems is not None:
+        from tamp.app.problem import read_problem_set
+
+        return [X for p in read_problem_set(problems) for X in (p.X_init, p.X_goal)][:max_scenes]
+    from learned import load_transitions
+
+    assert data is not None  # exactly one of problems and data (checked above)
+    t = load_transitions(data)
+    if len(t) == 0:
+        raise UserError(f"{data}: the dataset holds no transitions")
+    pick = np.random.default_rng(seed).permutation(len(t))[:max_scenes]
+    return [t.X[i, :int(t.n[i])] for i in sorted(pick)]
+
+
+def cmd_domain(args: argparse.Namespace) -> int:
+    """Symbols from the Symbolic Model -> learned PDDL / PPDDL domain and its statistics."""
+    from tamp.planning.domain import learn_domain
+
+    check_output_dir(args.out, "--out")
+    report = learn_domain(args.model, args.data, args.out, holdout=args.holdout, seed=args.seed,
+                          sampled_domains=args.sampled, involved_only=args.involved_only,
+                          min_count=args.min_count, min_prob=args.min_prob, only_moved=args.only_moved,
+                          any_bottleneck=args.any_bottleneck, max_arity=args.max_arity)
+    held = report.get("coverage_holdout") or {}
+    print(f"{report['n_operators']} operators from {report['transitions']} transitions -> {args.out}")
+    left_out = report["max_arity"]["transitions_left_out"]
+    if left_out:
+        print(f"  {left_out} training transitions involve more than {report['max_arity']['limit']} objects "
+              "(the most the lifted search takes): no operator learned from them")
+    for key in ("effects_per_operator", "coverage_train"):
+        if key in report:
+            print(f"  {key}: {json.dumps(report[key])}")
+    print(f"  coverage_holdout: {json.dumps(held)}")
+    return 0
+
+
+def cmd_pddl(args: argparse.Namespace) -> int:
+    """A models directory's learned domain (and a problem's symbols) as PDDL files."""
+    from tamp.app.problem import load_problem
+    from tamp.planning.domain import export_pddl
+    from tamp.planning.models import pretrained_dir
+
+    check_output_dir(args.out, "--out")
+    problem = None if args.problem is None else load_problem(args.problem)
+    paths = export_pddl(args.models or pretrained_dir(), args.out, None if problem is None else problem.X_init,
+                        None if problem is None else problem.X_goal,
+                        problem_name=(problem.name or args.problem.stem) if problem is not None else "symbolic-task",
+                        sampled=args.sampled, seed=args.seed)
+    for kind, path in paths.items():
+        print(f"{kind}: {path}")
+    return 0
+
+
+def add_domain(sub) -> None:
+    """`tamp domain`."""
+    p = sub.add_parser(
+        "domain",
+        help="learned symbolic domain (PDDL, PPDDL, operators.json) from a Symbolic Model and data",
+        description="Compute the Symbolic Model's unary and relational bits before and after every "
+        "transition, learn lifted operators (most frequent effect and the empirical distribution), "
+        "and write domain.pddl, domain.ppddl, operators.json and stats.json (number of operators, "
+        "effects per operator, coverage on held-out transitions). `tamp pddl` writes the PDDL files of an "
+        "existing models directory (the bundled one by default) and of a problem.",
+    )
+    p.add_argument("--model", required=True, help="Symbolic Model checkpoint (tamp train --bottleneck gumbel_sigmoid)")
+    p.add_argument("--data", required=True, nargs="+", metavar="DIR",
+                   help="dataset directory, or several (learned from together)")
+    p.add_argument("--out", required=True, help="output directory")
+    p.add_argument("--holdout", type=fraction, default=0.1, help="fraction of transitions held out for coverage")
+    p.add_argument("--sampled", type=non_negative_int, default=0, metavar="N", help="also write N sampled PDDL domains")
+    p.add_argument("--involved-only", action="store_true",
+                   help="operators mention only the objects a transition involves (picked, target, and "
+                   "those whose symbols change) rather than every object in the scene: far fewer operators")
+    p.add_argument("--only-moved", action="store_true",
+                   help="learn from the transitions that moved their picked block (failed grasps and blocked "
+                   "motions left out, as the paper's authors do)")
+    p.add_argument("--min-count", type=non_negative_int, default=0, metavar="N",
+                   help="keep operators seen at least N times (default 0: all; the paper's authors: 51)")
+    p.add_argument("--max-arity", type=positive_int, default=None, metavar="A",
+                   help="learn no operator from a transition that involves more than A objects (default: the "
+                   "most the lifted search takes, 4 with 1 unary bit and 3 relations; larger ones are refused "
+                   "by the planner)")
+    p.add_argument("--min-prob", type=probability, default=0.0, metavar="P",
+                   help="drop effects of probability below P and renormalise (default 0; the paper's authors: 0.1)")
+    p.add_argument("--any-bottleneck", action="store_true",
+                   help="accept a --model that is not a Symbolic Model (e.g. the Fig. 4 Sigmoid variant)")
+    p.add_argument("--seed", type=non_negative_int, default=0)
+    p.set_defaults(func=cmd_domain)
+
+
+def add_pddl(sub) -> None:
+    """`tamp pddl`."""
+    p = sub.add_parser(
+        "pddl",
+        help="export a models directory's learned domain (and a problem) as PDDL for other planners",
+        description="Write the learned domain of --models (its domain/operators.json) as domain.pddl "
+        "(most frequent effects: a deterministic STRIPS domain with equality) and domain.ppddl (PPDDL "
+        "probabilistic effects), with --problem the problem's symbols (from the Symbolic Model) as "
+        "problem.pddl, and with --sampled N the distinct domains of N sampled ones, as Level 1 draws them. "
+        "Fast Downward and other PDDL planners read domain.pddl and problem.pddl; "
+        "`tamp domain` learns a domain from data.",
+    )
+    p.add_argument("--models", type=Path, default=None,
+                   help="models directory (domain/, and symbolic.pt for --problem); default: the bundled models")
+    p.add_argument("--out", type=Path, required=True, help="output directory")
+    p.add_argument("--problem", type=Path, default=None, help="problem file (JSON: X_init, X_goal) to export")
+    p.add_argument("--sampled", type=non_negative_int, default=0, metavar="N",
+                   help="also write the distinct domains among N sampled ones (sampled/, with sampled.json)")
+    p.add_argument("--seed", type=non_negative_int, default=0, help="seed of the sampled domains (default 0)")
+    p.set_defaults(func=cmd_pddl)
+
+
+def add_symbols(sub) -> None:
+    """`tamp symbols`."""
+    p = sub.add_parser(
+        "symbols",
+        help="what each learned bit of a Symbolic Model means: its rate and agreement with geometric facts",
+        description="Read the Symbolic Model's unary bits, relations r_k(i, j) (i != j) and self relations "
+        "r_k(i, i) on held-out scenes (the initial and goal scenes of a problem set, or states of a "
+        "dataset) and compare each with facts a reader understands: block type, elevated, on another "
+        "block, carrying one, left/right along y, near, on top of, vertical order. Prints a table "
+        "(agreement in %, the better of the fact and its negation, and the Matthews correlation phi, "
+        "which does not reward agreeing with a rare fact by being always 0); --png draws it.",
+    )
+    p.add_argument("--model", type=Path, required=True, help="Symbolic Model checkpoint")
+    p.add_argument("--problems", type=Path, default=None, help="problem set (tamp problems --out): its scenes")
+    p.add_argument("--data", type=Path, default=None, help="or a dataset directory: states of its transitions")
+    p.add_argument("--max-scenes", type=positive_int, default=5000, help="scenes read at most (default 5000)")
+    p.add_argument("--seed", type=non_negative_int, default=0, help="seed of the scenes drawn from --data (default 0)")
+    p.add_argument("--png", type=Path, default=None, help="write the table as a heat map (PNG)")
+    p.add_argument("--json", type=Path, default=None, help="write every figure as JSON")
+    p.set_defaults(func=cmd_symbols)

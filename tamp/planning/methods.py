@@ -1,0 +1,90 @@
+"""The planning methods behind one interface (`METHODS`, same signature, same `PlanResult`) and `plan`.
+
+    result = plan("bilevel", models, X_init, X_goal, PlanConfig())
+
+- ``bilevel``        Algorithm 1 with our extensions (`tamp.planning.bilevel.plan_bilevel`).
+- ``bilevel_alg1``   the paper's Algorithm 1 exactly (`plan_bilevel_alg1`).
+- ``probabilistic``  the most frequent plan of the probabilistic symbolic planner, not verified
+                     (its verification error is reported).
+- ``deterministic``  the plan in the most-frequent-effect domain (baseline), not verified.
+- ``cfs``            continuous forward search alone.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+from typing import AbstractSet, Callable, Sequence
+
+from tamp.planning.bilevel import plan_bilevel, plan_bilevel_alg1
+from tamp.planning.config import PlanConfig
+from tamp.planning.feasibility import Feasibility
+from tamp.planning.level1 import level1_plans, verify_candidate
+from tamp.planning.level2 import level2
+from tamp.planning.models import Models
+from tamp.planning.results import PlanResult, take_plan, timed
+from tamp.planning.structs import KinematicFeasibility
+from tamp.planning.validate import check_problem
+from tamp.planning.verify import states_pair
+
+
+def _symbolic_only(method: str, probabilistic: bool):
+    def run(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig(),
+            kinematics: KinematicFeasibility | None = None) -> PlanResult:
+        def body(result: PlanResult) -> PlanResult:
+            any_plan = replace(cfg, level1=replace(cfg.level1, nonempty=False))
+            result.candidates = level1_plans(models, X_init, X_goal, any_plan, result, probabilistic)
+            if not result.candidates:
+                return result
+            t = time.perf_counter()
+            v = verify_candidate(models, X_init, X_goal, result.candidates[0], cfg)  # reported, not used
+            result.timings["verify"] = time.perf_counter() - t
+            return take_plan(result, v.actions, 1, v.trajectory, X_goal)
+        return timed(method, body)
+    run.__doc__ = f"The {method} symbolic planner alone (top plan, unverified; `kinematics` is ignored)."
+    return run
+
+
+plan_probabilistic = _symbolic_only("probabilistic", True)
+plan_deterministic = _symbolic_only("deterministic", False)
+
+
+def plan_cfs(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig(),
+             kinematics: KinematicFeasibility | None = None,
+             avoid: AbstractSet[tuple[bytes, tuple]] = frozenset()) -> PlanResult:
+    """Continuous forward search alone; with `kinematics` (and cfg.kinematics.feasibility) infeasible successors
+    are pruned, as are the pairs of `avoid` (see `plan_bilevel`), and the plan is refined before it is
+    returned."""
+    def body(result: PlanResult) -> PlanResult:
+        feas = Feasibility.of(kinematics, cfg, result, avoid)
+        return level2(models, X_init, X_goal, cfg, result, feas)
+    return timed("cfs", body)
+
+
+Planner = Callable[..., PlanResult]  # (models, X_init, X_goal, cfg, kinematics=None) -> PlanResult
+METHODS: dict[str, Planner] = {"bilevel": plan_bilevel, "bilevel_alg1": plan_bilevel_alg1,
+                               "probabilistic": plan_probabilistic, "deterministic": plan_deterministic,
+                               "cfs": plan_cfs}
+# the methods that put kinematics in their planning loop when given a checker (and cfg.kinematics.feasibility)
+KINEMATIC_METHODS = frozenset({"cfs", "bilevel"})
+# the methods whose closed loop keeps a plan on course (cfg.loop.keep_plan); the others replan every round
+KEEPING_METHODS = frozenset({"cfs", "bilevel"})
+
+
+def plan(method: str, models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig(),
+         kinematics: KinematicFeasibility | None = None,
+         avoid: AbstractSet[tuple[bytes, tuple]] = frozenset()) -> PlanResult:
+    """Run one of METHODS on (X_init, X_goal), both (n, 5) arrays. `kinematics` (e.g. a
+    tamp.sim.feasibility.FeasibilityChecker that observed the scene of X_init) puts kinematic feasibility
+    into the planning loop of KINEMATIC_METHODS (unless cfg.kinematics.feasibility is False); with it, those
+    methods also leave out the (state key, action) pairs of `avoid` (a closed loop's revisits)."""
+    if method not in METHODS:
+        raise ValueError(f"unknown planning method {method!r}; choose one of {', '.join(METHODS)}")
+    X_init, X_goal = states_pair(X_init, X_goal)
+    # an observed X_init may hold tilted blocks: checked as any scene, not as one placed upright
+    check_problem(X_init, X_goal, where="plan()", n_max=getattr(models, "n_max", None), init_upright=False)
+    extra = {"avoid": avoid} if avoid and method in KINEMATIC_METHODS else {}
+    return METHODS[method](models, X_init, X_goal, cfg, kinematics=kinematics, **extra)
+
+
+__all__: Sequence[str] = ["KEEPING_METHODS", "KINEMATIC_METHODS", "METHODS", "Planner", "plan", "plan_cfs",
+                          "plan_deterministic", "plan_probabilistic"]

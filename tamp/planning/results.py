@@ -1,0 +1,140 @@
+"""What a planning call returns: `PlanResult`, with Level 1's `Candidate` plans, and the helpers that fill it."""
+from __future__ import annotations
+
+import time
+from collections import Counter
+from dataclasses import dataclass, field
+from typing import Callable, Sequence
+
+import numpy as np
+
+from tamp.planning.search import SearchResult
+from tamp.planning.structs import Infeasible, PickPlace
+from tamp.planning.verify import goal_error
+
+LEVEL1_STAGES = ("symbols", "symbolic", "verify")  # the `PlanResult.timings` keys that make up Level 1's time
+
+
+@dataclass
+class Candidate:
+    """A symbolic plan of Level 1 with its verification outcome (None: not verified, Alg. 1 stopped before)."""
+
+    actions: tuple[tuple[int, int, int, int], ...]
+    count: int  # sampled domains that produced it
+    probability: float
+    error: float | None = None  # metres: max per-object distance of the predicted final state to the goal
+    verified: bool | None = None
+    alternative_of: int | None = None  # index of the ranked symbolic plan whose symbolic states it shares
+    states: tuple[int, ...] | None = field(default=None, repr=False)  # packed symbolic states (python backend)
+    objects: tuple[int, ...] | None = None  # the sub-scene's objects the states describe, in the scene's
+    #   indices (`level1_scene`); None: all objects
+    stages: tuple[int, ...] | None = None  # a plan joined one block at a time (`level1_serial`): the blocks
+    #   its stages placed, in order (count 0: no sampled domain gave it whole)
+
+
+@dataclass
+class PlanResult:
+    method: str
+    plan: list[PickPlace] | None  # None: no plan
+    level: int | None = None  # 1 (symbolic) or 2 (continuous search) that produced the plan
+    predicted: np.ndarray | None = None  # (len(plan) + 1, n, 5) Dynamics Model rollout of the plan
+    candidates: list[Candidate] = field(default_factory=list)
+    search: SearchResult | None = None
+    timings: dict[str, float] = field(default_factory=dict)  # seconds: symbols, symbolic, verify, search, total
+    reasons: list[str] = field(default_factory=list)  # why each level did not produce the plan
+    symbolic_stats: dict = field(default_factory=dict)  # domains, unique plans, planner outcomes
+    predicted_error: float | None = None  # metres: max per-object distance, predicted final state to goal
+    # Kinematic feasibility: per level (1, 2), how many candidate plans (Level 1) or successors
+    # (Level 2) the check or full refinement rejected, by reason; None when it was off
+    rejected: dict[int, Counter] | None = None
+    refinements: list[dict] = field(default_factory=list)  # level, plan, outcome of each full refinement
+    kept_by: str | None = None  # closed loop: the plan is the rest of the last round's (`keep_rest`), not planned
+    #   anew, judged by the plan's own prediction ("on course") or by a rollout from the observed state ("rollout")
+    widened: bool = False  # closed loop: the plan of a search over every action, after the planner found none
+    toward: bool = False  # closed loop, widened: no plan reaches the goal; the path to the closest state found
+
+    @property
+    def solved(self) -> bool:
+        return self.plan is not None
+
+    @property
+    def kept(self) -> bool:
+        """Closed loop: the plan is the rest of the last round's, not planned anew."""
+        return self.kept_by is not None
+
+    @property
+    def origin(self) -> str:
+        """How this round got its plan: "planned", "widened search", "toward the closest state", "kept on
+        course" or "kept by rollout"."""
+        if self.kept_by is None:
+            return "toward the closest state" if self.toward else "widened search" if self.widened else "planned"
+        return "kept on course" if self.kept_by == "on course" else "kept by rollout"
+
+    def _plan_path(self) -> tuple[tuple[int, ...], tuple[int, ...] | None] | None:
+        """The packed symbolic states a Level-1 plan passes through and the sub-scene they describe."""
+        if self.level != 1 or self.plan is None:
+            return None
+        actions = tuple(tuple(int(v) for v in a) for a in self.plan)
+        known = [(c.states, c.actions, c.objects) for c in self.candidates if c.verified and c.states is not None]
+        for states, plan, objects in known:
+            if plan == actions:
+                return states, objects
+        for states, plan, objects in known:  # a plan cut where it reaches the goal (level1_cut): its path's start
+            if plan[:len(actions)] == actions:
+                return states[:len(actions) + 1], objects
+        return None
+
+    @property
+    def plan_states(self) -> tuple[int, ...] | None:
+        """The packed symbolic states a Level-1 plan passes through (None: Level 2, one block at a time
+        (`level1_serial`), or a backend that does not give them); of the sub-scene `plan_scene`."""
+        path = self._plan_path()
+        return None if path is None else path[0]
+
+    @property
+    def plan_scene(self) -> tuple[int, ...] | None:
+        """The objects whose symbols `plan_states` describe, in the scene's indices (`level1_scene`); None:
+        every object."""
+        path = self._plan_path()
+        return None if path is None else path[1]
+
+    def rejected_dict(self) -> dict | None:
+        """`rejected` with string keys (JSON): {"level 1": {"no_grasp": 3, ...}, "level 2": {...}}."""
+        if self.rejected is None:
+            return None
+        return {f"level {lvl}": {r.value if isinstance(r, Infeasible) else str(r): int(c) for r, c in sorted(
+            counts.items(), key=lambda rc: str(rc[0]))} for lvl, counts in sorted(self.rejected.items())}
+
+    def to_dict(self) -> dict:
+        return {"method": self.method, "solved": self.solved, "level": self.level,
+                "plan": None if self.plan is None else [list(a) for a in self.plan],
+                "predicted_error_m": self.predicted_error,
+                "candidates": [{"actions": [list(a) for a in c.actions], "count": c.count,
+                                "probability": round(c.probability, 4), "error_m": c.error,
+                                "verified": c.verified, "alternative_of": c.alternative_of}
+                               for c in self.candidates],
+                "search": None if self.search is None else {
+                    k: getattr(self.search, k) for k in ("status", "reason", "expanded", "generated",
+                                                         "duplicates", "predict_calls", "time")},
+                "timings": {k: round(v, 6) for k, v in self.timings.items()},
+                "reasons": list(self.reasons), "symbolic": self.symbolic_stats,
+                "rejected": self.rejected_dict(), "refinements": list(self.refinements), "kept": self.kept,
+                "kept_by": self.kept_by, "widened": self.widened, "toward": self.toward}
+
+
+def take_plan(result: PlanResult, actions, level: int, predicted: np.ndarray, X_goal) -> PlanResult:
+    """Set `actions` as the result's plan, from `level`, with its predicted states (their last one's goal error)."""
+    result.plan, result.level, result.predicted = [PickPlace(*a) for a in actions], level, predicted
+    result.predicted_error = goal_error(predicted[-1], X_goal)
+    return result
+
+
+def timed(method: str, body: Callable[[PlanResult], PlanResult]) -> PlanResult:
+    """A new result of `method`, filled by `body`, with its total time."""
+    t = time.perf_counter()
+    result = body(PlanResult(method, None))
+    result.timings["total"] = time.perf_counter() - t
+    return result
+
+
+__all__: Sequence[str] = ["Candidate", "LEVEL1_STAGES", "PlanResult", "take_plan", "timed"]
