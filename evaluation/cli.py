@@ -99,7 +99,7 @@ def _add_run_arguments(p: argparse.ArgumentParser, models_help: str, out_help: s
     p.add_argument("--oracle-max-plans", type=positive_int, default=20,
                    help="probabilistic_oracle: ranked plans executed at most per problem (default 20)")
     p.add_argument("--noise", type=_metres_below(0.05), default=0.0, metavar="METRES",
-                   help="closed loops: Gaussian noise of this standard deviation on every position the planner "
+                   help="closed loops: Gaussian noise of this standard deviation on every x and y the planner "
                    "observes, as a camera's would (default 0; the world itself is not moved)")
     p.add_argument("--push", type=_push_range, default=None, metavar="MIN,MAX",
                    help="closed loops: once per problem, after the first action, push one free block MIN-MAX "

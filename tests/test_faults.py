@@ -44,11 +44,11 @@ def test_no_free_block_no_push():
         assert note == "no free block had room to be pushed" and after is s
 
 
-def test_observation_noise_has_the_asked_spread_and_leaves_types():
+def test_observation_noise_has_the_asked_spread_and_leaves_heights_and_types():
     X = np.tile([[0.6, 0.0, 0.025, 1.0, 0.0]], (2000, 1))
     seen = Faults(noise_m=0.005).observe(X, np.random.default_rng(1))
-    assert np.std(seen[:, :3] - X[:, :3]) == pytest.approx(0.005, rel=0.05)
-    assert np.array_equal(seen[:, 3:], X[:, 3:]) and seen is not X
+    assert np.std(seen[:, :2] - X[:, :2]) == pytest.approx(0.005, rel=0.05)
+    assert np.array_equal(seen[:, 2:], X[:, 2:]) and seen is not X  # resting blocks stay resting
     assert Faults().observe(X, np.random.default_rng(1)) is X
 
 

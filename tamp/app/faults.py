@@ -1,8 +1,10 @@
 """Faults of a real cell, injected into a closed loop to measure how it recovers.
 
-- Observation noise: every position the planner observes carries Gaussian noise of `noise_m`
-  (metres, per coordinate), as a camera's block poses would. The world itself is not moved, and the
-  kinematic checker sees the true scene (orientations are not in X; a real system would estimate them).
+- Observation noise: every horizontal position the planner observes carries Gaussian noise of
+  `noise_m` (metres, per coordinate), as a camera's block poses would. Heights are observed exactly: a
+  perception pipeline places a block on what supports it, and a block observed half inside the table
+  or floating is not a scene the planner accepts. The world itself is not moved, and the kinematic
+  checker sees the true scene (orientations are not in X; a real system would estimate them).
 - A push: once per run, after the first action, one free block (on the table, nothing on it) is
   moved `push_m` (metres, uniform in the range) in a random horizontal direction, as a person or a
   slipping block would, to a place where it touches no other block. The planner observes it there.
@@ -30,7 +32,7 @@ _ON_TABLE = 0.04  # metres: a block whose centre is lower stands on the table (b
 class Faults:
     """Disturbances of the world during a closed loop (see the module docstring)."""
 
-    noise_m: float = 0.0  # std of the noise on every observed coordinate (0: exact observations)
+    noise_m: float = 0.0  # std of the noise on every observed x and y (0: exact observations)
     push_m: tuple[float, float] | None = None  # (min, max) distance of the one push (None: no push)
 
     def __post_init__(self) -> None:
@@ -44,11 +46,11 @@ class Faults:
         return self.noise_m > 0 or self.push_m is not None
 
     def observe(self, X: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-        """X as the planner observes it: positions with noise."""
+        """X as the planner observes it: horizontal positions with noise."""
         if self.noise_m <= 0:
             return X
         seen = np.array(X, dtype=float)
-        seen[:, :3] += rng.normal(0.0, self.noise_m, size=(len(X), 3))
+        seen[:, :2] += rng.normal(0.0, self.noise_m, size=(len(X), 2))
         return seen
 
 
