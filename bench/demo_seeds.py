@@ -50,7 +50,7 @@ def main() -> int:
                 print(f"seed {seed}: exit {run.returncode}: {run.stderr.strip().splitlines()[-1:]}", flush=True)
                 continue
             reached += run.returncode == 0
-            error = re.search(r"final error ([0-9.]+) cm", run.stdout)
+            error = re.search(r"final error ([0-9.]+) cm \(max over blocks", run.stdout)
             cause = re.search(r"cause: (.*)", run.stdout)
             actions = re.search(r"(\d+) action\(s\) executed", run.stdout)
             print(f"seed {seed}: {'reached' if run.returncode == 0 else 'missed'}; final error "
