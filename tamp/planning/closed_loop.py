@@ -54,7 +54,7 @@ class ClosedLoopResult:
     eps: float
     reason: str = ""
     stop: str = ""  # how the loop ended: "goal", "no_plan", "empty_plan", "rounds" (the paper's loop ran its
-    #   k - 1 rounds) or "budget" (`LoopConfig.max_actions` used up)
+    #   k - 1 rounds) or "budget" (`LoopConfig.max_actions` or `.search_budget` used up)
 
     @property
     def X_final(self) -> np.ndarray:
