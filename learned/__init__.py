@@ -7,11 +7,12 @@ from .ablation import ablate_activations, format_ablation_markdown, summarize_ab
 from .checkpoint import load_model, save_checkpoint
 from .dataset import DatasetWriter, ShardError, TransitionDataset, Transitions, load_transitions, read_meta
 from .effects import arm_displacement, effect_targets, encode_actions, moved_picks
-from .model import ACTIVATIONS, EffectModel, ModelConfig
+from .model import ACTIVATIONS, RELATIONS, EffectModel, ModelConfig
 from .train import TrainConfig, TrainResult, evaluate, train_model
 
 __all__ = [
-    "ACTIVATIONS", "DatasetWriter", "EffectModel", "ModelConfig", "ShardError", "TrainConfig", "TrainResult",
+    "ACTIVATIONS", "DatasetWriter", "EffectModel", "ModelConfig", "RELATIONS", "ShardError", "TrainConfig",
+    "TrainResult",
     "TransitionDataset", "Transitions", "ablate_activations", "arm_displacement", "effect_targets",
     "encode_actions", "evaluate", "format_ablation_markdown", "load_model", "load_transitions", "moved_picks",
     "read_meta", "save_checkpoint", "summarize_ablation_dir", "train_model", "write_ablation_report",

@@ -6,7 +6,7 @@
 For every unary bit u_b(i) and relation r_k(i, j) (i != j; the self relation r_k(i, i) is read as a
 unary bit) the report gives its rate (how often it is 1) and its agreement with each fact a reader
 understands: block type, resting on another block, carrying one, left / right along y, near, on top
-of, vertical order. Agreement is the share of objects (pairs) where the bit equals the fact, or its
+of, above (over the footprint, any height), vertical order, level, in line along the offset axis (y). Agreement is the share of objects (pairs) where the bit equals the fact, or its
 negation (polarity "not"), whichever is higher; phi (the Matthews correlation) is given beside it,
 because a rare fact agrees with an almost-always-0 bit without meaning anything. The facts are
 computed from X alone (upright blocks, sizes of `effects.TYPE_NAMES`), so any scene source works:
@@ -29,12 +29,17 @@ def _type(X: np.ndarray) -> np.ndarray:
     return np.argmax(X[..., 3:5], axis=-1)
 
 
-def _on(X: np.ndarray) -> np.ndarray:
-    """(n, n) bool: i rests directly on j (i above j by one block height, centre over j's top)."""
+def _over(X: np.ndarray) -> np.ndarray:
+    """(n, n) bool: i's centre lies over j's footprint (with ON_TOLERANCE_M slack), at any height."""
     half = BLOCK_HALF_XY[_type(X)]
     d = X[:, None, :3] - X[None, :, :3]
-    over = np.all(np.abs(d[..., :2]) <= half[None, :, :] + ON_TOLERANCE_M, axis=-1)
-    return over & (np.abs(d[..., 2] - HEIGHT_M) <= ON_TOLERANCE_M) & ~np.eye(len(X), dtype=bool)
+    return np.all(np.abs(d[..., :2]) <= half[None, :, :] + ON_TOLERANCE_M, axis=-1) & ~np.eye(len(X), dtype=bool)
+
+
+def _on(X: np.ndarray) -> np.ndarray:
+    """(n, n) bool: i rests directly on j (i above j by one block height, centre over j's top)."""
+    d = X[:, None, 2] - X[None, :, 2]
+    return _over(X) & (np.abs(d - HEIGHT_M) <= ON_TOLERANCE_M)
 
 
 def unary_facts(X: np.ndarray) -> dict[str, np.ndarray]:
@@ -50,13 +55,17 @@ def unary_facts(X: np.ndarray) -> dict[str, np.ndarray]:
 
 def relation_facts(X: np.ndarray) -> dict[str, np.ndarray]:
     """Facts about each ordered pair (i, j) of one scene: name -> (n, n) bool (the diagonal unused)."""
-    on = _on(X)
+    on, over = _on(X), _over(X)
     z, y, x = X[:, 2], X[:, 1], X[:, 0]
     dist = np.linalg.norm(X[:, None, :2] - X[None, :, :2], axis=-1)
     t = _type(X)
+    higher = z[:, None] > z[None, :] + 0.02
     return {"i on j": on, "j on i": on.T,
-            "z_i > z_j (i higher)": z[:, None] > z[None, :] + 0.02,
+            "i above j": over & higher, "j above i": over.T & higher.T,
+            "z_i > z_j (i higher)": higher, "z_j > z_i (j higher)": higher.T,
             "z_i <= z_j (vertical order)": z[:, None] <= z[None, :] + 0.02,
+            "same level (|dz| < 2 cm)": np.abs(z[:, None] - z[None, :]) < 0.02,
+            "aligned in x (|dx| < 2 cm)": np.abs(x[:, None] - x[None, :]) < 0.02,
             "y_i < y_j": y[:, None] < y[None, :], "x_i < x_j": x[:, None] < x[None, :],
             "near (< 10 cm)": dist < NEAR_M, "same type": t[:, None] == t[None, :],
             "i large": np.broadcast_to(t[:, None] == 1, on.shape),
@@ -139,6 +148,8 @@ FACT_PHRASES = {
     "on another block": "{i} {neg}on a block", "carries a block": "{i} {neg}carrying a block",
     "left half (y > 0)": "{i} {neg}in the left half", "far half (x > 0.7 m)": "{i} {neg}in the far half",
     "i on j": "{i} {neg}on {j}", "j on i": "{j} {neg}on {i}", "z_i > z_j (i higher)": "{i} {neg}higher than {j}",
+    "i above j": "{i} {neg}above {j}", "j above i": "{j} {neg}above {i}", "z_j > z_i (j higher)": "{j} {neg}higher than {i}",
+    "same level (|dz| < 2 cm)": "{i} {neg}level with {j}", "aligned in x (|dx| < 2 cm)": "{i} {neg}in line with {j} along y",
     "z_i <= z_j (vertical order)": "{i} {neg}at most as high as {j}", "y_i < y_j": "{i} {neg}right of {j}",
     "x_i < x_j": "{i} {neg}nearer the arm than {j}", "near (< 10 cm)": "{i} {neg}near {j}",
     "same type": "{i} {neg}the same type as {j}", "i large": "{i} {neg}large", "j large": "{j} {neg}large"}
@@ -188,6 +199,55 @@ class BitNames:
         text = f"{self.bit(kind, k, i, j)}={int(value)}"
         meaning = self.meaning(kind, k, value, i, j)
         return text if meaning is None else f"{text} ~ {meaning}"
+
+
+TYPE_FACTS = frozenset({"large (type)", "same type", "i large", "j large"})  # what the input features already say
+SPATIAL_PHI = 0.8  # a relation "says where blocks are" when a spatial fact explains it this well
+CONSTANT_RATE = 0.02  # a bit set in under 2 % or over 98 % of the objects (pairs) it is read on carries ~nothing
+
+
+@dataclass
+class SymbolSummary:
+    """The few figures that say whether a Symbolic Model's bits are worth planning with."""
+
+    spatial: list[str]  # relations (i != j) whose best fact is spatial with |phi| >= SPATIAL_PHI
+    constant: list[str]  # bits (any kind) set in under CONSTANT_RATE or over 1 - CONSTANT_RATE
+    typed: list[str]  # bits whose best fact is the block type, which the input already has
+    goals_like_init: int | None = None  # goals whose symbols equal their initial scene's (problem sets)
+    goals: int | None = None
+
+    def lines(self) -> list[str]:
+        out = [f"relations with a spatial meaning (|phi| >= {SPATIAL_PHI}): {len(self.spatial)}"
+               + (f" ({', '.join(self.spatial)})" if self.spatial else ""),
+               f"near-constant bits (rate under {CONSTANT_RATE:.0%} or over {1 - CONSTANT_RATE:.0%}): "
+               + (", ".join(self.constant) or "none"),
+               "bits whose best fact is the block type: " + (", ".join(self.typed) or "none")]
+        if self.goals:
+            assert self.goals_like_init is not None
+            out.append(f"goals whose symbols equal their initial scene's: {self.goals_like_init} of {self.goals} "
+                       f"({100 * self.goals_like_init / self.goals:.1f} %)")
+        return out
+
+
+def summarize_symbols(report: Sequence[BitReport],
+                      symbols: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None,
+                      problems: Sequence[tuple[np.ndarray, np.ndarray]] = (), given: Sequence[str] = ()) -> SymbolSummary:
+    """`SymbolSummary` of a report; with `symbols` and (X_init, X_goal) `problems`, also how many goals
+    read exactly like their initial scene (a symbolic planner cannot tell them apart). `given`: bits
+    that are not learned (the type symbol), left out of the checks."""
+    report = [b for b in report if b.name not in given]
+    spatial = [b.name for b in report if b.name.startswith("r") and "(i,i)" not in b.name
+               and b.best not in TYPE_FACTS and abs(b.phi[b.best]) >= SPATIAL_PHI]
+    constant = [b.name for b in report if not CONSTANT_RATE <= b.rate <= 1 - CONSTANT_RATE]
+    typed = [b.name for b in report if b.best in TYPE_FACTS and abs(b.phi[b.best]) > 0]
+    summary = SymbolSummary(spatial, constant, typed)
+    if symbols is not None and len(problems):
+        same = 0
+        for X_init, X_goal in problems:
+            (ui, ri), (ug, rg) = symbols(np.asarray(X_init, float)), symbols(np.asarray(X_goal, float))
+            same += int(np.array_equal(ui, ug) and np.array_equal(ri, rg))
+        summary.goals_like_init, summary.goals = same, len(problems)
+    return summary
 
 
 def format_symbols_markdown(report: Sequence[BitReport]) -> str:

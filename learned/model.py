@@ -1,8 +1,10 @@
 """The attentive effect predictor of the paper (Symbolic and Dynamics Model share it).
 
     u_i      = act(MLP_u(x_i))                        unary symbol, d_z bits
-    s_k(i,j) = act(q_k(x_i) . k_k(x_j) / sqrt(d_key))  relation k of K (self-attention heads)
-    z_i      = MLP_z([u_i, a_i])                       a_i: per-object action encoding
+    s_k(i,j) = act(q_k(x_i) . k_k(x_j) / sqrt(d_key))  relation k of K (self-attention heads), or with
+               relations="pairwise": act(MLP_r(x_i, x_j, x_j - x_i)_k), which sees the offset directly
+    z_i      = MLP_z([u_i, a_i])                       a_i: per-object action encoding (with type_symbol,
+               u_i ends with the block's given type bit, so that no learned bit or relation must carry it)
     h_i^k    = sum_j s_k(i,j) z_j                      (padded j excluded)
     e_i      = MLP_e([h_i^1, ..., h_i^K])              effect, metres (see ``effects``)
 
@@ -27,6 +29,7 @@ from torch import nn
 from .effects import ACTION_ENC_DIM, STATE_DIM, arm_shift, as_action_array, check_actions, encode_actions
 
 ACTIVATIONS = ("gumbel_sigmoid", "sigmoid", "tanh", "none")
+RELATIONS = ("attention", "pairwise")
 
 
 @dataclass
@@ -42,10 +45,23 @@ class ModelConfig:
     activation: str = "sigmoid"  # one of ACTIVATIONS
     temperature: float = 1.0     # Gumbel-Sigmoid temperature
     arm_input: bool = True       # arm_xy in the action encoding (False: symbols carry the geometry)
+    # relation encoder: "attention" (the paper's q_k(x_i) . k_k(x_j)) or "pairwise" (an MLP of x_i, x_j
+    # and x_j - x_i, so a relation can be a threshold on an offset: on, aligned, near)
+    relations: str = "attention"
+    # the block type (large or not, from the state's one-hot) as a given unary symbol after the d_z learned
+    # bits: the decoder reads it directly, so no learned bit has to spend itself on what the input says
+    type_symbol: bool = False
+
+    @property
+    def n_unary(self) -> int:
+        """Unary symbols per object: the d_z learned bits, then the given type bit (type_symbol)."""
+        return self.d_z + int(self.type_symbol)
 
     def __post_init__(self):
         if self.activation not in ACTIVATIONS:
             raise ValueError(f"activation {self.activation!r} not in {ACTIVATIONS}")
+        if self.relations not in RELATIONS:
+            raise ValueError(f"relations {self.relations!r} not in {RELATIONS}")
         for f in ("n_max", "d_z", "heads", "d_key", "d_msg", "hidden", "layers"):
             if int(getattr(self, f)) < 1:
                 raise ValueError(f"{f} must be >= 1")
@@ -107,10 +123,13 @@ class EffectModel(nn.Module):
         c = self.config = config
         hid = [c.hidden] * c.layers
         self.unary = mlp([STATE_DIM, *hid, c.d_z])
-        self.pre_attention = nn.Sequential(mlp([STATE_DIM, *hid]), nn.ReLU())
-        self.query = nn.Linear(c.hidden, c.heads * c.d_key)
-        self.key = nn.Linear(c.hidden, c.heads * c.d_key)
-        self.object_mlp = mlp([c.d_z + ACTION_ENC_DIM, *hid, c.d_msg])
+        if c.relations == "attention":
+            self.pre_attention = nn.Sequential(mlp([STATE_DIM, *hid]), nn.ReLU())
+            self.query = nn.Linear(c.hidden, c.heads * c.d_key)
+            self.key = nn.Linear(c.hidden, c.heads * c.d_key)
+        else:  # pairwise: [x_i, x_j, (x_j - x_i)[:3]] per ordered pair, K logits out
+            self.pair = mlp([2 * STATE_DIM + 3, *hid, c.heads])
+        self.object_mlp = mlp([c.n_unary + ACTION_ENC_DIM, *hid, c.d_msg])
         self.decoder = mlp([c.heads * c.d_msg, *hid, 3])
         self.bottleneck = Bottleneck(c.activation, c.temperature)
         # Normalisation statistics (metres), set from training data by ``set_normalisation``.
@@ -130,13 +149,23 @@ class EffectModel(nn.Module):
         return torch.cat([(X[..., :3] - self.pos_mean) / self.pos_std, X[..., 3:]], dim=-1)
 
     def unary_logits(self, X: torch.Tensor) -> torch.Tensor:
-        """(B, N, d_z) pre-activation unary symbols."""
+        """(B, N, d_z) pre-activation unary symbols (the learned ones)."""
         return self.unary(self._normalise(X))
 
+    def _with_type(self, u: torch.Tensor, X: torch.Tensor) -> torch.Tensor:
+        """The unary symbols (B, N, d_z) followed by the given type bit (1: large) with type_symbol."""
+        return torch.cat([u, X[..., 4:5].to(u.dtype)], dim=-1) if self.config.type_symbol else u
+
     def relation_logits(self, X: torch.Tensor) -> torch.Tensor:
-        """(B, K, N, N) pre-activation relations q_k(x_i) . k_k(x_j)."""
+        """(B, K, N, N) pre-activation relations: q_k(x_i) . k_k(x_j), or MLP_r(x_i, x_j, x_j - x_i)."""
         B, N, _ = X.shape
         c = self.config
+        if c.relations == "pairwise":
+            x = self._normalise(X)
+            offset = (X[:, None, :, :3] - X[:, :, None, :3]) / self.pos_std  # [b, i, j] = x_j - x_i
+            pair = torch.cat([x[:, :, None].expand(B, N, N, STATE_DIM), x[:, None].expand(B, N, N, STATE_DIM),
+                              offset], dim=-1)
+            return self.pair(pair).permute(0, 3, 1, 2)
         f = self.pre_attention(self._normalise(X))
         q = self.query(f).view(B, N, c.heads, c.d_key).transpose(1, 2)
         k = self.key(f).view(B, N, c.heads, c.d_key).transpose(1, 2)
@@ -144,8 +173,8 @@ class EffectModel(nn.Module):
 
     # -- forward ------------------------------------------------------------------------
     def encode(self, X: torch.Tensor, mask: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """Bottleneck outputs: unary (B, N, d_z) and relations (B, K, N, N), padded j zeroed."""
-        u = self.bottleneck(self.unary_logits(X))
+        """Bottleneck outputs: unary (B, N, n_unary) and relations (B, K, N, N), padded j zeroed."""
+        u = self._with_type(self.bottleneck(self.unary_logits(X)), X)
         r = self.bottleneck(self.relation_logits(X)) * mask.to(X.dtype)[:, None, None, :]
         return u, r
 
@@ -253,7 +282,7 @@ class EffectModel(nn.Module):
 
     @torch.no_grad()
     def symbols(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Discrete symbols of one scene: unary bits (n, d_z) and relation bits (K, n, n), uint8.
+        """Discrete symbols of one scene: unary bits (n, n_unary) and relation bits (K, n, n), uint8.
 
         Deterministic: bit = 1 iff the bottleneck logit > 0 (rounded activation).
         """
@@ -264,18 +293,18 @@ class EffectModel(nn.Module):
     @torch.no_grad()
     def symbols_batch(self, X: np.ndarray, mask: np.ndarray, batch_size: int = 4096
                       ) -> tuple[np.ndarray, np.ndarray]:
-        """Symbols of many padded scenes: unary (S, N, d_z) and relations (S, K, N, N), uint8.
+        """Symbols of many padded scenes: unary (S, N, n_unary) and relations (S, K, N, N), uint8.
 
         For converting whole datasets; padded objects get all-zero bits (in both roles).
         """
         Xt = torch.as_tensor(np.asarray(X), dtype=torch.float32)
         m = torch.as_tensor(np.asarray(mask), dtype=torch.bool)
         S, N = m.shape
-        us = [torch.zeros(0, N, self.config.d_z, dtype=torch.bool)]
+        us = [torch.zeros(0, N, self.config.n_unary, dtype=torch.bool)]
         rs = [torch.zeros(0, self.config.heads, N, N, dtype=torch.bool)]
         for s in range(0, S, batch_size):
             Xb, mb = Xt[s:s + batch_size], m[s:s + batch_size]
-            us.append((self.unary_logits(Xb) > 0) & mb[..., None])
+            us.append((self._with_type((self.unary_logits(Xb) > 0).float(), Xb) > 0.5) & mb[..., None])
             pair = mb[:, None, :, None] & mb[:, None, None, :]
             rs.append((self.relation_logits(Xb) > 0) & pair)
         return (torch.cat(us).to(torch.uint8).numpy(), torch.cat(rs).to(torch.uint8).numpy())

@@ -5,11 +5,12 @@ import pytest
 
 import learned
 from tamp.app.cli import main
-from tamp.app.commands_learning import BOTTLENECKS
+from tamp.app.commands_learning import BOTTLENECKS, RELATION_ENCODERS
 
 
 def test_bottleneck_choices_match_the_model():
     assert tuple(BOTTLENECKS) == tuple(learned.ACTIVATIONS)
+    assert tuple(RELATION_ENCODERS) == tuple(learned.RELATIONS)
 
 
 @pytest.fixture(scope="module")

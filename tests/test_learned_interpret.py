@@ -6,7 +6,7 @@ import json
 import numpy as np
 import pytest
 
-from learned.interpret import interpret_symbols, relation_facts, unary_facts
+from learned.interpret import interpret_symbols, relation_facts, summarize_symbols, unary_facts
 
 ON_BAR = np.array([[0.6, 0.0, 0.025, 0, 1], [0.6, 0.05, 0.075, 1, 0], [0.75, 0.2, 0.025, 1, 0]])
 FLAT = np.array([[0.5, -0.1, 0.025, 1, 0], [0.7, 0.1, 0.025, 0, 1], [0.8, 0.3, 0.025, 1, 0]])
@@ -21,6 +21,10 @@ def test_facts_of_a_cube_on_a_bar():
     r = relation_facts(ON_BAR)
     assert np.argwhere(r["i on j"]).tolist() == [[1, 0]] and np.argwhere(r["j on i"]).tolist() == [[0, 1]]
     assert r["near (< 10 cm)"][0, 1] and not r["near (< 10 cm)"][0, 2]
+    assert np.argwhere(r["i above j"]).tolist() == [[1, 0]] and np.argwhere(r["j above i"]).tolist() == [[0, 1]]
+    assert r["z_j > z_i (j higher)"][0, 1] and not r["z_j > z_i (j higher)"][1, 0]
+    assert r["aligned in x (|dx| < 2 cm)"][0, 1] and not r["aligned in x (|dx| < 2 cm)"][0, 2]
+    assert r["same level (|dz| < 2 cm)"][0, 2] and not r["same level (|dz| < 2 cm)"][0, 1]
     assert not relation_facts(FLAT)["i on j"].any()
 
 
@@ -37,6 +41,23 @@ def test_a_fact_bit_is_recognised_and_a_constant_bit_is_not_credited():
     assert report["r0"].best == "j on i" and report["r0"].phi["j on i"] == pytest.approx(1.0)
     assert report["r0"].count == 36
     assert report["r0"].phi["i on j"] < 0.0  # the reverse relation is not mistaken for it
+
+
+def test_the_summary_counts_spatial_constant_and_type_bits_and_goals_that_read_like_their_scene():
+    def symbols(X):
+        r = relation_facts(X)
+        rel = np.stack([r["j on i"], r["same type"], np.zeros((len(X), len(X)), bool)])
+        return (X[:, 2:3] > 0.04).astype(np.uint8), rel.astype(np.uint8)
+
+    report = interpret_symbols(symbols, [ON_BAR, FLAT] * 3)
+    moved = FLAT.copy()
+    moved[0, 0] += 0.2  # slid across the table: no fact above changes
+    summary = summarize_symbols(report, symbols, [(FLAT, ON_BAR), (FLAT, moved)])
+    assert summary.spatial == ["r0"]
+    assert summary.typed == ["r1"]
+    assert "r2" in summary.constant and "r0" not in summary.constant
+    assert (summary.goals_like_init, summary.goals) == (1, 2)
+    assert "1 of 2 (50.0 %)" in summary.lines()[-1]
 
 
 def test_cli_prints_the_table_and_writes_png_and_json(tmp_path, capsys):

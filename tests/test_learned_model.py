@@ -15,8 +15,11 @@ def make_model(activation="sigmoid", seed=0, **kw) -> EffectModel:
     m = EffectModel(ModelConfig(hidden=32, d_msg=16, d_z=6, heads=3, activation=activation, **kw))
     m.set_normalisation([0.65, 0.0, 0.05], [0.12, 0.2, 0.03], effect_scale=0.05, arm_scale=0.2)
     with torch.no_grad():  # sharper relations than at init, so every head matters
-        m.query.weight.mul_(4)
-        m.key.weight.mul_(4)
+        if m.config.relations == "attention":
+            m.query.weight.mul_(4)
+            m.key.weight.mul_(4)
+        else:
+            m.pair[-1].weight.mul_(4)
     return m.eval()
 
 
@@ -28,9 +31,13 @@ def all_actions(n):
     return [(i, d, j, r) for i in range(n) for d in (-1, 0, 1) for j in range(n) for r in (-1, 0, 1)]
 
 
-@pytest.mark.parametrize("activation", ["sigmoid", "gumbel_sigmoid", "tanh", "none"])
-def test_permuting_objects_permutes_effects_and_symbols(activation):
-    m = make_model(activation, seed=1)
+@pytest.mark.parametrize("activation,relations", [("sigmoid", "attention"), ("gumbel_sigmoid", "attention"),
+                                                  ("tanh", "attention"), ("none", "attention"),
+                                                  ("gumbel_sigmoid", "pairwise"), ("sigmoid", "pairwise"),
+                                                  ("gumbel_sigmoid", "pairwise+type")])
+def test_permuting_objects_permutes_effects_and_symbols(activation, relations):
+    typed = relations.endswith("+type")
+    m = make_model(activation, seed=1, relations=relations.removesuffix("+type"), type_symbol=typed)
     X = scene(4, seed=2)
     acts = np.array(all_actions(4))
     perm = np.array([2, 0, 3, 1])          # new object k is old object perm[k]
@@ -48,11 +55,16 @@ def test_permuting_objects_permutes_effects_and_symbols(activation):
     assert 0 < u.mean() < 1 and 0 < r.mean() < 1, "symbols too uniform for a meaningful test"
     np.testing.assert_array_equal(u_p, u[perm])
     np.testing.assert_array_equal(r_p, r[:, perm][:, :, perm])
+    assert u.shape[1] == m.config.n_unary == m.config.d_z + typed
+    if typed:  # the last unary symbol is the given type: 1 for a large block
+        np.testing.assert_array_equal(u[:, -1], X[:, 4])
 
 
-@pytest.mark.parametrize("activation", ["sigmoid", "gumbel_sigmoid"])
-def test_padding_does_not_change_predictions(activation):
-    m = make_model(activation, seed=3)
+@pytest.mark.parametrize("activation,relations,typed", [("sigmoid", "attention", False),
+                                                        ("gumbel_sigmoid", "attention", False),
+                                                        ("gumbel_sigmoid", "pairwise", True)])
+def test_padding_does_not_change_predictions(activation, relations, typed):
+    m = make_model(activation, seed=3, relations=relations, type_symbol=typed)
     X = torch.tensor(scene(2, seed=4), dtype=torch.float32)[None]
     acts = torch.tensor(all_actions(2))
     B = acts.shape[0]
@@ -135,8 +147,9 @@ def test_gumbel_is_stochastic_in_training_and_binary_at_inference():
     assert m.training and m.bottleneck.training
 
 
-def test_checkpoint_round_trips_exactly(tmp_path):
-    m = make_model("tanh", seed=9)
+@pytest.mark.parametrize("relations", ["attention", "pairwise"])
+def test_checkpoint_round_trips_exactly(tmp_path, relations):
+    m = make_model("tanh", seed=9, relations=relations)
     path = tmp_path / "m.pt"
     save_checkpoint(path, m)
     m2 = load_model(path)
@@ -148,6 +161,26 @@ def test_checkpoint_round_trips_exactly(tmp_path):
                                   m.predict_effect(X, all_actions(4)))
     for a, b in zip(m.symbols(X), m2.symbols(X)):
         np.testing.assert_array_equal(a, b)
+
+
+def test_pairwise_relations_read_the_offset_between_two_objects():
+    """A pairwise relation is a function of (x_i, x_j, x_j - x_i): one whose last layer reads only the
+    offset's height is "j higher than i" exactly, which the attention form q(x_i) . k(x_j) cannot be."""
+    torch.manual_seed(0)
+    m = EffectModel(ModelConfig(hidden=8, layers=1, d_z=1, heads=1, activation="gumbel_sigmoid",
+                                relations="pairwise"))
+    m.set_normalisation([0.65, 0.0, 0.05], [0.12, 0.2, 0.03], effect_scale=0.05, arm_scale=0.2)
+    with torch.no_grad():  # offsets are read in units of pos_std (z: 3 cm); hidden unit 0 = relu(dz), unit 1 = relu(-dz); logit = unit 0 - unit 1 - 0.5
+        for param in m.pair.parameters():
+            param.zero_()
+        m.pair[0].weight[0, 12], m.pair[0].weight[1, 12] = 1.0, -1.0
+        m.pair[-1].weight[0, 0], m.pair[-1].weight[0, 1], m.pair[-1].bias[0] = 1.0, -1.0, -0.5
+    X = scene(4, seed=11)
+    X[:, 2] = [0.025, 0.075, 0.125, 0.025]
+    _, r = m.eval().symbols(X)
+    np.testing.assert_array_equal(r[0], (X[None, :, 2] - X[:, None, 2] > 0.5 * 0.03).astype(np.uint8))
+    with pytest.raises(ValueError, match="relations"):
+        ModelConfig(relations="dense")
 
 
 def test_foreign_or_corrupt_checkpoints_give_clear_errors(tmp_path):

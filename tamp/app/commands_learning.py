@@ -16,6 +16,7 @@ from tamp.errors import UserError
 
 # learned.ACTIVATIONS, spelled out so that `tamp --help` does not import torch (tests check they agree).
 BOTTLENECKS = ("gumbel_sigmoid", "sigmoid", "tanh", "none")
+RELATION_ENCODERS = ("attention", "pairwise")  # learned.RELATIONS
 TRAIN_PATIENCE = 100  # learned.TrainConfig.fast().patience_epochs, for the same reason
 
 
@@ -29,7 +30,9 @@ def cmd_train(args: argparse.Namespace) -> int:
         raise UserError(f"--resume: no training state at {last_path(Path(args.out))} to continue from "
                          "(leave out --resume to start a new training)")
     asked = {k: v for k, v in (("activation", args.bottleneck), ("d_z", args.d_z), ("heads", args.heads),
-                               ("arm_input", False if args.no_arm_input else None)) if v is not None}
+                               ("arm_input", False if args.no_arm_input else None),
+                               ("relations", args.relations),
+                               ("type_symbol", True if args.type_symbol else None)) if v is not None}
     asked["n_max"] = max(int(read_meta(d)["n_max"]) for d in args.data)  # the object limit of the data
     if args.init is None:
         config = ModelConfig.from_dict(asked)
@@ -126,6 +129,14 @@ def add_train(sub) -> None:
                    help="unary symbol bits per object (default: learned.ModelConfig's; more bits, more operators)")
     p.add_argument("--heads", type=positive_int, default=None,
                    help="relation types = attention heads (default: learned.ModelConfig's)")
+    p.add_argument("--relations", choices=RELATION_ENCODERS, default=None,
+                   help="relation encoder: attention = the paper's q_k(x_i) . k_k(x_j) (default, or --init's); "
+                   "pairwise = an MLP of x_i, x_j and their offset x_j - x_i, which can learn spatial relations "
+                   "(on, aligned, near)")
+    p.add_argument("--type-symbol", action="store_true",
+                   help="give the decoder each block's type (large or not) as a fixed unary symbol after the "
+                   "learned bits, so that no learned bit or relation is spent on it (the domain then has d_z + 1 "
+                   "unary symbols)")
     _add_train_arguments(p)
     p.add_argument("--time-limit-min", type=positive_float, default=None, metavar="MIN",
                    help="stop after the epoch that passes this wall time; the run is unfinished, --resume continues")

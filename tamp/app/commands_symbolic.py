@@ -21,7 +21,7 @@ from tamp.errors import UserError
 def cmd_symbols(args: argparse.Namespace) -> int:
     """What each learned bit of a Symbolic Model means, on held-out scenes."""
     from learned import load_model
-    from learned.interpret import format_symbols_markdown, interpret_symbols, write_symbols_png
+    from learned.interpret import format_symbols_markdown, interpret_symbols, summarize_symbols, write_symbols_png
 
     for path, flag in ((args.json, "--json"), (args.png, "--png")):
         if path is not None:
@@ -29,9 +29,15 @@ def cmd_symbols(args: argparse.Namespace) -> int:
     model = load_model(args.model)
     scenes = symbol_scenes(args.problems, args.data, args.max_scenes, args.seed)
     report = interpret_symbols(model.symbols, scenes)
-    print(f"{args.model}: d_z = {model.config.d_z} unary bit(s), K = {model.config.heads} relation(s), read on "
-          f"{len(scenes)} scenes of {args.problems or args.data}")
+    pairs = list(zip(scenes[0::2], scenes[1::2])) if args.problems is not None else []
+    cfg = model.config
+    given = [f"u{cfg.d_z}"] if cfg.type_symbol else []
+    summary = summarize_symbols(report, model.symbols, pairs, given)
+    print(f"{args.model}: d_z = {cfg.d_z} learned unary bit(s)" + (f" and the given type as {given[0]}" if given else "")
+          + f", K = {cfg.heads} {cfg.relations} relation(s), read on {len(scenes)} scenes of "
+          f"{args.problems or args.data}")
     print(format_symbols_markdown(report))
+    print("\n".join(summary.lines()))
     if args.json is not None:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps([b.to_dict() for b in report], indent=1) + "\n")

@@ -135,15 +135,15 @@ def load_models(directory: str | Path, need_symbolic: bool | None = True) -> Mod
         require_kind(models.symbolic, "symbolic", paths["symbolic"])
         models.domain = symbolic.load_domain(directory / DOMAIN_DIR)
         cfg = models.symbolic.config
-        if (cfg.d_z, cfg.heads) != (models.domain.n_unary, models.domain.n_relations):
-            raise UserError(f"{paths['symbolic']} has d_z={cfg.d_z}, K={cfg.heads} but the domain in "
+        if (cfg.n_unary, cfg.heads) != (models.domain.n_unary, models.domain.n_relations):
+            raise UserError(f"{paths['symbolic']} has {cfg.n_unary} unary symbol(s), K={cfg.heads} but the domain in "
                              f"{paths['domain'].parent} was learned with d_z={models.domain.n_unary}, "
                              f"K={models.domain.n_relations}")
         from symbolic.lifted import max_arity
 
-        largest, limit = max((op.arity for op in models.domain.operators), default=0), max_arity(cfg.d_z, cfg.heads)
+        largest, limit = max((op.arity for op in models.domain.operators), default=0), max_arity(cfg.n_unary, cfg.heads)
         if largest > limit:  # the lifted search (Level 1, the per-step records) would refuse every problem
             raise UserError(f"{paths['domain']} has operators of arity {largest}, but the symbolic search takes at "
-                            f"most {limit} with d_z={cfg.d_z}, K={cfg.heads}: learn the domain again with "
+                            f"most {limit} with {cfg.n_unary} unary symbol(s), K={cfg.heads}: learn the domain again with "
                             "`tamp domain` (its --max-arity keeps to the limit by default)")
     return models
