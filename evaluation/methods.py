@@ -145,8 +145,8 @@ def load_method_models(models_dir: str | Path, methods: Sequence[str]) -> dict[s
         model, domain = learned.load_model(path), symbolic.load_domain(domain_dir)
         cfg = model.config
         if (cfg.n_unary, cfg.heads) != (domain.n_unary, domain.n_relations):
-            raise UserError(f"{path} has {cfg.n_unary} unary symbol(s), K={cfg.heads} but the domain in {domain_dir} was "
-                             f"learned with d_z={domain.n_unary}, K={domain.n_relations}")
+            raise UserError(f"{path} has {cfg.n_unary} unary symbol(s), K={cfg.heads} but the domain in "
+                             f"{domain_dir} was learned with d_z={domain.n_unary}, K={domain.n_relations}")
         sets["symbolic_sigmoid"] = Models(sets["default"].dynamics, model, domain)
     if "dynamics_gumbel" in needed:
         sets["dynamics_gumbel"] = Models(learned.load_model(models_dir / VARIANTS_DIR / DYNAMICS_GUMBEL))

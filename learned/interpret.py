@@ -6,8 +6,8 @@
 For every unary bit u_b(i) and relation r_k(i, j) (i != j; the self relation r_k(i, i) is read as a
 unary bit) the report gives its rate (how often it is 1) and its agreement with each fact a reader
 understands: block type, resting on another block, carrying one, left / right along y, near, on top
-of, above (over the footprint, any height), vertical order, level, in line along the offset axis (y). Agreement is the share of objects (pairs) where the bit equals the fact, or its
-negation (polarity "not"), whichever is higher; phi (the Matthews correlation) is given beside it,
+of, above (over the footprint, any height), vertical order, level, in line along the offset axis (y).
+Agreement is the share of objects (pairs) where the bit equals the fact, or its negation (polarity "not"), whichever is higher; phi (the Matthews correlation) is given beside it,
 because a rare fact agrees with an almost-always-0 bit without meaning anything. The facts are
 computed from X alone (upright blocks, sizes of `effects.TYPE_NAMES`), so any scene source works:
 the scenes of a problem set (never trained on) or of a dataset.
@@ -148,8 +148,9 @@ FACT_PHRASES = {
     "on another block": "{i} {neg}on a block", "carries a block": "{i} {neg}carrying a block",
     "left half (y > 0)": "{i} {neg}in the left half", "far half (x > 0.7 m)": "{i} {neg}in the far half",
     "i on j": "{i} {neg}on {j}", "j on i": "{j} {neg}on {i}", "z_i > z_j (i higher)": "{i} {neg}higher than {j}",
-    "i above j": "{i} {neg}above {j}", "j above i": "{j} {neg}above {i}", "z_j > z_i (j higher)": "{j} {neg}higher than {i}",
-    "same level (|dz| < 2 cm)": "{i} {neg}level with {j}", "aligned in x (|dx| < 2 cm)": "{i} {neg}in line with {j} along y",
+    "i above j": "{i} {neg}above {j}", "j above i": "{j} {neg}above {i}",
+    "z_j > z_i (j higher)": "{j} {neg}higher than {i}", "same level (|dz| < 2 cm)": "{i} {neg}level with {j}",
+    "aligned in x (|dx| < 2 cm)": "{i} {neg}in line with {j} along y",
     "z_i <= z_j (vertical order)": "{i} {neg}at most as high as {j}", "y_i < y_j": "{i} {neg}right of {j}",
     "x_i < x_j": "{i} {neg}nearer the arm than {j}", "near (< 10 cm)": "{i} {neg}near {j}",
     "same type": "{i} {neg}the same type as {j}", "i large": "{i} {neg}large", "j large": "{j} {neg}large"}
