@@ -6,11 +6,12 @@
 For every unary bit u_b(i) and relation r_k(i, j) (i != j; the self relation r_k(i, i) is read as a
 unary bit) the report gives its rate (how often it is 1) and its agreement with each fact a reader
 understands: block type, resting on another block, carrying one, left / right along y, near, on top
-of, above (over the footprint, any height), vertical order, level, in line along the offset axis (y).
-Agreement is the share of objects (pairs) where the bit equals the fact, or its negation (polarity "not"), whichever is higher; phi (the Matthews correlation) is given beside it,
-because a rare fact agrees with an almost-always-0 bit without meaning anything. The facts are
-computed from X alone (upright blocks, sizes of `effects.TYPE_NAMES`), so any scene source works:
-the scenes of a problem set (never trained on) or of a dataset.
+of, above (over the footprint, any height), vertical order, level, in line along the offset axis
+(y). Agreement is the share of objects (pairs) where the bit equals the fact, or its negation
+(polarity "not"), whichever is higher; phi (the Matthews correlation) is given beside it, because a
+rare fact agrees with an almost-always-0 bit without meaning anything. The facts are computed from X
+alone (upright blocks, sizes of `effects.TYPE_NAMES`), so any scene source works: the scenes of a
+problem set (never trained on) or of a dataset.
 """
 from __future__ import annotations
 
@@ -232,7 +233,8 @@ class SymbolSummary:
 
 def summarize_symbols(report: Sequence[BitReport],
                       symbols: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None,
-                      problems: Sequence[tuple[np.ndarray, np.ndarray]] = (), given: Sequence[str] = ()) -> SymbolSummary:
+                      problems: Sequence[tuple[np.ndarray, np.ndarray]] = (),
+                      given: Sequence[str] = ()) -> SymbolSummary:
     """`SymbolSummary` of a report; with `symbols` and (X_init, X_goal) `problems`, also how many goals
     read exactly like their initial scene (a symbolic planner cannot tell them apart). `given`: bits
     that are not learned (the type symbol), left out of the checks."""

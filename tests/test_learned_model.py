@@ -170,7 +170,9 @@ def test_pairwise_relations_read_the_offset_between_two_objects():
     m = EffectModel(ModelConfig(hidden=8, layers=1, d_z=1, heads=1, activation="gumbel_sigmoid",
                                 relations="pairwise"))
     m.set_normalisation([0.65, 0.0, 0.05], [0.12, 0.2, 0.03], effect_scale=0.05, arm_scale=0.2)
-    with torch.no_grad():  # offsets are read in units of pos_std (z: 3 cm); hidden unit 0 = relu(dz), unit 1 = relu(-dz); logit = unit 0 - unit 1 - 0.5
+    # offsets are read in units of pos_std (z: 3 cm); hidden unit 0 = relu(dz), unit 1 = relu(-dz);
+    # logit = unit 0 - unit 1 - 0.5
+    with torch.no_grad():
         for param in m.pair.parameters():
             param.zero_()
         m.pair[0].weight[0, 12], m.pair[0].weight[1, 12] = 1.0, -1.0

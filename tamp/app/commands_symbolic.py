@@ -33,7 +33,8 @@ def cmd_symbols(args: argparse.Namespace) -> int:
     cfg = model.config
     given = [f"u{cfg.d_z}"] if cfg.type_symbol else []
     summary = summarize_symbols(report, model.symbols, pairs, given)
-    print(f"{args.model}: d_z = {cfg.d_z} learned unary bit(s)" + (f" and the given type as {given[0]}" if given else "")
+    print(f"{args.model}: d_z = {cfg.d_z} learned unary bit(s)"
+          + (f" and the given type as {given[0]}" if given else "")
           + f", K = {cfg.heads} {cfg.relations} relation(s), read on {len(scenes)} scenes of "
           f"{args.problems or args.data}")
     print(format_symbols_markdown(report))

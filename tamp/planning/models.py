@@ -144,6 +144,6 @@ def load_models(directory: str | Path, need_symbolic: bool | None = True) -> Mod
         largest, limit = max((op.arity for op in models.domain.operators), default=0), max_arity(cfg.n_unary, cfg.heads)
         if largest > limit:  # the lifted search (Level 1, the per-step records) would refuse every problem
             raise UserError(f"{paths['domain']} has operators of arity {largest}, but the symbolic search takes at "
-                            f"most {limit} with {cfg.n_unary} unary symbol(s), K={cfg.heads}: learn the domain again with "
-                            "`tamp domain` (its --max-arity keeps to the limit by default)")
+                            f"most {limit} with {cfg.n_unary} unary symbol(s), K={cfg.heads}: learn the domain again "
+                            "with `tamp domain` (its --max-arity keeps to the limit by default)")
     return models
