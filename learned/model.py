@@ -2,7 +2,8 @@
 
     u_i      = act(MLP_u(x_i))                        unary symbol, d_z bits
     s_k(i,j) = act(q_k(x_i) . k_k(x_j) / sqrt(d_key))  relation k of K (self-attention heads), or with
-               relations="pairwise": act(MLP_r(x_i, x_j, x_j - x_i)_k), which sees the offset directly
+               relations="pairwise": act(MLP_r(x_i, x_j, x_j - x_i)_k), which sees the offset directly,
+               and s_k(i,i) = 1 (each object always hears itself; the diagonal is no learned bit)
     z_i      = MLP_z([u_i, a_i])                       a_i: per-object action encoding (with type_symbol,
                u_i ends with the block's given type bit, so that no learned bit or relation must carry it)
     h_i^k    = sum_j s_k(i,j) z_j                      (padded j excluded)
@@ -30,6 +31,7 @@ from .effects import ACTION_ENC_DIM, STATE_DIM, arm_shift, as_action_array, chec
 
 ACTIVATIONS = ("gumbel_sigmoid", "sigmoid", "tanh", "none")
 RELATIONS = ("attention", "pairwise")
+SELF_LOGIT = 30.0  # pairwise r_k(i, i): a logit whose Gumbel-Sigmoid sample is 1 but for ~1e-13 of draws
 
 
 @dataclass
@@ -46,7 +48,7 @@ class ModelConfig:
     temperature: float = 1.0     # Gumbel-Sigmoid temperature
     arm_input: bool = True       # arm_xy in the action encoding (False: symbols carry the geometry)
     # relation encoder: "attention" (the paper's q_k(x_i) . k_k(x_j)) or "pairwise" (an MLP of x_i, x_j
-    # and x_j - x_i, so a relation can be a threshold on an offset: on, aligned, near)
+    # and x_j - x_i, so a relation can be a threshold on an offset: on, aligned, near; r_k(i, i) = 1)
     relations: str = "attention"
     # the block type (large or not, from the state's one-hot) as a given unary symbol after the d_z learned
     # bits: the decoder reads it directly, so no learned bit has to spend itself on what the input says
@@ -165,7 +167,10 @@ class EffectModel(nn.Module):
             offset = (X[:, None, :, :3] - X[:, :, None, :3]) / self.pos_std  # [b, i, j] = x_j - x_i
             pair = torch.cat([x[:, :, None].expand(B, N, N, STATE_DIM), x[:, None].expand(B, N, N, STATE_DIM),
                               offset], dim=-1)
-            return self.pair(pair).permute(0, 3, 1, 2)
+            logits = self.pair(pair).permute(0, 3, 1, 2)
+            # r_k(i, i) = 1: every head hears the object itself; the diagonal carries no learned bit
+            eye = torch.eye(N, dtype=torch.bool, device=X.device)
+            return logits.masked_fill(eye, SELF_LOGIT)
         f = self.pre_attention(self._normalise(X))
         q = self.query(f).view(B, N, c.heads, c.d_key).transpose(1, 2)
         k = self.key(f).view(B, N, c.heads, c.d_key).transpose(1, 2)

@@ -180,7 +180,9 @@ def test_pairwise_relations_read_the_offset_between_two_objects():
     X = scene(4, seed=11)
     X[:, 2] = [0.025, 0.075, 0.125, 0.025]
     _, r = m.eval().symbols(X)
-    np.testing.assert_array_equal(r[0], (X[None, :, 2] - X[:, None, 2] > 0.5 * 0.03).astype(np.uint8))
+    expected = (X[None, :, 2] - X[:, None, 2] > 0.5 * 0.03).astype(np.uint8)
+    np.fill_diagonal(expected, 1)  # r(i, i) = 1 by construction: each object hears itself
+    np.testing.assert_array_equal(r[0], expected)
     with pytest.raises(ValueError, match="relations"):
         ModelConfig(relations="dense")
 

@@ -31,10 +31,11 @@ def cmd_symbols(args: argparse.Namespace) -> int:
     report = interpret_symbols(model.symbols, scenes)
     pairs = list(zip(scenes[0::2], scenes[1::2])) if args.problems is not None else []
     cfg = model.config
-    given = [f"u{cfg.d_z}"] if cfg.type_symbol else []
+    given = ([f"u{cfg.d_z}"] if cfg.type_symbol else []) + \
+        ([f"r{k}(i,i)" for k in range(cfg.heads)] if cfg.relations == "pairwise" else [])
     summary = summarize_symbols(report, model.symbols, pairs, given)
     print(f"{args.model}: d_z = {cfg.d_z} learned unary bit(s)"
-          + (f" and the given type as {given[0]}" if given else "")
+          + (f" and the given type as u{cfg.d_z}" if cfg.type_symbol else "")
           + f", K = {cfg.heads} {cfg.relations} relation(s), read on {len(scenes)} scenes of "
           f"{args.problems or args.data}")
     print(format_symbols_markdown(report))
