@@ -99,6 +99,9 @@ class TrainConfig:
     max_steps: int | None = None  # optimizer steps at most
     target_val_cm: float | None = None  # stop once the validation error reaches this
     time_limit_s: float | None = None  # wall-clock cap of one call: the run is then unfinished, resumable
+    # weight of a penalty on each learned bit (unary, and relation over pairs i != j) whose batch rate
+    # leaves [USAGE_LOW, 1 - USAGE_LOW]: a head the effect loss could leave constant stays in use (0: off)
+    bit_usage: float = 0.0
 
     def __post_init__(self) -> None:
         if self.precision not in ("float32", "bfloat16"):
@@ -110,6 +113,8 @@ class TrainConfig:
                              f"{self.batch_size}, {self.lr}")
         if not 0.0 < self.val_fraction < 1.0:
             raise ValueError(f"val_fraction must be in (0, 1), got {self.val_fraction}")
+        if not self.bit_usage >= 0.0:
+            raise ValueError(f"bit_usage must be >= 0, got {self.bit_usage}")
 
     @classmethod
     def fast(cls, batch_size: int = 1024, **changes: Any) -> "TrainConfig":
@@ -148,9 +153,32 @@ def train_options(train: TrainConfig, num_train: int, num_val: int, init: str | 
             "batch_size": train.batch_size, "lr": train.lr, "val_fraction": train.val_fraction,
             "seed": train.seed, "num_train": num_train, "num_val": num_val,
             **({"only_moved": True} if train.only_moved else {}),
+            **({"bit_usage": train.bit_usage} if train.bit_usage else {}),
             **({"precision": train.precision} if train.precision != "float32" else {}),
             **({"patience_epochs": train.patience_epochs, "min_delta_cm": train.min_delta_cm}
                if train.patience_epochs is not None else {})}
+
+
+USAGE_LOW = 0.05  # `TrainConfig.bit_usage`: a bit set in under 5 % or over 95 % of a batch is penalised
+USAGE_SHARPNESS = 4.0  # the rate counts sigmoid(4 logit): close to the read bit (logit > 0), with a gradient
+
+
+def bit_usage_penalty(model: EffectModel, X: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+    """Sum over learned bits of how far each one's rate in the batch lies outside [USAGE_LOW, 1 -
+    USAGE_LOW], in units of USAGE_LOW: 0 for bits in use, 1 for a bit that is always 0 or always 1.
+    The rate is that of the bits as read (logit > 0), made differentiable (`USAGE_SHARPNESS`), not of
+    the Gumbel samples, whose noise sets a bit now and then whatever its logit. X (B, N, 5), mask
+    (B, N) the real objects; the given type symbol and the diagonal r_k(i, i) are no learned bits."""
+    m = mask.float()
+    u = torch.sigmoid(USAGE_SHARPNESS * model.unary_logits(X).float())
+    rates = [(u * m[..., None]).sum(dim=(0, 1)) / m.sum()]
+    N = mask.shape[1]
+    pairs = (m[:, :, None] * m[:, None, :]) * (1 - torch.eye(N, dtype=m.dtype))
+    if float(pairs.sum()) > 0:
+        r = torch.sigmoid(USAGE_SHARPNESS * model.relation_logits(X).float())
+        rates.append((r * pairs[:, None]).sum(dim=(0, 2, 3)) / pairs.sum())
+    rate = torch.cat(rates)
+    return (torch.relu(USAGE_LOW - rate) + torch.relu(rate - 1 + USAGE_LOW)).sum() / USAGE_LOW
 
 
 def last_path(out_path: str | Path) -> Path:
@@ -361,8 +389,11 @@ def train_model(data: "str | Path | Sequence[str | Path] | Transitions", config:
             X, A, M, T = Xe[batch], Ae[batch], Me[batch], Te[batch]
             with torch.autocast("cpu", dtype=torch.bfloat16, enabled=train.precision == "bfloat16"):
                 pred = model(X, A, M)
+                usage = bit_usage_penalty(model, X, M) if train.bit_usage else None
             d = pred.float() - T
             loss = (d / scale).pow(2).sum(dim=(1, 2)).mean()
+            if usage is not None:
+                loss = loss + train.bit_usage * usage
             opt.zero_grad(set_to_none=True)
             loss.backward()
             opt.step()

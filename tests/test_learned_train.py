@@ -117,6 +117,47 @@ def test_only_moved_trains_on_the_transitions_that_moved_the_picked_block(tmp_pa
     assert res.best_epoch == 0
 
 
+def test_the_bit_usage_penalty_counts_constant_bits_and_leaves_the_given_ones_out():
+    from learned import EffectModel
+    from learned.train import bit_usage_penalty
+
+    model = EffectModel(ModelConfig(hidden=8, layers=1, d_msg=8, d_z=2, heads=2, relations="pairwise",
+                                    type_symbol=True))
+    model.set_normalisation([0.0, 0.0, 0.0], [1.0, 1.0, 1.0], effect_scale=0.05, arm_scale=0.2)
+    with torch.no_grad():  # unary bit 0: x > 0, bit 1: never; relation 0: always, relation 1: x_j - x_i > 0.5
+        for param in [*model.unary.parameters(), *model.pair.parameters()]:
+            param.zero_()
+        model.unary[0].weight[0, 0], model.unary[-1].weight[0, 0] = 1.0, 100.0  # logit 100 relu(x) - 1
+        model.unary[-1].bias[0], model.unary[-1].bias[1] = -1.0, -100.0
+        model.pair[0].weight[0, 10] = 1.0  # hidden unit 0 = relu(x_j - x_i)
+        model.pair[-1].bias[0] = 100.0
+        model.pair[-1].weight[1, 0], model.pair[-1].bias[1] = 100.0, -50.0
+    X = torch.zeros(4, 4, 5)
+    X[..., 0] = torch.tensor([-1.0, 1.0, 2.0, 9.0])  # object 3 is padding: it does not count
+    X[..., 4] = 1.0  # all large: the given type bit is constant, but it is no learned bit
+    mask = torch.tensor([[True, True, True, False]] * 4)
+    assert float(bit_usage_penalty(model, X, mask)) == pytest.approx(2.0, abs=1e-3)  # unary 1 and relation 0
+    X[..., 0] = torch.tensor([0.0, 0.1, 0.2, 9.0])  # no real pair 0.5 apart: relation 1 is never set
+    assert float(bit_usage_penalty(model, X, mask)) == pytest.approx(3.0, abs=1e-3)
+
+
+def test_the_bit_usage_penalty_keeps_relations_the_effect_loss_leaves_constant(tmp_path):
+    """On the synthetic data the effect loss alone leaves every pairwise relation at 0; with the
+    penalty each one is set on some pairs, and the checkpoint records the weight."""
+    data = generate(600, seed=5)
+    pairs = data.mask[:, :, None] & data.mask[:, None, :] & ~np.eye(data.mask.shape[1], dtype=bool)
+    config = ModelConfig(hidden=32, d_msg=16, d_z=2, heads=3, activation="gumbel_sigmoid", relations="pairwise")
+    rates = {}
+    for weight in (0.0, 1.0):
+        fit(data, config, 60, tmp_path / f"m{weight}.pt", lr=3e-3, seed=0, bit_usage=weight)
+        _, r = load_model(tmp_path / f"m{weight}.pt").symbols_batch(data.X, data.mask)
+        rates[weight] = [float(r[:, k][pairs].mean()) for k in range(3)]
+    assert max(rates[0.0]) < 0.01, rates
+    assert min(rates[1.0]) > 0.03, rates
+    assert torch.load(tmp_path / "m1.0.pt", weights_only=True)["train"]["options"]["bit_usage"] == 1.0
+    assert "bit_usage" not in torch.load(tmp_path / "m0.0.pt", weights_only=True)["train"]["options"]
+
+
 TINY = ModelConfig(hidden=16, d_msg=8, d_z=4, heads=2, activation="gumbel_sigmoid")
 
 

@@ -8,6 +8,7 @@ from tamp.app.args import (
     check_output_dir,
     check_output_file,
     fraction,
+    non_negative_float,
     non_negative_int,
     positive_float,
     positive_int,
@@ -41,6 +42,7 @@ def cmd_train(args: argparse.Namespace) -> int:
 
         config = ModelConfig.from_dict({**load_model(args.init).config.to_dict(), **asked})
     settings = _train_config(args, only_moved=args.only_moved, val_fraction=args.val_fraction,
+                             bit_usage=args.bit_usage,
                              time_limit_s=None if args.time_limit_min is None else 60 * args.time_limit_min)
     result = train_model(args.data, config, settings, args.out, resume=args.resume, init=args.init)
     print(f"best validation effect error {result.best_val_cm:.2f} cm (epoch {result.best_epoch}) -> {result.out_path}")
@@ -137,6 +139,9 @@ def add_train(sub) -> None:
                    help="give the decoder each block's type (large or not) as a fixed unary symbol after the "
                    "learned bits, so that no learned bit or relation is spent on it (the domain then has d_z + 1 "
                    "unary symbols)")
+    p.add_argument("--bit-usage", type=non_negative_float, default=0.0, metavar="WEIGHT",
+                   help="weight of a penalty on learned bits and relations set in under 5 %% or over 95 %% of a "
+                   "batch, so that the effect loss cannot leave a relation constant (default 0: the paper's loss)")
     _add_train_arguments(p)
     p.add_argument("--time-limit-min", type=positive_float, default=None, metavar="MIN",
                    help="stop after the epoch that passes this wall time; the run is unfinished, --resume continues")
