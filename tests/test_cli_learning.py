@@ -38,6 +38,24 @@ def test_train_then_domain_end_to_end(tiny_dataset, tmp_path, capsys):
     assert "operators from 600 transitions" in capsys.readouterr().out
 
 
+def test_pairwise_relations_and_the_type_symbol_reach_the_domain_and_tamp_symbols(tiny_dataset, tmp_path, capsys):
+    model = tmp_path / "symbolic.pt"
+    assert main(["train", "--data", str(tiny_dataset), "--bottleneck", "gumbel_sigmoid", "--d-z", "1", "--heads",
+                 "2", "--relations", "pairwise", "--type-symbol", "--bit-usage", "0.1", "--epochs", "2",
+                 "--out", str(model)]) == 0
+    config = learned.load_model(model).config
+    assert (config.relations, config.type_symbol, config.n_unary) == ("pairwise", True, 2)
+    out = tmp_path / "domain"
+    assert main(["domain", "--model", str(model), "--data", str(tiny_dataset), "--out", str(out),
+                 "--involved-only"]) == 0
+    assert json.loads((out / "stats.json").read_text())["n_unary"] == 2  # the learned bit and the type
+    capsys.readouterr()
+    assert main(["symbols", "--model", str(model), "--data", str(tiny_dataset), "--max-scenes", "200"]) == 0
+    printed = capsys.readouterr().out
+    assert "1 learned unary bit(s) and the given type as u1, K = 2 pairwise relation(s)" in printed
+    assert "near-constant bits" in printed and "goals whose symbols" not in printed  # no problem set given
+
+
 def test_train_missing_dataset_is_a_clear_error(tmp_path, capsys):
     assert main(["train", "--data", str(tmp_path / "nope"), "--out", str(tmp_path / "m.pt")]) == 2
     err = capsys.readouterr().err
@@ -77,7 +95,8 @@ def test_train_prints_why_it_stopped_and_resumes_a_time_limited_run(tiny_dataset
 
 
 @pytest.mark.parametrize("flag,value", [("--batch-size", "0"), ("--lr", "-1"), ("--lr", "nan"), ("--patience", "-2"),
-                                        ("--precision", "float16"), ("--time-limit-min", "0")])
+                                        ("--precision", "float16"), ("--time-limit-min", "0"),
+                                        ("--bit-usage", "-1"), ("--relations", "dense")])
 def test_train_bad_settings_are_one_line_errors(tmp_path, capsys, flag, value):
     with pytest.raises(SystemExit) as e:
         main(["train", "--data", str(tmp_path), "--out", str(tmp_path / "m.pt"), flag, value])
