@@ -179,9 +179,15 @@ class EffectModel(nn.Module):
     # -- forward ------------------------------------------------------------------------
     def encode(self, X: torch.Tensor, mask: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Bottleneck outputs: unary (B, N, n_unary) and relations (B, K, N, N), padded j zeroed."""
-        u = self._with_type(self.bottleneck(self.unary_logits(X)), X)
-        r = self.bottleneck(self.relation_logits(X)) * mask.to(X.dtype)[:, None, None, :]
-        return u, r
+        return self.encode_logits(X, mask)[:2]
+
+    def encode_logits(self, X: torch.Tensor, mask: torch.Tensor
+                      ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+        """`encode`'s outputs and the logits they come from: unary (B, N, d_z), relations (B, K, N, N)."""
+        unary, relation = self.unary_logits(X), self.relation_logits(X)
+        u = self._with_type(self.bottleneck(unary), X)
+        r = self.bottleneck(relation) * mask.to(X.dtype)[:, None, None, :]
+        return u, r, unary, relation
 
     def decode(self, X: torch.Tensor, action: torch.Tensor, mask: torch.Tensor, u: torch.Tensor,
                r: torch.Tensor) -> torch.Tensor:

@@ -163,19 +163,20 @@ USAGE_LOW = 0.05  # `TrainConfig.bit_usage`: a bit set in under 5 % or over 95 %
 USAGE_SHARPNESS = 4.0  # the rate counts sigmoid(4 logit): close to the read bit (logit > 0), with a gradient
 
 
-def bit_usage_penalty(model: EffectModel, X: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+def bit_usage_penalty(unary: torch.Tensor, relation: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
     """Sum over learned bits of how far each one's rate in the batch lies outside [USAGE_LOW, 1 -
     USAGE_LOW], in units of USAGE_LOW: 0 for bits in use, 1 for a bit that is always 0 or always 1.
     The rate is that of the bits as read (logit > 0), made differentiable (`USAGE_SHARPNESS`), not of
-    the Gumbel samples, whose noise sets a bit now and then whatever its logit. X (B, N, 5), mask
-    (B, N) the real objects; the given type symbol and the diagonal r_k(i, i) are no learned bits."""
+    the Gumbel samples, whose noise sets a bit now and then whatever its logit. unary (B, N, d_z) and
+    relation (B, K, N, N) are the learned logits (`EffectModel.encode_logits`), mask (B, N) the real
+    objects; the diagonal r_k(i, i) is left out."""
     m = mask.float()
-    u = torch.sigmoid(USAGE_SHARPNESS * model.unary_logits(X).float())
+    u = torch.sigmoid(USAGE_SHARPNESS * unary.float())
     rates = [(u * m[..., None]).sum(dim=(0, 1)) / m.sum()]
     N = mask.shape[1]
     pairs = (m[:, :, None] * m[:, None, :]) * (1 - torch.eye(N, dtype=m.dtype))
     if float(pairs.sum()) > 0:
-        r = torch.sigmoid(USAGE_SHARPNESS * model.relation_logits(X).float())
+        r = torch.sigmoid(USAGE_SHARPNESS * relation.float())
         rates.append((r * pairs[:, None]).sum(dim=(0, 2, 3)) / pairs.sum())
     rate = torch.cat(rates)
     return (torch.relu(USAGE_LOW - rate) + torch.relu(rate - 1 + USAGE_LOW)).sum() / USAGE_LOW
@@ -388,8 +389,9 @@ def train_model(data: "str | Path | Sequence[str | Path] | Transitions", config:
             batch = slice(s, s + train.batch_size)
             X, A, M, T = Xe[batch], Ae[batch], Me[batch], Te[batch]
             with torch.autocast("cpu", dtype=torch.bfloat16, enabled=train.precision == "bfloat16"):
-                pred = model(X, A, M)
-                usage = bit_usage_penalty(model, X, M) if train.bit_usage else None
+                u, r, unary, relation = model.encode_logits(X, M)
+                pred = model.decode(X, A, M, u, r)
+                usage = bit_usage_penalty(unary, relation, M) if train.bit_usage else None
             d = pred.float() - T
             loss = (d / scale).pow(2).sum(dim=(1, 2)).mean()
             if usage is not None:
