@@ -137,9 +137,13 @@ def cmd_refinability(args: argparse.Namespace) -> int:
         raise UserError(f"{args.out}: no row has per-step records (the models need a Symbolic Model and its "
                         "domain, and the planners must have executed something)")
     paths = refinability.write(rows, args.out)
+    def pct(value: float | None) -> str:
+        return "—" if value is None else f"{value:.1f}"
+
     for f in refinability.fidelity_by_method(rows):
-        share = "—" if f["as_expected_pct"] is None else f"{f['as_expected_pct']:.1f}"
-        print(f"{f['method']}: {f['judged']} executed steps with an operator, {share} % as expected")
+        print(f"{f['method']}: {f['judged']} executed steps with an operator, {pct(f['as_expected_pct'])} % as "
+              f"expected; of the {f['accurate']} within 1 cm of the prediction, {pct(f['accurate_as_expected_pct'])} "
+              f"% as expected and {pct(f['accurate_allowed_pct'])} % one of the operator's effects")
     print("written " + ", ".join(str(p) for p in paths))
     return 0
 

@@ -27,6 +27,7 @@ from typing import Any, Sequence
 from .format import fmt_cm, fmt_pct
 from .stats import rate_pct
 
+ACCURATE_M = 0.01  # a step "went as predicted" when the Dynamics Model's mean position error on it is under 1 cm
 LEAST_FAITHFUL = 10
 MIN_EXECUTED = 3  # an operator enters the least-faithful list with at least this many executed steps
 CSV_FIELDS = ("operator", "uses", "kinematic_pct", "refined_pct", "executed", "as_expected_pct", "allowed_pct",
@@ -93,6 +94,7 @@ def fidelity_by_method(rows: Sequence[dict]) -> list[dict[str, Any]]:
             continue
         steps = [s for r in mine for s in r["steps"]]
         judged = [s for s in steps if s["match"] is not None]
+        accurate = [s for s in judged if s.get("error_m") is not None and s["error_m"] < ACCURATE_M]
         faithful = [r for r in mine if r["steps"] and all(s["match"] is not False for s in r["steps"])
                     and any(s["match"] for s in r["steps"])]
         broken = [r for r in mine if any(s["match"] is False for s in r["steps"])]
@@ -100,6 +102,8 @@ def fidelity_by_method(rows: Sequence[dict]) -> list[dict[str, Any]]:
                     "no_operator": sum(s["operator"] is None for s in steps),
                     "as_expected_pct": rate_pct([s["match"] for s in judged]),
                     "allowed_pct": rate_pct([s["allowed"] for s in judged if s.get("allowed") is not None]),
+                    "accurate": len(accurate), "accurate_as_expected_pct": rate_pct([s["match"] for s in accurate]),
+                    "accurate_allowed_pct": rate_pct([s["allowed"] for s in accurate if s.get("allowed") is not None]),
                     "on_plan_as_expected_pct": rate_pct([s["match"] for s in judged if s.get("on_plan")]),
                     "off_plan_as_expected_pct": rate_pct([s["match"] for s in judged if not s.get("on_plan")]),
                     "faithful_problems": len(faithful),
@@ -111,12 +115,15 @@ def fidelity_by_method(rows: Sequence[dict]) -> list[dict[str, Any]]:
 def fidelity_lines(fidelity: Sequence[dict]) -> list[str]:
     """The Markdown table of `fidelity_by_method`."""
     lines = ["| method | problems | executed steps (with an operator) | as expected (%) | allowed (%) | "
+             "steps within 1 cm of the prediction: as expected / allowed (%) | "
              "Level-1 plan steps as expected (%) | other steps as expected (%) | no operator | success, all "
              "steps as expected (%) | success, a step not as expected (%) |",
-             "|---|---|---|---|---|---|---|---|---|---|"]
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
     for f in fidelity:
         lines.append(f"| {f['method']} | {f['problems']} | {f['judged']} | {fmt_pct(f['as_expected_pct'])} | "
-                     f"{fmt_pct(f['allowed_pct'])} | {fmt_pct(f['on_plan_as_expected_pct'])} | "
+                     f"{fmt_pct(f['allowed_pct'])} | {fmt_pct(f['accurate_as_expected_pct'])} / "
+                     f"{fmt_pct(f['accurate_allowed_pct'])} (of {f['accurate']}) | "
+                     f"{fmt_pct(f['on_plan_as_expected_pct'])} | "
                      f"{fmt_pct(f['off_plan_as_expected_pct'])} | {f['no_operator']} | "
                      f"{fmt_pct(f['faithful_success_pct'])} (of {f['faithful_problems']}) | "
                      f"{fmt_pct(f['broken_success_pct'])} (of {f['broken_problems']}) |")
@@ -126,7 +133,9 @@ def fidelity_lines(fidelity: Sequence[dict]) -> list[str]:
 FIDELITY_NOTE = ("A step is *as expected* when the symbols the Symbolic Model reads on the state after it equal "
                  "those its learned operator expected (the effect a Level-1 plan counted on, else the most probable "
                  "one), *allowed* when they are one of the operator's learned effects. Steps that were not "
-                 "executed (refinement failed) are not judged.")
+                 "executed (refinement failed) are not judged. Steps within 1 cm of the prediction: those whose "
+                 "objects the Dynamics Model placed within 1 cm on average, where the motion did what was "
+                 "expected and only the symbols can be at fault.")
 
 
 def markdown(rows: Sequence[dict], figure: str | None = None, min_executed: int = MIN_EXECUTED,

@@ -146,7 +146,7 @@ def test_the_refinability_table_and_the_fidelity_are_recomputed_from_rows(tmp_pa
         {"problem": "p2", "method": "cfs", "success": False, "plan": [[0, 0, 1, 1]],
          "steps": [_step("a", kinematic="collision", refined=False)]},
         {"problem": "p1", "method": "bilevel", "success": True, "plan": [[0, 0, 1, 0], [1, 0, 0, 0], [1, 1, 0, 1]],
-         "steps": [_step("a", on_plan=True), _step("b", match=False, allowed=False, on_plan=True),
+         "steps": [_step("a", on_plan=True, error=0.004), _step("b", match=False, allowed=False, on_plan=True),
                    _step(None, match=None)]},
         {"problem": "p3", "method": "bilevel", "success": True, "plan": [], "steps": []},
         {"problem": "p4", "method": "bilevel", "success": False, "plan": None, "steps": None},
@@ -166,6 +166,10 @@ def test_the_refinability_table_and_the_fidelity_are_recomputed_from_rows(tmp_pa
     assert (cfs["broken_problems"], cfs["broken_success_pct"], cfs["faithful_problems"]) == (1, 100.0, 0)
     assert (bilevel["problems"], bilevel["judged"], bilevel["no_operator"], bilevel["on_plan_as_expected_pct"]) == \
         (2, 2, 1, 50.0)
+    # steps the Dynamics Model predicted within 1 cm: bilevel's first one only (errors of 1 and 3 cm are not)
+    assert (bilevel["accurate"], bilevel["accurate_as_expected_pct"], bilevel["accurate_allowed_pct"]) == \
+        (1, 100.0, 100.0)
+    assert (cfs["accurate"], cfs["accurate_as_expected_pct"]) == (0, None)
     assert "No operator was executed 3 times or more." in refinability.markdown(rows)
     paths = refinability.write(rows, tmp_path, min_executed=2)
     csv_lines = (tmp_path / "refinability.csv").read_text().splitlines()
