@@ -3,6 +3,7 @@
     .venv/bin/python bench/demo_seeds.py --seeds 0-49                 # the defaults: 3 blocks, k = 3, full
     .venv/bin/python bench/demo_seeds.py --seeds 0-19 --objects 5 --actions 4
     .venv/bin/python bench/demo_seeds.py --seeds 0-49 --open-loop     # the baseline: one plan, no loop
+    .venv/bin/python bench/demo_seeds.py --seeds 0-49 --models M      # another models directory
 
 Each seed runs `tamp demo` in its own process (no replay written: --replay goes to a temporary
 directory) and is judged by its exit status; the printed cause is the demo's own `cause:` line.
@@ -35,6 +36,7 @@ def main() -> int:
     p.add_argument("--actions", type=int, default=3)
     p.add_argument("--fidelity", choices=("full", "fast"), default="full")
     p.add_argument("--open-loop", action="store_true")
+    p.add_argument("--models", type=Path, default=None, help="models directory (default: the bundled models)")
     args = p.parse_args()
     tamp = str(Path(sys.executable).with_name("tamp"))
     reached, times = 0, []
@@ -43,6 +45,7 @@ def main() -> int:
             command = [tamp, "demo", "--seed", str(seed), "--objects", str(args.objects), "--actions",
                        str(args.actions), "--fidelity", args.fidelity, "--replay", f"{tmp}/replay.html"]
             command += ["--open-loop"] if args.open_loop else []
+            command += ["--models", str(args.models)] if args.models is not None else []
             t = time.perf_counter()
             run = subprocess.run(command, capture_output=True, text=True)
             times.append(time.perf_counter() - t)

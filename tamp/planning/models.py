@@ -27,7 +27,7 @@ SYMBOLS_FILE = "symbols.json"  # what the Symbolic Model's bits mean (`tamp symb
 
 
 def pretrained_dir() -> Path:
-    """The quick-scale models shipped inside the package (tamp/pretrained/; PROVENANCE.md says how
+    """The paper-scale models shipped inside the package (tamp/pretrained/; PROVENANCE.md says how
     they were made), the default of `tamp demo --models`."""
     return Path(__file__).resolve().parents[1] / "pretrained"
 
