@@ -6,7 +6,7 @@ import sys
 from pathlib import Path
 
 from evaluation.methods import SYMBOLIC_BACKENDS
-from tamp.app.args import check_output_dir, check_output_file, non_negative_int, positive_int
+from tamp.app.args import check_output_dir, check_output_file, models_directory, non_negative_int, positive_int
 from tamp.app.parallel import add_arguments as add_parallel_arguments
 from tamp.app.plan_command import add_planner_arguments
 from tamp.app.problem import PROTOCOLS
@@ -88,7 +88,7 @@ def _eval_config(args: argparse.Namespace):
 def _add_run_arguments(p: argparse.ArgumentParser, models_help: str, out_help: str, methods_default,
                        methods_help: str) -> None:
     """The flags of a command that runs methods on a problem set (`tamp evaluate`, `tamp refinability`)."""
-    p.add_argument("--models", type=Path, required=True, help=models_help)
+    p.add_argument("--models", type=models_directory, required=True, help=models_help)
     p.add_argument("--problems", type=Path, required=True, help="problem set (tamp problems --out)")
     p.add_argument("--out", type=Path, required=True, help=out_help)
     p.add_argument("--methods", type=_name_list, default=methods_default, help=methods_help)

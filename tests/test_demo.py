@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import base64
 import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -18,20 +19,26 @@ def _scene_paths(html_file) -> bytes:
 
 
 @pytest.mark.sim
-def test_the_shipped_models_are_small_load_and_plan():
+@pytest.mark.parametrize("name", ["pretrained", "pairwise"])
+def test_the_shipped_models_are_small_load_by_name_and_plan(name):
     import torch
 
+    from tamp.app.args import models_directory
     from tamp.app.problem import random_problem
     from tamp.planning.config import PlanConfig
     from tamp.planning.methods import plan
 
     torch.set_num_threads(1)
-    directory = pretrained_dir()
-    files = [directory / SYMBOLIC_FILE, directory / DYNAMICS_FILE, directory / DOMAIN_DIR / "operators.json",
-             directory / "PROVENANCE.md"]
+    directory = models_directory(name)
+    assert directory == pretrained_dir() / ("" if name == "pretrained" else name)
+    files = [directory / SYMBOLIC_FILE, directory / DYNAMICS_FILE, directory / DOMAIN_DIR / "operators.json"]
     assert all(f.is_file() for f in files), [str(f) for f in files if not f.is_file()]
-    assert sum(f.stat().st_size for f in directory.rglob("*") if f.is_file()) < 5e6  # "a few MB at most"
+    assert (pretrained_dir() / "PROVENANCE.md").is_file()
+    own = [f for f in directory.rglob("*") if f.is_file() and (name != "pretrained" or "pairwise" not in f.parts)]
+    assert sum(f.stat().st_size for f in own) < 4e6  # "a few MB at most", each set
     models = load_models(directory)
+    assert models.symbolic is not None and models.symbolic.config.relations == ("attention" if name == "pretrained"
+                                                                                 else "pairwise")
     problem = random_problem(2, 1, seed=0)
     result = plan("bilevel", models, problem.X_init, problem.X_goal, PlanConfig().with_seed(0))
     assert result.solved, result.reasons
@@ -106,3 +113,13 @@ def test_predictions_are_tied_to_the_start_of_each_action():
     assert np.array_equal(shown.states, predicted[1:3])
     with pytest.raises(ValueError, match="one \\(n, 5\\) state per time"):
         type(goal)("bad", predicted, [0.0], goal.rgba)
+
+
+def test_a_local_folder_named_like_a_bundled_set_wins(tmp_path, monkeypatch):
+    from tamp.app.args import models_directory
+
+    monkeypatch.chdir(tmp_path)
+    assert models_directory("pairwise") == pretrained_dir() / "pairwise"
+    (tmp_path / "pairwise").mkdir()
+    assert models_directory("pairwise") == Path("pairwise")
+    assert models_directory("elsewhere") == Path("elsewhere")  # not a bundled name: left to the command's check

@@ -41,6 +41,23 @@ def positive_float(text: str) -> float:
     return _number(text, float, lambda v: math.isfinite(v) and v > 0, "a finite number > 0")
 
 
+BUNDLED_MODELS = {"pretrained": "", "pairwise": "pairwise"}  # name -> folder under tamp/pretrained/
+MODELS_HELP = ("a models directory (symbolic.pt, dynamics.pt, domain/), or a bundled set: pretrained (the "
+               "paper's configuration, the default) or pairwise (pairwise relations with the type symbol; "
+               "docs/learned-symbols.md)")
+
+
+def models_directory(text: str) -> Path:
+    """argparse type: a models directory, or the name of a bundled set (`BUNDLED_MODELS`) when no such
+    path exists here."""
+    path = Path(text)
+    if not path.exists() and text in BUNDLED_MODELS:
+        from tamp.planning.models import pretrained_dir
+
+        return pretrained_dir() / BUNDLED_MODELS[text]
+    return path
+
+
 def non_negative_float(text: str) -> float:
     """argparse type: a finite number >= 0."""
     return _number(text, float, lambda v: math.isfinite(v) and v >= 0, "a finite number >= 0")

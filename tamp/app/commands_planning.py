@@ -6,8 +6,10 @@ import textwrap
 from pathlib import Path
 
 from tamp.app.args import (
+    MODELS_HELP,
     _html_path,
     check_output_file,
+    models_directory,
     non_negative_int,
     positive_int,
 )
@@ -77,9 +79,7 @@ def add_demo(sub) -> None:
     p.add_argument("--objects", type=positive_int, default=3, help="number of blocks (default 3)")
     p.add_argument("--actions", type=positive_int, default=3,
                    help="k: random actions that generate the goal (default 3)")
-    p.add_argument("--models", type=Path, default=None,
-                   help="models directory (symbolic.pt, dynamics.pt, domain/); default: the pretrained "
-                   "models shipped in the package")
+    p.add_argument("--models", type=models_directory, default=None, help=MODELS_HELP)
     p.add_argument("--fidelity", choices=("full", "fast"), default="full",
                    help="execute with the arm under physics (full, default) or in the fast world")
     p.add_argument("--replay", type=_html_path, default=Path("demo_replay.html"), metavar="OUT.html",

@@ -11,6 +11,7 @@ from tamp.app.args import (
     check_output_dir,
     check_output_file,
     fraction,
+    models_directory,
     non_negative_int,
     positive_int,
     probability,
@@ -157,8 +158,9 @@ def add_pddl(sub) -> None:
         "Fast Downward and other PDDL planners read domain.pddl and problem.pddl; "
         "`tamp domain` learns a domain from data.",
     )
-    p.add_argument("--models", type=Path, default=None,
-                   help="models directory (domain/, and symbolic.pt for --problem); default: the bundled models")
+    p.add_argument("--models", type=models_directory, default=None,
+                   help="models directory (domain/, and symbolic.pt for --problem), or a bundled set: pretrained "
+                   "(the default) or pairwise")
     p.add_argument("--out", type=Path, required=True, help="output directory")
     p.add_argument("--problem", type=Path, default=None, help="problem file (JSON: X_init, X_goal) to export")
     p.add_argument("--sampled", type=non_negative_int, default=0, metavar="N",

@@ -15,9 +15,11 @@ from pathlib import Path
 from typing import Any
 
 from tamp.app.args import (
+    MODELS_HELP,
     check_output_file,
     fraction,
     json_path,
+    models_directory,
     non_negative_int,
     object_count,
     positive_float,
@@ -307,8 +309,7 @@ def write_executed_trajectory(executed, path: Path, source: str) -> None:
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """The flags of `tamp plan`."""
     p.add_argument("--problem", type=Path, required=True, help="problem file (JSON: X_init, X_goal, k, seed)")
-    p.add_argument("--models", type=Path, required=True,
-                   help="models directory: symbolic.pt, dynamics.pt and the learned domain in domain/")
+    p.add_argument("--models", type=models_directory, required=True, help=MODELS_HELP.replace(", the default", ""))
     p.add_argument("--method", choices=tuple(METHODS), default="bilevel",
                    help="planner (default bilevel: verified symbolic plan, else continuous search; "
                    "bilevel_alg1: the paper's Algorithm 1 without our Level-1 extensions)")
