@@ -137,9 +137,9 @@ def test_the_bit_usage_penalty_counts_constant_bits_and_leaves_the_given_ones_ou
     X[..., 4] = 1.0  # all large: the given type bit is constant, but it is no learned bit
     # unary bit 1 and relation 0 are constant
     mask = torch.tensor([[True, True, True, False]] * 4)
-    assert float(bit_usage_penalty(*model.encode_logits(X, mask)[2:], mask)) == pytest.approx(2.0, abs=1e-3)
+    assert float(bit_usage_penalty(*model.encode_logits(X, mask)[2:], mask).detach()) == pytest.approx(2.0, abs=1e-3)
     X[..., 0] = torch.tensor([0.0, 0.1, 0.2, 9.0])  # no real pair 0.5 apart: relation 1 is never set
-    assert float(bit_usage_penalty(*model.encode_logits(X, mask)[2:], mask)) == pytest.approx(3.0, abs=1e-3)
+    assert float(bit_usage_penalty(*model.encode_logits(X, mask)[2:], mask).detach()) == pytest.approx(3.0, abs=1e-3)
 
 
 def test_the_bit_usage_penalty_keeps_relations_the_effect_loss_leaves_constant(tmp_path):
