@@ -177,9 +177,12 @@ def add_symbols(sub) -> None:
         description="Read the Symbolic Model's unary bits, relations r_k(i, j) (i != j) and self relations "
         "r_k(i, i) on held-out scenes (the initial and goal scenes of a problem set, or states of a "
         "dataset) and compare each with facts a reader understands: block type, elevated, on another "
-        "block, carrying one, left/right along y, near, on top of, vertical order. Prints a table "
-        "(agreement in %, the better of the fact and its negation, and the Matthews correlation phi, "
-        "which does not reward agreeing with a rare fact by being always 0); --png draws it.",
+        "block, carrying one, left/right along y, near, on top of, above, vertical order, level, in line. "
+        "Prints a table (agreement in %, the better of the fact and its negation, and the Matthews "
+        "correlation phi, which does not reward agreeing with a rare fact by being always 0; --png draws "
+        "it), then a summary: relations with a spatial fact at |phi| >= 0.8, near-constant bits, bits that "
+        "are the block type, and with --problems the goals whose symbols equal their initial scene's "
+        "(given bits, the type symbol and the pairwise diagonal, are left out).",
     )
     p.add_argument("--model", type=Path, required=True, help="Symbolic Model checkpoint")
     p.add_argument("--problems", type=Path, default=None, help="problem set (tamp problems --out): its scenes")
