@@ -43,7 +43,7 @@ def positive_float(text: str) -> float:
 
 BUNDLED_MODELS = {"pretrained": "", "pairwise": "pairwise"}  # name -> folder under tamp/pretrained/
 MODELS_HELP = ("a models directory (symbolic.pt, dynamics.pt, domain/), or a bundled set: pretrained (the "
-               "paper's configuration, the default) or pairwise (pairwise relations with the type symbol; "
+               "paper's configuration) or pairwise (pairwise relations with the type symbol; "
                "docs/learned-symbols.md)")
 
 

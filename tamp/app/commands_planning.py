@@ -79,7 +79,8 @@ def add_demo(sub) -> None:
     p.add_argument("--objects", type=positive_int, default=3, help="number of blocks (default 3)")
     p.add_argument("--actions", type=positive_int, default=3,
                    help="k: random actions that generate the goal (default 3)")
-    p.add_argument("--models", type=models_directory, default=None, help=MODELS_HELP)
+    p.add_argument("--models", type=models_directory, default=None,
+                   help=MODELS_HELP + "; default: pretrained")
     p.add_argument("--fidelity", choices=("full", "fast"), default="full",
                    help="execute with the arm under physics (full, default) or in the fast world")
     p.add_argument("--replay", type=_html_path, default=Path("demo_replay.html"), metavar="OUT.html",
