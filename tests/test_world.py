@@ -121,6 +121,20 @@ def test_block_resting_on_the_picked_bar_is_carried_along(world):
     assert X2[0, 2] == pytest.approx(X1[0, 2] + BAR_HEIGHT, abs=0.01)
 
 
+def test_a_bar_placed_end_to_end_against_a_cube_can_be_picked_again(world):
+    """The skill leaves the bar's end face on the cube's face; lifting it straight up slides past the
+    cube (the carried box is narrowed by `carried_inset`), and so does lifting the cube."""
+    world.reset(X=scene(((0.834, 0.066, 0.025), LARGE), ((0.47, 0.295, 0.025), SMALL)))
+    X1, info = world.step(PickPlace(0, 1, 1, -1))  # bar held 7.5 cm off centre, released 7.5 cm off the cube
+    assert info.status == "ok"
+    assert X1[1, 1] - X1[0, 1] == pytest.approx((BLOCK_SIZES[0][1] + BLOCK_SIZES[1][1]) / 2, abs=0.004)  # touching
+    for action in (PickPlace(0, 1, 0, 0), PickPlace(1, 0, 1, 1)):
+        world.reset(X=X1)
+        X2, info = world.step(action)
+        assert info.status == "ok", info.reason
+        assert np.linalg.norm(X2[action.pick, :2] - X1[action.pick, :2]) > 0.05  # it moved
+
+
 def _check_path(checker_planner, path, joint_step=1e-3):
     assert np.all(path >= Q_LOWER) and np.all(path <= Q_UPPER)
     return checker_planner.path_is_valid(path, joint_step)

@@ -26,11 +26,10 @@ from typing import Sequence
 import numpy as np
 from pydrake.math import RigidTransform
 
-from tamp.planning.structs import BLOCK_SIZES, Infeasible, PickPlace, RefinementOutcome
+from tamp.planning.structs import Infeasible, PickPlace, RefinementOutcome
 from tamp.sim.kinematics import Q_HOME, solve_chain
-from tamp.sim.plants import X_FlangeTcp
 from tamp.sim.refine import step_failure
-from tamp.sim.skill import Scene, approach_poses, held_block, pick_place_waypoints
+from tamp.sim.skill import Scene, approach_poses, carried_shapes, held_block, pick_place_waypoints
 from tamp.sim.structs import WorldConfig
 from tamp.sim.world import World
 
@@ -118,7 +117,7 @@ class FeasibilityChecker:
             return Infeasible.COLLISION
         # The carried blocks attached to the gripper for the carrying waypoints: attaching costs about
         # half a millisecond, building a checker per grasp ~150 ms (and predicted grasps rarely repeat).
-        planner.attach([(BLOCK_SIZES[int(scene.types[c])], X_FlangeTcp @ X_GC) for c, X_GC in zip(wp.carried, wp.X_GC)])
+        planner.attach(carried_shapes(scene, wp, cfg))
         try:
             return None if all(planner.is_valid(qs[name]) for name in CARRYING) else Infeasible.COLLISION
         finally:

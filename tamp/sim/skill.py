@@ -16,6 +16,7 @@ import numpy as np
 from pydrake.math import RigidTransform, RotationMatrix
 
 from tamp.planning.structs import BLOCK_SIZES, LARGE, OFFSET_STEP, PickPlace
+from tamp.sim.plants import X_FlangeTcp
 from tamp.sim.structs import WorldConfig
 
 JAW_OPENING = 0.08  # metres between the open jaws' inner faces
@@ -191,6 +192,21 @@ def pick_place_waypoints(scene: Scene, action: PickPlace, grasped: int, config: 
         carried=carried,
         X_GC=X_GC,
     )
+
+
+Box = tuple[tuple[float, float, float], RigidTransform]  # (size in metres, pose in the gripper body frame)
+
+
+def carried_shapes(scene: Scene, wp: Waypoints, config: WorldConfig) -> list[Box]:
+    """Collision boxes of the carried blocks in the gripper body frame (`MotionPlanner.attach`),
+    narrowed by `config.carried_inset` on each side: a block standing face to face with another one
+    slides up past it, which a padded box the block's full width would call a collision."""
+    shapes = []
+    for c, X_GC in zip(wp.carried, wp.X_GC):
+        sx, sy, sz = BLOCK_SIZES[int(scene.types[c])]
+        inset = 2 * config.carried_inset
+        shapes.append(((sx - inset, sy - inset, sz), X_FlangeTcp @ X_GC))
+    return shapes
 
 
 def _raised_to(X_WG: RigidTransform, z: float) -> RigidTransform:

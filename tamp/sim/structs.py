@@ -41,10 +41,15 @@ class WorldConfig:
     simplify_paths: bool = False  # OMPL path simplification (costly; for executed motions)
     joint_step: float = 0.005  # radians between collision checks along a motion
     padding: float = 0.002  # collision padding of the motion checker
+    # A carried block's collision box is this much narrower on each side (not in height), so a block
+    # standing against another one (the skill places blocks face to face) lifts straight up past it.
+    carried_inset: float = 0.003
 
     def __post_init__(self) -> None:
         if self.fidelity not in ("fast", "full"):
             raise UserError(f"WorldConfig.fidelity must be 'fast' or 'full', got {self.fidelity!r}")
+        if not 0.0 <= self.carried_inset < 0.02:
+            raise UserError(f"WorldConfig.carried_inset must be in [0, 0.02) metres, got {self.carried_inset}")
         for name in ("workspace_x", "workspace_y"):
             lo, hi = getattr(self, name)
             if not lo < hi:

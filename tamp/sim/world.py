@@ -27,8 +27,8 @@ from tamp.sim.kinematics import Q_HOME, drake_ik, solve_chain
 from tamp.sim.motion import MotionPlanner
 from tamp.sim.observer import Carried, PhysicsFrame, WorldObserver
 from tamp.sim.physics import BlockPhysics
-from tamp.sim.plants import X_FlangeTcp, build_motion_scene, build_physics_scene
-from tamp.sim.skill import Scene, Waypoints, approach_poses, held_block, pick_place_waypoints, topdown
+from tamp.sim.plants import build_motion_scene, build_physics_scene
+from tamp.sim.skill import Scene, Waypoints, approach_poses, carried_shapes, held_block, pick_place_waypoints, topdown
 from tamp.sim.structs import StepInfo, StepStatus, WorldConfig
 from tamp.sim.trajectory import RefinedPlan, refined_action
 
@@ -214,8 +214,7 @@ class World:
         # gripper alone is checked); from there on they are attached to the gripper.
         planner.set_block_poses(scene.X_WB, parked=tuple(wp.carried))
         ok = self._plan(planner, [("liftoff", qs["grasp"], qs["liftoff"])], info, paths)
-        sizes = [BLOCK_SIZES[int(scene.types[c])] for c in wp.carried]
-        planner.attach(list(zip(sizes, [X_FlangeTcp @ X_GC for X_GC in wp.X_GC])))
+        planner.attach(carried_shapes(scene, wp, self.config))
         carry = [("lift", qs["liftoff"], qs["lift"]), ("transfer", qs["lift"], qs["preplace"]),
                  ("lower", qs["preplace"], qs["place"])]
         ok = ok and self._plan(planner, carry, info, paths)
