@@ -4,6 +4,7 @@ the stub world (no Drake, no torch model)."""
 from __future__ import annotations
 
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -185,3 +186,15 @@ def test_without_a_plan_the_loop_steps_toward_the_closest_state_while_that_makes
     still = plan_closed_loop("bilevel", models, X_INIT, goal, slipping_world(0), rounds=None,
                              kinematics=RejectGoalMoves(), cfg=PlanConfig(loop=LoopConfig(progress=1.0)))
     assert not still.executed and still.stop == "no_plan"
+
+
+def test_with_no_budget_left_to_widen_the_loop_steps_toward_what_its_search_found(models):
+    # the round's own search spends the whole budget: no widened search, yet its closest state is a step closer
+    cfg = PlanConfig(search=replace(PlanConfig().search, max_expansions=3), loop=LoopConfig(search_budget=3))
+    out = plan_closed_loop("bilevel", models, X_INIT, A_ON_B, slipping_world(0), rounds=None,
+                           kinematics=RejectGoalMoves(), cfg=cfg)
+    first = out.rounds[0]
+    assert first.toward and not first.widened and first.origin == "toward the closest state"
+    assert len(out.executed) == 1 and out.stop == "budget"
+    before, after = (np.linalg.norm(X[:, :3] - A_ON_B[:, :3], axis=1).sum() for X in out.states)
+    assert after <= before - 0.02 + 1e-9

@@ -15,9 +15,10 @@ Two loops share one round (plan, or keep the rest of the last plan while it is o
   a plan that ends short of the goal is followed by another round. A round that finds no plan, or
   only the empty plan while a block is off its goal, widens the search (`widened_search`: every one of
   the 9 n^2 actions, so blocks can be moved out of the way, unstacked, or moved although at their
-  goal); when that finds none either, it takes the first action toward the closest state the widened
-  search reached, if that is `LoopConfig.progress` closer (the world may do better than the model
-  predicts, and the next round plans from there). Back at a state it observed before (`revisits`), it
+  goal); when that finds none either (or the search budget has nothing left to widen with), it takes
+  the first action toward the closest state either search expanded (`toward_closest`), if that is
+  `LoopConfig.progress` closer (the world may do better than the model predicts, and the next round
+  plans from there). Back at a state it observed before (`revisits`), it
   leaves out the actions it took from there, which would start the same cycle again in a deterministic world.
 
 Keeping a plan (`LoopConfig.keep_plan`, our extension, both loops): a round keeps the rest of the last
@@ -40,7 +41,7 @@ from tamp.planning.feasibility import Feasibility
 from tamp.planning.methods import KEEPING_METHODS, plan, plan_cfs
 from tamp.planning.models import Models
 from tamp.planning.results import Candidate, PlanResult, take_plan, timed
-from tamp.planning.search import state_key
+from tamp.planning.search import SearchResult, state_key
 from tamp.planning.structs import KinematicFeasibility, Outcome, PickPlace
 from tamp.planning.verify import Verification, at_goal, goal_error, goal_errors, verify
 
@@ -113,10 +114,13 @@ def plan_closed_loop(method: str, models: Models, X_init, X_goal,
         round_cfg = _within(cfg, cfg.search.max_expansions, spent) if until_goal else cfg
         result = _round(method, models, X, X_goal, out, round_cfg, planner, kinematics, avoid, until_goal)
         spent += _expanded(result)
-        if until_goal and cfg.loop.widen and not (result.solved and result.plan) and spent < cfg.loop.search_budget:
-            result = widened_search(method, models, X, X_goal, _within(cfg, cfg.loop.widen_expansions, spent),
-                                    kinematics, result, avoid)
-            spent += _expanded(result)
+        if until_goal and cfg.loop.widen and not (result.solved and result.plan):
+            if spent < cfg.loop.search_budget:
+                result = widened_search(method, models, X, X_goal, _within(cfg, cfg.loop.widen_expansions, spent),
+                                        kinematics, result, avoid)
+                spent += _expanded(result)
+            else:  # no budget left to widen: what the round's search found may still bring the blocks closer
+                result = toward_closest(X, X_goal, cfg, result, [result.search])
         out.rounds.append(result)
         if on_round is not None:
             on_round(r, result)
@@ -201,15 +205,26 @@ def widened_search(method: str, models: Models, X: np.ndarray, X_goal: np.ndarra
     if result.solved:
         result.reasons.append("searched again over every action (the goal-oriented ones gave no plan)")
         return result
-    search = result.search
-    closest = None if search is None else search.closest_trajectory
-    if closest is None or not _progress(X, closest[-1], X_goal, cfg.loop.progress):
-        result.reasons.append("no plan over every action either")
+    result.reasons.append("no plan over every action either")
+    return toward_closest(X, X_goal, cfg, result, [failed.search, result.search])
+
+
+def toward_closest(X: np.ndarray, X_goal: np.ndarray, cfg: PlanConfig, result: PlanResult,
+                   searches: Sequence[SearchResult | None]) -> PlanResult:
+    """`result` (a round without a plan) given the path to the closest state any of `searches` expanded (least
+    summed distance to the goal), when that state is `LoopConfig.progress` closer than the observed X: the
+    loop executes its first action and plans again from what the world did. Unchanged otherwise."""
+    found = [(float(goal_errors(s.closest_trajectory[-1], X_goal).sum()), i, s) for i, s in enumerate(searches)
+             if s is not None and s.closest_trajectory is not None and s.closest_plan]
+    if not found:
         return result
-    assert search is not None and search.closest_plan is not None  # set with closest_trajectory
-    result.reasons.append(f"no plan over every action either; toward the closest state found (predicted "
-                          f"{goal_error(closest[-1], X_goal) * 100:.1f} cm from the goal, from "
-                          f"{goal_error(X, X_goal) * 100:.1f} cm)")
+    _, _, search = min(found)
+    closest = search.closest_trajectory
+    assert closest is not None and search.closest_plan is not None  # filtered above
+    if not _progress(X, closest[-1], X_goal, cfg.loop.progress):
+        return result
+    result.reasons.append(f"toward the closest state found (predicted {goal_error(closest[-1], X_goal) * 100:.1f} cm "
+                          f"from the goal, from {goal_error(X, X_goal) * 100:.1f} cm)")
     result.toward = True
     return take_plan(result, search.closest_plan, 2, closest, X_goal)
 
@@ -301,4 +316,4 @@ def replan_rounds(k: int | None, default: int = 4) -> int:
 
 
 __all__: Sequence[str] = ["ClosedLoopResult", "keep_rest", "loop_outcome", "off_course", "plan_closed_loop",
-                          "replan_rounds", "widened_search"]
+                          "replan_rounds", "toward_closest", "widened_search"]
