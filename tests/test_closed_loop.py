@@ -198,3 +198,30 @@ def test_with_no_budget_left_to_widen_the_loop_steps_toward_what_its_search_foun
     assert len(out.executed) == 1 and out.stop == "budget"
     before, after = (np.linalg.norm(X[:, :3] - A_ON_B[:, :3], axis=1).sum() for X in out.states)
     assert after <= before - 0.02 + 1e-9
+
+
+def test_a_plan_kept_near_the_tolerance_gives_way_to_one_aimed_closer(models):
+    goal = world_step(world_step(X_INIT, (1, 0, 1, 1)), (0, 0, 1, 0))  # B shifted 7.5 cm, then A on B
+    calls: list[int] = []
+
+    def planner(off_m):
+        """`plan`, whose first plan predicts an end 4 cm off the goal (within eps, over search.confident), and
+        whose later plans end `off_m` off."""
+        def call(method, models, X, X_goal, cfg, **kwargs):
+            result = plan(method, models, X, X_goal, cfg, **kwargs)
+            shift = 0.04 if not calls else off_m
+            calls.append(len(result.plan))
+            result.predicted = result.predicted.copy()
+            result.predicted[-1, :, 0] += shift
+            result.predicted_error = float(np.abs(result.predicted[-1, :, :3] - X_goal[:, :3]).max()) + shift
+            return result
+        return call
+
+    calls.clear()
+    out = plan_closed_loop("bilevel", models, X_INIT, goal, slipping_world(0), rounds=None, planner=planner(0.0))
+    assert len(calls) == 2 and out.success
+    assert not out.rounds[1].kept and out.rounds[1].reasons[0].startswith("keep: the rest of the last plan ends 4.0 cm")
+    calls.clear()
+    worse = plan_closed_loop("bilevel", models, X_INIT, goal, slipping_world(0), rounds=None, planner=planner(0.045))
+    assert len(calls) == 2 and worse.rounds[1].kept and "planned" in worse.rounds[1].timings
+    assert worse.executed == worse.rounds[0].plan  # the first plan, followed to its end

@@ -26,7 +26,9 @@ plan when it refines and still ends within `search.confident` of the goal: as th
 the observed state is where the plan predicted it (every block within `LoopConfig.on_course`), else
 rolled out from the observed state; only otherwise does it plan again, so a plan on course is not
 traded for another one. The loop that does not know k keeps a plan on course while its own prediction
-still ends within eps (the plan was taken by that prediction, and the world is doing what it said).
+still ends within eps (the plan was taken by that prediction, and the world is doing what it said);
+when that end is over `search.confident` it plans again, and a new plan replaces the kept one only if
+it is predicted closer to the goal.
 """
 from __future__ import annotations
 
@@ -180,9 +182,18 @@ def _round(method: str, models: Models, X: np.ndarray, X_goal: np.ndarray, out: 
     keep = cfg.loop.keep_plan and method in KEEPING_METHODS and bool(out.rounds)
     kept = keep_rest(models, X, X_goal, out.rounds[-1], cfg, kinematics, avoid,
                      cfg.verify.eps if until_goal else None) if keep else None
-    if kept is not None and kept.solved:
+    marginal = until_goal and kept is not None and kept.solved and kept.predicted_error >= cfg.search.confident
+    if kept is not None and kept.solved and not marginal:
         return kept
     result = (planner or plan)(method, models, X, X_goal, cfg, **extra)
+    if kept is not None and marginal:  # kept within eps but not within confident: a plan aimed closer replaces it
+        assert kept.predicted_error is not None  # a solved keep has its prediction
+        if result.solved and result.plan and result.predicted_error < kept.predicted_error:
+            kept.reasons = [f"keep: the rest of the last plan ends {kept.predicted_error * 100:.1f} cm from the goal "
+                            f"(over {cfg.search.confident * 100:g} cm); a new plan aims closer"]
+        else:
+            _absorb(kept, result, "planned")
+            return kept
     if kept is not None:
         _absorb(result, kept)
     return result
