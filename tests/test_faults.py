@@ -52,6 +52,34 @@ def test_observation_noise_has_the_asked_spread_and_leaves_heights_and_types():
     assert Faults().observe(X, np.random.default_rng(1)) is X
 
 
+def test_footprints_apart_along_either_axis_are_apart():
+    R = RotationMatrix.MakeZRotation(np.pi / 6)
+    axis_y = np.array([-np.sin(np.pi / 6), np.cos(np.pi / 6)])  # the bar's long axis
+    for offset, apart in ((0.16, True), (0.14, False)):  # bar half length 12.5 cm + cube half 2.5 cm = 15 cm
+        s = Scene(np.array([LARGE, SMALL]), [RigidTransform(R, [0.6, 0.0, 0.025]),
+                                            RigidTransform(R, [*(np.array([0.6, 0.0]) + offset * axis_y), 0.025])])
+        assert _apart(footprint(s, 0), footprint(s, 1), 0.005) is apart
+
+
+def test_noise_never_puts_touching_blocks_into_each_other():
+    # a bar turned 30 degrees, end to end with a cube; a cube resting on the bar's other end
+    yaw = RotationMatrix.MakeZRotation(np.pi / 6)
+    end = np.array([0.6, 0.0]) + 0.15 * np.array([-np.sin(np.pi / 6), np.cos(np.pi / 6)])
+    world = Scene(np.array([LARGE, SMALL, SMALL]), [RigidTransform(yaw, [0.6, 0.0, 0.025]),
+                                                    RigidTransform(yaw, [*end, 0.025]),
+                                                    RigidTransform(yaw, [0.6, 0.0, 0.075])])
+    X = world.X()
+    faults, overlapped = Faults(noise_m=0.005), 0
+    for seed in range(200):
+        raw = faults.observe(X, np.random.default_rng(seed))
+        seen = faults.observe(X, np.random.default_rng(seed), world)
+        overlapped += not _apart(footprint(world, 0, raw[0, :2]), footprint(world, 1, raw[1, :2]), 0.0)
+        assert _apart(footprint(world, 0, seen[0, :2]), footprint(world, 1, seen[1, :2]), -1e-6)
+        assert np.array_equal(seen[2], raw[2])  # the stacked cube is on another level: left as observed
+        assert np.linalg.norm(seen[:2, :2] - raw[:2, :2], axis=1).max() < 0.03  # moved by the overlap only
+    assert overlapped > 50  # the noise alone puts them into each other about half the time
+
+
 @pytest.mark.parametrize("kwargs, words", [({"noise_m": -0.001}, "noise"), ({"noise_m": 0.2}, "noise"),
                                            ({"push_m": (0.05, 0.03)}, "push"), ({"push_m": (0.0, 0.03)}, "push")])
 def test_bad_faults_are_user_errors(kwargs, words):

@@ -3,8 +3,10 @@
 - Observation noise: every horizontal position the planner observes carries Gaussian noise of
   `noise_m` (metres, per coordinate), as a camera's block poses would. Heights are observed exactly: a
   perception pipeline places a block on what supports it, and a block observed half inside the table
-  or floating is not a scene the planner accepts. The world itself is not moved, and the kinematic
-  checker sees the true scene (orientations are not in X; a real system would estimate them).
+  or floating is not a scene the planner accepts. For the same reason two blocks the noise put into each
+  other are moved apart until they touch (`keep_apart`). The world itself is not moved, and the
+  kinematic checker takes the orientations from the true scene (they are not in X; a real system would
+  estimate them).
 - A push: once per run, after the first action, one free block (on the table, nothing on it) is
   moved `push_m` (metres, uniform in the range) in a random horizontal direction, as a person or a
   slipping block would, to a place where it touches no other block. The planner observes it there.
@@ -45,22 +47,69 @@ class Faults:
     def any(self) -> bool:
         return self.noise_m > 0 or self.push_m is not None
 
-    def observe(self, X: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-        """X as the planner observes it: horizontal positions with noise."""
+    def observe(self, X: np.ndarray, rng: np.random.Generator, scene: Scene | None = None) -> np.ndarray:
+        """X as the planner observes it: horizontal positions with noise. With the world's `scene`, blocks
+        the noise put into each other are moved apart (`keep_apart`)."""
         if self.noise_m <= 0:
             return X
         seen = np.array(X, dtype=float)
         seen[:, :2] += rng.normal(0.0, self.noise_m, size=(len(X), 2))
-        return seen
+        return seen if scene is None else keep_apart(seen, scene)
+
+
+def keep_apart(seen: np.ndarray, scene: Scene, passes: int = 10) -> np.ndarray:
+    """The noisy observation `seen` (n, 5) with every two blocks at the same height whose footprints the
+    noise made overlap, though they do not overlap in `scene`, moved apart until they touch: half the
+    overlap each, along the axis that separates them with the least motion. A perception pipeline knows
+    that two blocks cannot share space, as it knows that a block rests on its support."""
+    seen = np.array(seen, dtype=float)
+    n = scene.n
+    pairs = [(i, j) for i in range(n) for j in range(i + 1, n)
+             if abs(seen[i, 2] - seen[j, 2]) < 0.04 and _apart(footprint(scene, i), footprint(scene, j), -0.001)]
+    for _ in range(passes):
+        moved = False
+        for i, j in pairs:
+            a, b = footprint(scene, i, seen[i, :2]), footprint(scene, j, seen[j, :2])
+            axis, overlap = _least_overlap(a, b)
+            if overlap > 1e-6:
+                seen[i, :2] -= axis * overlap / 2
+                seen[j, :2] += axis * overlap / 2
+                moved = True
+        if not moved:
+            break
+    return seen
+
+
+def _least_overlap(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, float]:
+    """(unit axis, depth): the edge normal of two convex footprints along which they overlap least, pointing
+    from a to b, and that overlap in metres (0 when they are apart)."""
+    best: tuple[np.ndarray, float] = (np.zeros(2), np.inf)
+    for poly in (a, b):
+        for k in range(len(poly)):
+            edge = poly[(k + 1) % len(poly)] - poly[k]
+            normal = np.array([-edge[1], edge[0]])
+            norm = np.linalg.norm(normal)
+            if norm == 0:
+                continue
+            normal /= norm
+            pa, pb = a @ normal, b @ normal
+            forward, backward = pa.max() - pb.min(), pb.max() - pa.min()  # b beyond a, a beyond b
+            depth, axis = (forward, normal) if forward <= backward else (backward, -normal)
+            if depth <= 0:
+                return np.zeros(2), 0.0
+            if depth < best[1]:
+                best = (axis, float(depth))
+    return best
 
 
 def footprint(scene: Scene, i: int, at: np.ndarray | None = None) -> np.ndarray:
-    """The four (x, y) corners of block i's footprint (metres), centred at `at` if given."""
+    """The four (x, y) corners of block i's footprint (metres), in order around it (so that consecutive
+    corners make its edges), centred at `at` if given."""
     X_WB = scene.X_WB[i]
     half = np.asarray(BLOCK_SIZES[int(scene.types[i])][:2]) / 2
     R = X_WB.rotation().matrix()[:2, :2]
     centre = X_WB.translation()[:2] if at is None else at
-    corners = np.array([[sx * half[0], sy * half[1]] for sx in (-1, 1) for sy in (-1, 1)])
+    corners = np.array([[-half[0], -half[1]], [half[0], -half[1]], [half[0], half[1]], [-half[0], half[1]]])
     return centre + corners @ R.T
 
 
@@ -108,4 +157,4 @@ def push(scene: Scene, faults: Faults, rng: np.random.Generator, tries: int = 32
     return scene, "no free block had room to be pushed"
 
 
-__all__ = ["Faults", "footprint", "push"]
+__all__ = ["Faults", "footprint", "keep_apart", "push"]

@@ -191,7 +191,7 @@ def run_closed_loop(method: str, models: Models, X_init: np.ndarray, X_goal: np.
         step_times.append((seconds - execute, execute))
         infos.append(info)
         if faults is not None:
-            X = faults.observe(X, rng)
+            X = faults.observe(X, rng, world.scene)
         if on_step is not None:
             on_step(action, X, info, seconds)
         return X
@@ -199,7 +199,7 @@ def run_closed_loop(method: str, models: Models, X_init: np.ndarray, X_goal: np.
     if faults is not None and faults.noise_m > 0:
         injected.append(f"observations with {faults.noise_m * 1000:g} mm noise")
     try:
-        seen = X0 if faults is None else faults.observe(X0, rng)
+        seen = X0 if faults is None else faults.observe(X0, rng, world.scene)
         loop = plan_closed_loop(method, models, seen, X_goal, step, rounds, config, on_round=on_round,
                                 planner=planner, kinematics=kinematics)
     finally:
