@@ -182,14 +182,15 @@ def _round(method: str, models: Models, X: np.ndarray, X_goal: np.ndarray, out: 
     keep = cfg.loop.keep_plan and method in KEEPING_METHODS and bool(out.rounds)
     kept = keep_rest(models, X, X_goal, out.rounds[-1], cfg, kinematics, avoid,
                      cfg.verify.eps if until_goal else None) if keep else None
-    marginal = until_goal and kept is not None and kept.solved and kept.predicted_error >= cfg.search.confident
+    kept_error = kept.predicted_error if kept is not None and kept.solved else None
+    marginal = until_goal and kept_error is not None and kept_error >= cfg.search.confident
     if kept is not None and kept.solved and not marginal:
         return kept
     result = (planner or plan)(method, models, X, X_goal, cfg, **extra)
-    if kept is not None and marginal:  # kept within eps but not within confident: a plan aimed closer replaces it
-        assert kept.predicted_error is not None  # a solved keep has its prediction
-        if result.solved and result.plan and result.predicted_error < kept.predicted_error:
-            kept.reasons = [f"keep: the rest of the last plan ends {kept.predicted_error * 100:.1f} cm from the goal "
+    if kept is not None and kept_error is not None and marginal:  # a plan aimed closer replaces it
+        new_error = result.predicted_error if result.solved and result.plan else None
+        if new_error is not None and new_error < kept_error:
+            kept.reasons = [f"keep: the rest of the last plan ends {kept_error * 100:.1f} cm from the goal "
                             f"(over {cfg.search.confident * 100:g} cm); a new plan aims closer"]
         else:
             _absorb(kept, result, "planned")
