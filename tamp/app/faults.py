@@ -84,21 +84,14 @@ def _least_overlap(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, float]:
     """(unit axis, depth): the edge normal of two convex footprints along which they overlap least, pointing
     from a to b, and that overlap in metres (0 when they are apart)."""
     best: tuple[np.ndarray, float] = (np.zeros(2), np.inf)
-    for poly in (a, b):
-        for k in range(len(poly)):
-            edge = poly[(k + 1) % len(poly)] - poly[k]
-            normal = np.array([-edge[1], edge[0]])
-            norm = np.linalg.norm(normal)
-            if norm == 0:
-                continue
-            normal /= norm
-            pa, pb = a @ normal, b @ normal
-            forward, backward = pa.max() - pb.min(), pb.max() - pa.min()  # b beyond a, a beyond b
-            depth, axis = (forward, normal) if forward <= backward else (backward, -normal)
-            if depth <= 0:
-                return np.zeros(2), 0.0
-            if depth < best[1]:
-                best = (axis, float(depth))
+    for normal in _edge_normals(a, b):
+        pa, pb = a @ normal, b @ normal
+        forward, backward = pa.max() - pb.min(), pb.max() - pa.min()  # b beyond a, a beyond b
+        depth, axis = (forward, normal) if forward <= backward else (backward, -normal)
+        if depth <= 0:
+            return np.zeros(2), 0.0
+        if depth < best[1]:
+            best = (axis, float(depth))
     return best
 
 
@@ -115,18 +108,21 @@ def footprint(scene: Scene, i: int, at: np.ndarray | None = None) -> np.ndarray:
 
 def _apart(a: np.ndarray, b: np.ndarray, gap: float) -> bool:
     """Whether two convex footprints (corner arrays) are at least `gap` apart along a separating axis."""
+    for normal in _edge_normals(a, b):
+        pa, pb = a @ normal, b @ normal
+        if pa.max() + gap <= pb.min() or pb.max() + gap <= pa.min():
+            return True
+    return False
+
+
+def _edge_normals(a: np.ndarray, b: np.ndarray):
+    """The unit normals of the edges of two convex footprints: the candidate separating axes."""
     for poly in (a, b):
         for k in range(len(poly)):
             edge = poly[(k + 1) % len(poly)] - poly[k]
-            normal = np.array([-edge[1], edge[0]])
-            norm = np.linalg.norm(normal)
-            if norm == 0:
-                continue
-            normal /= norm
-            pa, pb = a @ normal, b @ normal
-            if pa.max() + gap <= pb.min() or pb.max() + gap <= pa.min():
-                return True
-    return False
+            norm = np.linalg.norm(edge)
+            if norm > 0:
+                yield np.array([-edge[1], edge[0]]) / norm
 
 
 def push(scene: Scene, faults: Faults, rng: np.random.Generator, tries: int = 32) -> tuple[Scene, str]:
