@@ -31,6 +31,7 @@ from .effects import ACTION_ENC_DIM, STATE_DIM, arm_shift, as_action_array, chec
 
 ACTIVATIONS = ("gumbel_sigmoid", "sigmoid", "tanh", "none")
 RELATIONS = ("attention", "pairwise")
+OFFSET_SCALE_M = 0.05  # `reconstruct_offsets` reads tanh(offset / 5 cm): which side and whether touching, not how far
 SELF_LOGIT = 30.0  # pairwise r_k(i, i): a logit whose Gumbel-Sigmoid sample is 1 but for ~1e-13 of draws
 
 
@@ -53,6 +54,10 @@ class ModelConfig:
     # the block type (large or not, from the state's one-hot) as a given unary symbol after the d_z learned
     # bits: the decoder reads it directly, so no learned bit has to spend itself on what the input says
     type_symbol: bool = False
+    # a head that reads each pair's offset x_j - x_i back from the pair's relation bits (both ways) and
+    # both objects' unary bits, trained with `TrainConfig.offset_weight`: the effect loss alone never
+    # asks where blocks stand on the table, this asks the bits to say it coarsely (planners never call it)
+    offset_decoder: bool = False
 
     @property
     def n_unary(self) -> int:
@@ -133,6 +138,8 @@ class EffectModel(nn.Module):
             self.pair = mlp([2 * STATE_DIM + 3, *hid, c.heads])
         self.object_mlp = mlp([c.n_unary + ACTION_ENC_DIM, *hid, c.d_msg])
         self.decoder = mlp([c.heads * c.d_msg, *hid, 3])
+        if c.offset_decoder:
+            self.offset_head = mlp([2 * c.n_unary + 2 * c.heads, *hid, 3])
         self.bottleneck = Bottleneck(c.activation, c.temperature)
         # Normalisation statistics (metres), set from training data by ``set_normalisation``.
         self.register_buffer("pos_mean", torch.zeros(3))
@@ -164,7 +171,7 @@ class EffectModel(nn.Module):
         c = self.config
         if c.relations == "pairwise":
             x = self._normalise(X)
-            offset = (X[:, None, :, :3] - X[:, :, None, :3]) / self.pos_std  # [b, i, j] = x_j - x_i
+            offset = self.offset_targets(X)  # [b, i, j] = x_j - x_i
             pair = torch.cat([x[:, :, None].expand(B, N, N, STATE_DIM), x[:, None].expand(B, N, N, STATE_DIM),
                               offset], dim=-1)
             logits = self.pair(pair).permute(0, 3, 1, 2)
@@ -201,6 +208,25 @@ class EffectModel(nn.Module):
         K = r.shape[1]
         h = (r.reshape(r.shape[0], K * N, N) @ z).view(B, K, N, -1).transpose(1, 2).reshape(B, N, -1)
         return self.decoder(h) * self.effect_scale * mask.to(X.dtype)[..., None]
+
+    def offset_targets(self, X: torch.Tensor) -> torch.Tensor:
+        """(B, N, N, 3) offsets x_j - x_i of every ordered pair, in units of the position std."""
+        return (X[:, None, :, :3] - X[:, :, None, :3]) / self.pos_std
+
+    @staticmethod
+    def squashed_offsets(X: torch.Tensor) -> torch.Tensor:
+        """(B, N, N, 3) tanh((x_j - x_i) / OFFSET_SCALE_M): -1 or 1 a block's width or more to either side,
+        between when the blocks touch or overlap; what `reconstruct_offsets` learns to read back."""
+        return torch.tanh((X[:, None, :, :3] - X[:, :, None, :3]) / OFFSET_SCALE_M)
+
+    def reconstruct_offsets(self, u: torch.Tensor, r: torch.Tensor) -> torch.Tensor:
+        """(B, N, N, 3) `squashed_offsets` read back from the bits alone (``offset_decoder``): from
+        [u_i, u_j, r_.(i, j), r_.(j, i)]."""
+        B, N, d = u.shape
+        rij = r.permute(0, 2, 3, 1)  # (B, N, N, K)
+        pair = torch.cat([u[:, :, None].expand(B, N, N, d), u[:, None].expand(B, N, N, d),
+                          rij, rij.transpose(1, 2)], dim=-1)
+        return self.offset_head(pair)
 
     def forward(self, X: torch.Tensor, action: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
         """Effect target (B, N, 3) in metres, arm motion of the pick object removed; 0 if padded.

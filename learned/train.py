@@ -102,6 +102,9 @@ class TrainConfig:
     # weight of a penalty on each learned bit (unary, and relation over pairs i != j) whose batch rate
     # leaves [USAGE_LOW, 1 - USAGE_LOW]: a head the effect loss could leave constant stays in use (0: off)
     bit_usage: float = 0.0
+    # weight of the offset reconstruction loss (`ModelConfig.offset_decoder`): the mean squared error, in
+    # position stds, of each pair's offset read back from its bits; 0: off (the paper's objective)
+    offset_weight: float = 0.0
 
     def __post_init__(self) -> None:
         if self.precision not in ("float32", "bfloat16"):
@@ -115,6 +118,8 @@ class TrainConfig:
             raise ValueError(f"val_fraction must be in (0, 1), got {self.val_fraction}")
         if not self.bit_usage >= 0.0:
             raise ValueError(f"bit_usage must be >= 0, got {self.bit_usage}")
+        if not self.offset_weight >= 0.0:
+            raise ValueError(f"offset_weight must be >= 0, got {self.offset_weight}")
 
     @classmethod
     def fast(cls, batch_size: int = 1024, **changes: Any) -> "TrainConfig":
@@ -154,6 +159,7 @@ def train_options(train: TrainConfig, num_train: int, num_val: int, init: str | 
             "seed": train.seed, "num_train": num_train, "num_val": num_val,
             **({"only_moved": True} if train.only_moved else {}),
             **({"bit_usage": train.bit_usage} if train.bit_usage else {}),
+            **({"offset_weight": train.offset_weight} if train.offset_weight else {}),
             **({"precision": train.precision} if train.precision != "float32" else {}),
             **({"patience_epochs": train.patience_epochs, "min_delta_cm": train.min_delta_cm}
                if train.patience_epochs is not None else {})}
@@ -180,6 +186,16 @@ def bit_usage_penalty(unary: torch.Tensor, relation: torch.Tensor, mask: torch.T
         rates.append((r * pairs[:, None]).sum(dim=(0, 2, 3)) / pairs.sum())
     rate = torch.cat(rates)
     return (torch.relu(USAGE_LOW - rate) + torch.relu(rate - 1 + USAGE_LOW)).sum() / USAGE_LOW
+
+
+def offset_loss(model: EffectModel, X: torch.Tensor, mask: torch.Tensor, u: torch.Tensor,
+                r: torch.Tensor) -> torch.Tensor:
+    """Mean over real pairs i != j of the squared error (summed over x, y, z) of the squashed offset
+    tanh((x_j - x_i) / 5 cm) read back from the pair's bits (`EffectModel.reconstruct_offsets`)."""
+    N = mask.shape[1]
+    pairs = (mask[:, :, None] & mask[:, None, :] & ~torch.eye(N, dtype=torch.bool, device=mask.device)).float()
+    err = (model.reconstruct_offsets(u, r).float() - model.squashed_offsets(X.float())).pow(2).sum(dim=-1)
+    return (err * pairs).sum() / pairs.sum().clamp(min=1.0)
 
 
 def last_path(out_path: str | Path) -> Path:
@@ -312,6 +328,8 @@ def train_model(data: "str | Path | Sequence[str | Path] | Transitions", config:
     config = config or ModelConfig(n_max=data.n_max)
     if data.n_max > config.n_max:
         raise ValueError(f"dataset n_max {data.n_max} exceeds model n_max {config.n_max}")
+    if train.offset_weight and not config.offset_decoder:
+        raise ValueError("offset_weight needs a model with offset_decoder=True (the head it trains)")
     options = train_options(train, len(data), len(val_data), init)
     tr, va = prepare(data), prepare(val_data)
 
@@ -392,10 +410,13 @@ def train_model(data: "str | Path | Sequence[str | Path] | Transitions", config:
                 u, r, unary, relation = model.encode_logits(X, M)
                 pred = model.decode(X, A, M, u, r)
                 usage = bit_usage_penalty(unary, relation, M) if train.bit_usage else None
+                offsets = offset_loss(model, X, M, u, r) if train.offset_weight else None
             d = pred.float() - T
             loss = (d / scale).pow(2).sum(dim=(1, 2)).mean()
             if usage is not None:
                 loss = loss + train.bit_usage * usage
+            if offsets is not None:
+                loss = loss + train.offset_weight * offsets
             opt.zero_grad(set_to_none=True)
             loss.backward()
             opt.step()

@@ -214,3 +214,42 @@ def test_closed_loop_steps_name_their_round_and_how_it_got_its_plan(models):
     records[0].update(round=steps[1].round, plan=steps[1].plan)
     assert "step 1: pick 1 at +0, place on 0 at +0 (round 1: kept on course)" in format_steps(records)[0]
     assert "(round 1: kept on course)" in step_panel_html(records[0], 3)  # the replay's panel says it too
+
+
+class _HeightBits:
+    """Symbols of the test below: u0 = on the table, no relation."""
+
+    def symbols(self, X):
+        X = np.asarray(X, dtype=float)
+        return (X[:, 2] < 0.04).astype(np.uint8)[:, None], np.zeros((1, len(X), len(X)), np.uint8)
+
+
+def test_a_step_is_judged_against_every_operator_of_its_action_in_a_domain_of_involved_objects():
+    """A domain learned on the objects each transition involved has, for one action, an operator of the
+    action's two objects (the picked block leaves the table: 7 of 10 transitions) and one with a bystander
+    that also left the table (3 of 10). The step's expected outcome is the heavier one, whichever operator
+    has more parameters, and an outcome of the other operator is one the action allows."""
+    from symbolic.dataset import make_dataset, restrict_to_involved
+    from symbolic.operators import learn_operators
+
+    bits = _HeightBits()
+    X0 = np.array([[0.6, 0.0, 0.025, 1, 0], [0.7, 0.1, 0.025, 1, 0], [0.5, -0.2, 0.025, 1, 0]])
+    lifted, both = X0.copy(), X0.copy()
+    lifted[0, 2] = both[0, 2] = both[2, 2] = 0.075
+    action = (0, 0, 1, 0)
+    u0, r0 = bits.symbols(X0)
+    after = [bits.symbols(lifted)] * 7 + [bits.symbols(both)] * 3
+    data = make_dataset(np.repeat(u0[None], 10, 0), np.repeat(r0[None], 10, 0), np.array([action] * 10),
+                        np.stack([u for u, _ in after]), np.stack([r for _, r in after]), np.full(10, 3))
+    domain = learn_operators(restrict_to_involved(data))
+    assert sorted(op.arity for op in domain.operators) == [2, 3]
+    models = Models(StubModel(), bits, domain)
+    (alone,) = symbolic_steps(models, [X0, lifted], [action])
+    assert alone.binding == (0, 1) and alone.match is True and alone.observed_effect == 0
+    (with_bystander,) = symbolic_steps(models, [X0, both], [action])
+    assert with_bystander.binding == (0, 1) and with_bystander.match is False
+    assert with_bystander.observed_operator is not None and with_bystander.observed_operator != with_bystander.operator
+    record = step_records([with_bystander], [], BitNames.none())
+    assert "another operator of the action" in "\n".join(format_steps(record))
+    (neither,) = symbolic_steps(models, [X0, X0], [action])  # nothing left the table: no operator learned that
+    assert neither.match is False and neither.observed_effect is None and neither.observed_operator is None

@@ -33,7 +33,8 @@ def cmd_train(args: argparse.Namespace) -> int:
     asked = {k: v for k, v in (("activation", args.bottleneck), ("d_z", args.d_z), ("heads", args.heads),
                                ("arm_input", False if args.no_arm_input else None),
                                ("relations", args.relations),
-                               ("type_symbol", True if args.type_symbol else None)) if v is not None}
+                               ("type_symbol", True if args.type_symbol else None),
+                               ("offset_decoder", True if args.offset_loss else None)) if v is not None}
     asked["n_max"] = max(int(read_meta(d)["n_max"]) for d in args.data)  # the object limit of the data
     if args.init is None:
         config = ModelConfig.from_dict(asked)
@@ -42,7 +43,7 @@ def cmd_train(args: argparse.Namespace) -> int:
 
         config = ModelConfig.from_dict({**load_model(args.init).config.to_dict(), **asked})
     settings = _train_config(args, only_moved=args.only_moved, val_fraction=args.val_fraction,
-                             bit_usage=args.bit_usage,
+                             bit_usage=args.bit_usage, offset_weight=args.offset_loss,
                              time_limit_s=None if args.time_limit_min is None else 60 * args.time_limit_min)
     result = train_model(args.data, config, settings, args.out, resume=args.resume, init=args.init)
     print(f"best validation effect error {result.best_val_cm:.2f} cm (epoch {result.best_epoch}) -> {result.out_path}")
@@ -142,6 +143,10 @@ def add_train(sub) -> None:
     p.add_argument("--bit-usage", type=non_negative_float, default=0.0, metavar="WEIGHT",
                    help="weight of a penalty on learned bits and relations set in under 5 %% or over 95 %% of a "
                    "batch, so that the effect loss cannot leave a relation constant (default 0: the paper's loss)")
+    p.add_argument("--offset-loss", type=non_negative_float, default=0.0, metavar="WEIGHT",
+                   help="weight of a loss that reads each pair's offset x_j - x_i back from the pair's bits alone, so "
+                   "that relations say where blocks stand on the table, which the effect loss never asks (default 0: "
+                   "the paper's loss)")
     _add_train_arguments(p)
     p.add_argument("--time-limit-min", type=positive_float, default=None, metavar="MIN",
                    help="stop after the epoch that passes this wall time; the run is unfinished, --resume continues")

@@ -194,11 +194,18 @@ def format_steps(records: Sequence[dict]) -> list[str]:
                                   + (f" ~ {d['meaning_observed']}" if d["meaning_observed"] else "")
                                   for d in s["mismatches"])
                 allowed = "" if s["observed_effect"] is None else \
-                    f" (the operator's effect {s['observed_effect'] + 1}, not the expected one)"
+                    f" ({_allowed(s)}, not the expected one)"
                 lines.append(f"  observed: MISMATCH in {len(s['mismatches'])} bit(s){allowed}: {diffs}")
         if r["dynamics_error_m"] is not None:
             lines.append(f"  Dynamics Model: {r['dynamics_error_m'] * 100:.1f} cm off (mean over blocks)")
     return lines
+
+
+def _allowed(s: dict) -> str:
+    """Which learned effect gave a step's observed symbols: the expected operator's, or another's of the action."""
+    if s.get("observed_operator") in (None, s["operator"]):
+        return f"the operator's effect {s['observed_effect'] + 1}"
+    return f"effect {s['observed_effect'] + 1} of {s['observed_operator']}, another operator of the action"
 
 
 def format_motion(m: dict) -> str:
@@ -272,8 +279,7 @@ def step_panel_html(record: dict, total: int) -> str:
             elif s["match"]:
                 out.append('<div><b>observed</b>: <span style="color:#1e8449">the expected symbols</span></div>')
             else:
-                allowed = "" if s["observed_effect"] is None else \
-                    f"; the operator's effect {s['observed_effect'] + 1}"
+                allowed = "" if s["observed_effect"] is None else f"; {escape(_allowed(s))}"
                 out.append(f'<div><b>observed</b>: <span style="{_MISMATCH}">MISMATCH in '
                            f"{len(s['mismatches'])} bit(s)</span> (red rows{allowed})</div>")
     if m is not None:

@@ -7,13 +7,17 @@ For step k, from the states the world was in before and after it (`symbolic_step
 - the learned operator that grounds the step's action in those symbols, its effect and that effect's
   probability, and the symbols it expects after. For a Level-1 plan whose symbols before the step
   are the plan's, the effect is the one the plan counted on (it leads to the plan's next symbolic
-  state); otherwise it is the operator's most probable effect. When several operators ground the
-  action (offset or arity variants), the plan's is taken, else the most specific one (the largest
-  arity: its precondition covers the most objects), the one seen most in the data among those;
+  state); otherwise it is the action's most probable outcome. Several operators can ground one
+  action: a domain learned on the objects each transition involved (`tamp domain --involved-only`)
+  adds a bystander to an operator only when the bystander changed, so the action's outcomes are
+  spread over its operators (one without bystanders, one per bystander change seen). An outcome's
+  weight is the number of training transitions that showed it (operator count x effect
+  probability), summed over the operators that give the same symbols; the expected outcome is the
+  heaviest, named by the operator that gives most of its weight;
 - the symbols read on the state observed after the step, and whether they equal the expected ones:
   a mismatch is a step whose motion did not produce the symbolic effect the abstraction counted on;
-  and which of the operator's learned effects, if any, gives them (the outcome was one the
-  abstraction allows, if not the one it counted on);
+  and which learned effect of the action's operators, if any, gives them (the outcome was one the
+  abstraction allows, if not the one it counted on): the expected operator's own, else the heaviest;
 - the Dynamics Model's position error predicting the step from the observed state before it.
 
 A step whose action could not be refined has no observed symbols (it changed nothing). Steps after
@@ -45,6 +49,10 @@ class Symbols:
     @classmethod
     def of(cls, unary, rel) -> "Symbols":
         return cls(np.asarray(unary, np.uint8), np.asarray(rel, np.uint8))
+
+    def key(self) -> bytes:
+        """The bits as bytes, equal for equal symbols of one scene (a dict key)."""
+        return self.unary.tobytes() + self.rel.tobytes()
 
     def __eq__(self, other: object) -> bool:
         return isinstance(other, Symbols) and np.array_equal(self.unary, other.unary) and \
@@ -107,7 +115,8 @@ class SymbolicStep:
     expected: Symbols | None = None  # before with the expected effect applied
     observed: Symbols | None = None  # read on the observed state after (None: the step changed nothing)
     on_plan: bool | None = None  # the symbols before equal the Level-1 plan's (None: no plan symbols)
-    observed_effect: int | None = None  # the operator's effect that gives the observed symbols (None: none does)
+    observed_effect: int | None = None  # the learned effect that gives the observed symbols (None: none does) ...
+    observed_operator: str | None = None  # ... of this operator grounding the action (the expected one if it can)
     dynamics_error_m: float | None = None  # mean over objects of |predicted - observed| position
     objects: tuple[int, ...] | None = None  # the sub-scene the symbols describe (whole-scene indices); None: all
 
@@ -158,6 +167,7 @@ class SymbolicStep:
                 "expected_changes": changes(self.before, self.expected),
                 "observed_changes": changes(self.before, self.observed),
                 "match": self.match, "on_plan": self.on_plan, "observed_effect": self.observed_effect,
+                "observed_operator": self.observed_operator,
                 "mismatches": [{"bit": names.bit(kind, k, n(i), o(j)), "expected": e, "observed": w,
                                 "meaning_observed": names.meaning(kind, k, w, n(i), o(j))}
                                for kind, k, i, j, e, w in self.mismatches()]}
@@ -238,26 +248,27 @@ def _ground(models: Models, step: SymbolicStep, planned: tuple[Symbols, Symbols]
         step.on_plan = planned[0] == step.before
     if not candidates:
         return
+    # every learned outcome of the action: (symbols after, ground action, effect, transitions that showed it)
+    outcomes = [(Symbols.of(*apply_effect(step.before.unary, step.before.rel, effect, task.binding(g))), g, e,
+                 ops.operators[task.operator(g)].count * float(ops.operators[task.operator(g)].probabilities[e]))
+                for g in candidates for e, effect in enumerate(ops.operators[task.operator(g)].effects)]
     choice = None
     if step.on_plan and planned is not None:  # the operator and effect the plan counted on
-        for g in candidates:
-            op = ops.operators[task.operator(g)]
-            for e, effect in enumerate(op.effects):
-                if Symbols.of(*apply_effect(step.before.unary, step.before.rel, effect, task.binding(g))) == planned[1]:
-                    choice = (g, e)
-                    break
-            if choice is not None:
-                break
-    if choice is None:  # the most specific operator (its precondition fixes the most objects), the
-        # one seen most in the data among those, with its most probable effect
-        g = max(candidates, key=lambda g: (ops.operators[task.operator(g)].arity,
-                                           ops.operators[task.operator(g)].count))
-        choice = (g, 0)
+        choice = next(((g, e) for after, g, e, _ in outcomes if after == planned[1]), None)
+    if choice is None:  # the action's most probable outcome, by the operator that gives most of its weight
+        weight: dict[bytes, float] = {}
+        for after, _, _, w in outcomes:
+            weight[after.key()] = weight.get(after.key(), 0.0) + w
+        heaviest = max(weight, key=lambda k: weight[k])  # first of equals: candidates' order
+        _, g, e, _ = max((o for o in outcomes if o[0].key() == heaviest), key=lambda o: o[3])
+        choice = (g, e)
     g, e = choice
     op = ops.operators[task.operator(g)]
     step.operator, step.binding = op.name, tuple(task.binding(g))
     step.effect, step.n_effects, step.probability = e, len(op.effects), float(op.probabilities[e])
     step.expected = Symbols.of(*apply_effect(step.before.unary, step.before.rel, op.effects[e], step.binding))
-    if step.observed is not None:  # did the world do one of the things the operator learned it may do?
-        step.observed_effect = next((i for i, effect in enumerate(op.effects) if Symbols.of(
-            *apply_effect(step.before.unary, step.before.rel, effect, step.binding)) == step.observed), None)
+    if step.observed is not None:  # did the world do one of the things the action's operators learned it may do?
+        given = [o for o in outcomes if o[0] == step.observed]
+        if given:
+            _, g_obs, step.observed_effect, _ = max(given, key=lambda o: (o[1] == g, o[3]))
+            step.observed_operator = ops.operators[task.operator(g_obs)].name
