@@ -45,7 +45,8 @@ def build_domain(unary_pre, rel_pre, actions, unary_post, rel_post, n_per_transi
         train, held = data, holdout
     else:
         train, held = split_dataset(data, float(holdout), seed)
-    limit = lifted_max_arity(data.n_unary, data.n_relations) if max_arity is None else max_arity
+    limit = lifted_max_arity(data.n_unary, data.n_relations, _constant_diagonal(data)) if max_arity is None \
+        else max_arity
     if limit < 1:
         raise ValueError(f"max_arity must be at least 1, got {limit}")
     over = int((train.n > limit).sum())
@@ -75,6 +76,16 @@ def build_domain(unary_pre, rel_pre, actions, unary_post, rel_post, n_per_transi
         report["sampled_domains"] = {"n": sampled_domains, "distinct": len(written)}
     (out / "stats.json").write_text(json.dumps(report, indent=1))
     return report
+
+
+def _constant_diagonal(data: SymbolicDataset) -> bool:
+    """The relations' diagonal r_k(i, i) is the same in every transition, before and after (pairwise
+    relations set it always): the lifted search then leaves it out of its keys (`symbolic.lifted.max_arity`)."""
+    real = np.arange(data.unary_pre.shape[1])[None, :] < data.n[:, None]  # (T, n_max)
+    diagonal = np.concatenate([np.diagonal(data.rel_pre, axis1=2, axis2=3)[:, :, None],
+                               np.diagonal(data.rel_post, axis1=2, axis2=3)[:, :, None]], axis=2)  # (T, K, 2, n_max)
+    values = diagonal.transpose(0, 3, 1, 2)[real]  # (real objects, K, 2)
+    return bool(len(values)) and bool(np.all(values == values[:1]))
 
 
 def load_domain(domain_dir: str | Path) -> OperatorSet:

@@ -29,13 +29,36 @@ GroundAction = int  # operator * n_tuples + tuple index: sorts in ground-action 
 MAX_PRECONDITION_BITS = 58  # an operator's sub-state code and its arity tag share one int64 key
 
 
-def max_arity(n_unary: int, n_relations: int) -> int:
+def max_arity(n_unary: int, n_relations: int, given_diagonal: bool = False) -> int:
     """The largest operator arity a lifted search takes: a * n_unary + n_relations * a^2 precondition
-    bits at most `MAX_PRECONDITION_BITS` (4 for the bundled 1 unary bit and 3 relations)."""
+    bits at most `MAX_PRECONDITION_BITS` (4 for the bundled 1 unary bit and 3 relations). With
+    `given_diagonal` (pairwise relations: r_k(i, i) = 1 always) the a diagonal bits of each relation
+    are no part of the key (`LiftedTask`), so a * n_unary + n_relations * a * (a - 1) bits count."""
+    def width(a: int) -> int:
+        return a * n_unary + n_relations * a * (a - 1 if given_diagonal else a)
+
     a = 0
-    while (a + 1) * n_unary + n_relations * (a + 1) ** 2 <= MAX_PRECONDITION_BITS:
+    while width(a + 1) <= MAX_PRECONDITION_BITS:
         a += 1
     return a
+
+
+def _key_layout(pres: list[np.ndarray], posts: list[np.ndarray], arity: int, n_unary: int,
+                n_relations: int) -> tuple[np.ndarray, np.ndarray]:
+    """Which local bits of one arity's operators enter their key: all of them when they fit in
+    `MAX_PRECONDITION_BITS`, else all but the relations' diagonal r_k(i, i) when it is the same in
+    every precondition and every outcome (pairwise relations: always set); a state's tuple must then
+    have those values besides its key. Returns (key bits, fixed bits), local indices, ascending."""
+    width = arity * n_unary + n_relations * arity * arity
+    every = np.arange(width)
+    if width <= MAX_PRECONDITION_BITS or not pres:
+        return every, every[:0]
+    diagonal = np.array([arity * n_unary + k * arity * arity + i * arity + i
+                         for k in range(n_relations) for i in range(arity)], dtype=np.int64)
+    states = np.array(pres + posts)[:, diagonal]
+    if not np.all(states == states[:1]):
+        return every, every[:0]
+    return np.setdiff1d(every, diagonal), diagonal
 
 
 @dataclass(frozen=True)
@@ -100,15 +123,25 @@ class LiftedTask:
         self.deterministic = np.array(n_effects, dtype=np.int64)[self.effect_op] == 1
         allowed = [op.arity <= n if scope == "subset" else op.arity == n for op in ops.operators]
         self.arities = sorted({op.arity for op, ok in zip(ops.operators, allowed) if ok})
-        if self.arities and (a := self.arities[-1]) > max_arity(d, K):
-            raise ValueError(f"operators of arity {a} ({a * d + K * a * a} precondition bits) are not "
-                             f"supported: at most arity {max_arity(d, K)} "
-                             f"({MAX_PRECONDITION_BITS} bits); learn the domain again with `tamp domain`, whose "
-                             "--max-arity keeps to that limit by default")
+        # per arity, the local bits of the key and the fixed ones (`_key_layout`)
+        self._layout: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        for a in self.arities:
+            of_a = [op for op, ok in zip(ops.operators, allowed) if ok and op.arity == a]
+            pres = [np.concatenate([op.pre_unary.ravel(), op.pre_rel.ravel()]).astype(np.int64) for op in of_a]
+            posts = [_flipped(pre, _local_flips(e, a, d)) for op, pre in zip(of_a, pres) for e in op.effects]
+            self._layout[a] = keep, _ = _key_layout(pres, posts, a, d, K)
+            if len(keep) > MAX_PRECONDITION_BITS:
+                given = len(keep) < a * d + K * a * a
+                raise ValueError(f"operators of arity {a} ({len(keep)} precondition bits) are not supported: at most "
+                                 f"arity {max_arity(d, K, given)} ({MAX_PRECONDITION_BITS} bits); learn the domain again "
+                                 "with `tamp domain`, whose --max-arity keeps to that limit by default")
         # Tuples of every arity in one table: their local bits' global positions, padded with n_bits
-        # (a bit that is always 0), and the tuple's arity.
+        # (a bit that is always 0), and the tuple's arity; the positions of their key bits and of
+        # their fixed bits (padded alike), with the values the fixed ones must have.
         L_max = max((a * d + K * a * a for a in self.arities), default=0)
-        tuples, positions, arity_of = [], [], []
+        Lk_max = max((len(self._layout[a][0]) for a in self.arities), default=0)
+        F_max = max((len(self._layout[a][1]) for a in self.arities), default=0)
+        tuples, positions, key_positions, fixed_positions, fixed_values, arity_of = [], [], [], [], [], []
         for a in self.arities:
             perms = np.array(list(itertools.permutations(range(n), a)), dtype=np.int64).reshape(-1, a)
             cols = [perms[:, i] * d + k for i in range(a) for k in range(d)]
@@ -117,14 +150,30 @@ class LiftedTask:
             pos = np.full((len(perms), L_max + 1), self.n_bits, dtype=np.int64)
             if cols:
                 pos[:, : len(cols)] = np.stack(cols, axis=1)
+            keep, fixed = self._layout[a]
+            kpos = np.full((len(perms), Lk_max), self.n_bits, dtype=np.int64)
+            kpos[:, : len(keep)] = pos[:, keep]
+            fpos = np.full((len(perms), F_max), self.n_bits, dtype=np.int64)
+            fpos[:, : len(fixed)] = pos[:, fixed]
+            fval = np.zeros((len(perms), F_max), dtype=np.int64)
+            if len(fixed):
+                of_a = next(op for op, ok in zip(ops.operators, allowed) if ok and op.arity == a)
+                pre = np.concatenate([of_a.pre_unary.ravel(), of_a.pre_rel.ravel()]).astype(np.int64)
+                fval[:, : len(fixed)] = pre[fixed]
             tuples.append(perms)
             positions.append(pos)
+            key_positions.append(kpos)
+            fixed_positions.append(fpos)
+            fixed_values.append(fval)
             arity_of.append(np.full(len(perms), a, dtype=np.int64))
         self.tuples = [tuple(int(v) for v in row) for perms in tuples for row in perms]
         self.n_tuples = max(len(self.tuples), 1)
         self.positions = np.concatenate(positions) if positions else np.zeros((0, 1), np.int64)
+        self._key_positions = np.concatenate(key_positions) if key_positions else np.zeros((0, 0), np.int64)
+        self._fixed_positions = np.concatenate(fixed_positions) if fixed_positions else np.zeros((0, 0), np.int64)
+        self._fixed_values = np.concatenate(fixed_values) if fixed_values else np.zeros((0, 0), np.int64)
         self._tuple_arity = np.concatenate(arity_of) if arity_of else np.zeros(0, np.int64)
-        self._shift = np.arange(L_max, dtype=np.int64)
+        self._shift = np.arange(Lk_max, dtype=np.int64)
         # per word of the state, the value of each local bit of each tuple (0 for the padding column)
         self._bit_value = []
         for w in range(self.words):
@@ -142,18 +191,16 @@ class LiftedTask:
             a = op.arity
             pre = np.concatenate([op.pre_unary.ravel(), op.pre_rel.ravel()]).astype(np.int64)
             for j, e in enumerate(op.effects):
-                local = [i * d + k for i, k in e.unary_flips] + \
-                        [a * d + k * a * a + i * a + jj for k, i, jj in e.rel_flips]
+                local = _local_flips(e, a, d)
                 row = int(self.effect_start[oi]) + j
                 self.effect_local[row, : len(local)] = local
                 local_flip.append(bytes([a]) + bytes(sorted(local)))
                 flip_ids.setdefault(local_flip[-1], len(flip_ids))
                 if not ok:
                     continue
-                pre_groups.setdefault(_key(pre, a), []).append(row)
-                post = pre.copy()
-                post[local] ^= 1
-                post_groups.setdefault(_key(post, a), {}).setdefault(local_flip[-1], row)
+                keep = self._layout[a][0]
+                pre_groups.setdefault(_key(pre[keep], a), []).append(row)
+                post_groups.setdefault(_key(_flipped(pre, local)[keep], a), {}).setdefault(local_flip[-1], row)
         self.flip_id = np.array([flip_ids[f] for f in local_flip], dtype=np.int64)
         self._n_flip_ids = max(len(flip_ids), 1)
         # The first rows: per pre-state and distinct local flip, the rows up to the first deterministic
@@ -182,6 +229,8 @@ class LiftedTask:
         sub.tuples = [t for t, k in zip(self.tuples, keep.tolist()) if k]
         sub.n_tuples = max(len(sub.tuples), 1)
         sub.positions = self.positions[keep]
+        sub._key_positions = self._key_positions[keep]
+        sub._fixed_positions, sub._fixed_values = self._fixed_positions[keep], self._fixed_values[keep]
         sub._tuple_arity = self._tuple_arity[keep]
         sub._bit_value = [v[keep] for v in self._bit_value]
         sub._cache = {}
@@ -189,11 +238,14 @@ class LiftedTask:
 
     # ---- state helpers ---------------------------------------------------------------------------
     def _keys(self, state: int) -> np.ndarray:
-        """Arity-tagged sub-state code of every tuple in `state`."""
+        """Arity-tagged sub-state code of every tuple in `state`; -1 (no operator's) for a tuple whose
+        fixed bits (`_key_layout`) differ from every operator's."""
         raw = np.frombuffer(state.to_bytes(self.words * 8, "little"), dtype=np.uint8)
         bits = np.unpackbits(raw, bitorder="little").astype(np.int64)
-        codes = (bits[self.positions[:, : len(self._shift)]] << self._shift).sum(axis=1)
-        return codes * 8 + self._tuple_arity
+        codes = (bits[self._key_positions] << self._shift).sum(axis=1) * 8 + self._tuple_arity
+        if self._fixed_positions.shape[1]:
+            codes[(bits[self._fixed_positions] != self._fixed_values).any(axis=1)] = -1
+        return codes
 
     def _flips(self, tuple_idx: np.ndarray, rows: np.ndarray) -> np.ndarray:
         """(R, words) uint64 XOR masks of effect rows applied to tuples."""
@@ -297,6 +349,18 @@ class LiftedTask:
     def action(self, g: GroundAction) -> Action:
         return self.ops.operators[self.operator(g)].action(self.binding(g))
 
+
+
+def _local_flips(effect, arity: int, n_unary: int) -> list[int]:
+    """An effect's flipped bits in the local layout of an operator of `arity` (unary, then relations)."""
+    return [i * n_unary + k for i, k in effect.unary_flips] + \
+        [arity * n_unary + k * arity * arity + i * arity + j for k, i, j in effect.rel_flips]
+
+
+def _flipped(bits: np.ndarray, local: list[int]) -> np.ndarray:
+    out = bits.copy()
+    out[local] ^= 1
+    return out
 
 
 def _key(bits: np.ndarray, arity: int) -> int:

@@ -13,6 +13,7 @@ from symbolic.atoms import pack_state, state_atoms, unpack_state
 from symbolic.build import build_domain, load_domain
 from symbolic.dataset import make_dataset
 from symbolic.operators import coverage, filter_operators, from_json, learn_operators, stats, to_json
+from symbolic.reference import GroundTask
 from symbolic.structs import Effect
 
 # Two blocks, d_z = 1 (u0 = clear), K = 1 (r0(a, b) = a on b). The three scenes:
@@ -266,8 +267,11 @@ def test_domains_keep_to_the_operator_size_the_lifted_search_takes(tmp_path):
     from symbolic.lifted import LiftedTask, max_arity
 
     assert max_arity(1, 3) == 4 and max_arity(8, 4) == 2
+    assert max_arity(2, 4) == 3 and max_arity(2, 4, given_diagonal=True) == 4
     data = bw.random_dataset(1500, (2, 3, 4, 5), seed=2)
-    args = (data.unary_pre, data.rel_pre, data.actions, data.unary_post, data.rel_post, data.n)
+    rel_pre = data.rel_pre.copy()
+    rel_pre[0, 0, 0, 0] = 1  # one block "on itself" once: the diagonal is no longer given, it takes key bits
+    args = (data.unary_pre, rel_pre, data.actions, data.unary_post, data.rel_post, data.n)
     limit = max_arity(data.n_unary, data.n_relations)
     assert 2 <= limit < 5
     report = build_domain(*args, tmp_path / "default", holdout=0.2, seed=0)
@@ -283,3 +287,32 @@ def test_domains_keep_to_the_operator_size_the_lifted_search_takes(tmp_path):
         LiftedTask(load_domain(tmp_path / "all"), 5)
     with pytest.raises(ValueError, match="at least 1"):
         build_domain(*args, tmp_path / "none", holdout=0.2, seed=0, max_arity=0)
+
+
+def test_a_diagonal_the_same_in_every_operator_leaves_room_for_larger_operators(tmp_path):
+    """No block is on itself: the relations' diagonal is 0 in every transition, so the lifted search
+    leaves it out of its keys (as it does for pairwise relations, always 1) and arity 5 fits where it did
+    not; the successors are still exactly the grounded ones. An operator that reads a diagonal bit
+    otherwise makes the diagonal part of the key again, and the domain is refused."""
+    from symbolic.lifted import LiftedTask, max_arity
+
+    data = bw.random_dataset(1500, (2, 3, 4, 5), seed=2)
+    args = (data.unary_pre, data.rel_pre, data.actions, data.unary_post, data.rel_post, data.n)
+    report = build_domain(*args, tmp_path / "all", holdout=0.2, seed=0)
+    limit = max_arity(data.n_unary, data.n_relations)
+    assert report["max_arity"] == {"limit": max_arity(data.n_unary, data.n_relations, given_diagonal=True),
+                                   "transitions_left_out": 0}
+    every = load_domain(tmp_path / "all")
+    assert max(op.arity for op in every.operators) == 5 > limit
+    task, ground = LiftedTask(every, 5), GroundTask(every, 5)
+    for seed in range(6):
+        problem = bw.random_problem(5, 3, seed=seed)[0]
+        for s in (pack_state(problem.init_unary, problem.init_rel), pack_state(problem.goal_unary, problem.goal_rel)):
+            gs = ground.applicable(s)
+            assert task.expand(s).successors == list(dict.fromkeys(s ^ f for g in gs for f in ground.flips[g]))
+            assert task.applicable(s) == [task.n_tuples * ground.op_index[g] + task.tuples.index(ground.binding[g])
+                                          for g in gs]
+    odd = next(op for op in every.operators if op.arity == 5)
+    odd.pre_rel[0, 0, 0] = 1
+    with pytest.raises(ValueError, match=rf"arity 5 .* at most arity {limit} .*--max-arity"):
+        LiftedTask(every, 5)

@@ -141,7 +141,8 @@ def load_models(directory: str | Path, need_symbolic: bool | None = True) -> Mod
                              f"K={models.domain.n_relations}")
         from symbolic.lifted import max_arity
 
-        largest, limit = max((op.arity for op in models.domain.operators), default=0), max_arity(cfg.n_unary, cfg.heads)
+        largest = max((op.arity for op in models.domain.operators), default=0)
+        limit = max_arity(cfg.n_unary, cfg.heads, given_diagonal=cfg.relations == "pairwise")
         if largest > limit:  # the lifted search (Level 1, the per-step records) would refuse every problem
             raise UserError(f"{paths['domain']} has operators of arity {largest}, but the symbolic search takes at "
                             f"most {limit} with {cfg.n_unary} unary symbol(s), K={cfg.heads}: learn the domain again "
