@@ -132,9 +132,9 @@ class LiftedTask:
             self._layout[a] = keep, _ = _key_layout(pres, posts, a, d, K)
             if len(keep) > MAX_PRECONDITION_BITS:
                 given = len(keep) < a * d + K * a * a
-                raise ValueError(f"operators of arity {a} ({len(keep)} precondition bits) are not supported: at most "
-                                 f"arity {max_arity(d, K, given)} ({MAX_PRECONDITION_BITS} bits); learn the domain again "
-                                 "with `tamp domain`, whose --max-arity keeps to that limit by default")
+                raise ValueError(f"operators of arity {a} ({len(keep)} precondition bits) are not supported: at "
+                                 f"most arity {max_arity(d, K, given)} ({MAX_PRECONDITION_BITS} bits); learn the domain "
+                                 "again with `tamp domain`, whose --max-arity keeps to that limit by default")
         # Tuples of every arity in one table: their local bits' global positions, padded with n_bits
         # (a bit that is always 0), and the tuple's arity; the positions of their key bits and of
         # their fixed bits (padded alike), with the values the fixed ones must have.
@@ -157,8 +157,8 @@ class LiftedTask:
             fpos[:, : len(fixed)] = pos[:, fixed]
             fval = np.zeros((len(perms), F_max), dtype=np.int64)
             if len(fixed):
-                of_a = next(op for op, ok in zip(ops.operators, allowed) if ok and op.arity == a)
-                pre = np.concatenate([of_a.pre_unary.ravel(), of_a.pre_rel.ravel()]).astype(np.int64)
+                first = next(op for op, ok in zip(ops.operators, allowed) if ok and op.arity == a)
+                pre = np.concatenate([first.pre_unary.ravel(), first.pre_rel.ravel()]).astype(np.int64)
                 fval[:, : len(fixed)] = pre[fixed]
             tuples.append(perms)
             positions.append(pos)
