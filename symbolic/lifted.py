@@ -133,8 +133,8 @@ class LiftedTask:
             if len(keep) > MAX_PRECONDITION_BITS:
                 given = len(keep) < a * d + K * a * a
                 raise ValueError(f"operators of arity {a} ({len(keep)} precondition bits) are not supported: at "
-                                 f"most arity {max_arity(d, K, given)} ({MAX_PRECONDITION_BITS} bits); learn the domain "
-                                 "again with `tamp domain`, whose --max-arity keeps to that limit by default")
+                                 f"most arity {max_arity(d, K, given)} ({MAX_PRECONDITION_BITS} bits); learn the domain"
+                                 " again with `tamp domain`, whose --max-arity keeps to that limit by default")
         # Tuples of every arity in one table: their local bits' global positions, padded with n_bits
         # (a bit that is always 0), and the tuple's arity; the positions of their key bits and of
         # their fixed bits (padded alike), with the values the fixed ones must have.
