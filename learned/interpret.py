@@ -5,10 +5,11 @@
 
 For every unary bit u_b(i) and relation r_k(i, j) (i != j; the self relation r_k(i, i) is read as a
 unary bit) the report gives its rate (how often it is 1) and its agreement with each fact a reader
-understands: block type, resting on another block, carrying one, left / right along y, near, on top
-of, above (over the footprint, any height), vertical order, level, in line along the offset axis
-(y). Agreement is the share of objects (pairs) where the bit equals the fact, or its negation
-(polarity "not"), whichever is higher; phi (the Matthews correlation) is given beside it, because a
+understands: block type, resting on another block, carrying one, left / right along y (strictly, and
+by more than 2 cm), nearer the arm (the same two ways), near, on top of, above (over the footprint,
+any height), vertical order, level, in line along the offset axis (y). Agreement is the share of
+objects (pairs) where the bit equals the fact, or its negation (polarity "not"), whichever is
+higher; phi (the Matthews correlation) is given beside it, because a
 rare fact agrees with an almost-always-0 bit without meaning anything. The facts are computed from X
 alone (upright blocks, sizes of `effects.TYPE_NAMES`), so any scene source works: the scenes of a
 problem set (never trained on) or of a dataset.
@@ -24,6 +25,7 @@ BLOCK_HALF_XY = np.array([[0.025, 0.025], [0.025, 0.125]])  # small cube, large 
 HEIGHT_M = 0.05  # every block is 5 cm tall
 ON_TOLERANCE_M = 0.015  # z gap and footprint slack for "on top of"
 NEAR_M = 0.10  # centre distance on the table for "near"
+SIDE_M = 0.02  # "higher", "right of", "nearer the arm": by more than this, so that blocks in line are neither
 
 
 def _type(X: np.ndarray) -> np.ndarray:
@@ -60,7 +62,9 @@ def relation_facts(X: np.ndarray) -> dict[str, np.ndarray]:
     z, y, x = X[:, 2], X[:, 1], X[:, 0]
     dist = np.linalg.norm(X[:, None, :2] - X[None, :, :2], axis=-1)
     t = _type(X)
-    higher = z[:, None] > z[None, :] + 0.02
+    higher = z[:, None] > z[None, :] + SIDE_M
+    farther = x[:, None] > x[None, :] + SIDE_M  # [i, j]: i farther from the arm than j
+    left = y[:, None] > y[None, :] + SIDE_M  # [i, j]: i left of j
     return {"i on j": on, "j on i": on.T,
             "i above j": over & higher, "j above i": over.T & higher.T,
             "z_i > z_j (i higher)": higher, "z_j > z_i (j higher)": higher.T,
@@ -68,6 +72,8 @@ def relation_facts(X: np.ndarray) -> dict[str, np.ndarray]:
             "same level (|dz| < 2 cm)": np.abs(z[:, None] - z[None, :]) < 0.02,
             "aligned in x (|dx| < 2 cm)": np.abs(x[:, None] - x[None, :]) < 0.02,
             "y_i < y_j": y[:, None] < y[None, :], "x_i < x_j": x[:, None] < x[None, :],
+            "i right of j (> 2 cm)": left.T, "j right of i (> 2 cm)": left,
+            "i nearer the arm (> 2 cm)": farther.T, "j nearer the arm (> 2 cm)": farther,
             "near (< 10 cm)": dist < NEAR_M, "same type": t[:, None] == t[None, :],
             "i large": np.broadcast_to(t[:, None] == 1, on.shape),
             "j large": np.broadcast_to(t[None, :] == 1, on.shape)}
@@ -154,6 +160,9 @@ FACT_PHRASES = {
     "aligned in x (|dx| < 2 cm)": "{i} {neg}in line with {j} along y",
     "z_i <= z_j (vertical order)": "{i} {neg}at most as high as {j}", "y_i < y_j": "{i} {neg}right of {j}",
     "x_i < x_j": "{i} {neg}nearer the arm than {j}", "near (< 10 cm)": "{i} {neg}near {j}",
+    "i right of j (> 2 cm)": "{i} {neg}right of {j}", "j right of i (> 2 cm)": "{j} {neg}right of {i}",
+    "i nearer the arm (> 2 cm)": "{i} {neg}nearer the arm than {j}",
+    "j nearer the arm (> 2 cm)": "{j} {neg}nearer the arm than {i}",
     "same type": "{i} {neg}the same type as {j}", "i large": "{i} {neg}large", "j large": "{j} {neg}large"}
 
 
