@@ -34,6 +34,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
 
+from symbolic import operators_file
 from tamp.errors import UserError
 from tamp.planning.models import DOMAIN_DIR, DYNAMICS_FILE, SYMBOLIC_FILE, Models
 
@@ -88,11 +89,11 @@ def required_files(models_dir: str | Path, method: str) -> list[Path]:
     v = d / VARIANTS_DIR
     m = METHODS[method]
     if m.models == "symbolic_sigmoid":
-        return [d / DYNAMICS_FILE, v / SYMBOLIC_SIGMOID, v / DOMAIN_SIGMOID / "operators.json"]
+        return [d / DYNAMICS_FILE, v / SYMBOLIC_SIGMOID, operators_file(v / DOMAIN_SIGMOID)]
     if m.models == "dynamics_gumbel":
         return [v / DYNAMICS_GUMBEL]
     if m.symbolic:
-        return [d / DYNAMICS_FILE, d / SYMBOLIC_FILE, d / DOMAIN_DIR / "operators.json"]
+        return [d / DYNAMICS_FILE, d / SYMBOLIC_FILE, operators_file(d / DOMAIN_DIR)]
     return [d / DYNAMICS_FILE]
 
 

@@ -14,7 +14,7 @@ The python backend's parts: `LiftedTask` (successors per state without grounding
 breadth-first search for all N domains); `symbolic.reference` keeps the plain per-domain version.
 """
 
-from symbolic.build import build_domain, load_domain, make_problem
+from symbolic.build import build_domain, load_domain, make_problem, operators_file
 from symbolic.dataset import make_dataset, split_dataset
 from symbolic.fast_downward import (
                                     PlannerCrashed,
@@ -50,6 +50,7 @@ __all__ = [
     "ProbabilisticPlanResult", "RankedPlan", "SymbolicDataset", "SymbolicPlanner", "SymbolicProblem",
     "apply_effect", "build_domain", "coverage", "dedup_choices", "learn_operators", "load_domain", "load_operators",
     "make_dataset", "make_problem", "plan_deterministic", "plan_probabilistic", "problem_pddl",
-    "raise_for_status", "replay", "run_fast_downward", "sample_choices", "save_operators", "search_domains",
+    "raise_for_status", "replay", "run_fast_downward", "operators_file", "sample_choices", "save_operators",
+    "search_domains",
     "split_dataset", "stats", "steps_to_actions", "write_domains", "write_sampled_domains",
 ]

@@ -88,9 +88,17 @@ def _constant_diagonal(data: SymbolicDataset) -> bool:
     return bool(len(values)) and bool(np.all(values == values[:1]))
 
 
+def operators_file(domain_dir: str | Path) -> Path:
+    """The operators file of a domain directory: operators.json, or operators.json.gz (bundled domains
+    ship gzipped: a learned domain's JSON shrinks about 18 times); operators.json when neither exists."""
+    plain = Path(domain_dir) / "operators.json"
+    packed = plain.with_name(plain.name + ".gz")
+    return packed if not plain.is_file() and packed.is_file() else plain
+
+
 def load_domain(domain_dir: str | Path) -> OperatorSet:
-    """Operators written by `build_domain` (operators.json)."""
-    return load_operators(Path(domain_dir) / "operators.json")
+    """Operators written by `build_domain` (`operators_file`)."""
+    return load_operators(operators_file(domain_dir))
 
 
 def make_problem(init_unary, init_rel, goal_unary, goal_rel, nonempty: bool = False,

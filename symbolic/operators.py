@@ -20,6 +20,7 @@ price of coverage.
 
 from __future__ import annotations
 
+import gzip
 import itertools
 import json
 from collections import Counter, defaultdict
@@ -245,13 +246,15 @@ def save_operators(ops: OperatorSet, path: str | Path) -> None:
 
 
 def load_operators(path: str | Path) -> OperatorSet:
-    """Operators of an operators.json; a missing, truncated or malformed file is a ValueError naming it."""
+    """Operators of an operators.json (or .json.gz); a missing, truncated or malformed file is a ValueError
+    naming it."""
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"no operators file at {path}")
     try:
-        return from_json(json.loads(path.read_text()))
-    except json.JSONDecodeError as error:
+        text = gzip.decompress(path.read_bytes()).decode() if path.suffix == ".gz" else path.read_text()
+        return from_json(json.loads(text))
+    except (json.JSONDecodeError, gzip.BadGzipFile, EOFError, UnicodeDecodeError) as error:
         raise ValueError(f"{path}: not valid JSON ({error}); the file is damaged or truncated") from None
     except ValueError as error:
         raise ValueError(f"{path}: {error}") from None

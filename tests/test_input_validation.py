@@ -281,6 +281,31 @@ def test_damaged_operators_file_is_named(tmp_path, capsys, text, message):
     _one_line_error(capsys, str(models / "domain" / "operators.json"), message)
 
 
+def test_a_gzipped_operators_file_is_read_and_a_damaged_one_is_named(tmp_path, capsys):
+    """Bundled domains ship operators.json.gz: the same operators as the plain file; a damaged one is a
+    one-line error naming it."""
+    import gzip
+
+    from symbolic import load_domain
+
+    models = tmp_path / "models"
+    shutil.copytree(pretrained_dir(), models)
+    plain = models / "domain" / "operators.json"
+    packed = plain.with_name("operators.json.gz")
+    packed.write_bytes(gzip.compress(plain.read_bytes()))
+    want = load_domain(models / "domain")
+    plain.unlink()
+    got = load_domain(models / "domain")
+    assert [op.name for op in got.operators] == [op.name for op in want.operators] and len(got) > 0
+    problem = tmp_path / "p.json"
+    problem.write_text(json.dumps({"X_init": INIT, "X_goal": GOAL}))
+    assert main(["plan", "--problem", str(problem), "--models", str(models), "--execute", "none"]) == 0
+    capsys.readouterr()
+    packed.write_bytes(packed.read_bytes()[:200])
+    assert main(["plan", "--problem", str(problem), "--models", str(models), "--execute", "none"]) == 2
+    _one_line_error(capsys, str(packed), "not valid JSON")
+
+
 def test_a_bug_reaches_the_user_with_its_traceback_a_mistake_in_one_line(tmp_path, monkeypatch, capsys):
     import tamp.app.plan_command as plan_command
 

@@ -69,8 +69,8 @@ def export_pddl(models_dir: str | Path, out_dir: str | Path, X_init: np.ndarray 
     from tamp.planning.models import DOMAIN_DIR, load_models
 
     models_dir, out = Path(models_dir), Path(out_dir)
-    if not (models_dir / DOMAIN_DIR / "operators.json").is_file():
-        raise UserError(f"no learned domain at {models_dir / DOMAIN_DIR / 'operators.json'}")
+    if not symbolic.operators_file(models_dir / DOMAIN_DIR).is_file():
+        raise UserError(f"no learned domain at {symbolic.operators_file(models_dir / DOMAIN_DIR)}")
     ops = symbolic.load_domain(models_dir / DOMAIN_DIR)
     paths = symbolic.write_domains(ops, out)
     if X_init is not None and X_goal is not None:

@@ -121,7 +121,7 @@ def load_models(directory: str | Path, need_symbolic: bool | None = True) -> Mod
         raise UserError(f"no models directory at {directory} (expected {SYMBOLIC_FILE}, "
                                 f"{DYNAMICS_FILE} and {DOMAIN_DIR}/ in it)")
     paths = {"dynamics": directory / DYNAMICS_FILE, "symbolic": directory / SYMBOLIC_FILE,
-             "domain": directory / DOMAIN_DIR / "operators.json"}
+             "domain": symbolic.operators_file(directory / DOMAIN_DIR)}
     if need_symbolic is None:
         need_symbolic = paths["symbolic"].is_file() and paths["domain"].is_file()
     wanted = ("dynamics", "symbolic", "domain") if need_symbolic else ("dynamics",)
