@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from symbolic import operators_file
 from tamp.app.cli import main
 from tamp.planning.models import DOMAIN_DIR, DYNAMICS_FILE, SYMBOLIC_FILE, load_models, pretrained_dir
 
@@ -19,7 +20,7 @@ def _scene_paths(html_file) -> bytes:
 
 
 @pytest.mark.sim
-@pytest.mark.parametrize("name", ["pretrained", "pairwise"])
+@pytest.mark.parametrize("name", ["pretrained", "pairwise", "spatial"])
 def test_the_shipped_models_are_small_load_by_name_and_plan(name):
     import torch
 
@@ -31,10 +32,11 @@ def test_the_shipped_models_are_small_load_by_name_and_plan(name):
     torch.set_num_threads(1)
     directory = models_directory(name)
     assert directory == pretrained_dir() / ("" if name == "pretrained" else name)
-    files = [directory / SYMBOLIC_FILE, directory / DYNAMICS_FILE, directory / DOMAIN_DIR / "operators.json"]
+    files = [directory / SYMBOLIC_FILE, directory / DYNAMICS_FILE, operators_file(directory / DOMAIN_DIR)]
     assert all(f.is_file() for f in files), [str(f) for f in files if not f.is_file()]
     assert (pretrained_dir() / "PROVENANCE.md").is_file()
-    own = [f for f in directory.rglob("*") if f.is_file() and (name != "pretrained" or "pairwise" not in f.parts)]
+    others = {"pairwise", "spatial"} if name == "pretrained" else set()  # the other sets live in subfolders
+    own = [f for f in directory.rglob("*") if f.is_file() and not others & set(f.parts)]
     assert sum(f.stat().st_size for f in own) < 4e6  # "a few MB at most", each set
     models = load_models(directory)
     assert models.symbolic is not None and models.symbolic.config.relations == ("attention" if name == "pretrained"

@@ -41,10 +41,11 @@ def positive_float(text: str) -> float:
     return _number(text, float, lambda v: math.isfinite(v) and v > 0, "a finite number > 0")
 
 
-BUNDLED_MODELS = {"pretrained": "", "pairwise": "pairwise"}  # name -> folder under tamp/pretrained/
+# name -> folder under tamp/pretrained/
+BUNDLED_MODELS = {"pretrained": "", "pairwise": "pairwise", "spatial": "spatial"}
 MODELS_HELP = ("a models directory (symbolic.pt, dynamics.pt, domain/), or a bundled set: pretrained (the "
-               "paper's configuration) or pairwise (pairwise relations with the type symbol; "
-               "docs/learned-symbols.md)")
+               "paper's configuration), pairwise (pairwise relations with the type symbol) or spatial (pairwise "
+               "relations that say on which side of a block another stands; docs/learned-symbols.md)")
 
 
 def models_directory(text: str) -> Path:
