@@ -102,8 +102,8 @@ class TrainConfig:
     # weight of a penalty on each learned bit (unary, and relation over pairs i != j) whose batch rate
     # leaves [USAGE_LOW, 1 - USAGE_LOW]: a head the effect loss could leave constant stays in use (0: off)
     bit_usage: float = 0.0
-    # weight of the offset reconstruction loss (`ModelConfig.offset_decoder`): the mean squared error, in
-    # position stds, of each pair's offset read back from its bits; 0: off (the paper's objective)
+    # weight of the offset loss (`ModelConfig.offset_decoder`, `offset_loss`): each pair's squashed offset
+    # read back from its bits, so that relations say where blocks stand; 0: off (the paper's objective)
     offset_weight: float = 0.0
 
     def __post_init__(self) -> None:
