@@ -20,7 +20,7 @@ from symbolic.structs import OperatorSet, SymbolicDataset, SymbolicProblem
 def build_domain(unary_pre, rel_pre, actions, unary_post, rel_post, n_per_transition, out_dir,
                  holdout: float | SymbolicDataset = 0.1, seed: int = 0, min_prob: float = 0.0,
                  sampled_domains: int = 0, involved_only: bool = False, min_count: int = 0,
-                 max_arity: int | None = None) -> dict:
+                 max_arity: int | None = None, core_from_all: bool = False) -> dict:
     """Learn operators from symbolic transitions and write the domain files.
 
     Inputs: padded bit arrays unary (T, n_max, d_z), relations (T, K, n_max, n_max), actions (T, 4),
@@ -29,15 +29,18 @@ def build_domain(unary_pre, rel_pre, actions, unary_post, rel_post, n_per_transi
     domain.ppddl, operators.json, stats.json, and with sampled_domains = N > 0 the distinct sampled
     PDDL domains in sampled/ (sampled.json has their multiplicities). Returns the statistics dict.
     With `involved_only`, operators mention only the objects a transition involves (picked, target,
-    and those whose bits change; see `restrict_to_involved`) instead of every object in the scene.
+    and those whose bits change; see `restrict_to_involved`, also for `core_from_all`) instead of every
+    object in the scene.
     `min_count` and `min_prob` drop rare operators and rare effects (`filter_operators`).
     `max_arity` (default: the most the lifted search takes, `symbolic.lifted.max_arity`) leaves out the
     training transitions that involve more objects: no operator is learned from them, and held-out ones
     count as not covered.
     """
     data = make_dataset(unary_pre, rel_pre, actions, unary_post, rel_post, n_per_transition)
+    if core_from_all and not involved_only:
+        raise ValueError("core_from_all needs involved_only (it adds the picked and target objects' operators)")
     if involved_only:
-        data = restrict_to_involved(data)
+        data = restrict_to_involved(data, core_from_all)
         if isinstance(holdout, SymbolicDataset):
             holdout = restrict_to_involved(holdout)
     held: SymbolicDataset | None
@@ -64,6 +67,7 @@ def build_domain(unary_pre, rel_pre, actions, unary_post, rel_post, n_per_transi
     report = stats(ops)
     report["train_transitions"] = len(train)
     report["involved_only"] = involved_only
+    report["core_from_all"] = core_from_all
     report["max_arity"] = {"limit": limit, "transitions_left_out": over}
     report["filters"] = {"min_count": min_count, "min_prob": min_prob, "operators_learned": len(learned),
                          "operators_kept": len(ops)}

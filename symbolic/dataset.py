@@ -71,12 +71,18 @@ def split_dataset(data: SymbolicDataset, holdout: float,
     return data.subset(np.sort(perm[k:])), data.subset(np.sort(perm[:k]))
 
 
-def restrict_to_involved(data: SymbolicDataset) -> SymbolicDataset:
+def restrict_to_involved(data: SymbolicDataset, core_from_all: bool = False) -> SymbolicDataset:
     """Each transition restricted to the objects it involves: the picked object, the target, and
     every object whose unary or relation bits change. Operators learned from the result mention
     only those objects, so they apply to any scene that contains such a sub-state (a frame
     assumption on the other objects), which keeps learned domains small when the full pre-state of
-    every object would make nearly every transition its own operator."""
+    every object would make nearly every transition its own operator.
+
+    An operator of the picked and target objects alone then holds only the transitions in which no
+    other object changed: in larger scenes mostly failed picks, so its outcomes lean to "nothing
+    happens". With `core_from_all`, a transition that changed other objects also appears restricted
+    to its picked and target objects (the others' changes ignored there), so that operator holds
+    what the action does to those two whatever else it disturbed."""
     T, n_max, d_z = data.unary_pre.shape
     up = np.zeros_like(data.unary_pre)
     uq = np.zeros_like(data.unary_post)
@@ -99,4 +105,16 @@ def restrict_to_involved(data: SymbolicDataset) -> SymbolicDataset:
         rq[t, :, :m, :m] = data.rel_post[t][:, o][:, :, o]
         actions[t, 0], actions[t, 2] = 0, (0 if place == pick else 1)
         n_new[t] = m
-    return SymbolicDataset(up, rp, actions, uq, rq, n_new)
+    involved = SymbolicDataset(up, rp, actions, uq, rq, n_new)
+    core = 1 + (data.actions[:, 0] != data.actions[:, 2]).astype(np.int64)  # the picked and target objects
+    more = np.flatnonzero(n_new > core) if core_from_all else np.zeros(0, np.int64)
+    if not len(more):
+        return involved
+    # the same transitions cut to their first `core` objects (the picked one, then the target)
+    keep = np.arange(n_max)[None, :] < core[more][:, None]  # (E, n_max)
+    pair = keep[:, :, None] & keep[:, None, :]
+    cut_u = [u[more] * keep[..., None] for u in (up, uq)]
+    cut_r = [r[more] * pair[:, None] for r in (rp, rq)]
+    return SymbolicDataset(np.concatenate([up, cut_u[0]]), np.concatenate([rp, cut_r[0]]),
+                           np.concatenate([actions, actions[more]]), np.concatenate([uq, cut_u[1]]),
+                           np.concatenate([rq, cut_r[1]]), np.concatenate([n_new, core[more]]))

@@ -56,6 +56,26 @@ def test_pairwise_relations_and_the_type_symbol_reach_the_domain_and_tamp_symbol
     assert "near-constant bits" in printed and "goals whose symbols" not in printed  # no problem set given
 
 
+def test_domain_core_from_all_adds_operators_and_needs_involved_only(tiny_dataset, tmp_path, capsys):
+    model = tmp_path / "symbolic.pt"
+    assert main(["train", "--data", str(tiny_dataset), "--bottleneck", "gumbel_sigmoid", "--d-z", "1", "--heads",
+                 "2", "--epochs", "2", "--out", str(model)]) == 0
+    counts = {}
+    for extra in ([], ["--core-from-all"]):
+        out = tmp_path / ("core" if extra else "plain")
+        assert main(["domain", "--model", str(model), "--data", str(tiny_dataset), "--out", str(out),
+                     "--involved-only", *extra]) == 0
+        stats = json.loads((out / "stats.json").read_text())
+        assert stats["core_from_all"] is bool(extra)
+        counts[bool(extra)] = stats["train_transitions"]
+    assert counts[True] > counts[False]  # transitions that changed a third object teach their pair's operator too
+    capsys.readouterr()
+    assert main(["domain", "--model", str(model), "--data", str(tiny_dataset), "--out", str(tmp_path / "x"),
+                 "--core-from-all"]) == 2
+    err = capsys.readouterr().err
+    assert "--core-from-all needs --involved-only" in err and "Traceback" not in err
+
+
 def test_train_missing_dataset_is_a_clear_error(tmp_path, capsys):
     assert main(["train", "--data", str(tmp_path / "nope"), "--out", str(tmp_path / "m.pt")]) == 2
     err = capsys.readouterr().err

@@ -316,3 +316,32 @@ def test_a_diagonal_the_same_in_every_operator_leaves_room_for_larger_operators(
     odd.pre_rel[0, 0, 0] = 1
     with pytest.raises(ValueError, match=rf"arity 5 .* at most arity {limit} .*--max-arity"):
         LiftedTask(every, 5)
+
+
+def test_with_core_from_all_the_operator_of_the_picked_and_target_objects_learns_from_every_transition(tmp_path):
+    """One action in 3-object scenes, u0 = on the table: 2 transitions put the picked block on the target,
+    5 do that and also lift the third block, 3 change nothing. Restricted to the objects involved, the
+    picked-target operator sees only the 5 that changed no third object and expects nothing (3 of 5); with
+    core_from_all it sees all 10 and expects the block to leave the table (7 of 10). The bystander operator
+    is the same either way."""
+    table = np.ones((3, 1), np.uint8)
+    lifted = table.copy()
+    lifted[0] = 0
+    both = lifted.copy()
+    both[2] = 0
+    after = [lifted] * 2 + [both] * 5 + [table] * 3
+    rel = np.zeros((10, 1, 3, 3), np.uint8)
+    args = (np.repeat(table[None], 10, 0), rel, np.array([(0, 0, 1, 0)] * 10), np.stack(after), rel, np.full(10, 3))
+
+    def by_arity(out):
+        build_domain(*args, out, holdout=0.0, involved_only=True, core_from_all=out.name == "core")
+        ops = load_domain(out)
+        return {op.arity: op for op in ops.operators}
+
+    plain, core = by_arity(tmp_path / "plain"), by_arity(tmp_path / "core")
+    assert plain[2].count == 5 and core[2].count == 10
+    assert plain[2].effects[0].unary_flips == () and float(plain[2].probabilities[0]) == pytest.approx(0.6)
+    assert core[2].effects[0].unary_flips == ((0, 0),) and float(core[2].probabilities[0]) == pytest.approx(0.7)
+    assert plain[3].count == core[3].count == 5 and plain[3].effects == core[3].effects
+    with pytest.raises(ValueError, match="involved_only"):
+        build_domain(*args, tmp_path / "x", holdout=0.0, core_from_all=True)

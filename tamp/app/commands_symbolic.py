@@ -75,10 +75,13 @@ def cmd_domain(args: argparse.Namespace) -> int:
     from tamp.planning.domain import learn_domain
 
     check_output_dir(args.out, "--out")
+    if args.core_from_all and not args.involved_only:
+        raise UserError("--core-from-all needs --involved-only (it adds operators of the picked and target objects)")
     report = learn_domain(args.model, args.data, args.out, holdout=args.holdout, seed=args.seed,
                           sampled_domains=args.sampled, involved_only=args.involved_only,
                           min_count=args.min_count, min_prob=args.min_prob, only_moved=args.only_moved,
-                          any_bottleneck=args.any_bottleneck, max_arity=args.max_arity)
+                          any_bottleneck=args.any_bottleneck, max_arity=args.max_arity,
+                          core_from_all=args.core_from_all)
     held = report.get("coverage_holdout") or {}
     print(f"{report['n_operators']} operators from {report['transitions']} transitions -> {args.out}")
     left_out = report["max_arity"]["transitions_left_out"]
@@ -129,6 +132,10 @@ def add_domain(sub) -> None:
     p.add_argument("--involved-only", action="store_true",
                    help="operators mention only the objects a transition involves (picked, target, and "
                    "those whose symbols change) rather than every object in the scene: far fewer operators")
+    p.add_argument("--core-from-all", action="store_true",
+                   help="with --involved-only: every transition also teaches the operator of its picked and target "
+                   "objects alone, other objects' changes ignored there; without it that operator holds only the "
+                   "transitions that disturbed nothing else (mostly failed picks) and expects nothing to happen")
     p.add_argument("--only-moved", action="store_true",
                    help="learn from the transitions that moved their picked block (failed grasps and blocked "
                    "motions left out, as the paper's authors do)")

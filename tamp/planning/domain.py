@@ -17,7 +17,8 @@ from tamp.errors import UserError
 def learn_domain(model_path: str | Path, data_dir: "str | Path | Sequence[str | Path]", out_dir: str | Path,
                  holdout: float = 0.1, seed: int = 0, sampled_domains: int = 0, skip_corrupt: bool = True,
                  involved_only: bool = False, min_count: int = 0, min_prob: float = 0.0,
-                 only_moved: bool = False, any_bottleneck: bool = False, max_arity: int | None = None) -> dict:
+                 only_moved: bool = False, any_bottleneck: bool = False, max_arity: int | None = None,
+                 core_from_all: bool = False) -> dict:
     """Write the learned domain of `model_path` on the transitions in `data_dir` (a dataset directory, or
     several learned from together: `learned.load_transitions`); returns stats.
     `only_moved`: learn from the transitions that moved their picked block alone (as the paper's
@@ -50,7 +51,7 @@ def learn_domain(model_path: str | Path, data_dir: "str | Path | Sequence[str | 
     report = symbolic.build_domain(u_pre, r_pre, np.asarray(data.action), u_post, r_post, np.asarray(data.n),
                                    out_dir, holdout=holdout, seed=seed, sampled_domains=sampled_domains,
                                    involved_only=involved_only, min_count=min_count, min_prob=min_prob,
-                                   max_arity=max_arity)
+                                   max_arity=max_arity, core_from_all=core_from_all)
     report["model"] = str(model_path)
     report["data"] = source
     report["transitions"] = int(len(data))
