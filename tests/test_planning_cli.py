@@ -115,6 +115,9 @@ def test_cli_plans_without_execution(models_dir, tmp_path, capsys):
                      "--execute", "none"]) == 0
         out = capsys.readouterr().out
         assert f"{method}: plan of" in out and "timings:" in out and "predicted final error" in out
+    # without --models: the bundled (pretrained) set, as `tamp demo`
+    assert main(["plan", "--problem", str(path), "--execute", "none"]) == 0
+    assert "bilevel: plan of" in capsys.readouterr().out
     (models_dir / "missing").mkdir()
     assert main(["plan", "--problem", str(path), "--models", str(models_dir / "missing")]) == 2
     assert "missing model file(s)" in capsys.readouterr().err

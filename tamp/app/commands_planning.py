@@ -18,8 +18,9 @@ from tamp.app.args import (
 def cmd_plan(args: argparse.Namespace) -> int:
     """Plan a problem file with the learned models; refine, execute and replay the plan."""
     from tamp.app.plan_command import options_from_args, run_plan
+    from tamp.planning.models import pretrained_dir
 
-    return run_plan(args.problem, args.models, options_from_args(args))
+    return run_plan(args.problem, args.models or pretrained_dir(), options_from_args(args))
 
 
 def cmd_demo(args: argparse.Namespace) -> int:

@@ -309,7 +309,7 @@ def write_executed_trajectory(executed, path: Path, source: str) -> None:
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """The flags of `tamp plan`."""
     p.add_argument("--problem", type=Path, required=True, help="problem file (JSON: X_init, X_goal, k, seed)")
-    p.add_argument("--models", type=models_directory, required=True, help=MODELS_HELP)
+    p.add_argument("--models", type=models_directory, default=None, help=MODELS_HELP + "; default: pretrained")
     p.add_argument("--method", choices=tuple(METHODS), default="bilevel",
                    help="planner (default bilevel: verified symbolic plan, else continuous search; "
                    "bilevel_alg1: the paper's Algorithm 1 without our Level-1 extensions)")
