@@ -171,7 +171,7 @@ class EffectModel(nn.Module):
         c = self.config
         if c.relations == "pairwise":
             x = self._normalise(X)
-            offset = self.offset_targets(X)  # [b, i, j] = x_j - x_i
+            offset = self.pair_offsets(X) / self.pos_std  # [b, i, j] = x_j - x_i
             pair = torch.cat([x[:, :, None].expand(B, N, N, STATE_DIM), x[:, None].expand(B, N, N, STATE_DIM),
                               offset], dim=-1)
             logits = self.pair(pair).permute(0, 3, 1, 2)
@@ -209,15 +209,15 @@ class EffectModel(nn.Module):
         h = (r.reshape(r.shape[0], K * N, N) @ z).view(B, K, N, -1).transpose(1, 2).reshape(B, N, -1)
         return self.decoder(h) * self.effect_scale * mask.to(X.dtype)[..., None]
 
-    def offset_targets(self, X: torch.Tensor) -> torch.Tensor:
-        """(B, N, N, 3) offsets x_j - x_i of every ordered pair, in units of the position std."""
-        return (X[:, None, :, :3] - X[:, :, None, :3]) / self.pos_std
-
     @staticmethod
-    def squashed_offsets(X: torch.Tensor) -> torch.Tensor:
+    def pair_offsets(X: torch.Tensor) -> torch.Tensor:
+        """(B, N, N, 3) offsets x_j - x_i of every ordered pair [b, i, j], metres."""
+        return X[:, None, :, :3] - X[:, :, None, :3]
+
+    def squashed_offsets(self, X: torch.Tensor) -> torch.Tensor:
         """(B, N, N, 3) tanh((x_j - x_i) / OFFSET_SCALE_M): -1 or 1 a block's width or more to either side,
         between when the blocks touch or overlap; what `reconstruct_offsets` learns to read back."""
-        return torch.tanh((X[:, None, :, :3] - X[:, :, None, :3]) / OFFSET_SCALE_M)
+        return torch.tanh(self.pair_offsets(X) / OFFSET_SCALE_M)
 
     def reconstruct_offsets(self, u: torch.Tensor, r: torch.Tensor) -> torch.Tensor:
         """(B, N, N, 3) `squashed_offsets` read back from the bits alone (``offset_decoder``): from

@@ -43,22 +43,26 @@ def max_arity(n_unary: int, n_relations: int, given_diagonal: bool = False) -> i
     return a
 
 
-def _key_layout(pres: list[np.ndarray], posts: list[np.ndarray], arity: int, n_unary: int,
-                n_relations: int) -> tuple[np.ndarray, np.ndarray]:
+def _key_layout(operators: list, arity: int, n_unary: int, n_relations: int
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Which local bits of one arity's operators enter their key: all of them when they fit in
     `MAX_PRECONDITION_BITS`, else all but the relations' diagonal r_k(i, i) when it is the same in
     every precondition and every outcome (pairwise relations: always set); a state's tuple must then
-    have those values besides its key. Returns (key bits, fixed bits), local indices, ascending."""
+    have those values besides its key. Returns (key bits, fixed bits, their values), local indices
+    ascending."""
     width = arity * n_unary + n_relations * arity * arity
     every = np.arange(width)
-    if width <= MAX_PRECONDITION_BITS or not pres:
-        return every, every[:0]
+    none = (every, every[:0], every[:0])
+    if width <= MAX_PRECONDITION_BITS or not operators:
+        return none
     diagonal = np.array([arity * n_unary + k * arity * arity + i * arity + i
                          for k in range(n_relations) for i in range(arity)], dtype=np.int64)
+    pres = [np.concatenate([op.pre_unary.ravel(), op.pre_rel.ravel()]).astype(np.int64) for op in operators]
+    posts = [_flipped(pre, _local_flips(e, arity, n_unary)) for op, pre in zip(operators, pres) for e in op.effects]
     states = np.array(pres + posts)[:, diagonal]
     if not np.all(states == states[:1]):
-        return every, every[:0]
-    return np.setdiff1d(every, diagonal), diagonal
+        return none
+    return np.setdiff1d(every, diagonal), diagonal, states[0]
 
 
 @dataclass(frozen=True)
@@ -124,12 +128,10 @@ class LiftedTask:
         allowed = [op.arity <= n if scope == "subset" else op.arity == n for op in ops.operators]
         self.arities = sorted({op.arity for op, ok in zip(ops.operators, allowed) if ok})
         # per arity, the local bits of the key and the fixed ones (`_key_layout`)
-        self._layout: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        self._layout: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         for a in self.arities:
             of_a = [op for op, ok in zip(ops.operators, allowed) if ok and op.arity == a]
-            pres = [np.concatenate([op.pre_unary.ravel(), op.pre_rel.ravel()]).astype(np.int64) for op in of_a]
-            posts = [_flipped(pre, _local_flips(e, a, d)) for op, pre in zip(of_a, pres) for e in op.effects]
-            self._layout[a] = keep, _ = _key_layout(pres, posts, a, d, K)
+            self._layout[a] = keep, _, _ = _key_layout(of_a, a, d, K)
             if len(keep) > MAX_PRECONDITION_BITS:
                 given = len(keep) < a * d + K * a * a
                 raise ValueError(f"operators of arity {a} ({len(keep)} precondition bits) are not supported: at "
@@ -150,16 +152,13 @@ class LiftedTask:
             pos = np.full((len(perms), L_max + 1), self.n_bits, dtype=np.int64)
             if cols:
                 pos[:, : len(cols)] = np.stack(cols, axis=1)
-            keep, fixed = self._layout[a]
+            keep, fixed, values = self._layout[a]
             kpos = np.full((len(perms), Lk_max), self.n_bits, dtype=np.int64)
             kpos[:, : len(keep)] = pos[:, keep]
             fpos = np.full((len(perms), F_max), self.n_bits, dtype=np.int64)
             fpos[:, : len(fixed)] = pos[:, fixed]
             fval = np.zeros((len(perms), F_max), dtype=np.int64)
-            if len(fixed):
-                first = next(op for op, ok in zip(ops.operators, allowed) if ok and op.arity == a)
-                pre = np.concatenate([first.pre_unary.ravel(), first.pre_rel.ravel()]).astype(np.int64)
-                fval[:, : len(fixed)] = pre[fixed]
+            fval[:, : len(fixed)] = values
             tuples.append(perms)
             positions.append(pos)
             key_positions.append(kpos)

@@ -249,9 +249,11 @@ def _ground(models: Models, step: SymbolicStep, planned: tuple[Symbols, Symbols]
     if not candidates:
         return
     # every learned outcome of the action: (symbols after, ground action, effect, transitions that showed it)
-    outcomes = [(Symbols.of(*apply_effect(step.before.unary, step.before.rel, effect, task.binding(g))), g, e,
-                 ops.operators[task.operator(g)].count * float(ops.operators[task.operator(g)].probabilities[e]))
-                for g in candidates for e, effect in enumerate(ops.operators[task.operator(g)].effects)]
+    outcomes = []
+    for g in candidates:
+        op = ops.operators[task.operator(g)]
+        outcomes += [(Symbols.of(*apply_effect(step.before.unary, step.before.rel, effect, task.binding(g))), g, e,
+                      op.count * float(op.probabilities[e])) for e, effect in enumerate(op.effects)]
     choice = None
     if step.on_plan and planned is not None:  # the operator and effect the plan counted on
         choice = next(((g, e) for after, g, e, _ in outcomes if after == planned[1]), None)
