@@ -58,6 +58,9 @@ class ModelConfig:
     # both objects' unary bits, trained with `TrainConfig.offset_weight`: the effect loss alone never
     # asks where blocks stand on the table, this asks the bits to say it coarsely (planners never call it)
     offset_decoder: bool = False
+    # the offset head reads the pair's relations only, not the unary bits: the relations alone must then
+    # say where j stands from i, every axis (height too), which the unary "elevated" bit otherwise says
+    offset_from_relations: bool = False
 
     @property
     def n_unary(self) -> int:
@@ -69,6 +72,8 @@ class ModelConfig:
             raise ValueError(f"activation {self.activation!r} not in {ACTIVATIONS}")
         if self.relations not in RELATIONS:
             raise ValueError(f"relations {self.relations!r} not in {RELATIONS}")
+        if self.offset_from_relations and not self.offset_decoder:
+            raise ValueError("offset_from_relations needs offset_decoder=True (the head it changes)")
         for f in ("n_max", "d_z", "heads", "d_key", "d_msg", "hidden", "layers"):
             if int(getattr(self, f)) < 1:
                 raise ValueError(f"{f} must be >= 1")
@@ -139,7 +144,7 @@ class EffectModel(nn.Module):
         self.object_mlp = mlp([c.n_unary + ACTION_ENC_DIM, *hid, c.d_msg])
         self.decoder = mlp([c.heads * c.d_msg, *hid, 3])
         if c.offset_decoder:
-            self.offset_head = mlp([2 * c.n_unary + 2 * c.heads, *hid, 3])
+            self.offset_head = mlp([(0 if c.offset_from_relations else 2 * c.n_unary) + 2 * c.heads, *hid, 3])
         self.bottleneck = Bottleneck(c.activation, c.temperature)
         # Normalisation statistics (metres), set from training data by ``set_normalisation``.
         self.register_buffer("pos_mean", torch.zeros(3))
@@ -221,11 +226,12 @@ class EffectModel(nn.Module):
 
     def reconstruct_offsets(self, u: torch.Tensor, r: torch.Tensor) -> torch.Tensor:
         """(B, N, N, 3) `squashed_offsets` read back from the bits alone (``offset_decoder``): from
-        [u_i, u_j, r_.(i, j), r_.(j, i)]."""
+        [u_i, u_j, r_.(i, j), r_.(j, i)], or [r_.(i, j), r_.(j, i)] with ``offset_from_relations``."""
         B, N, d = u.shape
         rij = r.permute(0, 2, 3, 1)  # (B, N, N, K)
-        pair = torch.cat([u[:, :, None].expand(B, N, N, d), u[:, None].expand(B, N, N, d),
-                          rij, rij.transpose(1, 2)], dim=-1)
+        unary = [] if self.config.offset_from_relations else [u[:, :, None].expand(B, N, N, d),
+                                                               u[:, None].expand(B, N, N, d)]
+        pair = torch.cat([*unary, rij, rij.transpose(1, 2)], dim=-1)
         return self.offset_head(pair)
 
     def forward(self, X: torch.Tensor, action: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:

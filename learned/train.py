@@ -105,6 +105,10 @@ class TrainConfig:
     # weight of the offset loss (`ModelConfig.offset_decoder`, `offset_loss`): each pair's squashed offset
     # read back from its bits, so that relations say where blocks stand; 0: off (the paper's objective)
     offset_weight: float = 0.0
+    # the offset loss reads back only pairs whose centres lie within this distance on the table (metres;
+    # farther pairs read as "no offset"), so relations say where a neighbour stands and a block moved far
+    # from a bystander leaves their relations as they were; None: every pair (the side of every block)
+    offset_radius_m: float | None = None
 
     def __post_init__(self) -> None:
         if self.precision not in ("float32", "bfloat16"):
@@ -120,6 +124,8 @@ class TrainConfig:
             raise ValueError(f"bit_usage must be >= 0, got {self.bit_usage}")
         if not self.offset_weight >= 0.0:
             raise ValueError(f"offset_weight must be >= 0, got {self.offset_weight}")
+        if self.offset_radius_m is not None and not self.offset_radius_m > 0.0:
+            raise ValueError(f"offset_radius_m must be > 0, got {self.offset_radius_m}")
 
     @classmethod
     def fast(cls, batch_size: int = 1024, **changes: Any) -> "TrainConfig":
@@ -160,6 +166,7 @@ def train_options(train: TrainConfig, num_train: int, num_val: int, init: str | 
             **({"only_moved": True} if train.only_moved else {}),
             **({"bit_usage": train.bit_usage} if train.bit_usage else {}),
             **({"offset_weight": train.offset_weight} if train.offset_weight else {}),
+            **({"offset_radius_m": train.offset_radius_m} if train.offset_radius_m is not None else {}),
             **({"precision": train.precision} if train.precision != "float32" else {}),
             **({"patience_epochs": train.patience_epochs, "min_delta_cm": train.min_delta_cm}
                if train.patience_epochs is not None else {})}
@@ -189,12 +196,17 @@ def bit_usage_penalty(unary: torch.Tensor, relation: torch.Tensor, mask: torch.T
 
 
 def offset_loss(model: EffectModel, X: torch.Tensor, mask: torch.Tensor, u: torch.Tensor,
-                r: torch.Tensor) -> torch.Tensor:
+                r: torch.Tensor, radius_m: float | None = None) -> torch.Tensor:
     """Mean over real pairs i != j of the squared error (summed over x, y, z) of the squashed offset
-    tanh((x_j - x_i) / 5 cm) read back from the pair's bits (`EffectModel.reconstruct_offsets`)."""
+    tanh((x_j - x_i) / 5 cm) read back from the pair's bits (`EffectModel.reconstruct_offsets`); with
+    `radius_m`, pairs farther apart than that on the table are to read as 0."""
     N = mask.shape[1]
     pairs = (mask[:, :, None] & mask[:, None, :] & ~torch.eye(N, dtype=torch.bool, device=mask.device)).float()
-    err = (model.reconstruct_offsets(u, r).float() - model.squashed_offsets(X.float())).pow(2).sum(dim=-1)
+    target = model.squashed_offsets(X.float())
+    if radius_m is not None:
+        near = model.pair_offsets(X.float())[..., :2].norm(dim=-1) < radius_m
+        target = target * near[..., None]
+    err = (model.reconstruct_offsets(u, r).float() - target).pow(2).sum(dim=-1)
     return (err * pairs).sum() / pairs.sum().clamp(min=1.0)
 
 
@@ -410,7 +422,7 @@ def train_model(data: "str | Path | Sequence[str | Path] | Transitions", config:
                 u, r, unary, relation = model.encode_logits(X, M)
                 pred = model.decode(X, A, M, u, r)
                 usage = bit_usage_penalty(unary, relation, M) if train.bit_usage else None
-                offsets = offset_loss(model, X, M, u, r) if train.offset_weight else None
+                offsets = offset_loss(model, X, M, u, r, train.offset_radius_m) if train.offset_weight else None
             d = pred.float() - T
             loss = (d / scale).pow(2).sum(dim=(1, 2)).mean()
             if usage is not None:

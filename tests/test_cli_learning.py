@@ -82,6 +82,12 @@ def test_train_missing_dataset_is_a_clear_error(tmp_path, capsys):
     assert "nope" in err and "Traceback" not in err
 
 
+def test_offset_from_relations_without_the_offset_loss_is_a_clear_error(tiny_dataset, tmp_path, capsys):
+    assert main(["train", "--data", str(tiny_dataset), "--out", str(tmp_path / "m.pt"), "--offset-from-relations"]) == 2
+    err = capsys.readouterr().err
+    assert "--offset-loss" in err and "Traceback" not in err and not (tmp_path / "m.pt").exists()
+
+
 def test_domain_with_a_corrupt_model_is_a_clear_error(tiny_dataset, tmp_path, capsys):
     bad = tmp_path / "bad.pt"
     bad.write_bytes(b"not a checkpoint")
@@ -116,7 +122,7 @@ def test_train_prints_why_it_stopped_and_resumes_a_time_limited_run(tiny_dataset
 
 @pytest.mark.parametrize("flag,value", [("--batch-size", "0"), ("--lr", "-1"), ("--lr", "nan"), ("--patience", "-2"),
                                         ("--precision", "float16"), ("--time-limit-min", "0"),
-                                        ("--bit-usage", "-1"), ("--relations", "dense")])
+                                        ("--bit-usage", "-1"), ("--relations", "dense"), ("--offset-radius-cm", "0")])
 def test_train_bad_settings_are_one_line_errors(tmp_path, capsys, flag, value):
     with pytest.raises(SystemExit) as e:
         main(["train", "--data", str(tmp_path), "--out", str(tmp_path / "m.pt"), flag, value])

@@ -182,6 +182,41 @@ def test_the_offset_loss_makes_relations_say_on_which_side_of_a_block_another_st
         fit(data, ModelConfig(hidden=8, d_msg=8, d_z=1, heads=1), 1, tmp_path / "x.pt", offset_weight=1.0)
 
 
+def test_an_offset_head_from_relations_reads_the_relations_alone():
+    """With ``offset_from_relations`` the offset read back depends on the pair's relations and not on the
+    unary bits, so the relations must carry every axis; the option needs the offset head."""
+    from learned.model import EffectModel
+
+    torch.manual_seed(0)
+    for alone in (False, True):
+        model = EffectModel(ModelConfig(hidden=8, d_msg=8, d_z=2, heads=3, relations="pairwise",
+                                        offset_decoder=True, offset_from_relations=alone))
+        u, r = torch.rand(1, 3, 2), torch.rand(1, 3, 3, 3)
+        same_r = model.reconstruct_offsets(u, r), model.reconstruct_offsets(torch.rand(1, 3, 2), r)
+        assert torch.equal(*same_r) == alone
+        assert not torch.equal(same_r[0], model.reconstruct_offsets(u, torch.rand(1, 3, 3, 3)))
+    with pytest.raises(ValueError, match="offset_decoder"):
+        ModelConfig(offset_from_relations=True)
+
+
+def test_the_offset_radius_asks_only_neighbours_where_they_stand():
+    """With a radius, a pair farther apart on the table than it is to read back as no offset, a nearer pair
+    as its squashed offset, as without a radius."""
+    from learned.model import EffectModel
+    from learned.train import offset_loss
+
+    torch.manual_seed(0)
+    model = EffectModel(ModelConfig(hidden=8, d_msg=8, d_z=1, heads=2, relations="pairwise", offset_decoder=True))
+    X = torch.zeros(1, 2, 5)
+    X[0, 1, :3] = torch.tensor([0.3, 0.05, 0.0])  # 30 cm away
+    mask, u, r = torch.ones(1, 2, dtype=torch.bool), torch.rand(1, 2, 1), torch.rand(1, 2, 2, 2)
+    read = model.reconstruct_offsets(u, r)[0]
+    far = (read[0, 1].pow(2).sum() + read[1, 0].pow(2).sum()) / 2
+    assert torch.allclose(offset_loss(model, X, mask, u, r, radius_m=0.1), far)
+    assert not torch.allclose(offset_loss(model, X, mask, u, r), far)
+    assert torch.allclose(offset_loss(model, X, mask, u, r, radius_m=0.5), offset_loss(model, X, mask, u, r))
+
+
 TINY = ModelConfig(hidden=16, d_msg=8, d_z=4, heads=2, activation="gumbel_sigmoid")
 
 

@@ -30,11 +30,17 @@ def cmd_train(args: argparse.Namespace) -> int:
     if args.resume and not last_path(Path(args.out)).is_file():
         raise UserError(f"--resume: no training state at {last_path(Path(args.out))} to continue from "
                          "(leave out --resume to start a new training)")
+    for flag, given in (("--offset-from-relations", args.offset_from_relations),
+                        ("--offset-radius-cm", args.offset_radius_cm is not None)):
+        if given and not args.offset_loss:
+            raise UserError(f"{flag} changes what --offset-loss asks: give --offset-loss too")
     asked = {k: v for k, v in (("activation", args.bottleneck), ("d_z", args.d_z), ("heads", args.heads),
                                ("arm_input", False if args.no_arm_input else None),
                                ("relations", args.relations),
                                ("type_symbol", True if args.type_symbol else None),
-                               ("offset_decoder", True if args.offset_loss else None)) if v is not None}
+                               ("offset_decoder", True if args.offset_loss else None),
+                               ("offset_from_relations", True if args.offset_from_relations else None))
+             if v is not None}
     asked["n_max"] = max(int(read_meta(d)["n_max"]) for d in args.data)  # the object limit of the data
     if args.init is None:
         config = ModelConfig.from_dict(asked)
@@ -44,6 +50,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         config = ModelConfig.from_dict({**load_model(args.init).config.to_dict(), **asked})
     settings = _train_config(args, only_moved=args.only_moved, val_fraction=args.val_fraction,
                              bit_usage=args.bit_usage, offset_weight=args.offset_loss,
+                             offset_radius_m=None if args.offset_radius_cm is None else args.offset_radius_cm / 100,
                              time_limit_s=None if args.time_limit_min is None else 60 * args.time_limit_min)
     result = train_model(args.data, config, settings, args.out, resume=args.resume, init=args.init)
     print(f"best validation effect error {result.best_val_cm:.2f} cm (epoch {result.best_epoch}) -> {result.out_path}")
@@ -147,6 +154,14 @@ def add_train(sub) -> None:
                    help="weight of a loss that reads each pair's offset x_j - x_i back from the pair's bits alone, so "
                    "that relations say where blocks stand on the table, which the effect loss never asks (default 0: "
                    "the paper's loss)")
+    p.add_argument("--offset-from-relations", action="store_true",
+                   help="with --offset-loss: read the offset back from the pair's relations alone, not its unary "
+                   "bits too, so that the relations also say which block stands higher")
+    p.add_argument("--offset-radius-cm", type=positive_float, default=None, metavar="CM",
+                   help="with --offset-loss: read back only the offsets of pairs whose centres lie within this "
+                   "distance on the table, farther pairs as no offset, so that relations say where a neighbour "
+                   "stands and moving a block far from a bystander leaves their relations unchanged (default: "
+                   "every pair)")
     _add_train_arguments(p)
     p.add_argument("--time-limit-min", type=positive_float, default=None, metavar="MIN",
                    help="stop after the epoch that passes this wall time; the run is unfinished, --resume continues")
