@@ -61,6 +61,10 @@ class ModelConfig:
     # the offset head reads the pair's relations only, not the unary bits: the relations alone must then
     # say where j stands from i, every axis (height too), which the unary "elevated" bit otherwise says
     offset_from_relations: bool = False
+    # a head that reads each block's place on the table, tanh of its normalised (x, y), back from its unary
+    # bits, trained with `TrainConfig.position_weight`: a unary bit can then say in which part of the table
+    # a block stands, a symbol that only the moved block's step changes (planners never call the head)
+    position_decoder: bool = False
 
     @property
     def n_unary(self) -> int:
@@ -145,6 +149,8 @@ class EffectModel(nn.Module):
         self.decoder = mlp([c.heads * c.d_msg, *hid, 3])
         if c.offset_decoder:
             self.offset_head = mlp([(0 if c.offset_from_relations else 2 * c.n_unary) + 2 * c.heads, *hid, 3])
+        if c.position_decoder:
+            self.position_head = mlp([c.n_unary, *hid, 2])
         self.bottleneck = Bottleneck(c.activation, c.temperature)
         # Normalisation statistics (metres), set from training data by ``set_normalisation``.
         self.register_buffer("pos_mean", torch.zeros(3))
@@ -223,6 +229,15 @@ class EffectModel(nn.Module):
         """(B, N, N, 3) tanh((x_j - x_i) / OFFSET_SCALE_M): -1 or 1 a block's width or more to either side,
         between when the blocks touch or overlap; what `reconstruct_offsets` learns to read back."""
         return torch.tanh(self.pair_offsets(X) / OFFSET_SCALE_M)
+
+    def squashed_positions(self, X: torch.Tensor) -> torch.Tensor:
+        """(B, N, 2) tanh of each block's normalised place on the table, (x, y): what
+        `reconstruct_positions` learns to read back."""
+        return torch.tanh((X[..., :2] - self.pos_mean[:2]) / self.pos_std[:2])
+
+    def reconstruct_positions(self, u: torch.Tensor) -> torch.Tensor:
+        """(B, N, 2) `squashed_positions` read back from each block's unary bits alone (``position_decoder``)."""
+        return self.position_head(u)
 
     def reconstruct_offsets(self, u: torch.Tensor, r: torch.Tensor) -> torch.Tensor:
         """(B, N, N, 3) `squashed_offsets` read back from the bits alone (``offset_decoder``): from

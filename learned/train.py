@@ -109,6 +109,9 @@ class TrainConfig:
     # farther pairs read as "no offset"), so relations say where a neighbour stands and a block moved far
     # from a bystander leaves their relations as they were; None: every pair (the side of every block)
     offset_radius_m: float | None = None
+    # weight of the position loss (`ModelConfig.position_decoder`, `position_loss`): each block's place on
+    # the table read back from its unary bits, so that a unary bit says where a block stands; 0: off
+    position_weight: float = 0.0
 
     def __post_init__(self) -> None:
         if self.precision not in ("float32", "bfloat16"):
@@ -124,6 +127,8 @@ class TrainConfig:
             raise ValueError(f"bit_usage must be >= 0, got {self.bit_usage}")
         if not self.offset_weight >= 0.0:
             raise ValueError(f"offset_weight must be >= 0, got {self.offset_weight}")
+        if not self.position_weight >= 0.0:
+            raise ValueError(f"position_weight must be >= 0, got {self.position_weight}")
         if self.offset_radius_m is not None and not self.offset_radius_m > 0.0:
             raise ValueError(f"offset_radius_m must be > 0, got {self.offset_radius_m}")
 
@@ -167,6 +172,7 @@ def train_options(train: TrainConfig, num_train: int, num_val: int, init: str | 
             **({"bit_usage": train.bit_usage} if train.bit_usage else {}),
             **({"offset_weight": train.offset_weight} if train.offset_weight else {}),
             **({"offset_radius_m": train.offset_radius_m} if train.offset_radius_m is not None else {}),
+            **({"position_weight": train.position_weight} if train.position_weight else {}),
             **({"precision": train.precision} if train.precision != "float32" else {}),
             **({"patience_epochs": train.patience_epochs, "min_delta_cm": train.min_delta_cm}
                if train.patience_epochs is not None else {})}
@@ -193,6 +199,14 @@ def bit_usage_penalty(unary: torch.Tensor, relation: torch.Tensor, mask: torch.T
         rates.append((r * pairs[:, None]).sum(dim=(0, 2, 3)) / pairs.sum())
     rate = torch.cat(rates)
     return (torch.relu(USAGE_LOW - rate) + torch.relu(rate - 1 + USAGE_LOW)).sum() / USAGE_LOW
+
+
+def position_loss(model: EffectModel, X: torch.Tensor, mask: torch.Tensor, u: torch.Tensor) -> torch.Tensor:
+    """Mean over real objects of the squared error (summed over x, y) of the squashed place on the table
+    read back from the object's unary bits (`EffectModel.reconstruct_positions`)."""
+    err = (model.reconstruct_positions(u).float() - model.squashed_positions(X.float())).pow(2).sum(dim=-1)
+    real = mask.float()
+    return (err * real).sum() / real.sum().clamp(min=1.0)
 
 
 def offset_loss(model: EffectModel, X: torch.Tensor, mask: torch.Tensor, u: torch.Tensor,
@@ -342,6 +356,8 @@ def train_model(data: "str | Path | Sequence[str | Path] | Transitions", config:
         raise ValueError(f"dataset n_max {data.n_max} exceeds model n_max {config.n_max}")
     if train.offset_weight and not config.offset_decoder:
         raise ValueError("offset_weight needs a model with offset_decoder=True (the head it trains)")
+    if train.position_weight and not config.position_decoder:
+        raise ValueError("position_weight needs a model with position_decoder=True (the head it trains)")
     options = train_options(train, len(data), len(val_data), init)
     tr, va = prepare(data), prepare(val_data)
 
@@ -423,12 +439,15 @@ def train_model(data: "str | Path | Sequence[str | Path] | Transitions", config:
                 pred = model.decode(X, A, M, u, r)
                 usage = bit_usage_penalty(unary, relation, M) if train.bit_usage else None
                 offsets = offset_loss(model, X, M, u, r, train.offset_radius_m) if train.offset_weight else None
+                places = position_loss(model, X, M, u) if train.position_weight else None
             d = pred.float() - T
             loss = (d / scale).pow(2).sum(dim=(1, 2)).mean()
             if usage is not None:
                 loss = loss + train.bit_usage * usage
             if offsets is not None:
                 loss = loss + train.offset_weight * offsets
+            if places is not None:
+                loss = loss + train.position_weight * places
             opt.zero_grad(set_to_none=True)
             loss.backward()
             opt.step()

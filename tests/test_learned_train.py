@@ -217,6 +217,27 @@ def test_the_offset_radius_asks_only_neighbours_where_they_stand():
     assert torch.allclose(offset_loss(model, X, mask, u, r, radius_m=0.5), offset_loss(model, X, mask, u, r))
 
 
+def test_the_position_loss_makes_a_unary_bit_say_where_a_block_stands(tmp_path):
+    """Without the position loss, the synthetic effects make some unary bit follow one axis of the table
+    and none the other; with it, both halves (x and y beyond the middle) have a bit that says them. The
+    checkpoint records the weight, and the loss needs its head."""
+    data = generate(600, seed=5)
+    X = data.X[data.mask]
+    sides = [X[:, a] > np.median(X[:, a]) for a in (0, 1)]
+    best = {}
+    for weight in (0.0, 1.0):
+        config = ModelConfig(hidden=32, d_msg=16, d_z=3, heads=1, activation="gumbel_sigmoid", arm_input=False,
+                             position_decoder=bool(weight))
+        fit(data, config, 60, tmp_path / f"p{weight}.pt", lr=3e-3, seed=0, position_weight=weight)
+        u, _ = load_model(tmp_path / f"p{weight}.pt").symbols_batch(data.X, data.mask)
+        bits = [u[..., k][data.mask] for k in range(3)]
+        best[weight] = [max((abs(np.corrcoef(b, side)[0, 1]) for b in bits if b.std()), default=0.0) for side in sides]
+    assert min(best[1.0]) > 0.6 and min(best[1.0]) > min(best[0.0]) + 0.3, best
+    assert torch.load(tmp_path / "p1.0.pt", weights_only=True)["train"]["options"]["position_weight"] == 1.0
+    with pytest.raises(ValueError, match="position_decoder"):
+        fit(data, ModelConfig(hidden=8, d_msg=8, d_z=1, heads=1), 1, tmp_path / "x.pt", position_weight=1.0)
+
+
 TINY = ModelConfig(hidden=16, d_msg=8, d_z=4, heads=2, activation="gumbel_sigmoid")
 
 

@@ -39,7 +39,8 @@ def cmd_train(args: argparse.Namespace) -> int:
                                ("relations", args.relations),
                                ("type_symbol", True if args.type_symbol else None),
                                ("offset_decoder", True if args.offset_loss else None),
-                               ("offset_from_relations", True if args.offset_from_relations else None))
+                               ("offset_from_relations", True if args.offset_from_relations else None),
+                               ("position_decoder", True if args.position_loss else None))
              if v is not None}
     asked["n_max"] = max(int(read_meta(d)["n_max"]) for d in args.data)  # the object limit of the data
     if args.init is None:
@@ -51,6 +52,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     settings = _train_config(args, only_moved=args.only_moved, val_fraction=args.val_fraction,
                              bit_usage=args.bit_usage, offset_weight=args.offset_loss,
                              offset_radius_m=None if args.offset_radius_cm is None else args.offset_radius_cm / 100,
+                             position_weight=args.position_loss,
                              time_limit_s=None if args.time_limit_min is None else 60 * args.time_limit_min)
     result = train_model(args.data, config, settings, args.out, resume=args.resume, init=args.init)
     print(f"best validation effect error {result.best_val_cm:.2f} cm (epoch {result.best_epoch}) -> {result.out_path}")
@@ -157,6 +159,10 @@ def add_train(sub) -> None:
     p.add_argument("--offset-from-relations", action="store_true",
                    help="with --offset-loss: read the offset back from the pair's relations alone, not its unary "
                    "bits too, so that the relations also say which block stands higher")
+    p.add_argument("--position-loss", type=non_negative_float, default=0.0, metavar="WEIGHT",
+                   help="weight of a loss that reads each block's place on the table back from its unary bits alone, "
+                   "so that a unary bit says in which part of the table a block stands, a symbol only the moved "
+                   "block's step changes (default 0: the paper's loss)")
     p.add_argument("--offset-radius-cm", type=positive_float, default=None, metavar="CM",
                    help="with --offset-loss: read back only the offsets of pairs whose centres lie within this "
                    "distance on the table, farther pairs as no offset, so that relations say where a neighbour "
