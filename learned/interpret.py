@@ -25,6 +25,7 @@ BLOCK_HALF_XY = np.array([[0.025, 0.025], [0.025, 0.125]])  # small cube, large 
 HEIGHT_M = 0.05  # every block is 5 cm tall
 ON_TOLERANCE_M = 0.015  # z gap and footprint slack for "on top of"
 NEAR_M = 0.10  # centre distance on the table for "near"
+FAR_HALF_X_M = 0.65  # the middle of the random scenes' workspace along x (0.45-0.85 m from the arm)
 SIDE_M = 0.02  # "higher", "right of", "nearer the arm": by more than this, so that blocks in line are neither
 
 
@@ -53,7 +54,7 @@ def unary_facts(X: np.ndarray) -> dict[str, np.ndarray]:
             "on another block": on.any(axis=1),
             "carries a block": on.any(axis=0),
             "left half (y > 0)": X[:, 1] > 0.0,
-            "far half (x > 0.7 m)": X[:, 0] > 0.7}
+            "far half (x > 0.65 m)": X[:, 0] > FAR_HALF_X_M}
 
 
 def relation_facts(X: np.ndarray) -> dict[str, np.ndarray]:
@@ -153,7 +154,7 @@ STRONG_PHI = 0.7
 FACT_PHRASES = {
     "large (type)": "{i} {neg}large", "elevated (z > 4 cm)": "{i} {neg}elevated",
     "on another block": "{i} {neg}on a block", "carries a block": "{i} {neg}carrying a block",
-    "left half (y > 0)": "{i} {neg}in the left half", "far half (x > 0.7 m)": "{i} {neg}in the far half",
+    "left half (y > 0)": "{i} {neg}in the left half", "far half (x > 0.65 m)": "{i} {neg}in the far half",
     "i on j": "{i} {neg}on {j}", "j on i": "{j} {neg}on {i}", "z_i > z_j (i higher)": "{i} {neg}higher than {j}",
     "i above j": "{i} {neg}above {j}", "j above i": "{j} {neg}above {i}",
     "z_j > z_i (j higher)": "{j} {neg}higher than {i}", "same level (|dz| < 2 cm)": "{i} {neg}level with {j}",
