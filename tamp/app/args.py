@@ -42,10 +42,11 @@ def positive_float(text: str) -> float:
 
 
 # name -> folder under tamp/pretrained/
-BUNDLED_MODELS = {"pretrained": "", "pairwise": "pairwise", "spatial": "spatial"}
+BUNDLED_MODELS = {"pretrained": "", "pairwise": "pairwise", "spatial": "spatial", "regions": "regions"}
 MODELS_HELP = ("a models directory (symbolic.pt, dynamics.pt, domain/), or a bundled set: pretrained (the "
-               "paper's configuration), pairwise (pairwise relations with the type symbol) or spatial (pairwise "
-               "relations that say on which side of a block another stands; docs/learned-symbols.md)")
+               "paper's configuration), pairwise (pairwise relations with the type symbol), spatial (pairwise "
+               "relations that say on which side of a block another stands) or regions (unary bits that say in "
+               "which part of the table a block stands, relations about neighbours; docs/learned-symbols.md)")
 
 
 def models_directory(text: str) -> Path:

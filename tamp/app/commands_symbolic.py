@@ -167,7 +167,7 @@ def add_pddl(sub) -> None:
     )
     p.add_argument("--models", type=models_directory, default=None,
                    help="models directory (domain/, and symbolic.pt for --problem), or a bundled set: pretrained "
-                   "(the default), pairwise or spatial")
+                   "(the default), pairwise, spatial or regions")
     p.add_argument("--out", type=Path, required=True, help="output directory")
     p.add_argument("--problem", type=Path, default=None, help="problem file (JSON: X_init, X_goal) to export")
     p.add_argument("--sampled", type=non_negative_int, default=0, metavar="N",
