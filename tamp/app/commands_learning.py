@@ -156,18 +156,19 @@ def add_train(sub) -> None:
                    help="weight of a loss that reads each pair's offset x_j - x_i back from the pair's bits alone, so "
                    "that relations say where blocks stand on the table, which the effect loss never asks (default 0: "
                    "the paper's loss)")
-    p.add_argument("--offset-from-relations", action="store_true",
-                   help="with --offset-loss: read the offset back from the pair's relations alone, not its unary "
-                   "bits too, so that the relations also say which block stands higher")
-    p.add_argument("--position-loss", type=non_negative_float, default=0.0, metavar="WEIGHT",
-                   help="weight of a loss that reads each block's place on the table back from its unary bits alone, "
-                   "so that a unary bit says in which part of the table a block stands, a symbol only the moved "
-                   "block's step changes (default 0: the paper's loss)")
     p.add_argument("--offset-radius-cm", type=positive_float, default=None, metavar="CM",
                    help="with --offset-loss: read back only the offsets of pairs whose centres lie within this "
                    "distance on the table, farther pairs as no offset, so that relations say where a neighbour "
                    "stands and moving a block far from a bystander leaves their relations unchanged (default: "
                    "every pair)")
+    p.add_argument("--offset-from-relations", action="store_true",
+                   help="with --offset-loss: read the offset back from the pair's relations alone, not its unary "
+                   "bits too, meant to make a relation say which block stands higher (measured at paper scale, "
+                   "the third relation stays mixed: docs/learned-symbols.md)")
+    p.add_argument("--position-loss", type=non_negative_float, default=0.0, metavar="WEIGHT",
+                   help="weight of a loss that reads each block's place on the table back from its unary bits alone, "
+                   "so that a unary bit says in which part of the table a block stands, a symbol only the moved "
+                   "block's step changes (default 0: the paper's loss)")
     _add_train_arguments(p)
     p.add_argument("--time-limit-min", type=positive_float, default=None, metavar="MIN",
                    help="stop after the epoch that passes this wall time; the run is unfinished, --resume continues")
