@@ -20,7 +20,8 @@ from symbolic.structs import OperatorSet, SymbolicDataset, SymbolicProblem
 def build_domain(unary_pre, rel_pre, actions, unary_post, rel_post, n_per_transition, out_dir,
                  holdout: float | SymbolicDataset = 0.1, seed: int = 0, min_prob: float = 0.0,
                  sampled_domains: int = 0, involved_only: bool = False, min_count: int = 0,
-                 max_arity: int | None = None, core_from_all: bool = False) -> dict:
+                 max_arity: int | None = None, core_from_all: bool = False,
+                 general_bystanders: bool = False) -> dict:
     """Learn operators from symbolic transitions and write the domain files.
 
     Inputs: padded bit arrays unary (T, n_max, d_z), relations (T, K, n_max, n_max), actions (T, 4),
@@ -31,6 +32,8 @@ def build_domain(unary_pre, rel_pre, actions, unary_post, rel_post, n_per_transi
     With `involved_only`, operators mention only the objects a transition involves (picked, target,
     and those whose bits change; see `restrict_to_involved`, also for `core_from_all`) instead of every
     object in the scene.
+    With `general_bystanders`, a transition that left its bystanders' own bits alone teaches a general
+    operator, which does not test them (`symbolic.operators`).
     `min_count` and `min_prob` drop rare operators and rare effects (`filter_operators`).
     `max_arity` (default: the most the lifted search takes, `symbolic.lifted.max_arity`) leaves out the
     training transitions that involve more objects: no operator is learned from them, and held-out ones
@@ -56,7 +59,7 @@ def build_domain(unary_pre, rel_pre, actions, unary_post, rel_post, n_per_transi
     train = train.subset(np.flatnonzero(train.n <= limit))
     if len(train) == 0:
         raise ValueError(f"every training transition involves more than {limit} objects: raise max_arity")
-    learned = learn_operators(train)
+    learned = learn_operators(train, general_bystanders)
     ops = filter_operators(learned, min_count, min_prob)
     if len(ops) == 0:
         raise ValueError(f"no operator was seen {min_count} times or more: lower min_count")
@@ -68,6 +71,8 @@ def build_domain(unary_pre, rel_pre, actions, unary_post, rel_post, n_per_transi
     report["train_transitions"] = len(train)
     report["involved_only"] = involved_only
     report["core_from_all"] = core_from_all
+    report["general_bystanders"] = general_bystanders
+    report["n_general"] = sum(op.is_general for op in ops.operators)
     report["max_arity"] = {"limit": limit, "transitions_left_out": over}
     report["filters"] = {"min_count": min_count, "min_prob": min_prob, "operators_learned": len(learned),
                          "operators_kept": len(ops)}

@@ -75,7 +75,7 @@ def replay(ops: OperatorSet, problem: SymbolicProblem, steps: list[PlanStep],
         b = [object_index(x, n) for x in args]
         if len(b) != op.arity or len(set(b)) != len(b):
             return False, f"step {t}: {name} needs {op.arity} distinct objects, got {args}"
-        if not (np.array_equal(u[b], op.pre_unary) and np.array_equal(r[:, b][:, :, b], op.pre_rel)):
+        if not op.holds(u[b], r[:, b][:, :, b]):
             return False, f"step {t}: precondition of {name}{tuple(args)} does not hold"
         u, r = apply_effect(u, r, op.effects[0 if choice is None else int(choice[oi])], b)
     if not (np.array_equal(u, problem.goal_unary) and np.array_equal(r, problem.goal_rel)):

@@ -1,8 +1,9 @@
 """Lifted successor generation: the applicable ground actions of a state without grounding the task.
 
 An operator's precondition fixes every bit of its parameters (their unary bits and every relation
-among them), so in a state each ordered tuple of distinct objects matches exactly the operators
-whose pre-state equals the tuple's sub-state: one lookup per tuple, P(n, a) tuples of arity a
+among them; a general operator, every bit it tests), so in a state each ordered tuple of distinct
+objects matches exactly the operators whose pre-state equals the tuple's sub-state on those bits:
+one lookup per tuple and group of operators that test the same bits, P(n, a) tuples of arity a
 (516 at n = 6), instead of testing every ground action (1.27 million for the bundled domain at
 n = 6). Regression works the same way with the post-states (pre-state XOR effect): the predecessors
 of a state, used for the search's distance bounds.
@@ -26,7 +27,9 @@ from symbolic.atoms import n_bits, object_name
 from symbolic.structs import Action, OperatorSet, PlanStep
 
 GroundAction = int  # operator * n_tuples + tuple index: sorts in ground-action order
-MAX_PRECONDITION_BITS = 58  # an operator's sub-state code and its arity tag share one int64 key
+MAX_PRECONDITION_BITS = 58  # an operator's sub-state code and its group tag share one int64 key
+TAG_BITS = 5  # a key's low bits: the group (arity and tested bits) of the operators it is for
+MAX_GROUPS = 1 << TAG_BITS
 
 
 def max_arity(n_unary: int, n_relations: int, given_diagonal: bool = False) -> int:
@@ -43,20 +46,20 @@ def max_arity(n_unary: int, n_relations: int, given_diagonal: bool = False) -> i
     return a
 
 
-def _key_layout(operators: list, arity: int, n_unary: int, n_relations: int
+def _key_layout(operators: list, arity: int, known: np.ndarray, n_unary: int, n_relations: int
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Which local bits of one arity's operators enter their key: all of them when they fit in
-    `MAX_PRECONDITION_BITS`, else all but the relations' diagonal r_k(i, i) when it is the same in
-    every precondition and every outcome (pairwise relations: always set); a state's tuple must then
-    have those values besides its key. Returns (key bits, fixed bits, their values), local indices
-    ascending."""
-    width = arity * n_unary + n_relations * arity * arity
-    every = np.arange(width)
+    """Which local bits of a group's operators (one arity, the same `known` tested bits) enter their
+    key: all tested bits when they fit in `MAX_PRECONDITION_BITS`, else all but the relations'
+    diagonal r_k(i, i) when it is the same in every precondition and every outcome (pairwise
+    relations: always set); a state's tuple must then have those values besides its key. Returns
+    (key bits, fixed bits, their values), local indices ascending."""
+    every = np.flatnonzero(known)
     none = (every, every[:0], every[:0])
-    if width <= MAX_PRECONDITION_BITS or not operators:
+    if len(every) <= MAX_PRECONDITION_BITS or not operators:
         return none
     diagonal = np.array([arity * n_unary + k * arity * arity + i * arity + i
                          for k in range(n_relations) for i in range(arity)], dtype=np.int64)
+    diagonal = diagonal[known[diagonal]]
     pres = [np.concatenate([op.pre_unary.ravel(), op.pre_rel.ravel()]).astype(np.int64) for op in operators]
     posts = [_flipped(pre, _local_flips(e, arity, n_unary)) for op, pre in zip(operators, pres) for e in op.effects]
     states = np.array(pres + posts)[:, diagonal]
@@ -84,7 +87,7 @@ class Expansion:
 
 
 class _CodeIndex:
-    """Sorted keys (arity-tagged sub-state codes) -> effect rows in CSR form, for vectorised lookups."""
+    """Sorted keys (group-tagged sub-state codes) -> effect rows in CSR form, for vectorised lookups."""
 
     def __init__(self, keys: list[int], rows: list[list[int]]):
         order = np.argsort(np.array(keys, dtype=np.int64), kind="stable")
@@ -127,13 +130,23 @@ class LiftedTask:
         self.deterministic = np.array(n_effects, dtype=np.int64)[self.effect_op] == 1
         allowed = [op.arity <= n if scope == "subset" else op.arity == n for op in ops.operators]
         self.arities = sorted({op.arity for op, ok in zip(ops.operators, allowed) if ok})
-        # per arity, the local bits of the key and the fixed ones (`_key_layout`)
+        # Operators in groups of one arity and the same tested bits (general operators test fewer),
+        # by arity; each group has its own tuples, key layout and tag.
+        names: dict[tuple[int, bytes], int] = {}
+        for op in sorted((op for op, ok in zip(ops.operators, allowed) if ok), key=lambda o: o.arity):
+            names.setdefault((op.arity, op.known_bits().tobytes()), len(names))
+        if len(names) > MAX_GROUPS:
+            raise ValueError(f"operators test {len(names)} different sets of bits; at most {MAX_GROUPS} are supported")
+        self.groups = [(a, np.frombuffer(known, dtype=bool)) for a, known in names]
+        group_of = [names[(op.arity, op.known_bits().tobytes())] if ok else -1
+                    for op, ok in zip(ops.operators, allowed)]
+        # per group, the local bits of the key and the fixed ones (`_key_layout`)
         self._layout: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
-        for a in self.arities:
-            of_a = [op for op, ok in zip(ops.operators, allowed) if ok and op.arity == a]
-            self._layout[a] = keep, _, _ = _key_layout(of_a, a, d, K)
+        for g, (a, known) in enumerate(self.groups):
+            of_g = [op for op, group in zip(ops.operators, group_of) if group == g]
+            self._layout[g] = keep, _, _ = _key_layout(of_g, a, known, d, K)
             if len(keep) > MAX_PRECONDITION_BITS:
-                given = len(keep) < a * d + K * a * a
+                given = len(keep) < int(known.sum())
                 raise ValueError(f"operators of arity {a} ({len(keep)} precondition bits) are not supported: at "
                                  f"most arity {max_arity(d, K, given)} ({MAX_PRECONDITION_BITS} bits); learn the domain"
                                  " again with `tamp domain`, whose --max-arity keeps to that limit by default")
@@ -141,10 +154,10 @@ class LiftedTask:
         # (a bit that is always 0), and the tuple's arity; the positions of their key bits and of
         # their fixed bits (padded alike), with the values the fixed ones must have.
         L_max = max((a * d + K * a * a for a in self.arities), default=0)
-        Lk_max = max((len(self._layout[a][0]) for a in self.arities), default=0)
-        F_max = max((len(self._layout[a][1]) for a in self.arities), default=0)
-        tuples, positions, key_positions, fixed_positions, fixed_values, arity_of = [], [], [], [], [], []
-        for a in self.arities:
+        Lk_max = max((len(layout[0]) for layout in self._layout.values()), default=0)
+        F_max = max((len(layout[1]) for layout in self._layout.values()), default=0)
+        tuples, positions, key_positions, fixed_positions, fixed_values, tag_of = [], [], [], [], [], []
+        for g, (a, _) in enumerate(self.groups):
             perms = np.array(list(itertools.permutations(range(n), a)), dtype=np.int64).reshape(-1, a)
             cols = [perms[:, i] * d + k for i in range(a) for k in range(d)]
             cols += [n * d + k * n * n + perms[:, i] * n + perms[:, j]
@@ -152,7 +165,7 @@ class LiftedTask:
             pos = np.full((len(perms), L_max + 1), self.n_bits, dtype=np.int64)
             if cols:
                 pos[:, : len(cols)] = np.stack(cols, axis=1)
-            keep, fixed, values = self._layout[a]
+            keep, fixed, values = self._layout[g]
             kpos = np.full((len(perms), Lk_max), self.n_bits, dtype=np.int64)
             kpos[:, : len(keep)] = pos[:, keep]
             fpos = np.full((len(perms), F_max), self.n_bits, dtype=np.int64)
@@ -164,14 +177,14 @@ class LiftedTask:
             key_positions.append(kpos)
             fixed_positions.append(fpos)
             fixed_values.append(fval)
-            arity_of.append(np.full(len(perms), a, dtype=np.int64))
+            tag_of.append(np.full(len(perms), g, dtype=np.int64))
         self.tuples = [tuple(int(v) for v in row) for perms in tuples for row in perms]
         self.n_tuples = max(len(self.tuples), 1)
         self.positions = np.concatenate(positions) if positions else np.zeros((0, 1), np.int64)
         self._key_positions = np.concatenate(key_positions) if key_positions else np.zeros((0, 0), np.int64)
         self._fixed_positions = np.concatenate(fixed_positions) if fixed_positions else np.zeros((0, 0), np.int64)
         self._fixed_values = np.concatenate(fixed_values) if fixed_values else np.zeros((0, 0), np.int64)
-        self._tuple_arity = np.concatenate(arity_of) if arity_of else np.zeros(0, np.int64)
+        self._tuple_tag = np.concatenate(tag_of) if tag_of else np.zeros(0, np.int64)
         self._shift = np.arange(Lk_max, dtype=np.int64)
         # per word of the state, the value of each local bit of each tuple (0 for the padding column)
         self._bit_value = []
@@ -186,7 +199,7 @@ class LiftedTask:
         post_groups: dict[int, dict[bytes, int]] = {}  # key -> one row per distinct local flip
         local_flip: list[bytes] = []  # per effect row: its arity and sorted local flip positions
         flip_ids: dict[bytes, int] = {}
-        for oi, (op, ok) in enumerate(zip(ops.operators, allowed)):
+        for oi, (op, group) in enumerate(zip(ops.operators, group_of)):
             a = op.arity
             pre = np.concatenate([op.pre_unary.ravel(), op.pre_rel.ravel()]).astype(np.int64)
             for j, e in enumerate(op.effects):
@@ -195,11 +208,11 @@ class LiftedTask:
                 self.effect_local[row, : len(local)] = local
                 local_flip.append(bytes([a]) + bytes(sorted(local)))
                 flip_ids.setdefault(local_flip[-1], len(flip_ids))
-                if not ok:
+                if group < 0:
                     continue
-                keep = self._layout[a][0]
-                pre_groups.setdefault(_key(pre[keep], a), []).append(row)
-                post_groups.setdefault(_key(_flipped(pre, local)[keep], a), {}).setdefault(local_flip[-1], row)
+                keep = self._layout[group][0]
+                pre_groups.setdefault(_key(pre[keep], group), []).append(row)
+                post_groups.setdefault(_key(_flipped(pre, local)[keep], group), {}).setdefault(local_flip[-1], row)
         self.flip_id = np.array([flip_ids[f] for f in local_flip], dtype=np.int64)
         self._n_flip_ids = max(len(flip_ids), 1)
         # The first rows: per pre-state and distinct local flip, the rows up to the first deterministic
@@ -230,18 +243,18 @@ class LiftedTask:
         sub.positions = self.positions[keep]
         sub._key_positions = self._key_positions[keep]
         sub._fixed_positions, sub._fixed_values = self._fixed_positions[keep], self._fixed_values[keep]
-        sub._tuple_arity = self._tuple_arity[keep]
+        sub._tuple_tag = self._tuple_tag[keep]
         sub._bit_value = [v[keep] for v in self._bit_value]
         sub._cache = {}
         return sub
 
     # ---- state helpers ---------------------------------------------------------------------------
     def _keys(self, state: int) -> np.ndarray:
-        """Arity-tagged sub-state code of every tuple in `state`; -1 (no operator's) for a tuple whose
+        """Group-tagged sub-state code of every tuple in `state`; -1 (no operator's) for a tuple whose
         fixed bits (`_key_layout`) differ from every operator's."""
         raw = np.frombuffer(state.to_bytes(self.words * 8, "little"), dtype=np.uint8)
         bits = np.unpackbits(raw, bitorder="little").astype(np.int64)
-        codes = (bits[self._key_positions] << self._shift).sum(axis=1) * 8 + self._tuple_arity
+        codes = (bits[self._key_positions] << self._shift).sum(axis=1) * MAX_GROUPS + self._tuple_tag
         if self._fixed_positions.shape[1]:
             codes[(bits[self._fixed_positions] != self._fixed_values).any(axis=1)] = -1
         return codes
@@ -362,5 +375,5 @@ def _flipped(bits: np.ndarray, local: list[int]) -> np.ndarray:
     return out
 
 
-def _key(bits: np.ndarray, arity: int) -> int:
-    return sum(int(b) << i for i, b in enumerate(bits.tolist())) * 8 + arity
+def _key(bits: np.ndarray, group: int) -> int:
+    return sum(int(b) << i for i, b in enumerate(bits.tolist())) * MAX_GROUPS + group

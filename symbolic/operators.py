@@ -10,6 +10,15 @@ the parameters: every unary bit of every parameter and every relation bit betwee
 (including r(x, x)), written as positive atoms ``u``/``not-u``, ``r``/``not-r``, plus pairwise
 distinct parameters. The effect is the set difference to the post-state (bits that flip).
 
+General operators (`general_bystanders`). The parameters besides the picked and target objects
+are bystanders: a transition names them (with `involved_only`) because their relations to the moved
+blocks changed. What happens to a bystander depends on where it stands relative to the moved blocks,
+not on its own unary bits (where on the table it stands, its type) or on its relations to the other
+bystanders. A transition that changed none of those bits is grouped with the bits left out: its
+operator tests only the picked and target objects' bits and the relations that involve one of them
+(`Operator.known_unary`, `known_rel`), and applies to every pre-state that agrees there. Transitions
+that changed a bystander's own bits keep full operators.
+
 Applicability in scenes of another size. Objects that are not parameters are neither tested nor
 changed. An operator learned in an m-object scene therefore applies in an n >= m scene to every
 m-subset of objects whose sub-state matches exactly (the published domain of the paper behaves the
@@ -32,10 +41,11 @@ import numpy as np
 from symbolic.structs import Effect, Operator, OperatorSet, SymbolicDataset
 
 FORMAT = "symbolic-operators"
-VERSION = 1
+VERSION = 2  # 2: general operators carry known_unary / known_rel
+READABLE = (1, 2)
 _OFFSET_NAME = {-1: "m1", 0: "0", 1: "p1"}
 
-GroupKey = tuple[int, bool, int, int, bytes]  # (arity, same, grasp, release, canonical pre-state code)
+GroupKey = tuple[int, bool, int, int, bool, bytes]  # (arity, same, grasp, release, general, canonical pre-state code)
 
 
 def operator_name(index: int, grasp: int, release: int) -> str:
@@ -76,9 +86,58 @@ def _canonicalize_group(U, R, Uq, Rq, pick, place, same):
     return best_pre, best_eff, best_order
 
 
-def canonical_transitions(data: SymbolicDataset) -> tuple[list[GroupKey], list[bytes], np.ndarray]:
-    """Group key, effect code and parameter order (padded with -1) of every transition."""
+def _bystanders(data: SymbolicDataset) -> tuple[np.ndarray, np.ndarray]:
+    """Per transition, the bits a general operator leaves out: each bystander's unary bits (T, n_max,
+    d_z) and the relations between two distinct bystanders (T, K, n_max, n_max); bystanders are the
+    objects other than the picked and target ones."""
+    T, n_max, d = data.unary_pre.shape
+    index = np.arange(n_max)[None, :]
+    bystander = (index < data.n[:, None]) & (index != data.actions[:, :1]) & (index != data.actions[:, 2:3])
+    unary = np.repeat(bystander[:, :, None], d, axis=2)
+    pair = bystander[:, :, None] & bystander[:, None, :] & ~np.eye(n_max, dtype=bool)[None]
+    return unary, np.repeat(pair[:, None], data.n_relations, axis=1)
+
+
+def generalize(data: SymbolicDataset) -> tuple[SymbolicDataset, np.ndarray]:
+    """The transitions with the bits a general operator leaves out set to 0 before and after, and
+    which transitions are general: those that changed none of those bits (the others are returned
+    unchanged and keep full operators)."""
+    unary, rel = _bystanders(data)
+    changed = ((data.unary_pre != data.unary_post) & unary).any(axis=(1, 2)) | \
+        ((data.rel_pre != data.rel_post) & rel).any(axis=(1, 2, 3))
+    general = ~changed
+    return _zeroed(data, unary & general[:, None, None], rel & general[:, None, None, None]), general
+
+
+def _zeroed(data: SymbolicDataset, unary: np.ndarray, rel: np.ndarray) -> SymbolicDataset:
+    """The transitions with the given unary (T, n_max, d_z) and relation (T, K, n_max, n_max) bits
+    set to 0 before and after."""
+    def zero(bits: np.ndarray, where: np.ndarray) -> np.ndarray:
+        return np.where(where, 0, bits).astype(np.uint8)
+
+    return SymbolicDataset(zero(data.unary_pre, unary), zero(data.rel_pre, rel), data.actions,
+                           zero(data.unary_post, unary), zero(data.rel_post, rel), data.n)
+
+
+def _known(arity: int, same: bool, n_unary: int, n_relations: int) -> tuple[np.ndarray, np.ndarray]:
+    """The bits a general operator of `arity` tests: all but its bystanders' (parameters from 1, or
+    from 2 when pick != place) unary bits and the relations between two distinct bystanders."""
+    first = 1 if same else 2
+    unary = np.ones((arity, n_unary), dtype=bool)
+    unary[first:] = False
+    rel = np.ones((n_relations, arity, arity), dtype=bool)
+    by = np.arange(arity) >= first
+    rel[:, by[:, None] & by[None, :] & ~np.eye(arity, dtype=bool)] = False
+    return unary, rel
+
+
+def canonical_transitions(data: SymbolicDataset, general: np.ndarray | None = None
+                          ) -> tuple[list[GroupKey], list[bytes], np.ndarray]:
+    """Group key, effect code and parameter order (padded with -1) of every transition. `general`
+    (bool per transition, from `generalize`, whose bits `data` must come from) marks the keys of
+    general operators."""
     T = len(data)
+    general = np.zeros(T, dtype=bool) if general is None else general
     keys: list[GroupKey | None] = [None] * T
     effs: list[bytes | None] = [None] * T
     orders = np.full((T, data.unary_pre.shape[1]), -1, np.int64)
@@ -97,7 +156,7 @@ def canonical_transitions(data: SymbolicDataset) -> tuple[list[GroupKey], list[b
                 data.unary_post[idx, sl], data.rel_post[idx][:, :, sl, sl],
                 a[idx, 0], a[idx, 2], same)
             for j, t in enumerate(idx):
-                keys[t] = (int(n), bool(same), int(a[t, 1]), int(a[t, 3]), pre[j])
+                keys[t] = (int(n), bool(same), int(a[t, 1]), int(a[t, 3]), bool(general[t]), pre[j])
                 effs[t] = eff[j]
                 orders[t, : int(n)] = order[j]
     return keys, effs, orders  # type: ignore[return-value]
@@ -113,18 +172,23 @@ def _lifted(data: SymbolicDataset, t: int, order: np.ndarray):
     return u, r, effect
 
 
-def learn_operators(data: SymbolicDataset) -> OperatorSet:
-    """Group transitions into lifted operators with their empirical effect distributions."""
+def learn_operators(data: SymbolicDataset, general_bystanders: bool = False) -> OperatorSet:
+    """Group transitions into lifted operators with their empirical effect distributions; with
+    `general_bystanders`, the transitions that left their bystanders' own bits alone into general
+    operators (module docstring)."""
     if len(data) == 0:
         raise ValueError("empty dataset: no transitions to learn operators from")
-    keys, effs, orders = canonical_transitions(data)
+    general = None
+    if general_bystanders:
+        data, general = generalize(data)
+    keys, effs, orders = canonical_transitions(data, general)
     members: dict[GroupKey, list[int]] = defaultdict(list)
     for t, key in enumerate(keys):
         members[key].append(t)
     groups = sorted(members.items(), key=lambda kv: (-len(kv[1]), kv[0]))
     operators = []
     for index, (key, ts) in enumerate(groups):
-        arity, same, grasp, release, _ = key
+        arity, same, grasp, release, is_general, _ = key
         counts: Counter = Counter()
         decoded: dict[bytes, Effect] = {}
         for t in ts:
@@ -134,10 +198,12 @@ def learn_operators(data: SymbolicDataset) -> OperatorSet:
             counts[decoded[code]] += 1
         pre_u, pre_r, _ = _lifted(data, ts[0], orders[ts[0]])
         ranked = sorted(counts.items(), key=lambda ec: (-ec[1], ec[0]))
+        known_u, known_r = _known(arity, same, data.n_unary, data.n_relations) if is_general else (None, None)
         operators.append(Operator(
             name=operator_name(index, grasp, release), arity=arity, same=same, grasp=grasp,
             release=release, pre_unary=pre_u, pre_rel=pre_r,
-            effects=tuple(e for e, _ in ranked), counts=tuple(c for _, c in ranked)))
+            effects=tuple(e for e, _ in ranked), counts=tuple(c for _, c in ranked),
+            known_unary=known_u, known_rel=known_r))
     return OperatorSet(operators, data.n_unary, data.n_relations)
 
 
@@ -159,7 +225,7 @@ def filter_operators(ops: OperatorSet, min_count: int = 0, min_prob: float = 0.0
 
 def operator_key(op: Operator) -> GroupKey:
     code = np.packbits(np.concatenate([op.pre_unary.ravel(), op.pre_rel.ravel()]).astype(np.uint8))
-    return (op.arity, op.same, op.grasp, op.release, code.tobytes())
+    return (op.arity, op.same, op.grasp, op.release, op.is_general, code.tobytes())
 
 
 def coverage(ops: OperatorSet, data: SymbolicDataset) -> dict[str, float | int]:
@@ -176,15 +242,25 @@ def coverage(ops: OperatorSet, data: SymbolicDataset) -> dict[str, float | int]:
                          f"learned with d_z={ops.n_unary}, K={ops.n_relations}")
     table = {operator_key(op): op for op in ops.operators}
     keys, _, orders = canonical_transitions(data)
+    # the key of the general operator each pre-state would match, whatever the transition changed
+    seen_general = _zeroed(data, *_bystanders(data))
+    _, is_general = generalize(data)
+    any_general = any(op.is_general for op in ops.operators)
+    general_keys, _, general_orders = canonical_transitions(seen_general, np.ones(len(data), dtype=bool)) \
+        if any_general else (keys, None, orders)
     matched = predicted = mode = 0
     for t, key in enumerate(keys):
-        op = table.get(key)
-        if op is None:
+        outcomes = []  # (operator, the transition's effect in its parameter order, or None if it has none)
+        if key in table:
+            outcomes.append((table[key], _lifted(data, t, orders[t])[2]))
+        if any_general and general_keys[t] in table:
+            effect = _lifted(seen_general, t, general_orders[t])[2] if is_general[t] else None
+            outcomes.append((table[general_keys[t]], effect))
+        if not outcomes:
             continue
         matched += 1
-        effect = _lifted(data, t, orders[t])[2]
-        predicted += effect in op.effects
-        mode += effect == op.effects[0]
+        predicted += any(effect in op.effects for op, effect in outcomes)
+        mode += any(effect == op.effects[0] for op, effect in outcomes)
     T = len(data)
     return {"transitions": T, "matched": matched / T, "effect_predicted": predicted / T,
             "effect_is_mode": mode / T}
@@ -214,6 +290,8 @@ def to_json(ops: OperatorSet) -> dict:
         "operators": [{
             "name": op.name, "arity": op.arity, "same": op.same, "grasp": op.grasp, "release": op.release,
             "pre_unary": op.pre_unary.tolist(), "pre_rel": op.pre_rel.tolist(),
+            **({} if op.known_unary is None or op.known_rel is None else
+               {"known_unary": op.known_unary.astype(int).tolist(), "known_rel": op.known_rel.astype(int).tolist()}),
             "effects": [{"unary_flips": [list(f) for f in e.unary_flips],
                          "rel_flips": [list(f) for f in e.rel_flips], "count": c}
                         for e, c in zip(op.effects, op.counts)],
@@ -226,8 +304,8 @@ def from_json(doc: dict) -> OperatorSet:
         raise ValueError(f"not an operators file (expected a JSON object, got {type(doc).__name__})")
     if doc.get("format") != FORMAT:
         raise ValueError(f"not an operators file (format={doc.get('format')!r})")
-    if doc.get("version") != VERSION:
-        raise ValueError(f"operators.json version {doc.get('version')} unsupported (expected {VERSION})")
+    if doc.get("version") not in READABLE:
+        raise ValueError(f"operators.json version {doc.get('version')} unsupported (expected one of {READABLE})")
     d, K = int(doc["n_unary"]), int(doc["n_relations"])
     operators = []
     for o in doc["operators"]:
@@ -236,8 +314,11 @@ def from_json(doc: dict) -> OperatorSet:
         pre_r = np.asarray(o["pre_rel"], np.uint8).reshape(K, a, a)
         effects = tuple(Effect(tuple(tuple(f) for f in e["unary_flips"]), tuple(tuple(f) for f in e["rel_flips"]))
                         for e in o["effects"])
+        known_u = np.asarray(o["known_unary"], bool).reshape(a, d) if "known_unary" in o else None
+        known_r = np.asarray(o["known_rel"], bool).reshape(K, a, a) if "known_rel" in o else None
         operators.append(Operator(o["name"], a, bool(o["same"]), int(o["grasp"]), int(o["release"]),
-                                  pre_u, pre_r, effects, tuple(int(e["count"]) for e in o["effects"])))
+                                  pre_u, pre_r, effects, tuple(int(e["count"]) for e in o["effects"]),
+                                  known_u, known_r))
     return OperatorSet(operators, d, K)
 
 

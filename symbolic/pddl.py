@@ -55,10 +55,13 @@ class DomainWriter:
     def _render_head(op: Operator) -> str:
         names = parameter_names(op)
         pre = [f"(not (= {a} {b}))" for i, a in enumerate(names) for b in names[i + 1:]]
-        pre += [unary_atom(k, names[i], int(op.pre_unary[i, k]))
-                for i in range(op.arity) for k in range(op.pre_unary.shape[1])]
+        d, K = op.pre_unary.shape[1], op.pre_rel.shape[0]
+        known = op.known_bits()
+        unary = [(i, k) for i in range(op.arity) for k in range(d)]
+        rel = [(k, i, j) for k in range(K) for i in range(op.arity) for j in range(op.arity)]
+        pre += [unary_atom(k, names[i], int(op.pre_unary[i, k])) for (i, k), ok in zip(unary, known) if ok]
         pre += [rel_atom(k, names[i], names[j], int(op.pre_rel[k, i, j]))
-                for k in range(op.pre_rel.shape[0]) for i in range(op.arity) for j in range(op.arity)]
+                for (k, i, j), ok in zip(rel, known[len(unary):]) if ok]
         return (f" :parameters ({' '.join(names)})\n"
                 f"  :precondition (and {' '.join(pre)})\n  :effect ")
 

@@ -42,6 +42,7 @@ class GroundTask:
             if a > n:
                 continue
             pre = np.concatenate([op.pre_unary.ravel(), op.pre_rel.ravel()]).astype(bool)
+            known = op.known_bits()
             local_u = [(i, k) for i in range(a) for k in range(d)]
             local_r = [(k, i, j) for k in range(K) for i in range(a) for j in range(a)]
             for b in itertools.permutations(range(n), a):
@@ -49,8 +50,8 @@ class GroundTask:
                                + [n * d + k * n * n + b[i] * n + b[j] for k, i, j in local_r], dtype=np.int64)
                 self.op_index.append(oi)
                 self.binding.append(b)
-                self.pre_mask.append(_int(pos))
-                self.pre_val.append(_int(pos[pre]))
+                self.pre_mask.append(_int(pos[known]))
+                self.pre_val.append(_int(pos[known & pre]))
                 self.flips.append(tuple(_int([b[i] * d + k for i, k in e.unary_flips]
                                              + [n * d + k * n * n + b[i] * n + b[j] for k, i, j in e.rel_flips])
                                         for e in op.effects))

@@ -38,7 +38,7 @@ class Effect:
 
 @dataclass
 class Operator:
-    """A lifted operator: the full symbolic pre-state over its parameters plus observed effects.
+    """A lifted operator: the symbolic pre-state over its parameters plus observed effects.
 
     ``effects`` are sorted by decreasing count (ties by the effect itself), so ``effects[0]`` is the
     most frequent effect used by the deterministic domain.
@@ -53,6 +53,29 @@ class Operator:
     pre_rel: np.ndarray  # (K, arity, arity) uint8
     effects: tuple[Effect, ...]
     counts: tuple[int, ...]
+    # Which precondition bits the operator tests (None: every one). A general operator
+    # (`learn_operators(general_bystanders=True)`) leaves out its bystanders' unary bits and the
+    # relations among them; its pre_unary / pre_rel hold 0 there, and no effect flips them.
+    known_unary: np.ndarray | None = None  # (arity, d_z) bool
+    known_rel: np.ndarray | None = None  # (K, arity, arity) bool
+
+    @property
+    def is_general(self) -> bool:
+        return self.known_unary is not None
+
+    def known_bits(self) -> np.ndarray:
+        """The tested bits in the local layout (unary bits of each parameter, then each relation's
+        arity x arity matrix), as a bool vector."""
+        if self.known_unary is None or self.known_rel is None:
+            return np.ones(self.pre_unary.size + self.pre_rel.size, dtype=bool)
+        return np.concatenate([self.known_unary.ravel(), self.known_rel.ravel()]).astype(bool)
+
+    def holds(self, unary: np.ndarray, rel: np.ndarray) -> bool:
+        """The precondition holds on the parameters' bits: unary (arity, d_z), relations (K, arity, arity)."""
+        bits = np.concatenate([np.asarray(unary).ravel(), np.asarray(rel).ravel()])
+        pre = np.concatenate([self.pre_unary.ravel(), self.pre_rel.ravel()])
+        known = self.known_bits()
+        return bits.shape == pre.shape and bool(np.array_equal(bits[known], pre[known]))
 
     @property
     def count(self) -> int:

@@ -50,6 +50,12 @@ def test_pairwise_relations_and_the_type_symbol_reach_the_domain_and_tamp_symbol
                  "--involved-only"]) == 0
     assert json.loads((out / "stats.json").read_text())["n_unary"] == 2  # the learned bit and the type
     capsys.readouterr()
+    assert main(["domain", "--model", str(model), "--data", str(tiny_dataset), "--out", str(tmp_path / "general"),
+                 "--involved-only", "--general-bystanders"]) == 0
+    general = json.loads((tmp_path / "general" / "stats.json").read_text())
+    assert general["general_bystanders"] and general["n_operators"] <= json.loads((out / "stats.json").read_text())[
+        "n_operators"]
+    assert f"({general['n_general']} general)" in capsys.readouterr().out
     assert main(["symbols", "--model", str(model), "--data", str(tiny_dataset), "--max-scenes", "200"]) == 0
     printed = capsys.readouterr().out
     assert "1 learned unary bit(s) and the given type as u1, K = 2 pairwise relation(s)" in printed

@@ -345,3 +345,91 @@ def test_with_core_from_all_the_operator_of_the_picked_and_target_objects_learns
     assert plain[3].count == core[3].count == 5 and plain[3].effects == core[3].effects
     with pytest.raises(ValueError, match="involved_only"):
         build_domain(*args, tmp_path / "x", holdout=0.0, core_from_all=True)
+
+
+def _beside_dataset():
+    """3-object scenes, u0 = far half, u1 = on the table, r0(a, b) = a beside b. Object 2 stands beside
+    object 1; the action puts object 0 on object 1, which makes it beside object 2 as well. Object 2
+    stands in the near half in every transition (u0 = 0). A last transition knocks object 2 over
+    (its u1 changes): it keeps a full operator."""
+    u = np.array([[0, 1], [0, 1], [0, 1]], np.uint8)
+    r = np.zeros((1, 3, 3), np.uint8)
+    r[0, 1, 2] = r[0, 2, 1] = 1
+    uq, rq = u.copy(), r.copy()
+    uq[0, 1] = 0
+    rq[0, 0, 2] = rq[0, 2, 0] = 1
+    knocked = uq.copy()
+    knocked[2, 1] = 0
+    rows = [(u, r, uq, rq)] * 6 + [(u, r, knocked, rq)]
+    return make_dataset(*(np.stack([row[i] for row in rows]) for i in (0, 1)), np.array([(0, 0, 1, 0)] * len(rows)),
+                        *(np.stack([row[i] for row in rows]) for i in (2, 3)), np.full(len(rows), 3))
+
+
+def test_general_bystander_operators_cover_where_a_bystander_stands_unseen(tmp_path):
+    """A bystander in the far half (u0 = 1) was never seen; what the step does to it depends only on
+    its relations to the moved blocks, so the general operator applies and predicts it, in the lifted
+    search, the grounded reference, the PDDL, the JSON file and the held-out coverage."""
+    from symbolic.lifted import LiftedTask
+    from symbolic.pddl import DomainWriter
+
+    data = _beside_dataset()
+    full, general = learn_operators(data), learn_operators(data, general_bystanders=True)
+    assert len(full) == 1 and not full.operators[0].is_general and full.operators[0].counts == (6, 1)
+    assert sorted(op.is_general for op in general.operators) == [False, True]
+    op = next(op for op in general.operators if op.is_general)
+    assert op.count == 6 and op.known_unary.tolist() == [[True, True], [True, True], [False, False]]
+    assert op.known_rel[0, 2, 2]  # the diagonal stays tested
+    assert op.known_rel[0, 0, 2] and op.known_rel[0, 2, 1]  # relations to the moved blocks are tested
+    knocked = next(op for op in general.operators if not op.is_general)
+    assert knocked.count == 1 and knocked.pre_unary[2].tolist() == [0, 1]
+
+    far = data.subset(np.arange(6))
+    far.unary_pre[:, 2, 0] = far.unary_post[:, 2, 0] = 1  # the bystander stands in the far half
+    state = pack_state(far.unary_pre[0, :3], far.rel_pre[0, :, :3, :3])
+    after = pack_state(far.unary_post[0, :3], far.rel_post[0, :, :3, :3])
+    assert after not in LiftedTask(full, 3).expand(state).successors
+    task, ground = LiftedTask(general, 3), GroundTask(general, 3)
+    assert after in task.expand(state).successors
+    gs = ground.applicable(state)
+    assert task.expand(state).successors == list(dict.fromkeys(state ^ f for g in gs for f in ground.flips[g]))
+    assert coverage(full, far)["matched"] == 0.0
+    assert coverage(general, far) == {"transitions": 6, "matched": 1.0, "effect_predicted": 1.0, "effect_is_mode": 1.0}
+
+    head = DomainWriter(general)._render_head(op)
+    assert "u0 ?x1)" not in head and "u1 ?x1)" not in head and "(r0 ?t ?x1)" in head and "(u1 ?t)" in head
+    back = from_json(json.loads(json.dumps(to_json(general))))
+    assert [(o.is_general, o.known_bits().tolist()) for o in back.operators] == \
+        [(o.is_general, o.known_bits().tolist()) for o in general.operators]
+
+
+def test_general_bystander_domains_give_the_grounded_successors(tmp_path):
+    """On a blocks world of 2-5 blocks (a bystander's own bits change when a block is taken off it),
+    the lifted search's successors and ground actions equal the grounded reference's, and the general
+    domain has fewer operators than the full one and covers more held-out transitions."""
+    from symbolic.lifted import LiftedTask
+
+    data = bw.random_dataset(2500, (2, 3, 4, 5), seed=3)
+    args = (data.unary_pre, data.rel_pre, data.actions, data.unary_post, data.rel_post, data.n)
+    full = build_domain(*args, tmp_path / "full", holdout=0.2, seed=0, involved_only=True)
+    report = build_domain(*args, tmp_path / "general", holdout=0.2, seed=0, involved_only=True,
+                          general_bystanders=True)
+    assert report["general_bystanders"] and 0 < report["n_general"] < report["n_operators"] < full["n_operators"]
+    assert report["coverage_holdout"]["matched"] >= full["coverage_holdout"]["matched"]
+    ops = load_domain(tmp_path / "general")
+    task, ground = LiftedTask(ops, 5), GroundTask(ops, 5)
+    for seed in range(6):
+        problem = bw.random_problem(5, 3, seed=seed)[0]
+        for s in (pack_state(problem.init_unary, problem.init_rel), pack_state(problem.goal_unary, problem.goal_rel)):
+            gs = ground.applicable(s)
+            assert task.expand(s).successors == list(dict.fromkeys(s ^ f for g in gs for f in ground.flips[g]))
+            assert task.applicable(s) == sorted(task.n_tuples * ground.op_index[g] + _tuple(task, ground.op_index[g],
+                                                                                             ground.binding[g])
+                                                for g in gs)
+
+
+def _tuple(task, operator: int, binding: tuple) -> int:
+    """The lifted task's tuple index of a binding, in the tuples of the operator's group."""
+    op = task.ops.operators[operator]
+    group = next(g for g, (a, known) in enumerate(task.groups)
+                 if a == op.arity and known.tolist() == op.known_bits().tolist())
+    return next(i for i, t in enumerate(task.tuples) if t == binding and task._tuple_tag[i] == group)

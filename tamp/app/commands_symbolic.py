@@ -81,9 +81,10 @@ def cmd_domain(args: argparse.Namespace) -> int:
                           sampled_domains=args.sampled, involved_only=args.involved_only,
                           min_count=args.min_count, min_prob=args.min_prob, only_moved=args.only_moved,
                           any_bottleneck=args.any_bottleneck, max_arity=args.max_arity,
-                          core_from_all=args.core_from_all)
+                          core_from_all=args.core_from_all, general_bystanders=args.general_bystanders)
     held = report.get("coverage_holdout") or {}
-    print(f"{report['n_operators']} operators from {report['transitions']} transitions -> {args.out}")
+    general = f" ({report['n_general']} general)" if args.general_bystanders else ""
+    print(f"{report['n_operators']} operators{general} from {report['transitions']} transitions -> {args.out}")
     left_out = report["max_arity"]["transitions_left_out"]
     if left_out:
         print(f"  {left_out} training transitions involve more than {report['max_arity']['limit']} objects "
@@ -136,6 +137,11 @@ def add_domain(sub) -> None:
                    help="with --involved-only: every transition also teaches the operator of its picked and target "
                    "objects alone, other objects' changes ignored there; without it that operator holds only the "
                    "transitions that disturbed nothing else (mostly failed picks) and expects nothing to happen")
+    p.add_argument("--general-bystanders", action="store_true",
+                   help="an operator does not test its bystanders' own bits (where on the table they stand, "
+                   "their type) or the relations among them, when its transitions left those bits alone: what "
+                   "a step does to a block beside the moved ones depends on where it stands relative to them. "
+                   "Fewer operators, and pre-states no transition showed are still covered")
     p.add_argument("--only-moved", action="store_true",
                    help="learn from the transitions that moved their picked block (failed grasps and blocked "
                    "motions left out, as the paper's authors do)")

@@ -18,14 +18,15 @@ def learn_domain(model_path: str | Path, data_dir: "str | Path | Sequence[str | 
                  holdout: float = 0.1, seed: int = 0, sampled_domains: int = 0, skip_corrupt: bool = True,
                  involved_only: bool = False, min_count: int = 0, min_prob: float = 0.0,
                  only_moved: bool = False, any_bottleneck: bool = False, max_arity: int | None = None,
-                 core_from_all: bool = False) -> dict:
+                 core_from_all: bool = False, general_bystanders: bool = False) -> dict:
     """Write the learned domain of `model_path` on the transitions in `data_dir` (a dataset directory, or
     several learned from together: `learned.load_transitions`); returns stats.
     `only_moved`: learn from the transitions that moved their picked block alone (as the paper's
     authors do), so that failed grasps and blocked motions are not among the operators' outcomes.
     `any_bottleneck`: accept a model that is not a Symbolic Model (the Fig. 4 Sigmoid variant).
     `max_arity`: learn no operator from transitions that involve more objects (default: the most the
-    lifted search takes, `symbolic.build_domain`)."""
+    lifted search takes, `symbolic.build_domain`). `general_bystanders`: operators that do not test
+    their bystanders' own bits when a transition left them alone (`symbolic.operators`)."""
     import learned
     import symbolic
 
@@ -51,7 +52,8 @@ def learn_domain(model_path: str | Path, data_dir: "str | Path | Sequence[str | 
     report = symbolic.build_domain(u_pre, r_pre, np.asarray(data.action), u_post, r_post, np.asarray(data.n),
                                    out_dir, holdout=holdout, seed=seed, sampled_domains=sampled_domains,
                                    involved_only=involved_only, min_count=min_count, min_prob=min_prob,
-                                   max_arity=max_arity, core_from_all=core_from_all)
+                                   max_arity=max_arity, core_from_all=core_from_all,
+                                   general_bystanders=general_bystanders)
     report["model"] = str(model_path)
     report["data"] = source
     report["transitions"] = int(len(data))
