@@ -198,7 +198,10 @@ def learn_operators(data: SymbolicDataset, general_bystanders: bool = False) -> 
             counts[decoded[code]] += 1
         pre_u, pre_r, _ = _lifted(data, ts[0], orders[ts[0]])
         ranked = sorted(counts.items(), key=lambda ec: (-ec[1], ec[0]))
-        known_u, known_r = _known(arity, same, data.n_unary, data.n_relations) if is_general else (None, None)
+        known_u: np.ndarray | None = None
+        known_r: np.ndarray | None = None
+        if is_general and arity > (1 if same else 2):  # with no bystander, nothing is left out
+            known_u, known_r = _known(arity, same, data.n_unary, data.n_relations)
         operators.append(Operator(
             name=operator_name(index, grasp, release), arity=arity, same=same, grasp=grasp,
             release=release, pre_unary=pre_u, pre_rel=pre_r,
