@@ -304,14 +304,7 @@ def test_a_diagonal_the_same_in_every_operator_leaves_room_for_larger_operators(
                                    "transitions_left_out": 0}
     every = load_domain(tmp_path / "all")
     assert max(op.arity for op in every.operators) == 5 > limit
-    task, ground = LiftedTask(every, 5), GroundTask(every, 5)
-    for seed in range(6):
-        problem = bw.random_problem(5, 3, seed=seed)[0]
-        for s in (pack_state(problem.init_unary, problem.init_rel), pack_state(problem.goal_unary, problem.goal_rel)):
-            gs = ground.applicable(s)
-            assert task.expand(s).successors == list(dict.fromkeys(s ^ f for g in gs for f in ground.flips[g]))
-            assert task.applicable(s) == [task.n_tuples * ground.op_index[g] + task.tuples.index(ground.binding[g])
-                                          for g in gs]
+    _check_lifted_against_grounded(every, 5)
     odd = next(op for op in every.operators if op.arity == 5)
     odd.pre_rel[0, 0, 0] = 1
     with pytest.raises(ValueError, match=rf"arity 5 .* at most arity {limit} .*--max-arity"):
@@ -406,8 +399,6 @@ def test_general_bystander_domains_give_the_grounded_successors(tmp_path):
     """On a blocks world of 2-5 blocks (a bystander's own bits change when a block is taken off it),
     the lifted search's successors and ground actions equal the grounded reference's, and the general
     domain has fewer operators than the full one and covers more held-out transitions."""
-    from symbolic.lifted import LiftedTask
-
     data = bw.random_dataset(2500, (2, 3, 4, 5), seed=3)
     args = (data.unary_pre, data.rel_pre, data.actions, data.unary_post, data.rel_post, data.n)
     full = build_domain(*args, tmp_path / "full", holdout=0.2, seed=0, involved_only=True)
@@ -416,15 +407,22 @@ def test_general_bystander_domains_give_the_grounded_successors(tmp_path):
     assert report["general_bystanders"] and 0 < report["n_general"] < report["n_operators"] < full["n_operators"]
     assert report["coverage_holdout"]["matched"] >= full["coverage_holdout"]["matched"]
     ops = load_domain(tmp_path / "general")
-    task, ground = LiftedTask(ops, 5), GroundTask(ops, 5)
+    _check_lifted_against_grounded(ops, 5)
+
+
+def _check_lifted_against_grounded(ops, n: int) -> None:
+    """On the initial and goal states of random n-block problems, the lifted task's successors and
+    ground actions (in ground-action order) are the grounded reference's."""
+    from symbolic.lifted import LiftedTask
+
+    task, ground = LiftedTask(ops, n), GroundTask(ops, n)
     for seed in range(6):
-        problem = bw.random_problem(5, 3, seed=seed)[0]
+        problem = bw.random_problem(n, 3, seed=seed)[0]
         for s in (pack_state(problem.init_unary, problem.init_rel), pack_state(problem.goal_unary, problem.goal_rel)):
             gs = ground.applicable(s)
             assert task.expand(s).successors == list(dict.fromkeys(s ^ f for g in gs for f in ground.flips[g]))
-            assert task.applicable(s) == sorted(task.n_tuples * ground.op_index[g] + _tuple(task, ground.op_index[g],
-                                                                                             ground.binding[g])
-                                                for g in gs)
+            assert task.applicable(s) == [task.n_tuples * ground.op_index[g]
+                                          + _tuple(task, ground.op_index[g], ground.binding[g]) for g in gs]
 
 
 def _tuple(task, operator: int, binding: tuple) -> int:
