@@ -149,6 +149,12 @@ def main() -> None:
             o = old[n]
             print(f"{n:>2} {'old':>10} {ms(pct(o, 50))} {ms(pct(o, 90))} {ms(max(o))} {ms(float(np.mean(o)))}"
                   f"   old / new: median {pct(o, 50) / pct(sym, 50):.0f}x, mean {np.mean(o) / np.mean(sym):.0f}x")
+    for sizes in ((2, 3, 4), (5, 6)):  # the figures: one median over the problems of these sizes
+        pooled = [r["level1"] for n in sizes for r in rows.get(n, [])]
+        if len({n for n in sizes if n in rows}) > 1:
+            print(f"n = {sizes[0]}-{sizes[-1]} pooled, level1: median {pct(pooled, 50) * 1000:.1f} ms, "
+                  f"p90 {pct(pooled, 90) * 1000:.1f}, mean {float(np.mean(pooled)) * 1000:.1f} "
+                  f"({len(pooled)} problems)")
     print("\nsymbolic = sampling + search; level1 = symbols + symbolic + verify.")
 
 

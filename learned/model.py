@@ -31,6 +31,7 @@ from .effects import ACTION_ENC_DIM, STATE_DIM, arm_shift, as_action_array, chec
 
 ACTIVATIONS = ("gumbel_sigmoid", "sigmoid", "tanh", "none")
 RELATIONS = ("attention", "pairwise")
+POSITION_AXES = ("xy", "x")
 OFFSET_SCALE_M = 0.05  # `reconstruct_offsets` reads tanh(offset / 5 cm): which side and whether touching, not how far
 SELF_LOGIT = 30.0  # pairwise r_k(i, i): a logit whose Gumbel-Sigmoid sample is 1 but for ~1e-13 of draws
 
@@ -65,6 +66,13 @@ class ModelConfig:
     # bits, trained with `TrainConfig.position_weight`: a unary bit can then say in which part of the table
     # a block stands, a symbol that only the moved block's step changes (planners never call the head)
     position_decoder: bool = False
+    # the table axes the position head reads back: "xy", or "x" alone (the skill's grasp and release offsets
+    # are along y, so a block placed at a target lands at the target's x: x-only places are predictable)
+    position_axes: str = "xy"
+    # a head that predicts the bits after a step from the bits before it and the action (each object's
+    # unary bits and each pair's relations, seeing how the pair stands to the picked block and the
+    # target), trained with `TrainConfig.transition_weight`: bits an operator can predict (planners never call it)
+    transition_decoder: bool = False
 
     @property
     def n_unary(self) -> int:
@@ -76,6 +84,8 @@ class ModelConfig:
             raise ValueError(f"activation {self.activation!r} not in {ACTIVATIONS}")
         if self.relations not in RELATIONS:
             raise ValueError(f"relations {self.relations!r} not in {RELATIONS}")
+        if self.position_axes not in POSITION_AXES:
+            raise ValueError(f"position_axes {self.position_axes!r} not in {POSITION_AXES}")
         if self.offset_from_relations and not self.offset_decoder:
             raise ValueError("offset_from_relations needs offset_decoder=True (the head it changes)")
         for f in ("n_max", "d_z", "heads", "d_key", "d_msg", "hidden", "layers"):
@@ -150,7 +160,11 @@ class EffectModel(nn.Module):
         if c.offset_decoder:
             self.offset_head = mlp([(0 if c.offset_from_relations else 2 * c.n_unary) + 2 * c.heads, *hid, 3])
         if c.position_decoder:
-            self.position_head = mlp([c.n_unary, *hid, 2])
+            self.position_head = mlp([c.n_unary, *hid, len(c.position_axes)])
+        if c.transition_decoder:  # per object: [u_i, a_i, context_i]; per pair: both of those and r_.(i, j), r_.(j, i)
+            context = 4 * c.heads + 2 * c.n_unary  # the object's relations both ways to the pick and the target; theirs
+            self.next_unary_head = mlp([c.n_unary + ACTION_ENC_DIM + context, *hid, c.d_z])
+            self.next_relation_head = mlp([2 * (c.n_unary + ACTION_ENC_DIM + context) + 2 * c.heads, *hid, c.heads])
         self.bottleneck = Bottleneck(c.activation, c.temperature)
         # Normalisation statistics (metres), set from training data by ``set_normalisation``.
         self.register_buffer("pos_mean", torch.zeros(3))
@@ -231,12 +245,13 @@ class EffectModel(nn.Module):
         return torch.tanh(self.pair_offsets(X) / OFFSET_SCALE_M)
 
     def squashed_positions(self, X: torch.Tensor) -> torch.Tensor:
-        """(B, N, 2) tanh of each block's normalised place on the table, (x, y): what
-        `reconstruct_positions` learns to read back."""
-        return torch.tanh((X[..., :2] - self.pos_mean[:2]) / self.pos_std[:2])
+        """(B, N, axes) tanh of each block's normalised place on the table, (x, y) or x (``position_axes``):
+        what `reconstruct_positions` learns to read back."""
+        axes = len(self.config.position_axes)
+        return torch.tanh((X[..., :axes] - self.pos_mean[:axes]) / self.pos_std[:axes])
 
     def reconstruct_positions(self, u: torch.Tensor) -> torch.Tensor:
-        """(B, N, 2) `squashed_positions` read back from each block's unary bits alone (``position_decoder``)."""
+        """(B, N, axes) `squashed_positions` read back from each block's unary bits alone (``position_decoder``)."""
         return self.position_head(u)
 
     def reconstruct_offsets(self, u: torch.Tensor, r: torch.Tensor) -> torch.Tensor:
@@ -248,6 +263,26 @@ class EffectModel(nn.Module):
                                                                u[:, None].expand(B, N, N, d)]
         pair = torch.cat([*unary, rij, rij.transpose(1, 2)], dim=-1)
         return self.offset_head(pair)
+
+    def predict_next_logits(self, X: torch.Tensor, action: torch.Tensor, u: torch.Tensor, r: torch.Tensor
+                            ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Logits of the learned bits after the action, (B, N, d_z) and (B, K, N, N), from the bits before
+        it (u: (B, N, n_unary), r: (B, K, N, N)) and the action alone (``transition_decoder``): each object
+        is seen with its action encoding, its relations both ways to the picked block and to the target,
+        and their unary bits; each pair with both objects' and its own two relations."""
+        B, N, _ = X.shape
+        a = encode_actions(X, action, self.arm_scale, arm=self.config.arm_input)
+        batch = torch.arange(B, device=X.device)
+        rij = r.permute(0, 2, 3, 1)  # (B, N, N, K)
+        pick, target = action[:, 0], action[:, 2]
+        context = torch.cat([rij[batch, :, pick], rij[batch, pick], rij[batch, :, target], rij[batch, target],
+                             u[batch, pick][:, None].expand(B, N, -1), u[batch, target][:, None].expand(B, N, -1)],
+                            dim=-1)
+        obj = torch.cat([u.expand(B, -1, -1), a.to(u.dtype), context.to(u.dtype)], dim=-1)
+        F = obj.shape[-1]
+        pair = torch.cat([obj[:, :, None].expand(B, N, N, F), obj[:, None].expand(B, N, N, F), rij,
+                          rij.transpose(1, 2)], dim=-1)
+        return self.next_unary_head(obj), self.next_relation_head(pair).permute(0, 3, 1, 2)
 
     def forward(self, X: torch.Tensor, action: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
         """Effect target (B, N, 3) in metres, arm motion of the pick object removed; 0 if padded.

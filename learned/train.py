@@ -112,6 +112,9 @@ class TrainConfig:
     # weight of the position loss (`ModelConfig.position_decoder`, `position_loss`): each block's place on
     # the table read back from its unary bits, so that a unary bit says where a block stands; 0: off
     position_weight: float = 0.0
+    # weight of the transition loss (`ModelConfig.transition_decoder`, `transition_loss`): the bits read after
+    # each step predicted from the bits before it and the action, so that operators predict their steps; 0: off
+    transition_weight: float = 0.0
 
     def __post_init__(self) -> None:
         if self.precision not in ("float32", "bfloat16"):
@@ -129,6 +132,8 @@ class TrainConfig:
             raise ValueError(f"offset_weight must be >= 0, got {self.offset_weight}")
         if not self.position_weight >= 0.0:
             raise ValueError(f"position_weight must be >= 0, got {self.position_weight}")
+        if not self.transition_weight >= 0.0:
+            raise ValueError(f"transition_weight must be >= 0, got {self.transition_weight}")
         if self.offset_radius_m is not None and not self.offset_radius_m > 0.0:
             raise ValueError(f"offset_radius_m must be > 0, got {self.offset_radius_m}")
 
@@ -173,6 +178,7 @@ def train_options(train: TrainConfig, num_train: int, num_val: int, init: str | 
             **({"offset_weight": train.offset_weight} if train.offset_weight else {}),
             **({"offset_radius_m": train.offset_radius_m} if train.offset_radius_m is not None else {}),
             **({"position_weight": train.position_weight} if train.position_weight else {}),
+            **({"transition_weight": train.transition_weight} if train.transition_weight else {}),
             **({"precision": train.precision} if train.precision != "float32" else {}),
             **({"patience_epochs": train.patience_epochs, "min_delta_cm": train.min_delta_cm}
                if train.patience_epochs is not None else {})}
@@ -224,6 +230,25 @@ def offset_loss(model: EffectModel, X: torch.Tensor, mask: torch.Tensor, u: torc
     return (err * pairs).sum() / pairs.sum().clamp(min=1.0)
 
 
+def transition_loss(model: EffectModel, X: torch.Tensor, X_next: torch.Tensor, action: torch.Tensor,
+                    mask: torch.Tensor, u: torch.Tensor, r: torch.Tensor) -> torch.Tensor:
+    """Mean binary cross-entropy, over the learned bits of real objects and pairs i != j, of the bits
+    read on X_next (their sigmoids, not samples) predicted from the bits u, r before the step and the
+    action (`EffectModel.predict_next_logits`). The gradient reaches the bits after the step too: the
+    encoder is asked for bits a step's outcome can be predicted in, beside the effect they must explain."""
+    d_z = model.config.d_z
+    next_unary, next_relation = model.unary_logits(X_next), model.relation_logits(X_next)
+    pred_unary, pred_relation = model.predict_next_logits(X, action, u, r)
+    bce = torch.nn.functional.binary_cross_entropy_with_logits
+    m = mask.float()
+    unary = bce(pred_unary.float(), torch.sigmoid(next_unary.float()), reduction="none").sum(-1)
+    N = mask.shape[1]
+    pairs = (m[:, :, None] * m[:, None, :]) * (1 - torch.eye(N, dtype=m.dtype, device=m.device))
+    relation = bce(pred_relation.float(), torch.sigmoid(next_relation.float()), reduction="none").sum(1)
+    return (unary * m).sum() / (m.sum() * d_z).clamp(min=1.0) + \
+        (relation * pairs).sum() / (pairs.sum() * next_relation.shape[1]).clamp(min=1.0)
+
+
 def last_path(out_path: str | Path) -> Path:
     """Where the resumable latest-epoch checkpoint of ``out_path`` lives."""
     p = Path(out_path)
@@ -248,7 +273,7 @@ def prepare(data: Transitions) -> dict[str, torch.Tensor]:
     t = data.tensors()
     X, Xn, M, A = t["X"].float(), t["X_next"].float(), t["mask"], t["action"].long()
     return {"X": X, "mask": M, "action": A, "target": effect_targets(X, Xn, A, M),
-            "absolute": (Xn[..., :3] - X[..., :3]) * M[..., None]}
+            "absolute": (Xn[..., :3] - X[..., :3]) * M[..., None], "X_next": Xn}
 
 
 def normalisation(t: dict[str, torch.Tensor]) -> dict[str, Any]:
@@ -358,6 +383,8 @@ def train_model(data: "str | Path | Sequence[str | Path] | Transitions", config:
         raise ValueError("offset_weight needs a model with offset_decoder=True (the head it trains)")
     if train.position_weight and not config.position_decoder:
         raise ValueError("position_weight needs a model with position_decoder=True (the head it trains)")
+    if train.transition_weight and not config.transition_decoder:
+        raise ValueError("transition_weight needs a model with transition_decoder=True (the head it trains)")
     options = train_options(train, len(data), len(val_data), init)
     tr, va = prepare(data), prepare(val_data)
 
@@ -428,6 +455,7 @@ def train_model(data: "str | Path | Sequence[str | Path] | Transitions", config:
         perm = torch.randperm(N, generator=torch.Generator().manual_seed(train.seed * 100003 + epoch))
         # One gather per epoch; the steps then slice contiguous views.
         Xe, Ae, Me, Te = (tr[k][perm] for k in ("X", "action", "mask", "target"))
+        Ne = tr["X_next"][perm] if train.transition_weight else None
         run_loss, run_err = torch.zeros((), dtype=torch.float64), torch.zeros((), dtype=torch.float64)
         run_b = 0
         t0 = time.perf_counter()
@@ -440,6 +468,7 @@ def train_model(data: "str | Path | Sequence[str | Path] | Transitions", config:
                 usage = bit_usage_penalty(unary, relation, M) if train.bit_usage else None
                 offsets = offset_loss(model, X, M, u, r, train.offset_radius_m) if train.offset_weight else None
                 places = position_loss(model, X, M, u) if train.position_weight else None
+                steps = None if Ne is None else transition_loss(model, X, Ne[batch], A, M, u, r)
             d = pred.float() - T
             loss = (d / scale).pow(2).sum(dim=(1, 2)).mean()
             if usage is not None:
@@ -448,6 +477,8 @@ def train_model(data: "str | Path | Sequence[str | Path] | Transitions", config:
                 loss = loss + train.offset_weight * offsets
             if places is not None:
                 loss = loss + train.position_weight * places
+            if steps is not None:
+                loss = loss + train.transition_weight * steps
             opt.zero_grad(set_to_none=True)
             loss.backward()
             opt.step()

@@ -122,7 +122,7 @@ class LiftedTask:
         self.ops, self.n, self.scope = ops, n, scope
         d, K = ops.n_unary, ops.n_relations
         self.n_bits = n_bits(n, d, K)
-        self.words = (self.n_bits + 1 + 63) // 64  # one spare bit: the padding position
+        self.words = max((self.n_bits + 63) // 64, 1)  # uint64 words of a state (64 bits at n = 4: one word)
         n_effects = [len(op.effects) for op in ops.operators]
         self.effect_start = np.concatenate([[0], np.cumsum(n_effects)]).astype(np.int64)
         self.effect_op = np.repeat(np.arange(len(ops)), n_effects)
@@ -252,7 +252,8 @@ class LiftedTask:
     def _keys(self, state: int) -> np.ndarray:
         """Group-tagged sub-state code of every tuple in `state`; -1 (no operator's) for a tuple whose
         fixed bits (`_key_layout`) differ from every operator's."""
-        raw = np.frombuffer(state.to_bytes(self.words * 8, "little"), dtype=np.uint8)
+        # one spare byte: the padding position n_bits reads 0 even when the state fills its words
+        raw = np.frombuffer(state.to_bytes(self.words * 8 + 1, "little"), dtype=np.uint8)
         bits = np.unpackbits(raw, bitorder="little").astype(np.int64)
         codes = (bits[self._key_positions] << self._shift).sum(axis=1) * MAX_GROUPS + self._tuple_tag
         if self._fixed_positions.shape[1]:

@@ -88,10 +88,12 @@ def test_train_missing_dataset_is_a_clear_error(tmp_path, capsys):
     assert "nope" in err and "Traceback" not in err
 
 
-def test_offset_from_relations_without_the_offset_loss_is_a_clear_error(tiny_dataset, tmp_path, capsys):
-    assert main(["train", "--data", str(tiny_dataset), "--out", str(tmp_path / "m.pt"), "--offset-from-relations"]) == 2
+@pytest.mark.parametrize("flag,loss", [(["--offset-from-relations"], "--offset-loss"),
+                                       (["--position-axes", "x"], "--position-loss")])
+def test_a_loss_option_without_its_loss_is_a_clear_error(tiny_dataset, tmp_path, capsys, flag, loss):
+    assert main(["train", "--data", str(tiny_dataset), "--out", str(tmp_path / "m.pt"), *flag]) == 2
     err = capsys.readouterr().err
-    assert "--offset-loss" in err and "Traceback" not in err and not (tmp_path / "m.pt").exists()
+    assert loss in err and flag[0] in err and "Traceback" not in err and not (tmp_path / "m.pt").exists()
 
 
 def test_domain_with_a_corrupt_model_is_a_clear_error(tiny_dataset, tmp_path, capsys):

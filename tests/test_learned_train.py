@@ -238,6 +238,59 @@ def test_the_position_loss_makes_a_unary_bit_say_where_a_block_stands(tmp_path):
         fit(data, ModelConfig(hidden=8, d_msg=8, d_z=1, heads=1), 1, tmp_path / "x.pt", position_weight=1.0)
 
 
+def test_the_position_loss_on_x_alone_reads_back_where_a_block_stands_along_x_only():
+    """`position_axes="x"`: the head reads back x alone, so a block moved along y (the axis of the skill's
+    grasp and release offsets) costs the position loss nothing and one moved along x does."""
+    from learned.model import EffectModel
+    from learned.train import position_loss
+
+    torch.manual_seed(0)
+    model = EffectModel(ModelConfig(hidden=8, d_msg=8, d_z=2, heads=1, position_decoder=True, position_axes="x"))
+    model.set_normalisation(torch.tensor([0.6, 0.0, 0.05]), torch.tensor([0.1, 0.2, 0.03]), 0.05, 0.3)
+    X = torch.zeros(1, 2, 5)
+    X[0, :, :3] = torch.tensor([[0.55, -0.1, 0.025], [0.7, 0.2, 0.025]])
+    mask, u = torch.ones(1, 2, dtype=torch.bool), torch.rand(1, 2, 2)
+    assert model.squashed_positions(X).shape == (1, 2, 1) and model.reconstruct_positions(u).shape == (1, 2, 1)
+    along_y, along_x = X.clone(), X.clone()
+    along_y[0, :, 1] += 0.075
+    along_x[0, :, 0] += 0.075
+    assert torch.allclose(position_loss(model, along_y, mask, u), position_loss(model, X, mask, u))
+    assert not torch.allclose(position_loss(model, along_x, mask, u), position_loss(model, X, mask, u))
+    with pytest.raises(ValueError, match="position_axes"):
+        ModelConfig(position_axes="z")
+
+
+def test_the_transition_loss_asks_for_bits_a_step_can_be_predicted_in(tmp_path):
+    """`transition_decoder`: a head predicts the bits after a step from the bits before and the action; the
+    loss reads the bits on X_next, so its gradient reaches the encoder through them as well. Training records
+    the weight, and the loss needs its head."""
+    from learned.model import EffectModel
+    from learned.train import transition_loss
+
+    torch.manual_seed(0)
+    model = EffectModel(ModelConfig(hidden=8, d_msg=8, d_z=2, heads=2, relations="pairwise", transition_decoder=True))
+    X = torch.zeros(1, 3, 5)
+    X[0, :, :3] = torch.tensor([[0.55, -0.1, 0.025], [0.7, 0.2, 0.025], [0.6, 0.0, 0.025]])
+    X[0, :, 3] = 1
+    X_next = X.clone()
+    X_next[0, 0, :3] = torch.tensor([0.7, 0.2, 0.075])  # block 0 put on block 1
+    action, mask = torch.tensor([[0, 0, 1, 0]]), torch.ones(1, 3, dtype=torch.bool)
+    u, r = model.encode(X, mask)
+    unary, relation = model.predict_next_logits(X, action, u, r)
+    assert unary.shape == (1, 3, 2) and relation.shape == (1, 2, 3, 3)
+    loss = transition_loss(model, X, X_next, action, mask, u, r)
+    assert not torch.allclose(loss, transition_loss(model, X, X, action, mask, u, r))
+    model.zero_grad()
+    transition_loss(model, X, X_next, action, mask, u.detach(), r.detach()).backward()
+    assert model.unary[0].weight.grad.abs().sum() > 0  # through the bits read after the step
+    data = generate(200, seed=3)
+    config = ModelConfig(hidden=8, d_msg=8, d_z=2, heads=1, activation="gumbel_sigmoid", transition_decoder=True)
+    fit(data, config, 1, tmp_path / "t.pt", transition_weight=0.5)
+    assert torch.load(tmp_path / "t.pt", weights_only=True)["train"]["options"]["transition_weight"] == 0.5
+    with pytest.raises(ValueError, match="transition_decoder"):
+        fit(data, ModelConfig(hidden=8, d_msg=8, d_z=1, heads=1), 1, tmp_path / "x.pt", transition_weight=1.0)
+
+
 TINY = ModelConfig(hidden=16, d_msg=8, d_z=4, heads=2, activation="gumbel_sigmoid")
 
 

@@ -79,6 +79,23 @@ def test_a_step_that_did_not_run_is_not_judged_and_the_plan_states_choose_the_ef
     assert "none of the learned operators" in "\n".join(format_steps(step_records([other], [], BitNames.none())))
 
 
+@pytest.mark.parametrize("method", ["deterministic", "probabilistic"])
+def test_the_symbolic_planners_steps_are_judged_against_the_effects_their_plan_counted_on(models, method):
+    """The symbolic planners take their top plan unverified; its symbolic states still reach the per-step
+    view, which then expects the effect the plan counted on, not the action's most probable one."""
+    from symbolic.atoms import pack_state
+    from tamp.planning.methods import plan_deterministic, plan_probabilistic
+
+    plan = {"deterministic": plan_deterministic, "probabilistic": plan_probabilistic}[method]
+    result = plan(models, X0, ON)
+    assert result.level == 1 and [tuple(a) for a in result.plan] == [PUT_ON]
+    assert result.plan_states == (pack_state(*models.symbolic.symbols(X0)), pack_state(*models.symbolic.symbols(ON)))
+    result.candidates[0].verified = False  # taken whether or not the Dynamics Model verified it
+    assert result.plan_states is not None
+    (step,) = symbolic_steps(models, [X0, ON], result.plan, result.plan_states)
+    assert step.on_plan is True and step.match is True
+
+
 def test_a_plan_of_a_sub_scene_is_read_in_that_sub_scene_and_named_by_the_whole_scenes_objects(models):
     """A Level-1 plan made in the sub-scene of blocks 2 and 3 of a four-block scene (`PlanResult.plan_scene`):
     its steps read the symbols of those two blocks only, as the plan's symbolic states do, so the plan's

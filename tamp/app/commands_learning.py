@@ -30,6 +30,8 @@ def cmd_train(args: argparse.Namespace) -> int:
     if args.resume and not last_path(Path(args.out)).is_file():
         raise UserError(f"--resume: no training state at {last_path(Path(args.out))} to continue from "
                          "(leave out --resume to start a new training)")
+    if args.position_axes is not None and not args.position_loss:
+        raise UserError("--position-axes changes what --position-loss asks: give --position-loss too")
     for flag, given in (("--offset-from-relations", args.offset_from_relations),
                         ("--offset-radius-cm", args.offset_radius_cm is not None)):
         if given and not args.offset_loss:
@@ -40,7 +42,9 @@ def cmd_train(args: argparse.Namespace) -> int:
                                ("type_symbol", True if args.type_symbol else None),
                                ("offset_decoder", True if args.offset_loss else None),
                                ("offset_from_relations", True if args.offset_from_relations else None),
-                               ("position_decoder", True if args.position_loss else None))
+                               ("position_decoder", True if args.position_loss else None),
+                               ("position_axes", args.position_axes),
+                               ("transition_decoder", True if args.transition_loss else None))
              if v is not None}
     asked["n_max"] = max(int(read_meta(d)["n_max"]) for d in args.data)  # the object limit of the data
     if args.init is None:
@@ -52,7 +56,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     settings = _train_config(args, only_moved=args.only_moved, val_fraction=args.val_fraction,
                              bit_usage=args.bit_usage, offset_weight=args.offset_loss,
                              offset_radius_m=None if args.offset_radius_cm is None else args.offset_radius_cm / 100,
-                             position_weight=args.position_loss,
+                             position_weight=args.position_loss, transition_weight=args.transition_loss,
                              time_limit_s=None if args.time_limit_min is None else 60 * args.time_limit_min)
     result = train_model(args.data, config, settings, args.out, resume=args.resume, init=args.init)
     print(f"best validation effect error {result.best_val_cm:.2f} cm (epoch {result.best_epoch}) -> {result.out_path}")
@@ -169,6 +173,13 @@ def add_train(sub) -> None:
                    help="weight of a loss that reads each block's place on the table back from its unary bits alone, "
                    "so that a unary bit says in which part of the table a block stands, a symbol only the moved "
                    "block's step changes (default 0: the paper's loss)")
+    p.add_argument("--position-axes", choices=("xy", "x"), default=None,
+                   help="with --position-loss: the table axes read back, x and y (default) or x alone; the grasp and "
+                   "release offsets are along y, so a block placed beside or on a target lands at the target's x, "
+                   "and x-only places are ones an operator can predict")
+    p.add_argument("--transition-loss", type=non_negative_float, default=0.0, metavar="WEIGHT",
+                   help="weight of a loss that predicts the bits read after each step from the bits before it and "
+                   "the action, so that the bits are ones operators can predict (default 0: the paper's loss)")
     _add_train_arguments(p)
     p.add_argument("--time-limit-min", type=positive_float, default=None, metavar="MIN",
                    help="stop after the epoch that passes this wall time; the run is unfinished, --resume continues")

@@ -115,8 +115,9 @@ def level1_plans(models: Models, X_init, X_goal, cfg: PlanConfig, result: PlanRe
     from symbolic import steps_to_actions
 
     assert models.domain is not None  # models.symbolic_planner() checked it
-    actions = steps_to_actions(models.domain, out.plan, len(X_init))
-    return [Candidate(tuple(actions), 1, 1.0)]
+    actions = steps_to_actions(models.domain, out.plan, len(X_init) if objects is None else len(objects))
+    states = None if out.states is None else tuple(out.states)  # python backend: the plan's symbolic states
+    return [Candidate(in_scene(actions, objects), 1, 1.0, states=states, objects=objects)]
 
 
 class Verifier:

@@ -75,12 +75,12 @@ class PlanResult:
         if self.level != 1 or self.plan is None:
             return None
         actions = tuple(tuple(int(v) for v in a) for a in self.plan)
-        known = [(c.states, c.actions, c.objects) for c in self.candidates if c.verified and c.states is not None]
-        for states, plan, objects in known:
-            if plan == actions:
+        known = [(c.states, c.actions, c.objects, bool(c.verified)) for c in self.candidates if c.states is not None]
+        for states, plan, objects, _ in sorted(known, key=lambda k: not k[3]):  # the symbolic planners take
+            if plan == actions:  # their top plan unverified
                 return states, objects
-        for states, plan, objects in known:  # a plan cut where it reaches the goal (level1_cut): its path's start
-            if plan[:len(actions)] == actions:
+        for states, plan, objects, verified in known:  # a verified plan cut where it reaches the goal (level1_cut)
+            if verified and plan[:len(actions)] == actions:
                 return states[:len(actions) + 1], objects
         return None
 
