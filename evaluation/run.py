@@ -155,6 +155,8 @@ class EvalConfig:
                "symbolic_backend": p.level1.backend, "oracle_max_plans": self.oracle_max_plans}
         if p.level1.symbolic_time_limit != Level1Config.symbolic_time_limit:  # older directories stay resumable
             out["symbolic_time_limit_s"] = p.level1.symbolic_time_limit
+        if p.level1.settle != Level1Config.settle:
+            out["level1_settle"] = p.level1.settle
         # the loop that does not know k: the same, by the fields other than keep_plan and on_course (above)
         loop = {k: v for k, v in dataclasses.asdict(p.loop).items() if k not in ("keep_plan", "on_course")}
         if loop != {k: v for k, v in dataclasses.asdict(LoopConfig()).items() if k not in ("keep_plan", "on_course")}:

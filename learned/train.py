@@ -407,7 +407,8 @@ def train_model(data: "str | Path | Sequence[str | Path] | Transitions", config:
             st = payload.get("train")
             if not st:
                 raise ValueError(f"{lp}: no training state to resume from")
-            if payload["config"] != config.to_dict() or st["options"] != options:
+            # configs compared as dataclasses: a field added since the run began takes its default
+            if ModelConfig.from_dict(payload["config"]) != config or st["options"] != options:
                 raise ValueError(f"{lp}: was trained with a different config/options/data; "
                                  f"refusing to resume ({payload['config']}, {st['options']})")
             model = model_from_payload(payload, lp).train()

@@ -22,6 +22,7 @@ import itertools
 import os
 import time
 from collections import Counter
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
@@ -31,7 +32,7 @@ from symbolic.grounding import check_problem, problem_states, steps_to_actions
 from symbolic.lifted import LiftedTask
 from symbolic.pddl import DomainWriter, problem_pddl
 from symbolic.sampling import DomainSet, EffectSampler, dedup_choices
-from symbolic.search import SearchOutcome, search_domains
+from symbolic.search import SearchOutcome, search_domains, settled_prefix
 from symbolic.structs import (
     Action,
     OperatorSet,
@@ -116,13 +117,19 @@ class SymbolicPlanner:
 
     # ---- probabilistic -------------------------------------------------------------------------
     def plan_probabilistic(self, problem: SymbolicProblem, n_domains: int = 100, seed: int = 0,
-                           time_budget: float | None = None, budget: int | None = None) -> ProbabilisticPlanResult:
+                           time_budget: float | None = None, budget: int | None = None,
+                           on_settled: Callable[[list[RankedPlan]], bool] | None = None) -> ProbabilisticPlanResult:
         """Plan in N sampled domains and rank the plans by frequency. Python backend: with `budget`
         (states the shared search may generate; machine-independent, default the planner's) or
-        `time_budget` (seconds), the domains without a plan when either runs out count as timed out."""
+        `time_budget` (seconds), the domains without a plan when either runs out count as timed out.
+        `on_settled` (python backend): called during the search with the plans that have just taken
+        their final place at the top of the ranking (`search.settled_prefix`), in rank order; when it
+        returns True the search ends there (Level 1 verifies them as they come and stops once it takes
+        one): the domains still without a plan are STOPPED, `settled` says how many plans lead the
+        final ranking, and only those are returned."""
         check_problem(self.ops, problem)
         if self.backend == "python":
-            return self._probabilistic_python(problem, n_domains, seed, time_budget, budget)
+            return self._probabilistic_python(problem, n_domains, seed, time_budget, budget, on_settled)
         t0 = time.perf_counter()
         choices = self.sampler.choices(n_domains, seed)
         timings = {"sampling": time.perf_counter() - t0}
@@ -137,41 +144,53 @@ class SymbolicPlanner:
         return ProbabilisticPlanResult(ranked, n_domains, n_unique, n_searches, dict(statuses), timings)
 
     def _search(self, problem: SymbolicProblem, domains: DomainSet, budget: int,
-                deadline: float) -> SearchOutcome:
+                deadline: float, stop=None) -> SearchOutcome:
         """The one search for all `domains`, until `budget` generated states or `deadline` (time.perf_counter s)."""
         task = self.task(problem.n, problem.movable)
         init, goal = problem_states(problem)
         try:
-            return search_domains(task, domains, init, goal, budget, deadline, problem.nonempty)
+            return search_domains(task, domains, init, goal, budget, deadline, problem.nonempty, stop)
         finally:  # expansions are not kept between problems (honest per-problem cost, bounded memory)
             task.clear_cache()
 
     def _probabilistic_python(self, problem: SymbolicProblem, n_domains: int, seed: int,
-                              time_budget: float | None, budget: int | None) -> ProbabilisticPlanResult:
+                              time_budget: float | None, budget: int | None,
+                              on_settled: Callable[[list[RankedPlan]], bool] | None = None
+                              ) -> ProbabilisticPlanResult:
         start = time.perf_counter()
         deadline = None if time_budget is None else start + time_budget
         deadline = min(deadline or np.inf, start + self.time_limit)
         domains = DomainSet.sampled(self.sampler, n_domains, seed)
-        out = self._search(problem, domains, self.budget if budget is None else budget, deadline)
-        searched = time.perf_counter() - start
-        t0 = time.perf_counter()
         task = self.task(problem.n, problem.movable)  # the search's ground action numbers
-        found: dict[tuple, list] = {}
-        for k in range(n_domains):  # domain order: the first domain to produce a plan names its steps
-            i = out.plan_of[k]
-            if i < 0:
-                continue
-            key = tuple(task.action(g) for g in out.plans[i])
-            if key in found:
-                found[key][1] += 1
-            else:
-                found[key] = [tuple(task.step(g) for g in out.plans[i]), 1, out.states[i]]
-        ranked = _ranked(found)
-        timings = {"sampling": domains.seconds, "planner": searched - domains.seconds,
-                   "backward": out.timings.get("backward", 0.0), "parsing": time.perf_counter() - t0}
+        given, elsewhere = 0, 0.0  # plans handed to on_settled so far; seconds spent in it
+
+        def stop(out: SearchOutcome, remaining: int) -> bool:
+            nonlocal given, elsewhere
+            ranked = _ranked(_found(task, out, n_domains))
+            settled = settled_prefix([p.count for p in ranked], remaining)
+            if settled <= given or on_settled is None:
+                return False
+            t = time.perf_counter()
+            new, given = ranked[given:settled], settled
+            done = on_settled(new)
+            elsewhere += time.perf_counter() - t
+            return done
+
+        out = self._search(problem, domains, self.budget if budget is None else budget, deadline,
+                           stop if on_settled is not None else None)
+        searched = time.perf_counter() - start - elsewhere
+        t0 = time.perf_counter()
+        ranked = _ranked(_found(task, out, n_domains))
         statuses = Counter(s.value for s in out.status)
+        settled_count = None
+        if statuses.get(PlannerStatus.STOPPED.value, 0):  # only the plans whose place is final
+            settled_count = given
+            ranked = ranked[:given]
+        timings = {"sampling": domains.seconds, "planner": searched - domains.seconds,
+                   "backward": out.timings.get("backward", 0.0), "parsing": time.perf_counter() - t0,
+                   "elsewhere": elsewhere}  # in on_settled, during the search (not the planner's)
         return ProbabilisticPlanResult(ranked, n_domains, None, 1, dict(statuses), timings, out.expanded,
-                                       out.generated)
+                                       out.generated, settled_count)
 
     def _rank(self, per_domain: list[PlannerResult], n: int) -> list[RankedPlan]:
         found: dict[tuple, list] = {}
@@ -263,6 +282,22 @@ class SymbolicPlanner:
         results = [fd.run_fast_downward(d, prob, self.search, self.time_limit) for d in domains]
         timings["planner"] = time.perf_counter() - t0
         return results, len({d for d in domains}), len(domains)
+
+
+def _found(task: LiftedTask, out: SearchOutcome, n_domains: int) -> dict[tuple, list]:
+    """{actions: [steps, count, states]} of the plans a python search found so far; the first domain
+    (in domain order) to produce a plan names its steps."""
+    found: dict[tuple, list] = {}
+    for k in range(n_domains):
+        i = out.plan_of[k]
+        if i < 0:
+            continue
+        key = tuple(task.action(g) for g in out.plans[i])
+        if key in found:
+            found[key][1] += 1
+        else:
+            found[key] = [tuple(task.step(g) for g in out.plans[i]), 1, out.states[i]]
+    return found
 
 
 def _ranked(found: dict[tuple, list]) -> list[RankedPlan]:

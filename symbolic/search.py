@@ -28,6 +28,7 @@ runs out are TIMEOUT; a domain whose bounded search was not cut anywhere has no 
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -95,10 +96,15 @@ class _Distances:
         return self.dist.get(state, self.beyond)
 
 def search_domains(task: LiftedTask, domains: DomainSet, init: int, goal: int, budget: int = 1_000_000,
-                   deadline: float | None = None, nonempty: bool = False) -> SearchOutcome:
+                   deadline: float | None = None, nonempty: bool = False,
+                   stop: Callable[[SearchOutcome, int], bool] | None = None) -> SearchOutcome:
     """For each of the domains, its first shortest plan from `init` to the full goal state `goal`.
 
     With `nonempty`, a goal equal to `init` needs a plan of at least one action (a shortest cycle).
+    `stop(outcome, remaining)` is asked after each depth bound D is searched, when the plans found so
+    far are final (every domain with a plan of at most D actions has it) and `remaining` domains are
+    still without one (any plan they get is longer); True ends the search there, those domains
+    STOPPED (`settled_prefix` says which ranked plans that leaves in their final places).
     """
     N, full = domains.n, domains.full
     out = SearchOutcome([], [], [-1] * N, [PlannerStatus.TIMEOUT] * N)
@@ -194,11 +200,27 @@ def search_domains(task: LiftedTask, domains: DomainSet, init: int, goal: int, b
         for k in _bits(unsolvable):
             out.status[k] = PlannerStatus.UNSOLVABLE
         active &= ~unsolvable
+        if active and stop is not None and stop(out, active.bit_count()):
+            for k in _bits(active):
+                out.status[k] = PlannerStatus.STOPPED
+            out.message = f"stopped after depth bound {D}: the first ranked plans are settled"
+            active = 0
+            break
         D += 1
     for k in _bits(active):
         out.status[k] = PlannerStatus.UNSOLVABLE  # the goal is unreachable from init
     out.timings.update(backward=t_back)
     return out
+
+
+def settled_prefix(counts: list[int], remaining: int) -> int:
+    """How many of the plans found so far, by decreasing count (`counts`), hold their final place in the
+    ranking whatever the `remaining` domains without a plan yet produce (`search_domains`' `stop`).
+
+    The counts found are final (a plan is found at its own length by every domain it is the first
+    shortest plan of), and a later plan is longer than each of them and has at most `remaining`
+    domains: it ranks below a plan of `remaining` domains or more (ties go to the shorter plan)."""
+    return sum(c >= remaining for c in counts)
 
 
 def _radius(depth_bound: int) -> int:

@@ -74,6 +74,12 @@ def test_resume_continues_exactly(tmp_path):
     with pytest.raises(ValueError, match="different config"):
         fit(data, ModelConfig(hidden=16, d_msg=8, d_z=5, heads=2), 6, tmp_path / "b.pt",
                     resume=True, **kw)
+    # a run begun before a ModelConfig field existed (its checkpoints lack it) resumes with the field's default
+    last = last_path(tmp_path / "b.pt")
+    payload = torch.load(last, weights_only=True)
+    del payload["config"]["position_axes"]
+    torch.save(payload, last)
+    assert [h["epoch"] for h in fit(data, cfg, 5, tmp_path / "b.pt", resume=True, **kw).history] == [0, 1, 2, 3, 4]
 
 
 def test_the_symbolic_model_can_go_without_the_arm_displacement():

@@ -636,3 +636,32 @@ def test_on_course_flags():
     assert planner_config(parser.parse_args(["--no-on-course"])).loop.on_course is None
     with pytest.raises(SystemExit):
         parser.parse_args(["--on-course", "0"])
+
+
+def test_settled_plans_verified_during_the_search_give_algorithm_1s_plan_sooner():
+    """`Level1Config.settle`: Level 1 verifies the ranked plans whose place is final while the search runs
+    and ends it once one is taken. The plan is the one of the whole search and ranking (bundled regions
+    models, Drake problems); where the search ended early, the candidates are the settled plans and the
+    domains without a plan yet are counted as stopped."""
+    from tamp.app.problem import random_problem
+    from tamp.planning.models import load_models, pretrained_dir
+
+    models = load_models(pretrained_dir() / "regions")
+    base = PlanConfig(kinematics=KinematicsConfig(feasibility=False))
+    stopped = 0
+    for n, k, seed in ((3, 2, 1), (3, 3, 2), (4, 2, 3), (4, 1, 6)):
+        problem = random_problem(n, k, seed=seed)
+        runs = {}
+        for settle in (False, True):
+            cfg = replace(base, level1=replace(base.level1, settle=settle)).with_seed(problem.seed)
+            runs[settle] = plan("bilevel_alg1", models, problem.X_init, problem.X_goal, cfg)
+        whole, settled = runs[False], runs[True]
+        assert (settled.level, settled.plan) == (whole.level, whole.plan)
+        assert whole.symbolic_stats["settled"] is None and "stopped" not in whole.symbolic_stats["outcomes"]
+        if settled.symbolic_stats["settled"] is not None:
+            stopped += 1
+            assert settled.level == 1 and settled.symbolic_stats["outcomes"]["stopped"] > 0
+            first = [c.actions for c in whole.candidates][:len(settled.candidates)]
+            assert [c.actions for c in settled.candidates] == first
+            assert len(settled.candidates) == settled.symbolic_stats["settled"] < len(whole.candidates)
+    assert stopped >= 1

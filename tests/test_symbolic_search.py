@@ -65,6 +65,35 @@ def test_ranked_plans_of_the_bundled_domain_are_unchanged(bundled, golden):
         assert out.statuses == entry["statuses"], entry["name"]
 
 
+def test_plans_handed_out_during_the_search_lead_the_final_ranking(bundled, golden):
+    """`on_settled` gets plans only once their place in the ranking is final: what it was given leads the
+    ranking of the whole search, in order, with the final counts; ending the search there returns just
+    those plans, the domains still without a plan STOPPED, after generating fewer states."""
+    planner = SymbolicPlanner(bundled)
+    stopped_early = 0
+    for entry in golden["problems"]:
+        problem = _problem(entry, bundled)
+        given: list = []
+
+        def keep(plans: list, given: list = given) -> bool:
+            given.extend(plans)
+            return False
+
+        full = planner.plan_probabilistic(problem, golden["n_domains"], entry["seed"], budget=golden["budget"],
+                                          on_settled=keep)
+        assert _ranked(full) == entry["ranked"] and full.settled is None, entry["name"]
+        assert [[[list(a) for a in p.actions], p.count] for p in given] == entry["ranked"][:len(given)]
+        if not given:
+            continue
+        first = planner.plan_probabilistic(problem, golden["n_domains"], entry["seed"], budget=golden["budget"],
+                                           on_settled=lambda plans: True)
+        assert first.settled == len(first.plans) >= 1 and _ranked(first) == entry["ranked"][:first.settled]
+        if first.statuses.get("stopped"):
+            stopped_early += 1
+            assert sum(first.statuses.values()) == golden["n_domains"] and first.generated < full.generated
+    assert stopped_early >= 3
+
+
 def _check_against_one_bfs_per_domain(ops, problems, n_domains: int) -> int:
     planner = SymbolicPlanner(ops)
     compared = 0

@@ -395,6 +395,10 @@ def add_planner_arguments(p: argparse.ArgumentParser, backends: tuple[str, ...] 
                    f"{default.level1.confident:g} m, the success tolerance; the paper takes every plan verified "
                    f"within tau = {default.verify.tau_verify:g} m: give that value for its rule; `bilevel_alg1` always "
                    "does)")
+    p.add_argument("--no-level1-settle", dest="level1_settle", action="store_false",
+                   help="let the symbolic search finish before verifying any plan, so the candidates list every plan "
+                   "of the N domains (default: a plan is verified once its place in the ranking is final and the "
+                   "search ends when one is taken; the plan is the same)")
     p.add_argument("--no-level1-cut", dest="level1_cut", action="store_false",
                    help="return a verified Level-1 plan as verified (default: it ends at its first action predicted "
                    "to bring every block within --confident of the goal, and an action whose block the next one "
@@ -463,7 +467,7 @@ PLANNER_FLAGS: dict[str, dict[str, str]] = {
     "level1": {"n_domains": "n_domains", "backend": "symbolic_backend", "symbolic_time_limit": "symbolic_time_limit",
                "budget": "level1_budget", "focus_from": "focus_from", "focus_budget": "level1_focus_budget",
                "objects": "level1_objects", "serial": "level1_serial", "confident": "level1_confident",
-               "cut": "level1_cut"},
+               "cut": "level1_cut", "settle": "level1_settle"},
     "verify": {},
     "search": {"max_expansions": "max_expansions", "time_limit": "time_limit", "confident": "confident",
                "look_on": "look_on", "max_fragility": "max_fragility", "release_targets": "release_targets"},

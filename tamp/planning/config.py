@@ -39,6 +39,9 @@ class Level1Config:
     budget: int | None = 100_000  # symbolic states one search for all N domains may generate: deterministic
     time_budget: float | None = None  # seconds for all N symbolic calls (off: it would depend on the machine)
     verify_all: bool = False  # verify every candidate (default: stop at the first verified one, as Alg. 1)
+    # verify the ranked plans whose place is final as soon as the search has them, and search on only if none
+    # is taken: Alg. 1's plan, found sooner (the candidates then record the part of the ranking searched)
+    settle: bool = True
     alternatives: int = 64  # per symbolic plan, verify the best plans of a beam this wide over its skeleton
     alternatives_total: int = 256  # per problem (later symbolic plans are verified alone): bounds the time
     nonempty: bool = True  # X_init not within tau of X_goal: the symbolic plan needs >= 1 action

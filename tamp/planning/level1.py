@@ -6,6 +6,10 @@
           roll it out with the Dynamics Model: within tau of X_goal?       lines 10-11  `Verifier.check`
           the first verified plan is Level 1's                             line 12
 
+How it runs (`Level1Config.settle`, on for both planners): a ranked plan is verified as soon as the search
+has settled its place in the ranking (`symbolic.search.settled_prefix`), and the search ends once one is
+taken; the plan is the one line 9 would reach after the whole search, sooner.
+
 Our extensions (`Level1Config`; `bilevel_alg1` turns them off): the plans through the same symbolic
 states verified with each ranked plan (`alternatives`), a non-empty plan when X_init is not at the
 goal (`nonempty`), and from `focus_from` objects on: only misplaced blocks picked, Level 1 in the
@@ -15,7 +19,7 @@ plan cut where it reaches the goal (`cut`); kinematics (`feas`) before a verifie
 from __future__ import annotations
 
 import time
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 
@@ -33,6 +37,7 @@ def level1(models: Models, X_init, X_goal, cfg: PlanConfig, result: PlanResult,
     """Level 1 of Algorithm 1 (lines 4-14): Sigma_init, Sigma_goal -> plans of N sampled domains, ranked
     by frequency -> the first plan whose Dynamics Model rollout ends within tau of X_goal.
 
+    The plans are verified as the search settles their place (cfg.level1.settle, module docstring).
     Our extensions: from cfg.level1.focus_from objects on, Sigma is read on the sub-scene of the objects the
     goal involves (`level1_scene`; none when they are more than cfg.level1.objects); and in
     `Verifier.check`, a ranked plan is verified together with the plans through the same symbolic
@@ -44,14 +49,17 @@ def level1(models: Models, X_init, X_goal, cfg: PlanConfig, result: PlanResult,
         result.reasons.append(f"level 1: the goal involves {len(objects)} objects, more than the "
                               f"{cfg.level1.objects} of the scenes it plans in (--level1-objects)")
         return None
-    ranked = level1_plans(models, X_init, X_goal, cfg, result, objects=objects)  # lines 5-7
-    verifier = Verifier(models, X_init, X_goal, cfg, result, feas, ranked)
-    for i in range(len(ranked)):  # line 9: in decreasing order of probability
-        verifier.check(i)  # lines 10-11
-        if verifier.chosen is not None and not cfg.level1.verify_all:
-            break  # line 12
-        if verifier.refinements_used_up():
-            break
+    verifier = Verifier(models, X_init, X_goal, cfg, result, feas, [])
+
+    def verify_settled(plans: list[Candidate]) -> bool:
+        """Plans whose place in the ranking is final, as the search settles them: verified now, and the
+        search ends once one is taken (our speed-up, `Level1Config.settle`: Alg. 1's plan, sooner)."""
+        verifier.ranked += plans
+        return verifier.run()
+
+    settle = verify_settled if cfg.level1.settle and not cfg.level1.verify_all else None
+    verifier.ranked = level1_plans(models, X_init, X_goal, cfg, result, objects=objects, on_settled=settle)  # 5-7
+    verifier.run()  # line 9: in decreasing order of probability, lines 10-12
     verifier.finish()
     return verifier.chosen
 
@@ -78,9 +86,13 @@ def symbolic_problem(models: Models, X_init: np.ndarray, X_goal: np.ndarray, cfg
 
 
 def level1_plans(models: Models, X_init, X_goal, cfg: PlanConfig, result: PlanResult,
-                 probabilistic: bool = True, objects: tuple[int, ...] | None = None) -> list[Candidate]:
+                 probabilistic: bool = True, objects: tuple[int, ...] | None = None,
+                 on_settled: Callable[[list[Candidate]], bool] | None = None) -> list[Candidate]:
     """Symbolic candidates, best first, their actions on the whole scene (planned in the sub-scene of
-    `objects` if given); failures go to result.reasons (prefixed 'level 1')."""
+    `objects` if given); failures go to result.reasons (prefixed 'level 1'). `on_settled` (python
+    backend): given the candidates as their place in the ranking becomes final, during the search;
+    True ends the search, and only the candidates given are returned
+    (`SymbolicPlanner.plan_probabilistic`; result.symbolic_stats["settled"]: how many, None: all)."""
     t = time.perf_counter()
     try:
         planner = models.symbolic_planner(cfg.level1.backend, cfg.level1.symbolic_time_limit)
@@ -91,12 +103,18 @@ def level1_plans(models: Models, X_init, X_goal, cfg: PlanConfig, result: PlanRe
     finally:
         result.timings["symbols"] = time.perf_counter() - t
     t = time.perf_counter()
+
+    def candidate(p) -> Candidate:
+        return Candidate(in_scene(p.actions, objects), p.count, p.probability, states=p.states, objects=objects)
+
     if probabilistic:
         out = planner.plan_probabilistic(problem, n_domains=cfg.level1.n_domains, seed=cfg.level1.seed,
                                          time_budget=cfg.level1.time_budget,
-                                         budget=cfg.level1.budget_for(len(X_init)))
-        result.timings["symbolic"] = time.perf_counter() - t
-        result.symbolic_stats = {"n_domains": out.n_domains, "unique_plans": len(out.plans),
+                                         budget=cfg.level1.budget_for(len(X_init)),
+                                         on_settled=None if on_settled is None else
+                                         lambda plans: on_settled([candidate(p) for p in plans]))
+        result.timings["symbolic"] = time.perf_counter() - t - out.timings.get("elsewhere", 0.0)
+        result.symbolic_stats = {"n_domains": out.n_domains, "unique_plans": len(out.plans), "settled": out.settled,
                                  "outcomes": dict(out.statuses), "expanded": out.expanded,
                                  "generated": out.generated, "movable": problem.movable,
                                  "objects": None if objects is None else list(objects),
@@ -104,8 +122,7 @@ def level1_plans(models: Models, X_init, X_goal, cfg: PlanConfig, result: PlanRe
         if not out.plans:
             result.reasons.append(f"level 1: no symbolic plan in any of the {out.n_domains} sampled domains "
                                   f"(outcomes: {dict(out.statuses)})")
-        return [Candidate(in_scene(p.actions, objects), p.count, p.probability, states=p.states, objects=objects)
-                for p in out.plans]
+        return [candidate(p) for p in out.plans]
     out = planner.plan_deterministic(problem)
     result.timings["symbolic"] = time.perf_counter() - t
     result.symbolic_stats = {"outcome": out.status.value}
@@ -142,7 +159,21 @@ class Verifier:
         self.alternatives_left = cfg.level1.alternatives_total
         self._rollouts: dict[int, Verification] = {}
         self._done = 0  # ranked plans checked
-        self._start = time.perf_counter()
+        self._seconds = 0.0  # spent in `run`
+        self._ended = False  # a plan taken, or no refinement left
+
+    def run(self) -> bool:
+        """Check the ranked plans not checked yet, in order, until one is taken (Alg. 1, line 12) or no
+        full refinement is left; True when no more need checking."""
+        t = time.perf_counter()
+        try:
+            while not self._ended and self._done < len(self.ranked):
+                self.check(self._done)
+                self._ended = (self.chosen is not None and not self.cfg.level1.verify_all) or \
+                    self.refinements_used_up()
+            return self._ended
+        finally:
+            self._seconds += time.perf_counter() - t
 
     def refinements_used_up(self) -> bool:
         """True (and the reason recorded) when no plan is chosen and no full refinement is left."""
@@ -208,7 +239,7 @@ class Verifier:
         result, feas, ranked = self.result, self.feas, self.ranked
         result.candidates = self.checked + ranked[self._done:]
         if ranked:
-            result.timings["verify"] = time.perf_counter() - self._start - (
+            result.timings["verify"] = self._seconds - (
                 0.0 if feas is None else result.timings["feasibility"] + result.timings["refine"])
         if self.chosen is not None or not ranked:
             return
