@@ -638,11 +638,12 @@ def test_on_course_flags():
         parser.parse_args(["--on-course", "0"])
 
 
-def test_settled_plans_verified_during_the_search_give_algorithm_1s_plan_sooner():
+def test_settled_plans_verified_during_the_search_give_algorithm_1s_plan_sooner(capsys):
     """`Level1Config.settle`: Level 1 verifies the ranked plans whose place is final while the search runs
     and ends it once one is taken. The plan is the one of the whole search and ranking (bundled regions
     models, Drake problems); where the search ended early, the candidates are the settled plans and the
     domains without a plan yet are counted as stopped."""
+    from tamp.app.plan_command import print_result
     from tamp.app.problem import random_problem
     from tamp.planning.models import load_models, pretrained_dir
 
@@ -664,4 +665,6 @@ def test_settled_plans_verified_during_the_search_give_algorithm_1s_plan_sooner(
             first = [c.actions for c in whole.candidates][:len(settled.candidates)]
             assert [c.actions for c in settled.candidates] == first
             assert len(settled.candidates) == settled.symbolic_stats["settled"] < len(whole.candidates)
+            print_result(settled, 0.07)
+            assert "the symbolic search ended once the plan was taken" in capsys.readouterr().out
     assert stopped >= 1

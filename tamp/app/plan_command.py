@@ -107,6 +107,10 @@ def print_result(result: PlanResult, tau: float, indent: str = "") -> None:
             print(f"{p}    {i + 1}. {source}: {list(c.actions)}; {check}{chosen}")
         if len(result.candidates) > 10:
             print(f"{p}    ... {len(result.candidates) - 10} more")
+        stopped = (result.symbolic_stats.get("outcomes") or {}).get("stopped")
+        if result.symbolic_stats.get("settled") is not None and stopped:
+            print(f"{p}    (the symbolic search ended once the plan was taken: {stopped} domains without a plan yet "
+                  "would rank theirs lower; --no-level1-settle searches on)")
     if result.search is not None:
         s = result.search
         print(f"{p}  continuous search: {s.reason}; {s.generated} successors in {s.predict_calls} model calls")
