@@ -8,7 +8,7 @@ from pathlib import Path
 from evaluation.methods import SYMBOLIC_BACKENDS
 from tamp.app.args import check_output_dir, check_output_file, models_directory, non_negative_int, positive_int
 from tamp.app.parallel import add_arguments as add_parallel_arguments
-from tamp.app.plan_command import add_planner_arguments
+from tamp.app.planner_flags import add_planner_arguments
 from tamp.app.problem import PROTOCOLS
 from tamp.errors import UserError
 
@@ -77,7 +77,7 @@ def _eval_config(args: argparse.Namespace):
     """The EvalConfig of the flags of `_add_run_arguments` (`tamp evaluate`, `tamp refinability`)."""
     from evaluation.run import EvalConfig
     from tamp.app.faults import Faults
-    from tamp.app.plan_command import planner_config
+    from tamp.app.planner_flags import planner_config
 
     return EvalConfig(planner=planner_config(args), fidelity=args.fidelity, workers=args.workers,
                       backend=args.backend, address=args.address,

@@ -8,7 +8,7 @@ import dataclasses
 
 import pytest
 
-from tamp.app.plan_command import NOT_EXPOSED, PLANNER_FLAGS, add_planner_arguments, planner_config
+from tamp.app.planner_flags import NOT_EXPOSED, PLANNER_FLAGS, add_planner_arguments, planner_config
 from tamp.errors import UserError
 from tamp.planning.config import KinematicsConfig, Level1Config, LoopConfig, PlanConfig, VerifyConfig
 from tamp.planning.search import SearchConfig

@@ -627,7 +627,7 @@ def test_a_failed_keep_is_counted_in_the_round_that_plans_again(domain):
 def test_on_course_flags():
     import argparse
 
-    from tamp.app.plan_command import add_planner_arguments, planner_config
+    from tamp.app.planner_flags import add_planner_arguments, planner_config
 
     parser = argparse.ArgumentParser()
     add_planner_arguments(parser)

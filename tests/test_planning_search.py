@@ -164,7 +164,7 @@ def test_a_shorter_plan_predicted_4_cm_off_beats_longer_exact_ones():
 def test_paper_pruning_flag_restores_the_papers_rule():
     import argparse
 
-    from tamp.app.plan_command import add_planner_arguments, planner_config
+    from tamp.app.planner_flags import add_planner_arguments, planner_config
 
     parser = argparse.ArgumentParser()
     add_planner_arguments(parser)
@@ -222,7 +222,7 @@ def test_a_fragile_goal_state_waits_for_a_robust_one():
 def test_fragility_flags():
     import argparse
 
-    from tamp.app.plan_command import add_planner_arguments, planner_config
+    from tamp.app.planner_flags import add_planner_arguments, planner_config
 
     parser = argparse.ArgumentParser()
     add_planner_arguments(parser)

@@ -9,7 +9,6 @@ by action in a World of that fidelity and plans again from each observed state u
 from __future__ import annotations
 
 import argparse
-import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -17,19 +16,16 @@ from typing import Any
 from tamp.app.args import (
     MODELS_HELP,
     check_output_file,
-    fraction,
     json_path,
     models_directory,
     non_negative_int,
-    object_count,
-    positive_float,
-    positive_int,
 )
 from tamp.app.plan_file import fmt_action
+from tamp.app.planner_flags import add_planner_arguments, planner_config
 from tamp.errors import UserError
 from tamp.planning.causes import cause_of, stop_record
 from tamp.planning.closed_loop import loop_outcome
-from tamp.planning.config import SYMBOLIC_BACKENDS, PlanConfig
+from tamp.planning.config import PlanConfig
 from tamp.planning.methods import METHODS, plan
 from tamp.planning.results import PlanResult
 from tamp.planning.steps import dynamics_errors
@@ -346,153 +342,6 @@ def add_trajectory_argument(p: argparse.ArgumentParser) -> None:
                    "motion shaped as a ROS trajectory_msgs/JointTrajectory, the gripper's close and open events, "
                    "the joint names and limits; checked against the UR10e model's limits (docs/trajectories.md; "
                    "`tamp view --trajectory OUT.json` executes it again)")
-
-
-def add_planner_arguments(p: argparse.ArgumentParser, backends: tuple[str, ...] = SYMBOLIC_BACKENDS,
-                          feasibility: bool = True) -> None:
-    """The planner's flags, the same for `tamp plan` and `tamp evaluate`; `planner_config` reads them.
-    `feasibility`: offer --no-feasibility (evaluate chooses it per method instead)."""
-    default = PlanConfig()
-    p.add_argument("--n-domains", type=positive_int, default=default.level1.n_domains,
-                   help=f"N sampled symbolic domains (default {default.level1.n_domains})")
-    help_backend = {"python": "python (in-process search, default)", "fd": "fd (Fast Downward, as in the paper)",
-                    "fd-naive": "fd-naive (one Fast Downward driver call per sampled domain)"}
-    p.add_argument("--symbolic-backend", dest="symbolic_backend", choices=backends, default=default.level1.backend,
-                   help="symbolic planner: " + ", ".join(help_backend[b] for b in backends))
-    p.add_argument("--symbolic-time-limit", type=positive_float, default=default.level1.symbolic_time_limit,
-                   help="wall-clock limit per symbolic planner call, s "
-                   f"(default {default.level1.symbolic_time_limit:g}; "
-                   "Fast Downward needs more at 4 objects)")
-    p.add_argument("--level1-budget", type=positive_int, default=default.level1.budget,
-                   help="symbolic states Level 1's search (one for all N domains) may generate per planning call "
-                   f"(default {default.level1.budget}: at most about 0.2-0.3 s); deterministic, whatever the machine's "
-                   "load")
-    p.add_argument("--focus-from", type=positive_int, default=default.level1.focus_from, metavar="N",
-                   help="with N or more blocks, Level 1's symbolic plans pick up only the blocks off their goal "
-                   "(farther than the success tolerance in x, y), as the continuous search's pruning does: the "
-                   "symbolic search then grows with the blocks to move, not all of them "
-                   f"(default {default.level1.focus_from}; "
-                   "`bilevel_alg1`, the paper's Algorithm 1, never restricts)")
-    p.add_argument("--level1-focus-budget", type=positive_int, default=default.level1.focus_budget,
-                   metavar="STATES",
-                   help="with --focus-from blocks or more, Level 1's budget instead of --level1-budget (default "
-                   f"{default.level1.focus_budget}: about 40-60 ms; there the learned symbols rarely give a verified "
-                   "plan beyond a few thousand states, and a search that ends at its budget only delays the "
-                   "continuous search; the --level1-budget value gives one budget at any number of blocks)")
-    p.add_argument("--level1-objects", type=object_count, default=default.level1.objects, metavar="N",
-                   help="with --focus-from blocks or more, Level 1 plans in the scene of the objects the goal involves "
-                   "(the blocks off their goal and those the continuous search would place them on), which the "
-                   "Symbolic Model reads as a scene of the size it was trained on, and verifies its plans in the "
-                   "whole scene; when more than N objects are involved it plans one block at a time "
-                   "(--no-level1-serial: the continuous search plans at once) "
-                   f"(default {default.level1.objects}: the bundled models' 2-4 block training scenes; "
-                   "`bilevel_alg1` always plans in the whole scene)")
-    p.add_argument("--no-level1-objects", dest="level1_objects", action="store_const", const=None,
-                   help="Level 1 plans in the whole scene at any number of blocks (the rule before --level1-objects)")
-    p.add_argument("--no-level1-serial", dest="level1_serial", action="store_false",
-                   help="with --focus-from blocks or more, when Level 1 gives no verified plan it does not plan one "
-                   "misplaced block at a time (default: it does, lowest goal first, each block in the scene of the "
-                   "objects it would be placed on, and verifies the joined plan in the whole scene)")
-    p.add_argument("--level1-confident", type=positive_float, default=default.level1.confident, metavar="METRES",
-                   help="a verified Level-1 plan predicted farther than this from the goal (worst block) is kept "
-                   "while the continuous search looks for a plan, and returned only if it finds none (default "
-                   f"{default.level1.confident:g} m, the success tolerance; the paper takes every plan verified "
-                   f"within tau = {default.verify.tau_verify:g} m: give that value for its rule; `bilevel_alg1` always "
-                   "does)")
-    p.add_argument("--no-level1-settle", dest="level1_settle", action="store_false",
-                   help="let the symbolic search finish before verifying any plan, so the candidates list every plan "
-                   "of the N domains (default: a plan is verified once its place in the ranking is final and the "
-                   "search ends when one is taken; the plan is the same)")
-    p.add_argument("--no-level1-cut", dest="level1_cut", action="store_false",
-                   help="return a verified Level-1 plan as verified (default: it ends at its first action predicted "
-                   "to bring every block within --confident of the goal, and an action whose block the next one "
-                   "picks again is dropped when the shorter plan is predicted as close; `bilevel_alg1` never "
-                   "shortens)")
-    p.add_argument("--no-keep-plan", dest="keep_plan", action="store_false",
-                   help="with --replan (bilevel_replan), plan again in every round, as the paper does (default, for "
-                   "bilevel and cfs: keep the rest of the last plan while it refines and ends within --confident of "
-                   "the goal, as predicted when the plan is on course (--on-course), else rolled out from the "
-                   "observed state; bilevel_alg1 and the symbolic baselines always plan again)")
-    p.add_argument("--on-course", type=positive_float, default=default.loop.on_course, metavar="METRES",
-                   help="with the kept plan (--replan): when every block of the observed state is within this "
-                   "distance of where the last plan predicted it, the plan's own prediction of the rest decides "
-                   "whether it is kept, not a new rollout from the observed state: the world did what the plan "
-                   "expected, and the model's rollouts swing under millimetre changes "
-                   f"(default {default.loop.on_course:g} m)")
-    p.add_argument("--no-on-course", dest="on_course", action="store_const", const=None,
-                   help="keep the rest of the last plan only by its rollout from the observed state (the rule before "
-                   "--on-course)")
-    p.add_argument("--max-actions", type=positive_int, default=default.loop.max_actions,
-                   help="the closed loop (--replan; bilevel_loop) gives up after sending this many actions to the "
-                   f"world (default {default.loop.max_actions}: a goal of up to 5 random actions, with room to "
-                   "recover from misses)")
-    p.add_argument("--loop-search-budget", type=positive_int, default=default.loop.search_budget, metavar="EXPANSIONS",
-                   help="the closed loop (--replan; bilevel_loop) gives up when its rounds' continuous searches have "
-                   f"spent this many expansions (default {default.loop.search_budget}: twice one search's budget, "
-                   "so that a loop whose rounds keep failing ends in about the time of two failed searches)")
-    p.add_argument("--no-widen", dest="widen", action="store_false",
-                   help="the closed loop stops at a round without a plan (default: it first searches again over "
-                   "all 9 n^2 actions, which can move a block out of the way, unstack, or move a block already "
-                   "at its goal)")
-    p.add_argument("--max-expansions", type=positive_int, default=default.search.max_expansions,
-                   help="continuous search node limit per planning call: it decides when the search gives up, "
-                   f"whatever the machine's load (default {default.search.max_expansions}, about 10 s at 4 objects)")
-    p.add_argument("--confident", type=positive_float, default=default.search.confident, metavar="METRES",
-                   help="the continuous search ends at a goal state whose every object is predicted within this "
-                   f"distance of its goal (default {default.search.confident:g} m); a goal state within the success "
-                   f"tolerance ({default.search.eps:g} m) but not this close is kept while it looks on")
-    p.add_argument("--look-on", type=non_negative_int, default=default.search.look_on, metavar="EXPANSIONS",
-                   help="expansions the continuous search spends looking for a goal state within --confident after "
-                   f"finding one that is not (default {default.search.look_on}; 0 returns the first goal state)")
-    p.add_argument("--max-fragility", type=fraction, default=default.search.max_fragility, metavar="FRACTION",
-                   help="a plan (the continuous search's goal state, a verified Level-1 plan) is taken at once only "
-                   "if at most this fraction of its rollouts with the Dynamics Model's inputs perturbed by "
-                   f"{default.search.noise * 1000:g} mm misses the goal (default {default.search.max_fragility:g}); "
-                   "otherwise the search looks on as for a goal state beyond --confident, and Level 1's plan waits "
-                   "for the continuous search as beyond --level1-confident")
-    p.add_argument("--no-fragility", dest="max_fragility", action="store_const", const=None,
-                   help="take plans by their predicted error alone (the rule before the fragility test)")
-    p.add_argument("--paper-pruning", dest="release_targets", action="store_false",
-                   help="the continuous search (cfs, and bilevel's Level 2) prunes actions by the paper's rule alone: "
-                   "a misplaced block goes onto the object closest to its goal or onto itself (default: also onto "
-                   "the object with an offset release point closest to its goal, when that is another object; "
-                   "`bilevel_alg1` always uses the paper's rule)")
-    p.add_argument("--time-limit", type=positive_float, default=default.search.time_limit,
-                   help="continuous search wall-clock limit per planning call, s: a safety net behind "
-                   f"--max-expansions (default {default.search.time_limit:g})")
-    if feasibility:
-        p.add_argument("--no-feasibility", dest="feasibility", action="store_false",
-                       help="cfs and bilevel without kinematics in the planning loop (no feasibility check of "
-                       "actions on the predicted states, no refinement before a plan is returned)")
-
-
-# PlanConfig's fields that flags set: {part: {field: the flag's argparse dest}}; `planner_config` reads them
-PLANNER_FLAGS: dict[str, dict[str, str]] = {
-    "level1": {"n_domains": "n_domains", "backend": "symbolic_backend", "symbolic_time_limit": "symbolic_time_limit",
-               "budget": "level1_budget", "focus_from": "focus_from", "focus_budget": "level1_focus_budget",
-               "objects": "level1_objects", "serial": "level1_serial", "confident": "level1_confident",
-               "cut": "level1_cut", "settle": "level1_settle"},
-    "verify": {},
-    "search": {"max_expansions": "max_expansions", "time_limit": "time_limit", "confident": "confident",
-               "look_on": "look_on", "max_fragility": "max_fragility", "release_targets": "release_targets"},
-    "kinematics": {"feasibility": "feasibility"},  # `tamp evaluate` sets it per method instead
-    "loop": {"keep_plan": "keep_plan", "on_course": "on_course", "max_actions": "max_actions", "widen": "widen",
-             "search_budget": "loop_search_budget"},
-}
-# the fields deliberately without a flag (their defaults hold; tests and benchmarks set them in code)
-NOT_EXPOSED = {"level1": ("seed", "time_budget", "verify_all", "alternatives", "alternatives_total", "nonempty"),
-               "verify": ("tau_verify", "eps"), "kinematics": ("max_refinements",),
-               "search": ("weight", "h_unit", "eps", "misplaced", "resolution", "max_depth", "batched", "prune",
-                          "noise"),
-               "loop": ("widen_expansions", "revisit", "progress")}
-
-
-def planner_config(args: argparse.Namespace) -> PlanConfig:
-    """The PlanConfig of the flags of `add_planner_arguments` (seed 0: callers set the problem's)."""
-    default = PlanConfig()
-    return PlanConfig(**{part: dataclasses.replace(getattr(default, part), **{
-        name: getattr(args, dest) for name, dest in flags.items() if hasattr(args, dest)})
-        for part, flags in PLANNER_FLAGS.items()})
 
 
 def options_from_args(args: argparse.Namespace) -> PlanOptions:

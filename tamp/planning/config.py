@@ -4,7 +4,7 @@
 
 Each option's comment says what it does and why its default, in a line; the measurements behind the
 defaults are in docs/beyond-the-paper.md and BUILD_NOTES.md. `tamp plan`, `tamp demo` and `tamp
-evaluate` take their flags from these fields (`tamp.app.plan_command.PLANNER_FLAGS`; a test checks
+evaluate` take their flags from these fields (`tamp.app.planner_flags.PLANNER_FLAGS`; a test checks
 that every field has a flag or is listed as not exposed, and that the defaults agree).
 """
 from __future__ import annotations
