@@ -4,13 +4,16 @@ import json
 import pytest
 
 import learned
+from learned.model import POSITION_AXES
 from tamp.app.cli import main
 from tamp.app.commands_learning import BOTTLENECKS, RELATION_ENCODERS
+from tamp.app.commands_learning import POSITION_AXES as CLI_POSITION_AXES
 
 
 def test_bottleneck_choices_match_the_model():
     assert tuple(BOTTLENECKS) == tuple(learned.ACTIVATIONS)
     assert tuple(RELATION_ENCODERS) == tuple(learned.RELATIONS)
+    assert tuple(CLI_POSITION_AXES) == tuple(POSITION_AXES)
 
 
 @pytest.fixture(scope="module")

@@ -18,6 +18,7 @@ from tamp.errors import UserError
 # learned.ACTIVATIONS, spelled out so that `tamp --help` does not import torch (tests check they agree).
 BOTTLENECKS = ("gumbel_sigmoid", "sigmoid", "tanh", "none")
 RELATION_ENCODERS = ("attention", "pairwise")  # learned.RELATIONS
+POSITION_AXES = ("xy", "x")  # learned.model.POSITION_AXES
 TRAIN_PATIENCE = 100  # learned.TrainConfig.fast().patience_epochs, for the same reason
 
 
@@ -173,7 +174,7 @@ def add_train(sub) -> None:
                    help="weight of a loss that reads each block's place on the table back from its unary bits alone, "
                    "so that a unary bit says in which part of the table a block stands, a symbol only the moved "
                    "block's step changes (default 0: the paper's loss)")
-    p.add_argument("--position-axes", choices=("xy", "x"), default=None,
+    p.add_argument("--position-axes", choices=POSITION_AXES, default=None,
                    help="with --position-loss: the table axes read back, x and y (default) or x alone; the grasp and "
                    "release offsets are along y, so a block placed beside or on a target lands at the target's x, "
                    "and x-only places are ones an operator can predict")
