@@ -327,6 +327,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="symbolic planner: python (in-process search, default) or fd (Fast Downward, as in the paper)")
     p.set_defaults(func=cmd_reproduce)
 
+    from evaluation.practice import add_practice
+
+    add_practice(sub)
+
 
 def cmd_reproduce(args: argparse.Namespace) -> int:
     """Every stage of the paper's experiments, resumable."""

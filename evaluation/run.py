@@ -26,6 +26,12 @@ loop) and the last planning call's search status, kinematic rejections and predi
 `row_cause`; None for a success). `bilevel_loop` rows are judged by where the loop ended: an action
 it could not carry out changed nothing, and the loop went on.
 
+`predictions`: per executed action, the Dynamics Model's prediction against the world
+(`tamp.planning.calibration`): the action's class, the observed miss (the worst block, metres), the 95 %
+bound of that miss and its two parts (the members' disagreement, the scatter they predict); None
+without a Dynamics Model. `transitions`: per executed action, the observed state before and after it, the
+block the gripper carried and the world's status: the data `tamp practice` learns from.
+
 `steps`: per step executed or attempted (a refinement failure stops the plan; closed loop: every
 action sent to the world), the step through the learned abstraction (`tamp.planning.steps`):
 `operator` (None: no learned operator grounds the action in the observed symbols), `probability`
@@ -88,7 +94,7 @@ ROW_KEYS = ("problem", "n", "k", "run", "protocol", "moved", "method", "solved",
             "executed_actions", "executed_plans", "final_error_m", "success", "outcome", "rounds", "fidelity",
             "eps_m", "tau_verify_m", "symbolic_backend", "feasibility", "search_time_s", "feasibility_time_s",
             "plan_refine_time_s", "level1_stages_s", "search_expanded", "effect_error_m", "step_miss_m", "stop",
-            "cause", "steps")
+            "cause", "steps", "predictions", "transitions")
 # the only fields that vary between runs
 TIMING_KEYS = ("planning_time_s", "level1_time_s", "refine_time_s", "search_time_s", "feasibility_time_s",
                "plan_refine_time_s", "level1_stages_s")
@@ -157,6 +163,8 @@ class EvalConfig:
             out["symbolic_time_limit_s"] = p.level1.symbolic_time_limit
         if p.level1.settle != Level1Config.settle:
             out["level1_settle"] = p.level1.settle
+        if p.search.max_doubt is not None:
+            out["search_max_doubt_m"] = p.search.max_doubt
         # the loop that does not know k: the same, by the fields other than keep_plan and on_course (above)
         loop = {k: v for k, v in dataclasses.asdict(p.loop).items() if k not in ("keep_plan", "on_course")}
         if loop != {k: v for k, v in dataclasses.asdict(LoopConfig()).items() if k not in ("keep_plan", "on_course")}:
@@ -258,6 +266,28 @@ def _steps(models, states: Sequence[np.ndarray], actions, plan_states, infos, ch
                     "match": step.match, "mismatched_bits": len(step.mismatches()) if step.match is not None else None,
                     "allowed": None if step.match is None else step.observed_effect is not None,
                     "error_m": _round(step.dynamics_error_m)})
+    return out
+
+
+def _predictions(models, states: Sequence[np.ndarray], actions) -> list[dict] | None:
+    """A row's `predictions` (`tamp.planning.calibration`); None without a Dynamics Model."""
+    if models.dynamics is None:
+        return None
+    from tamp.planning.calibration import step_predictions
+
+    return [p.record() for p in step_predictions(models.dynamics, states, actions)]
+
+
+def _transitions(states: Sequence[np.ndarray], actions, infos) -> list[dict]:
+    """A row's `transitions`: per executed action (X, a, X', grasped, status), positions to 0.01 mm."""
+    out = []
+    for k, action in enumerate(actions[:len(states) - 1]):
+        info = infos[k] if k < len(infos) else None
+        out.append({"X": np.round(np.asarray(states[k], dtype=float), 5).tolist(),
+                    "action": [int(v) for v in action],
+                    "X_next": np.round(np.asarray(states[k + 1], dtype=float), 5).tolist(),
+                    "grasped": -1 if info is None else int(info.grasped),
+                    "status": "ok" if info is None else str(info.status.value)})
     return out
 
 
@@ -383,7 +413,7 @@ class Evaluator:
                   "refined": None, "refine_failure": None, "refine_time_s": [], "executed_actions": 0,
                   "executed_plans": 0, "final_error_m": _round(goal_error(problem.X_init, problem.X_goal)),
                   "rounds": None, "effect_error_m": None, "step_miss_m": None, "stop": stop_record(None, result),
-                  "steps": None}
+                  "steps": None, "predictions": None, "transitions": None}
         if not result.solved:
             return fields
         plans = [(c.actions, c.states, c.objects) for c in result.candidates[:self.config.oracle_max_plans]] \
@@ -401,7 +431,7 @@ class Evaluator:
         if not actions:  # the planner says the initial state meets the goal: nothing to refine
             return {"refined": True, "refine_failure": None, "refine_time_s": [], "executed_actions": 0,
                     "final_error_m": _round(goal_error(problem.X_init, problem.X_goal)), "effect_error_m": [],
-                    "step_miss_m": [], "steps": []}
+                    "step_miss_m": [], "steps": [], "predictions": [], "transitions": []}
         from tamp.app.runner import execute_plan
 
         ex = execute_plan(actions, problem.X_init, problem.X_goal, self.config.fidelity, world=self.world("fast"))
@@ -413,7 +443,9 @@ class Evaluator:
                 "refine_time_s": [_round(s.refine_time) for s in ex.refined.steps],
                 "executed_actions": len(ex.refined.steps), "final_error_m": _round(ex.error),
                 "effect_error_m": _rounded(errors),
-                "step_miss_m": _rounded(dynamics_errors(models, states, actions, worst=True)), "steps": steps}
+                "step_miss_m": _rounded(dynamics_errors(models, states, actions, worst=True)), "steps": steps,
+                "predictions": _predictions(models, states, actions),
+                "transitions": _transitions(states, actions, ex.refined.infos)}
 
     def _closed_loop(self, problem: Problem, method: Method, models) -> dict:
         from tamp.app.runner import run_closed_loop
@@ -447,7 +479,9 @@ class Evaluator:
                 "step_miss_m": _rounded(dynamics_errors(models, out.states, out.executed, worst=True)),
                 "stop": {**stop_record(out.stop, out.rounds[-1] if out.rounds else None),
                          **({"faults": run.faults} if run.faults else {})},
-                "steps": self._loop_steps(problem, models, run, errors or [])}
+                "steps": self._loop_steps(problem, models, run, errors or []),
+                "predictions": _predictions(models, out.states, out.executed),
+                "transitions": _transitions(out.states, out.executed, run.infos)}
 
     def _loop_steps(self, problem: Problem, models, run, errors: Sequence[float]) -> list[dict] | None:
         """The `steps` of a closed loop: each action sent to the world (`tamp.app.steps.loop_steps`)."""

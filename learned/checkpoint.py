@@ -57,8 +57,8 @@ def _write(path: str | Path, payload: dict[str, Any]) -> None:
     atomic_write_bytes(Path(path), lambda f: f.write(buf.getbuffer()))
 
 
-def read_checkpoint(path: str | Path) -> dict[str, Any]:
-    """Load a checkpoint payload safely; ValueError (with the path) if it is not one of ours."""
+def read_checkpoint(path: str | Path, formats: tuple[str, ...] = (CKPT_FORMAT,)) -> dict[str, Any]:
+    """Load a checkpoint payload safely; ValueError (with the path) if it is not one of `formats`."""
     path = Path(path)
     try:
         payload = torch.load(path, map_location="cpu", weights_only=True)
@@ -67,10 +67,10 @@ def read_checkpoint(path: str | Path) -> dict[str, Any]:
     except Exception as e:  # torch raises many types for corrupt / foreign files
         first = (str(e).strip().splitlines() or [""])[0]  # torch's messages run over many lines
         raise ValueError(f"{path}: not a readable checkpoint ({type(e).__name__}: {first})") from e
-    if not isinstance(payload, dict) or payload.get("format") != CKPT_FORMAT:
+    if not isinstance(payload, dict) or payload.get("format") not in formats:
         fmt = payload.get("format") if isinstance(payload, dict) else type(payload).__name__
         raise ValueError(f"{path}: not an effect-model checkpoint (format {fmt!r}, "
-                         f"expected {CKPT_FORMAT!r})")
+                         f"expected {' or '.join(map(repr, formats))})")
     return payload
 
 

@@ -33,6 +33,7 @@ ACTIVATIONS = ("gumbel_sigmoid", "sigmoid", "tanh", "none")
 RELATIONS = ("attention", "pairwise")
 POSITION_AXES = ("xy", "x")
 OFFSET_SCALE_M = 0.05  # `reconstruct_offsets` reads tanh(offset / 5 cm): which side and whether touching, not how far
+SPREAD_FLOOR_M = 0.001  # the least spread a ``spread`` head predicts per axis: observations are not finer than 1 mm
 SELF_LOGIT = 30.0  # pairwise r_k(i, i): a logit whose Gumbel-Sigmoid sample is 1 but for ~1e-13 of draws
 
 
@@ -73,6 +74,10 @@ class ModelConfig:
     # unary bits and each pair's relations, seeing how the pair stands to the picked block and the
     # target), trained with `TrainConfig.transition_weight`: bits an operator can predict (planners never call it)
     transition_decoder: bool = False
+    # a head that predicts how widely each object's effect scatters about the mean (a variance per axis), read
+    # from the decoder's features with their gradient stopped, trained by the Gaussian likelihood of the mean's
+    # residual (`TrainConfig` trains it whenever it is there): the mean stays the paper's Eq. 1 prediction
+    spread: bool = False
 
     @property
     def n_unary(self) -> int:
@@ -157,6 +162,8 @@ class EffectModel(nn.Module):
             self.pair = mlp([2 * STATE_DIM + 3, *hid, c.heads])
         self.object_mlp = mlp([c.n_unary + ACTION_ENC_DIM, *hid, c.d_msg])
         self.decoder = mlp([c.heads * c.d_msg, *hid, 3])
+        if c.spread:
+            self.spread_head = mlp([c.heads * c.d_msg, *hid, 3])
         if c.offset_decoder:
             self.offset_head = mlp([(0 if c.offset_from_relations else 2 * c.n_unary) + 2 * c.heads, *hid, 3])
         if c.position_decoder:
@@ -224,6 +231,19 @@ class EffectModel(nn.Module):
     def decode(self, X: torch.Tensor, action: torch.Tensor, mask: torch.Tensor, u: torch.Tensor,
                r: torch.Tensor) -> torch.Tensor:
         """Effects (B, N, 3) in metres from the symbols and the action (see ``forward``)."""
+        return self._effect(self.messages(X, action, mask, u, r), X, mask)
+
+    def decode_spread(self, X: torch.Tensor, action: torch.Tensor, mask: torch.Tensor, u: torch.Tensor,
+                      r: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Effects (B, N, 3) in metres, as `decode`, and the log-variance of each about it, per axis, in
+        units of ``effect_scale`` squared (the ``spread`` head: it reads the features with their gradient
+        stopped, so training it leaves the mean alone)."""
+        h = self.messages(X, action, mask, u, r)
+        return self._effect(h, X, mask), self.spread_head(h.detach())
+
+    def messages(self, X: torch.Tensor, action: torch.Tensor, mask: torch.Tensor, u: torch.Tensor,
+                 r: torch.Tensor) -> torch.Tensor:
+        """The decoder's input (B, N, K d_msg): h_i^k = sum_j s_k(i,j) z_j for every head k."""
         B, N, _ = X.shape
         a = encode_actions(X, action, self.arm_scale, arm=self.config.arm_input)
         z = self.object_mlp(torch.cat([u.expand(B, -1, -1), a], dim=-1))
@@ -231,7 +251,9 @@ class EffectModel(nn.Module):
         # 2-4x faster than broadcasting r (B, K, N, N) against z (B, 1, N, d_msg); same sums, but
         # float32 gradients differ from that form's in the last bits
         K = r.shape[1]
-        h = (r.reshape(r.shape[0], K * N, N) @ z).view(B, K, N, -1).transpose(1, 2).reshape(B, N, -1)
+        return (r.reshape(r.shape[0], K * N, N) @ z).view(B, K, N, -1).transpose(1, 2).reshape(B, N, -1)
+
+    def _effect(self, h: torch.Tensor, X: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
         return self.decoder(h) * self.effect_scale * mask.to(X.dtype)[..., None]
 
     @staticmethod
@@ -346,6 +368,16 @@ class EffectModel(nn.Module):
         `predict_effect` shares one scene among its actions; this is its counterpart for many plans
         rolled out side by side (Level-1 verification): one forward pass for all B, same numbers.
         """
+        return self._predict(Xs, actions, spread=False)[0]
+
+    @torch.no_grad()
+    def predict_gaussian(self, Xs: np.ndarray, actions) -> tuple[np.ndarray, np.ndarray]:
+        """`predict_effects` and each displacement's variance per axis (B, n, 3), metres squared: how widely
+        the world scatters the outcome about the mean (the ``spread`` head; zeros for a model without one).
+        Never below ``SPREAD_FLOOR_M`` squared for a real object."""
+        return self._predict(Xs, actions, spread=self.config.spread)
+
+    def _predict(self, Xs: np.ndarray, actions, spread: bool) -> tuple[np.ndarray, np.ndarray]:
         Xs = np.asarray(Xs, dtype=np.float64)
         a = as_action_array(actions)
         if Xs.ndim != 3 or Xs.shape[2] != STATE_DIM or Xs.shape[0] != a.shape[0]:
@@ -353,7 +385,7 @@ class EffectModel(nn.Module):
                              f"got {Xs.shape} and {a.shape[0]} actions")
         B, n = Xs.shape[:2]
         if B == 0:
-            return np.zeros((0, n, 3))
+            return np.zeros((0, n, 3)), np.zeros((0, n, 3))
         if n > self.config.n_max:
             raise ValueError(f"scene has {n} objects, model built for n_max={self.config.n_max}")
         check_actions(a, n)
@@ -369,9 +401,14 @@ class EffectModel(nn.Module):
             if len(first) < B:
                 scene = torch.from_numpy(np.cumsum(new) - 1)
                 u, r = u[scene], r[scene]
-            e = self.decode(Xt, at, mask, u, r).double()
+            if spread:
+                e, log_var = self.decode_spread(Xt, at, mask, u, r)
+                variance = (log_var.double().clamp(-30.0, 10.0).exp() * float(self.effect_scale) ** 2
+                            + SPREAD_FLOOR_M ** 2).numpy()
+            else:
+                e, variance = self.decode(Xt, at, mask, u, r), np.zeros((B, n, 3))
             shift = arm_shift(torch.as_tensor(Xs), at)
-        return (e + shift).numpy()
+        return (e.double() + shift).numpy(), variance
 
     @torch.no_grad()
     def symbols(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

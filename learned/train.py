@@ -371,6 +371,8 @@ def train_model(data: "str | Path | Sequence[str | Path] | Transitions", config:
     initial = None if init is None else model_from_payload(read_checkpoint(init), init)
     if initial is not None:
         own = {**initial.config.to_dict(), "n_max": data.n_max}
+        if config is not None and config.spread:  # a spread head may be added to a network without one
+            own["spread"] = True
         given = own if config is None else {**config.to_dict(), "n_max": data.n_max}
         if given != own:
             differ = ", ".join(f"{k} {given[k]!r} (its {own[k]!r})" for k in own if given[k] != own[k])
@@ -392,8 +394,10 @@ def train_model(data: "str | Path | Sequence[str | Path] | Transitions", config:
     model = EffectModel(config)
     stats = normalisation(tr)
     model.set_normalisation(**stats)
-    if initial is not None:  # its weights and normalisation buffers
-        model.load_state_dict(initial.state_dict())
+    if initial is not None:  # its weights and normalisation buffers (a spread head it lacks starts anew)
+        missing, unexpected = model.load_state_dict(initial.state_dict(), strict=False)
+        if unexpected or any(not k.startswith("spread_head.") for k in missing):
+            raise ValueError(f"{init}: its weights do not fit the network ({missing + unexpected})")
     opt = torch.optim.Adam(model.parameters(), lr=train.lr)
     epoch0, step, history = 0, 0, []
     best: dict[str, Any] = {"val_cm": float("inf"), "epoch": -1, "state": None}

@@ -10,8 +10,8 @@ decimals; the paper's numbers (`evaluation.paper`) are quoted as printed. A sect
 files are absent says so in one line.
 
 The package holds one module per group of sections (`setup`: 1, 2, 11; `symbolic_planning`: 3-5;
-`planning`: 6-8, 10, 13; `execution`: 9, 12, 14; `causes`: 15), the row readers (`rows`) and what the sections
-share (`results`: `Results`, the groups, `Section`); this module assembles the report.
+`planning`: 6-8, 10, 13; `execution`: 9, 12, 14; `causes`: 15; `calibration`: 16), the row readers (`rows`)
+and what the sections share (`results`: `Results`, the groups, `Section`); this module assembles the report.
 """
 from __future__ import annotations
 
@@ -24,6 +24,7 @@ from tamp.errors import UserError
 from tamp.planning.structs import OUTCOMES
 from tamp.records import atomic_write_text
 
+from .calibration import section_calibration
 from .causes import section_causes
 from .execution import section_feasibility, section_fidelity, section_refinement
 from .planning import section_level1, section_replanning, section_scaling, section_success, section_table3
@@ -70,6 +71,7 @@ def build_report(res: Results, figures: Path, ablation: dict | None = None,
     sections.append(section_scaling(res, figures))
     sections.append(section_fidelity(res))
     sections.append(section_causes(res, figures))
+    sections.append(section_calibration(res, figures))
     lines = ["# Evaluation report", "",
              f"From `{source}` ({len(res.rows)} rows, {len(res.cells)} problems). Ours next to the paper's "
              "numbers (Dogangun et al., quoted as printed). Success in % of problems (one decimal), times in "

@@ -48,22 +48,55 @@ def cmd_train(args: argparse.Namespace) -> int:
                                ("transition_decoder", True if args.transition_loss else None))
              if v is not None}
     asked["n_max"] = max(int(read_meta(d)["n_max"]) for d in args.data)  # the object limit of the data
+    if args.extra_data and args.ensemble is None:
+        raise UserError("--extra-data is drawn into each ensemble member's resample: give --ensemble too")
+    if not args.extra_share > 0:
+        raise UserError("--extra-share must be above 0 (the share of each resample drawn from --extra-data)")
+    if args.ensemble is not None and args.bottleneck == "gumbel_sigmoid":
+        raise UserError("--ensemble trains a Dynamics Model: leave out --bottleneck gumbel_sigmoid")
+    if args.extra_data:
+        asked["n_max"] = max(asked["n_max"], *(int(read_meta(d)["n_max"]) for d in args.extra_data))
     if args.init is None:
         config = ModelConfig.from_dict(asked)
     else:  # fine-tuning: the network of --init, which the flags given must agree with
-        from learned import load_model
+        from learned.ensemble import member_models
 
-        config = ModelConfig.from_dict({**load_model(args.init).config.to_dict(), **asked})
+        try:
+            initial = member_models(args.init)[0].config.to_dict()
+        except ValueError as error:
+            raise UserError(f"--init: {error}") from None
+        config = ModelConfig.from_dict({**initial, "spread": False, **asked})
     settings = _train_config(args, only_moved=args.only_moved, val_fraction=args.val_fraction,
                              bit_usage=args.bit_usage, offset_weight=args.offset_loss,
                              offset_radius_m=None if args.offset_radius_cm is None else args.offset_radius_cm / 100,
                              position_weight=args.position_loss, transition_weight=args.transition_loss,
                              time_limit_s=None if args.time_limit_min is None else 60 * args.time_limit_min)
+    if args.ensemble is not None:
+        return _train_ensemble(args, config, settings)
     result = train_model(args.data, config, settings, args.out, resume=args.resume, init=args.init)
     print(f"best validation effect error {result.best_val_cm:.2f} cm (epoch {result.best_epoch}) -> {result.out_path}")
     print(f"stopped: {result.stop_reason.value} after {result.epochs_reached} epochs (batch {settings.batch_size}, "
           f"lr {settings.lr:.3g}, {settings.precision})"
           + ("" if result.finished else "; unfinished: rerun with --resume to continue"))
+    return 0
+
+
+def _train_ensemble(args: argparse.Namespace, config, settings) -> int:
+    """`tamp train --ensemble M`: M bootstrap members with spread heads, written as one file."""
+    from learned.ensemble_train import EnsembleConfig, cleanup_members, train_ensemble
+
+    ensemble = EnsembleConfig(members=args.ensemble, extra_share=args.extra_share, workers=args.workers)
+    try:
+        result = train_ensemble(args.data, args.out, extra=args.extra_data or None, config=config, train=settings,
+                                ensemble=ensemble, init=args.init)
+    except TimeoutError as error:
+        print(f"unfinished: {error}")
+        return 0
+    for f in result.members:
+        print(f"member {f['member']}: validation effect error {f['val_err_cm']:.2f} cm (epoch {f['best_epoch']}), "
+              f"spread: {100 * f['val_coverage95']:.1f} % of objects inside their 95 % ellipsoid")
+    cleanup_members(args.out, args.ensemble)
+    print(f"ensemble of {args.ensemble} -> {result.out_path}")
     return 0
 
 
@@ -191,6 +224,18 @@ def add_train(sub) -> None:
                    "tamp/pretrained/dynamics.pt, trained on 2-4 blocks, on data with 5 and 6) instead of random "
                    "ones; its network settings are kept (--bottleneck, --d-z, --heads, --no-arm-input must agree "
                    "if given) and the object limit is the data's")
+    p.add_argument("--ensemble", type=positive_int, default=None, metavar="M",
+                   help="a Dynamics Model that knows its doubt: M members, each trained on a bootstrap resample and "
+                   "given a head that predicts how widely each effect scatters; the planner takes their mean and "
+                   "the rows their 95 %% bound (docs/beyond-the-paper.md). --init may be an ensemble (member m "
+                   "starts from its member m) or one model. A stopped run continues where each member was")
+    p.add_argument("--extra-data", nargs="+", default=[], metavar="DIR",
+                   help="with --ensemble: datasets of the robot's own executed steps (tamp practice), drawn into each "
+                   "member's resample at --extra-share beside the --data")
+    p.add_argument("--extra-share", type=fraction, default=0.25,
+                   help="with --extra-data: the share of each member's resample drawn from it (default 0.25)")
+    p.add_argument("--workers", type=positive_int, default=1,
+                   help="with --ensemble: members trained at a time, one process and one torch thread each (default 1)")
     p.add_argument("--no-arm-input", action="store_true",
                    help="leave the arm's pick-to-place displacement out of the action encoding, so that "
                    "positions reach the decoder only through the symbols (the Symbolic Model)")

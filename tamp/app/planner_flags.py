@@ -114,6 +114,10 @@ def add_planner_arguments(p: argparse.ArgumentParser, backends: tuple[str, ...] 
                    "for the continuous search as beyond --level1-confident")
     p.add_argument("--no-fragility", dest="max_fragility", action="store_const", const=None,
                    help="take plans by their predicted error alone (the rule before the fragility test)")
+    p.add_argument("--max-doubt", type=positive_float, default=default.search.max_doubt, metavar="METRES",
+                   help="with an ensemble Dynamics Model (tamp train --ensemble, tamp practice): a plan is taken at "
+                   "once only if no step of it may miss by more than this, by the model's own 95 %% bound; otherwise "
+                   "it waits as a fragile one does (default: off)")
     p.add_argument("--paper-pruning", dest="release_targets", action="store_false",
                    help="the continuous search (cfs, and bilevel's Level 2) prunes actions by the paper's rule alone: "
                    "a misplaced block goes onto the object closest to its goal or onto itself (default: also onto "
@@ -136,7 +140,8 @@ PLANNER_FLAGS: dict[str, dict[str, str]] = {
                "cut": "level1_cut", "settle": "level1_settle"},
     "verify": {},
     "search": {"max_expansions": "max_expansions", "time_limit": "time_limit", "confident": "confident",
-               "look_on": "look_on", "max_fragility": "max_fragility", "release_targets": "release_targets"},
+               "look_on": "look_on", "max_fragility": "max_fragility", "release_targets": "release_targets",
+               "max_doubt": "max_doubt"},
     "kinematics": {"feasibility": "feasibility"},  # `tamp evaluate` sets it per method instead
     "loop": {"keep_plan": "keep_plan", "on_course": "on_course", "max_actions": "max_actions", "widen": "widen",
              "search_budget": "loop_search_budget"},

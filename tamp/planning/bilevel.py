@@ -23,7 +23,7 @@ from tamp.planning.level2 import level2
 from tamp.planning.models import Models
 from tamp.planning.results import PlanResult, take_plan, timed
 from tamp.planning.structs import KinematicFeasibility
-from tamp.planning.verify import Verification, fragility
+from tamp.planning.verify import Verification, doubt, fragility
 
 
 def plan_bilevel(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig(),
@@ -48,6 +48,10 @@ def plan_bilevel(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig(),
         elif chosen is not None and confident is not None and _fragile(models, X_init, X_goal, chosen, cfg):
             result.reasons.append(f"level 1: its verified plan misses the goal in over {cfg.search.max_fragility:.0%} "
                                   "of its perturbed rollouts; kept while level 2 searches")
+        elif chosen is not None and _doubtful(models, chosen, cfg):
+            result.reasons.append(f"level 1: a step of its verified plan may miss by over "
+                                  f"{(cfg.search.max_doubt or 0.0) * 100:g} cm (the Dynamics Model's 95 % bound); "
+                                  "kept while level 2 searches")
         elif chosen is not None:
             return take_plan(result, chosen.actions, 1, chosen.trajectory, X_goal)
         result = level2(models, X_init, X_goal, cfg, result, feas)  # line 16: continuous search fallback
@@ -65,6 +69,12 @@ def _fragile(models: Models, X_init, X_goal, chosen: Verification, cfg: PlanConf
         models.require_dynamics(), X_init, X_goal, chosen.actions, cfg.verify.eps, cfg.search.noise) > limit
 
 
+def _doubtful(models: Models, chosen: Verification, cfg: PlanConfig) -> bool:
+    """Whether a step of the plan may miss by more than cfg.search.max_doubt (`verify.doubt`; our extension)."""
+    limit = cfg.search.max_doubt
+    return limit is not None and doubt(models.require_dynamics(), chosen.trajectory, chosen.actions) > limit
+
+
 def plan_bilevel_alg1(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig(),
                       kinematics: KinematicFeasibility | None = None) -> PlanResult:
     """The paper's Algorithm 1 exactly: ranked symbolic plans verified alone (no look-alike
@@ -73,7 +83,7 @@ def plan_bilevel_alg1(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConf
     paper = replace(cfg, level1=replace(cfg.level1, alternatives=0, nonempty=False, focus_from=None, confident=None,
                                         cut=False),
                     kinematics=replace(cfg.kinematics, feasibility=False),
-                    search=replace(cfg.search, look_on=0, release_targets=False, max_fragility=None))
+                    search=replace(cfg.search, look_on=0, release_targets=False, max_fragility=None, max_doubt=None))
     result = plan_bilevel(models, X_init, X_goal, paper)
     result.method = "bilevel_alg1"
     return result

@@ -128,7 +128,9 @@ def load_models(directory: str | Path, need_symbolic: bool | None = True) -> Mod
     missing = [str(paths[w]) for w in wanted if not paths[w].is_file()]
     if missing:
         raise UserError(f"missing model file(s): {', '.join(missing)}")
-    models = Models(learned.load_model(paths["dynamics"]))
+    from learned.ensemble import load_dynamics
+
+    models = Models(load_dynamics(paths["dynamics"]))
     require_kind(models.dynamics, "dynamics", paths["dynamics"])
     if need_symbolic:
         models.symbolic = learned.load_model(paths["symbolic"])

@@ -28,7 +28,9 @@ actions; then the closest candidate is returned (our extension: the Dynamics Mod
 to end 4-5 cm from the goal failed in execution about as often as they succeeded). A goal state also
 needs a robust plan to end the search (`max_fragility`, our extension): at most 30 % of its rollouts
 with the model's inputs perturbed by 5 mm may miss the goal (`verify.fragility`); candidates are
-ranked by that fraction, then by predicted error.
+ranked by that fraction, then by predicted error. With an ensemble Dynamics Model (`max_doubt`, our
+extension), a goal state whose plan has a step that may miss by more than `max_doubt` (its 95 % bound,
+`verify.doubt`) is a candidate too, ranked after every goal state without such a step.
 
 Duplicate detection:
 positions rounded to a `resolution` grid; a state is pushed again only when reached with fewer
@@ -47,7 +49,7 @@ import numpy as np
 
 from tamp.errors import UserError
 from tamp.planning.structs import OFFSET_STEP, OFFSETS
-from tamp.planning.verify import EPS_SUCCESS, DynamicsModel, fragility, states_pair
+from tamp.planning.verify import EPS_SUCCESS, DynamicsModel, doubt, fragility, states_pair
 
 _PAIRS = np.array([(g, r) for g in OFFSETS for r in OFFSETS], dtype=np.int64)  # the 9 offset pairs
 # metres: where a placed block's centre ends relative to its target object's, (r - g) * OFFSET_STEP along y
@@ -74,6 +76,9 @@ class SearchConfig:
     max_fragility: float | None = 0.3  # a goal state ends the search at once only if at most this fraction of
     #   its plan's perturbed rollouts miss the goal (`verify.fragility`); else it is a candidate (None: not checked)
     noise: float = 0.005  # metres: the input perturbation of `verify.fragility`
+    # a goal state ends the search at once only if no step of its plan may miss by more than this (metres, the
+    # 95 % bound of an ensemble Dynamics Model, `verify.doubt`); else it is a candidate, as a fragile one (None: off)
+    max_doubt: float | None = None
 
     def __post_init__(self) -> None:
         if not self.time_limit > 0 or self.max_expansions < 1 or self.max_depth < 1:
@@ -82,6 +87,9 @@ class SearchConfig:
         if self.max_fragility is not None and not 0 <= self.max_fragility < 1 or not self.noise > 0:
             raise UserError(f"the continuous search needs 0 <= max_fragility < 1 (or None) and a positive noise, "
                             f"got {self.max_fragility} and {self.noise} m")
+        if self.max_doubt is not None and not self.max_doubt > 0:
+            raise UserError(f"the continuous search's max_doubt must be a positive distance (or None), got "
+                            f"{self.max_doubt} m")
         if not 0 < self.confident <= self.eps or self.look_on < 0:
             raise UserError(f"the continuous search needs 0 < confident <= eps and look_on >= 0, got confident "
                             f"{self.confident} m, eps {self.eps} m, look_on {self.look_on}")
@@ -242,6 +250,13 @@ def continuous_search(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarr
         out.fragility_checks += 1
         return fragility(model, X_init, X_goal, path(index)[0], config.eps, config.noise)
 
+    def doubtful(index: int) -> bool:
+        """Whether a step of the plan into node `index` may miss by more than config.max_doubt (`verify.doubt`)."""
+        if config.max_doubt is None:
+            return False
+        plan, states = path(index)
+        return doubt(model, np.stack(states), plan) > config.max_doubt
+
     def finish(status: SearchStatus, reason: str, index: int | None = None) -> SearchResult:
         out.status, out.reason, out.time = status, reason, time.perf_counter() - t0
         if index is not None:
@@ -255,14 +270,20 @@ def continuous_search(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarr
     if np.all(d0 < config.eps):
         return finish(SearchStatus.SOLVED, "the initial state is already within eps of the goal", 0)
     best_g = {key(X_init[:, :3]): 0}
-    candidate: tuple[float, float, int] | None = None  # (fragility, worst object's predicted error, node)
+    # (doubtful, fragility, worst object's predicted error, node): the best goal state that did not end the search
+    candidate: tuple[bool, float, float, int] | None = None
     look_until = config.max_expansions  # expansions after which the candidate is returned
 
     def stop(status: SearchStatus, reason: str) -> SearchResult:
         """End at a limit: the candidate goal state if there is one."""
         if candidate is None:
             return finish(status, reason)
-        risk, error, index = candidate
+        unsure, risk, error, index = candidate
+        if unsure:
+            limit = (config.max_doubt or 0.0) * 100
+            return finish(SearchStatus.SOLVED, f"solved: {nodes[index][3]} actions, predicted {error * 100:.1f} cm "
+                          f"from the goal, a step's 95 % bound over {limit:g} cm (no goal state without one after "
+                          f"{out.expanded} expansions)", index)
         if config.max_fragility is None:
             return finish(SearchStatus.SOLVED, f"solved: {nodes[index][3]} actions, predicted {error * 100:.1f} cm "
                           f"from the goal (no goal state within {config.confident * 100:g} cm after "
@@ -324,7 +345,7 @@ def continuous_search(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarr
                 best_g[k] = g + 1
                 heapq.heappush(frontier, (g + 1 + config.weight * h[b], h[b], len(nodes) - 1))
                 continue
-            if candidate is not None and g + 1 > nodes[candidate[2]][3]:
+            if candidate is not None and g + 1 > nodes[candidate[3]][3]:
                 best_g[k] = g + 1
                 continue  # a goal state of a longer plan than the candidate's: more actions to go wrong
             # a goal state (not expanded)
@@ -332,7 +353,8 @@ def continuous_search(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarr
                 return finish(SearchStatus.SOLVED, f"solved: {g + 1} actions after {out.expanded} expansions",
                               len(nodes) - 1)
             risk = fragile(len(nodes) - 1)
-            robust = risk <= (config.max_fragility or 0.0)
+            unsure = doubtful(len(nodes) - 1)
+            robust = risk <= (config.max_fragility or 0.0) and not unsure
             if worst[b] < config.confident and robust:
                 return finish(SearchStatus.SOLVED, f"solved: {g + 1} actions after {out.expanded} expansions",
                               len(nodes) - 1)
@@ -340,8 +362,8 @@ def continuous_search(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarr
                 best_g[k] = g + 1
             if candidate is None:
                 look_until = min(look_until, out.expanded + config.look_on)
-            if candidate is None or (risk, float(worst[b])) < candidate[:2]:
-                candidate = (risk, float(worst[b]), len(nodes) - 1)
+            if candidate is None or (unsure, risk, float(worst[b])) < candidate[:3]:
+                candidate = (unsure, risk, float(worst[b]), len(nodes) - 1)
     offered = "goal-oriented actions" if config.prune else "all actions"
     return stop(SearchStatus.EXHAUSTED, f"exhausted: every state reachable within {config.max_depth} actions "
                   f"({offered}, {config.resolution * 100:g} cm grid) expanded, {out.expanded} expansions; "

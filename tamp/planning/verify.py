@@ -132,6 +132,18 @@ def fragility(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarray, acti
     return float(np.mean(worst >= eps))
 
 
+def doubt(model: DynamicsModel, trajectory: np.ndarray, actions: Sequence) -> float:
+    """Metres: the largest 95 % bound of a plan's steps (`learned.ensemble`: how far the farthest-off block may
+    land from the prediction), each predicted from the plan's predicted state before it (`trajectory`, k + 1
+    states for k actions); 0 for a model that gives no spread."""
+    if not len(actions):
+        return 0.0
+    from learned.ensemble import distribution_of
+
+    plan = np.asarray([tuple(int(v) for v in a) for a in actions], dtype=np.int64)
+    return float(distribution_of(model, np.asarray(trajectory)[:len(plan)], plan).bound().max())
+
+
 def verify_many(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarray, plans: Sequence[Sequence],
                 tau: float = TAU_VERIFY) -> list[Verification]:
     """`verify` for many plans, sharing rollouts: each distinct plan prefix is predicted once, and

@@ -1,0 +1,359 @@
+"""`tamp practice`: the robot learns from its own plans (data aggregation for system identification).
+
+Random exploration teaches the Dynamics Model where actions do nothing; the planner acts elsewhere, on
+the actions the model is optimistic about. Practice closes that loop, round after round:
+
+    round r:  problems of its own (seed PRACTICE_SEED + r, never a user's evaluation seed)
+              -> the closed loop plans them with round r's models and executes them in the world
+              -> every executed transition (X, a, X') written as a dataset (the format `tamp collect` writes)
+              -> an ensemble Dynamics Model trained on the random data and every round's practice so far
+                 (`learned.ensemble_train`: a share of each member's resample is practice), warm-started
+                 from round r's, becomes round r + 1's
+
+Round r's figures (success, how far executed steps landed from the prediction, how often beyond the
+model's own 95 % bound) are measured on problems its models never learned from, so the curve is a
+measurement, not a claim. The Symbolic Model and the domain are the given ones in every round.
+
+Layout of OUT:
+
+    OUT/practice.json            the inputs and settings (a rerun resumes only with the same ones)
+    OUT/round-R/problems.jsonl   the round's problems (strict and paper protocol, names prefixed)
+    OUT/round-R/eval/            `tamp evaluate` rows of the round's models on them
+    OUT/round-R/data/            the round's executed transitions
+    OUT/round-R/models/          the round's models (round 0: a copy-free reference to --models)
+    OUT/curve.json, curve.md     the learning curve, rewritten after every round
+    OUT/models/                  the last round's models (`tamp plan --models OUT/models`)
+
+Every stage resumes: problems and datasets are written atomically, the evaluation recomputes missing
+rows only, training continues each member where it stopped.
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import shutil
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from tamp.errors import UserError
+from tamp.records import atomic_write_text
+
+PRACTICE_SEED = 1_000_000  # round r's problems have seed PRACTICE_SEED + r: far from the small seeds users evaluate on
+STATE_NAME, CURVE_JSON, CURVE_MD = "practice.json", "curve.json", "curve.md"
+FORMAT = "tamp-practice/1"
+
+
+@dataclass(frozen=True)
+class PracticeConfig:
+    """What the robot practises and how it learns from it."""
+    rounds: int = 3  # practice-and-train cycles; one more evaluation round measures the last models
+    per_cell: int = 4  # problems per (n, k) and protocol each round: 200 problems at the defaults
+    objects: tuple[int, ...] = (2, 3, 4, 5, 6)
+    actions: tuple[int, ...] = (1, 2, 3, 4, 5)
+    protocols: tuple[str, ...] = ("strict", "paper")
+    seed: int = PRACTICE_SEED
+    method: str = "bilevel_loop"  # the closed loop that does not know k: the product's planner
+    fidelity: str = "fast"  # the world the plans are executed in ("full": the arm under physics)
+    members: int = 5  # ensemble members (`learned.ensemble_train.EnsembleConfig`)
+    extra_share: float = 0.1  # share of each member's resample drawn from the practice data
+    epochs: int = 300  # per member, at most (warm start: early stopping ends it far sooner)
+    patience: int = 20  # epochs without a better validation error before a member stops
+    lr: float = 4e-4  # half the from-scratch rate of batch 1024: a fine-tune
+    workers: int = 2  # evaluation workers and members trained at once
+    backend: str = "local"  # "local" process pool or "ray" (the evaluation)
+
+    def __post_init__(self) -> None:
+        for name in ("rounds", "per_cell", "members", "epochs", "patience", "workers"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise UserError(f"--{name.replace('_', '-')} must be a positive integer, got {value!r}")
+        if not 0.0 < self.extra_share < 1.0:
+            raise UserError(f"--extra-share must be in (0, 1), got {self.extra_share}")
+        if not 0 <= self.seed < 2**62:
+            raise UserError(f"--seed must be in [0, 2^62), got {self.seed}")
+        if self.fidelity not in ("fast", "full"):
+            raise UserError(f"--fidelity must be 'fast' or 'full', got {self.fidelity!r}")
+
+    def defining(self) -> dict[str, Any]:
+        """The settings a round's results depend on (all but rounds, workers and backend)."""
+        return {k: v for k, v in json.loads(json.dumps(dataclasses.asdict(self))).items()
+                if k not in ("rounds", "workers", "backend")}
+
+
+# --------------------------------------------------------------------------- one round's stages
+
+def round_dir(out: Path, r: int) -> Path:
+    return out / f"round-{r}"
+
+
+def make_problems(path: Path, r: int, config: PracticeConfig, progress: bool) -> Path:
+    """The round's problem set (both protocols, names prefixed by the protocol), written once."""
+    if path.is_file():
+        return path
+    from evaluation.problems import generate_problems, write_problems
+
+    problems = []
+    for protocol in config.protocols:
+        made = generate_problems(config.objects, config.actions, config.per_cell, config.seed + r, progress,
+                                 protocol, workers=config.workers)
+        problems += [dataclasses.replace(p, name=f"{protocol}-{p.name}") for p in made]
+    return write_problems(path, problems)
+
+
+def write_transitions(rows_path: Path, directory: Path, seed: int) -> int:
+    """The executed transitions of the rows at `rows_path` as a dataset at `directory` (written once; a
+    directory left half-written by a kill is written again); returns their number."""
+    from learned.dataset import DatasetWriter, load_transitions
+    from tamp.app.collect import STATUS_CODES
+    from tamp.app.runner import executing_world
+    from tamp.planning.validate import MAX_OBJECTS
+
+    from .run import read_rows
+
+    done = directory / ".complete"
+    if done.is_file():
+        return len(load_transitions(directory))
+    if directory.exists():
+        shutil.rmtree(directory)
+    world = executing_world("fast").config
+    steps = [t for row in read_rows(rows_path) for t in (row.get("transitions") or [])]
+    if not steps:
+        return 0
+    with DatasetWriter(directory, n_max=MAX_OBJECTS, world_config=world.to_dict(), seed=seed,
+                       status_codes=STATUS_CODES, shard_size=1000,
+                       extra_meta={"collection": {"source": f"executed steps of {rows_path}"}}) as writer:
+        for t in steps:
+            writer.add(t["X"], t["action"], t["X_next"], t["grasped"], STATUS_CODES[t["status"]])
+    done.write_text("")
+    return len(steps)
+
+
+def train_round_models(base: Path, previous: Path, data: list[Path], practice: list[Path], out: Path,
+                       config: PracticeConfig, progress: bool) -> Path:
+    """Round r + 1's models at `out`: the base's Symbolic Model and domain, and an ensemble Dynamics Model
+    trained on the random `data` and the `practice` datasets, warm-started from `previous`'s."""
+    from learned import TrainConfig
+    from learned.ensemble_train import EnsembleConfig, cleanup_members, train_ensemble
+    from tamp.planning.models import DOMAIN_DIR, DYNAMICS_FILE, SYMBOLIC_FILE, SYMBOLS_FILE
+
+    if (out / DYNAMICS_FILE).is_file():
+        return out
+    staging = out.with_name(out.name + ".training")
+    staging.mkdir(parents=True, exist_ok=True)
+    train = TrainConfig.fast(epochs=config.epochs, patience_epochs=config.patience, lr=config.lr)
+    ensemble = EnsembleConfig(members=config.members, extra_share=config.extra_share, workers=config.workers)
+    train_ensemble([str(d) for d in data], staging / DYNAMICS_FILE, extra=[str(p) for p in practice] or None,
+                   train=train, ensemble=ensemble, init=previous / DYNAMICS_FILE, progress=progress)
+    cleanup_members(staging / DYNAMICS_FILE, config.members)
+    for name in (SYMBOLIC_FILE, SYMBOLS_FILE):
+        if (base / name).is_file():
+            shutil.copy2(base / name, staging / name)
+    shutil.copytree(base / DOMAIN_DIR, staging / DOMAIN_DIR, dirs_exist_ok=True,
+                    ignore=shutil.ignore_patterns("*.pddl", "*.ppddl", "sampled*"))
+    if out.exists():
+        shutil.rmtree(out)
+    staging.rename(out)
+    return out
+
+
+def round_figures(rows_path: Path) -> dict[str, Any]:
+    """A round's point on the learning curve: success (all, by n and protocol), executed steps and their misses,
+    calibration, planning time."""
+    from evaluation.report.calibration import step_figures
+    from evaluation.stats import median
+
+    from .run import read_rows
+
+    rows = [r for r in read_rows(rows_path) if r.get("outcome") != "error"]
+    preds = [p for r in rows for p in (r.get("predictions") or [])]
+
+    def success(rs: list[dict]) -> float | None:
+        return 100.0 * sum(bool(r["success"]) for r in rs) / len(rs) if rs else None
+
+    return {"problems": len(rows), "success_pct": success(rows),
+            "success_by_n": {str(n): success([r for r in rows if r["n"] == n]) for n in sorted({r["n"] for r in rows})},
+            "success_by_protocol": {p: success([r for r in rows if r["protocol"] == p])
+                                    for p in sorted({r["protocol"] for r in rows})},
+            "steps": step_figures(preds),
+            "planning_median_s": median([r["planning_time_s"] for r in rows]),
+            "planning_mean_s": sum(r["planning_time_s"] for r in rows) / len(rows) if rows else None}
+
+
+# --------------------------------------------------------------------------- the rounds
+
+def _prepare(out: Path, models: Path, data: list[Path], config: PracticeConfig) -> dict[str, Any]:
+    """OUT/practice.json: written on the first run, compared on a resume."""
+    state = {"format": FORMAT, "models": str(models.resolve()), "data": [str(d.resolve()) for d in data],
+             "config": config.defining()}
+    path = out / STATE_NAME
+    if path.is_file():
+        try:
+            old = json.loads(path.read_text())
+        except ValueError as error:
+            raise UserError(f"{path}: not valid JSON ({error})") from None
+        if not isinstance(old, dict) or old.get("format") != FORMAT:
+            raise UserError(f"{path} is not the state file of a `tamp practice` directory")
+        differ = [k for k in ("models", "data", "config") if old.get(k) != state[k]]
+        if differ:
+            raise UserError(f"{out} was practised with other {', '.join(differ)}; give a new --out, or the same "
+                            "inputs and settings to resume")
+        return old
+    out.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(path, json.dumps({**state, "rounds": []}, indent=2) + "\n")
+    return {**state, "rounds": []}
+
+
+def practise(models: Path, data: list[Path], out: Path, config: PracticeConfig = PracticeConfig(),
+             progress: bool = True) -> list[dict[str, Any]]:
+    """Run `config.rounds` practice rounds and one more that measures the last models (module docstring);
+    returns the learning curve, one record per round."""
+    from evaluation.run import EvalConfig, evaluate
+    from tamp.planning.models import load_models
+
+    models, out = Path(models), Path(out)
+    load_models(models)  # every input checked before anything is written
+    for d in data:
+        from learned import read_meta
+
+        read_meta(d)
+    state = _prepare(out, models, data, config)
+    curve: list[dict[str, Any]] = []
+    current = models
+    for r in range(config.rounds + 1):
+        rd = round_dir(out, r)
+        rd.mkdir(parents=True, exist_ok=True)
+        timings: dict[str, float] = {}
+        if r > 0:
+            t = time.perf_counter()
+            practice = [d for d in (round_dir(out, q) / "data" for q in range(r))
+                        if (d / ".complete").is_file() and any(d.glob("shard-*.npz"))]
+            current = train_round_models(models, current, data, practice, rd / "models", config, progress)
+            timings["train_s"] = time.perf_counter() - t
+        t = time.perf_counter()
+        problems = make_problems(rd / "problems.jsonl", r, config, progress)
+        timings["problems_s"] = time.perf_counter() - t
+        t = time.perf_counter()
+        eval_config = EvalConfig(fidelity=config.fidelity, workers=config.workers, backend=config.backend,
+                                 progress=progress)
+        rows = evaluate(current, problems, rd / "eval", [config.method], eval_config)
+        timings["practice_s"] = time.perf_counter() - t
+        transitions = write_transitions(rows, rd / "data", config.seed + r)
+        point = {"round": r, "models": str(current), "seed": config.seed + r, "transitions": transitions,
+                 **round_figures(rows), "wall_s": timings}
+        previous = next((p for p in state.get("rounds", []) if p["round"] == r), None)
+        if previous is not None:  # a resumed round keeps the wall times of the run that did the work
+            point["wall_s"] = {k: max(v, previous.get("wall_s", {}).get(k, 0.0)) for k, v in timings.items()}
+        curve.append(point)
+        state["rounds"] = curve + [p for p in state.get("rounds", []) if p["round"] > r]
+        atomic_write_text(out / STATE_NAME, json.dumps(state, indent=2) + "\n")
+        write_curve(out, curve)
+        if progress:
+            print(format_point(point), file=sys.stderr, flush=True)
+    final = out / "models"
+    if final.is_symlink() or final.exists():
+        final.unlink() if final.is_symlink() else shutil.rmtree(final)
+    final.symlink_to(current.resolve(), target_is_directory=True)
+    return curve
+
+
+def format_point(p: dict[str, Any]) -> str:
+    s = p["steps"]
+    miss = "no step executed" if not s.get("steps") else (
+        f"{s['steps']} steps, {s['miss_ge_2cm_pct']:.1f} % >= 2 cm, {s['miss_ge_5cm_pct']:.1f} % >= 5 cm"
+        + ("" if s.get("exceeded_pct") is None else f", {s['exceeded_pct']:.1f} % beyond the 95 % bound"))
+    return (f"round {p['round']}: success {p['success_pct']:.1f} % of {p['problems']}; {miss}; "
+            f"{p['transitions']} transitions")
+
+
+def write_curve(out: Path, curve: list[dict[str, Any]]) -> None:
+    """OUT/curve.json and OUT/curve.md: one line per round."""
+    atomic_write_text(out / CURVE_JSON, json.dumps(curve, indent=2) + "\n")
+    ns = sorted({n for p in curve for n in p["success_by_n"]}, key=int)
+    header = ["round", "problems", "success (%)", *[f"n = {n} (%)" for n in ns], "steps", ">= 2 cm (%)",
+              ">= 5 cm (%)", "beyond bound (%)", "transitions", "train (min)", "practice (min)"]
+    lines = ["# Practice: the learning curve", "",
+             "Each round's models measured on that round's own problems, which no model before it learned from "
+             "(`tamp practice`; round 0: the given models).", "",
+             "| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+
+    def pct(x: float | None) -> str:
+        return "—" if x is None else f"{x:.1f}"
+
+    for p in curve:
+        s = p["steps"]
+        cells = [str(p["round"]), str(p["problems"]), pct(p["success_pct"]),
+                 *[pct(p["success_by_n"].get(n)) for n in ns], str(s.get("steps", 0)),
+                 pct(s.get("miss_ge_2cm_pct")), pct(s.get("miss_ge_5cm_pct")), pct(s.get("exceeded_pct")),
+                 str(p["transitions"]), f"{p['wall_s'].get('train_s', 0.0) / 60:.1f}",
+                 f"{(p['wall_s'].get('practice_s', 0.0) + p['wall_s'].get('problems_s', 0.0)) / 60:.1f}"]
+        lines.append("| " + " | ".join(cells) + " |")
+    atomic_write_text(out / CURVE_MD, "\n".join(lines) + "\n")
+
+
+# --------------------------------------------------------------------------- the command
+
+def cmd_practice(args: argparse.Namespace) -> int:
+    from tamp.app.args import check_output_dir
+
+    check_output_dir(args.out, "--out")
+    config = PracticeConfig(rounds=args.rounds, per_cell=args.per_cell, objects=tuple(args.objects),
+                            seed=args.seed, fidelity=args.fidelity, members=args.members,
+                            extra_share=args.extra_share, workers=args.workers, backend=args.backend)
+    from tamp.planning.models import pretrained_dir
+
+    models = Path(args.models) if args.models else pretrained_dir()
+    curve = practise(models, [Path(d) for d in args.data], Path(args.out), config, progress=not args.quiet)
+    for p in curve:
+        print(format_point(p))
+    print(f"learning curve: {Path(args.out) / CURVE_MD}; the last round's models: {Path(args.out) / 'models'}")
+    return 0
+
+
+def add_practice(sub) -> None:
+    """`tamp practice`."""
+    from evaluation.cli import _int_list as int_list
+    from tamp.app.args import fraction, models_directory, non_negative_int, positive_int
+
+    p = sub.add_parser(
+        "practice",
+        help="the robot practises: plans its own problems, executes them and learns from its own steps",
+        description="Round after round: make problems of its own seeds, plan them in the closed loop with the "
+        "current models, execute them in the world, record every executed transition, and train an ensemble "
+        "Dynamics Model on the random data and all the practice so far (warm-started). Each round's models are "
+        "measured on that round's new problems before training on them: OUT/curve.md is the learning curve. "
+        "Resumable: run the same command again (a larger --rounds continues).",
+    )
+    p.add_argument("--data", nargs="+", required=True, metavar="DIR",
+                   help="the random interaction data the models learned from (tamp collect --out)")
+    p.add_argument("--models", type=models_directory, default=None, metavar="DIR",
+                   help="the models to start from (default: the bundled ones); their Symbolic Model and domain are "
+                   "kept in every round")
+    p.add_argument("--out", type=Path, required=True, help="the practice directory (rounds, curve, final models)")
+    p.add_argument("--rounds", type=positive_int, default=PracticeConfig.rounds,
+                   help=f"practice-and-train cycles (default {PracticeConfig.rounds}); one more round measures "
+                   "the last models")
+    p.add_argument("--per-cell", type=positive_int, default=PracticeConfig.per_cell,
+                   help=f"problems per (objects, k) and protocol each round (default {PracticeConfig.per_cell}: "
+                   "200 problems a round)")
+    p.add_argument("--objects", type=int_list, default=PracticeConfig.objects,
+                   help="object counts of the practice problems (default 2,3,4,5,6)")
+    p.add_argument("--seed", type=non_negative_int, default=PRACTICE_SEED,
+                   help=f"round r's problems have seed SEED + r (default {PRACTICE_SEED}, far from the seeds "
+                   "one evaluates on)")
+    p.add_argument("--fidelity", choices=("fast", "full"), default="fast",
+                   help="the world plans are executed in: fast (default) or full (the arm under physics)")
+    p.add_argument("--members", type=positive_int, default=PracticeConfig.members,
+                   help=f"ensemble members of the Dynamics Model (default {PracticeConfig.members})")
+    p.add_argument("--extra-share", type=fraction, default=PracticeConfig.extra_share,
+                   help=f"share of each member's resample drawn from the practice data (default "
+                   f"{PracticeConfig.extra_share})")
+    p.add_argument("--workers", type=positive_int, default=2,
+                   help="worker processes of the evaluation, and members trained at once (default 2)")
+    p.add_argument("--backend", choices=("local", "ray"), default="local",
+                   help="the evaluation's workers: a local process pool (default) or Ray")
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
+    p.set_defaults(func=cmd_practice)
