@@ -75,7 +75,7 @@ class ModelConfig:
     # target), trained with `TrainConfig.transition_weight`: bits an operator can predict (planners never call it)
     transition_decoder: bool = False
     # a head that predicts how widely each object's effect scatters about the mean (a variance per axis), read
-    # from the decoder's features with their gradient stopped, trained by the Gaussian likelihood of the mean's
+    # from the decoder's features (gradient stopped) and the action, trained by the Gaussian likelihood of the mean's
     # residual (`TrainConfig` trains it whenever it is there): the mean stays the paper's Eq. 1 prediction
     spread: bool = False
 
@@ -163,7 +163,7 @@ class EffectModel(nn.Module):
         self.object_mlp = mlp([c.n_unary + ACTION_ENC_DIM, *hid, c.d_msg])
         self.decoder = mlp([c.heads * c.d_msg, *hid, 3])
         if c.spread:
-            self.spread_head = mlp([c.heads * c.d_msg, *hid, 3])
+            self.spread_head = mlp([c.heads * c.d_msg + ACTION_ENC_DIM, *hid, 3])
         if c.offset_decoder:
             self.offset_head = mlp([(0 if c.offset_from_relations else 2 * c.n_unary) + 2 * c.heads, *hid, 3])
         if c.position_decoder:
@@ -237,9 +237,14 @@ class EffectModel(nn.Module):
                       r: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Effects (B, N, 3) in metres, as `decode`, and the log-variance of each about it, per axis, in
         units of ``effect_scale`` squared (the ``spread`` head: it reads the features with their gradient
-        stopped, so training it leaves the mean alone)."""
+        stopped, so training it leaves the mean alone, and each object's action encoding)."""
         h = self.messages(X, action, mask, u, r)
-        return self._effect(h, X, mask), self.spread_head(h.detach())
+        return self._effect(h, X, mask), self.spread_head(self.spread_input(h, X, action))
+
+    def spread_input(self, h: torch.Tensor, X: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
+        """What the spread head reads: the decoder's features (gradient stopped) and the object's action encoding."""
+        return torch.cat([h.detach(), encode_actions(X, action, self.arm_scale, arm=self.config.arm_input).to(h.dtype)],
+                         dim=-1)
 
     def messages(self, X: torch.Tensor, action: torch.Tensor, mask: torch.Tensor, u: torch.Tensor,
                  r: torch.Tensor) -> torch.Tensor:

@@ -7,7 +7,8 @@ network frozen, by the Gaussian negative log-likelihood of the mean's residuals:
 
     NLL = 1/2 sum_axes (d^2 / s^2 + log s^2),   s^2 = exp(head(h)) scale^2 + floor^2
 
-over the real objects (d: residual, h: the decoder's features, `EffectModel.messages`). The features
+over the real objects (d: residual, h: the decoder's features and the object's action encoding,
+`EffectModel.spread_input`). The features
 are computed once, so a fit takes seconds; the head kept is the one with the best validation NLL.
 """
 from __future__ import annotations
@@ -29,7 +30,7 @@ class SpreadConfig:
     """How to fit the spread head (Adam on precomputed features; early stopping on validation NLL)."""
     epochs: int = 200            # at most
     patience_epochs: int = 15    # stop after this many epochs without a better validation NLL
-    batch_size: int = 4096       # objects per step (the features are small: large batches are cheap)
+    batch_size: int = 512        # objects per step
     lr: float = 1e-3
     seed: int = 0
 
@@ -37,14 +38,15 @@ class SpreadConfig:
 @torch.no_grad()
 def _features(model: EffectModel, t: dict[str, torch.Tensor], batch_size: int = 4096
               ) -> tuple[torch.Tensor, torch.Tensor]:
-    """The decoder's features of every real object (M, K d_msg) and its residual (M, 3) in effect-scale units."""
+    """The spread head's input for every real object (M, K d_msg + action encoding) and its residual (M, 3) in
+    effect-scale units."""
     feats, residuals = [], []
     for s in range(0, t["X"].shape[0], batch_size):
         X, A, M = t["X"][s:s + batch_size], t["action"][s:s + batch_size], t["mask"][s:s + batch_size]
         u, r = model.encode(X, M)
         h = model.messages(X, A, M, u, r)
         d = (model._effect(h, X, M) - t["target"][s:s + batch_size]) / model.effect_scale
-        feats.append(h[M])
+        feats.append(model.spread_input(h, X, A)[M])
         residuals.append(d[M])
     return torch.cat(feats), torch.cat(residuals)
 

@@ -231,3 +231,41 @@ def test_fragility_flags():
     assert planner_config(parser.parse_args(["--no-fragility"])).search.max_fragility is None
     with pytest.raises(SystemExit):
         parser.parse_args(["--max-fragility", "1"])
+
+
+class DoubtfulModel(StubModel):
+    """The stub dynamics as an ensemble that doubts `doubtful` actions: there its predicted variance is
+    (5 cm)^2 per axis (`learned.ensemble.distribution_of` reads `predict_gaussian`)."""
+
+    def __init__(self, doubtful):
+        super().__init__()
+        self.doubtful = {tuple(a) for a in doubtful}
+
+    def predict_gaussian(self, Xs, actions):
+        actions = np.asarray(actions, dtype=np.int64).reshape(-1, 4)
+        mean = np.stack([self.predict_effect(X, a[None])[0] for X, a in zip(Xs, actions)])
+        var = np.zeros_like(mean)
+        for b, a in enumerate(actions.tolist()):
+            if tuple(a) in self.doubtful:
+                var[b] = 0.05 ** 2
+        return mean, var
+
+
+def test_a_goal_state_the_model_doubts_waits_for_one_it_does_not():
+    from tamp.planning.verify import doubt
+
+    G = goal_after([(0, 0, 0, 1)])
+    model = DoubtfulModel([(0, -1, 0, 0)])  # generated first, exact, but the model doubts it
+    states = rollout(model, X, [(0, -1, 0, 0)])
+    assert doubt(model, states, [(0, -1, 0, 0)]) > 0.1 and doubt(model, states, [(0, 0, 0, 1)]) == 0.0
+    assert doubt(StubModel(), states, [(0, -1, 0, 0)]) == 0.0  # a model without spread doubts nothing
+    blind = continuous_search(model, X, G, SearchConfig(max_fragility=None))
+    assert blind.plan == [(0, -1, 0, 0)]
+    sure = continuous_search(model, X, G, SearchConfig(max_fragility=None, max_doubt=0.03))
+    assert sure.solved and sure.plan == [(0, 0, 0, 1)]
+    # when the model doubts every goal state, the search still returns the best of them after looking on
+    every = DoubtfulModel([(0, g, j, r) for g in (-1, 0, 1) for j in range(3) for r in (-1, 0, 1)])
+    only = continuous_search(every, X, G, SearchConfig(max_depth=1, max_fragility=None, max_doubt=0.03))
+    assert only.solved and len(only.plan) == 1 and "95 % bound" in only.reason
+    with pytest.raises(ValueError, match="max_doubt"):
+        SearchConfig(max_doubt=0.0)

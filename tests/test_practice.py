@@ -1,0 +1,66 @@
+"""`tamp practice`: rounds of the robot's own problems, planned and executed, learned from; resumable."""
+import json
+
+import numpy as np
+import pytest
+
+from evaluation.practice import PracticeConfig, practise
+from learned import load_transitions
+from learned.ensemble import EffectEnsemble, load_dynamics
+from learned.synthetic import write_synthetic_dataset
+from tamp.app.cli import main
+from tamp.errors import UserError
+from tamp.planning.models import pretrained_dir
+
+pytestmark = [pytest.mark.sim, pytest.mark.slow]
+TINY = PracticeConfig(rounds=1, per_cell=1, objects=(2,), actions=(1, 2), members=2, epochs=2, patience=2,
+                      workers=1)
+
+
+@pytest.fixture(scope="module")
+def practised(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("practice")
+    data = write_synthetic_dataset(tmp / "random", 300, seed=0)
+    out = tmp / "out"
+    curve = practise(pretrained_dir(), [data], out, TINY, progress=False)
+    return tmp, data, out, curve
+
+
+def test_each_round_plans_executes_records_and_learns(practised):
+    _, _, out, curve = practised
+    assert [p["round"] for p in curve] == [0, 1]
+    for p in curve:  # two protocols x 2 values of k x 1 problem
+        assert p["problems"] == 4 and p["seed"] == TINY.seed + p["round"]
+        assert p["steps"]["steps"] == p["transitions"] > 0
+    # the transitions are the executed steps of the rows, in the dataset format
+    rows = [json.loads(line) for line in (out / "round-0" / "eval" / "rows.jsonl").read_text().splitlines()]
+    data = load_transitions(out / "round-0" / "data")
+    assert len(data) == sum(r["executed_actions"] for r in rows) == curve[0]["transitions"]
+    first = next(r for r in rows if r["transitions"])
+    t = first["transitions"][0]
+    assert np.allclose(data.X[0, :len(t["X"])], t["X"], atol=1e-5) and list(data.action[0]) == t["action"]
+    assert [p["class"] for p in first["predictions"]] and first["predictions"][0]["miss_m"] >= 0
+    # round 1 plans with an ensemble trained on the random data and round 0's practice
+    model = load_dynamics(out / "round-1" / "models" / "dynamics.pt")
+    assert isinstance(model, EffectEnsemble) and len(model) == 2
+    assert (out / "round-1" / "models" / "domain").is_dir() and (out / "models").resolve() == \
+        (out / "round-1" / "models").resolve()
+    assert "| 1 | 4 |" in (out / "curve.md").read_text()
+
+
+def test_a_rerun_resumes_and_other_settings_are_refused(practised):
+    _, data, out, curve = practised
+    stamp = (out / "round-1" / "models" / "dynamics.pt").stat().st_mtime_ns
+    again = practise(pretrained_dir(), [data], out, TINY, progress=False)
+    assert [p["transitions"] for p in again] == [p["transitions"] for p in curve]
+    assert (out / "round-1" / "models" / "dynamics.pt").stat().st_mtime_ns == stamp  # nothing trained again
+    with pytest.raises(UserError, match="other config"):
+        practise(pretrained_dir(), [data], out, PracticeConfig(**{**TINY.__dict__, "extra_share": 0.3}),
+                 progress=False)
+
+
+def test_practice_flags_are_checked(tmp_path, capsys):
+    assert main(["practice", "--data", str(tmp_path), "--out", str(tmp_path / "o"), "--extra-share", "0"]) == 2
+    assert "--extra-share" in capsys.readouterr().err
+    assert main(["practice", "--data", str(tmp_path / "none"), "--out", str(tmp_path / "o")]) == 2
+    assert not (tmp_path / "o").exists()
