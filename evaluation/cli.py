@@ -6,18 +6,18 @@ import sys
 from pathlib import Path
 
 from evaluation.methods import SYMBOLIC_BACKENDS
-from tamp.app.args import check_output_dir, check_output_file, models_directory, non_negative_int, positive_int
+from tamp.app.args import (
+    check_output_dir,
+    check_output_file,
+    int_list,
+    models_directory,
+    non_negative_int,
+    positive_int,
+)
 from tamp.app.parallel import add_arguments as add_parallel_arguments
 from tamp.app.planner_flags import add_planner_arguments
 from tamp.app.problem import PROTOCOLS
 from tamp.errors import UserError
-
-
-def _int_list(text: str) -> tuple[int, ...]:
-    try:
-        return tuple(int(v) for v in text.split(","))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected integers like 1,2,3, got {text!r}") from None
 
 
 def _name_list(text: str) -> list[str]:
@@ -208,8 +208,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "give the same file, byte for byte, for any number of workers.",
     )
     p.add_argument("--out", type=Path, required=True, help="problem set file to write (JSONL)")
-    p.add_argument("--objects", type=_int_list, default=(2, 3, 4), help="object counts (default 2,3,4)")
-    p.add_argument("--actions", type=_int_list, default=(1, 2, 3, 4, 5),
+    p.add_argument("--objects", type=int_list, default=(2, 3, 4), help="object counts (default 2,3,4)")
+    p.add_argument("--actions", type=int_list, default=(1, 2, 3, 4, 5),
                    help="numbers k of random actions per goal (default 1,2,3,4,5)")
     p.add_argument("--per-cell", type=positive_int, default=10, help="problems per (objects, k) (default 10)")
     p.add_argument("--seed", type=non_negative_int, default=0, help="seed of the set (default 0); run j uses seed + j")

@@ -315,8 +315,7 @@ def cmd_practice(args: argparse.Namespace) -> int:
 
 def add_practice(sub) -> None:
     """`tamp practice`."""
-    from evaluation.cli import _int_list as int_list
-    from tamp.app.args import fraction, models_directory, non_negative_int, positive_int
+    from tamp.app.args import fraction, int_list, models_directory, non_negative_int, positive_int
 
     p = sub.add_parser(
         "practice",

@@ -7,7 +7,8 @@ the rest from the random data's, so that a few hundred planned steps weigh in be
 All members are validated on the same split (both sources' validation splits). Then the member's spread
 head is fitted (`learned.spread`). Members start from `init`'s weights when given (an ensemble file gives
 member m its own member m mod M; a single model gives all members its weights: the resamples and the
-seeds make them differ).
+seeds make them differ), and keep its object limit when it is larger than the data's (a limit raised on
+evidence, as the bundled models' was: tamp/pretrained/PROVENANCE.md).
 
 Files: member m's checkpoints are ``<out>.member-m.pt`` (and its ``.last.pt``: a stopped run resumes
 where each member was), the ensemble ``<out>`` (`learned.ensemble`) once all members are done.
@@ -129,6 +130,11 @@ def _train_member(task: tuple) -> dict[str, Any]:
                          init=_member_init(init, Path(out_path), m))
     if not result.finished:
         return {"member": m, "finished": False}
+    start = _member_init(init, Path(out_path), m)
+    if start is not None:  # the object limit of the model it started from, if larger (raised on evidence)
+        limit = member_models(start)[0].config.n_max
+        if limit > result.model.config.n_max:
+            result.model.config = dataclasses.replace(result.model.config, n_max=limit)
     figures = fit_spread(result.model, sample, val, ensemble.spread)
     out = {"val_err_cm": result.best_val_cm, "best_epoch": result.best_epoch, "epochs": result.epochs_reached,
            "stop_reason": result.stop_reason.value, **figures}

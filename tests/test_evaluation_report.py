@@ -74,6 +74,9 @@ def make_rows(methods=METHODS, per_cell=4, seed=3):
                     for step in r["steps"] or []:
                         if step["operator"] is None:
                             step["match"] = None
+                    r["predictions"] = [{"class": rng.choice(["cube on a cube", "bar beside a cube"]),
+                                         "miss_m": rng.uniform(0.0, 0.08), "bound_m": rng.uniform(0.01, 0.05),
+                                         "epistemic_m": 0.005, "aleatoric_m": 0.01} for _ in range(ran)]
     for r in rows:
         if r["level1_stages_s"]:
             r["level1_time_s"] = sum(r["level1_stages_s"].values())
@@ -556,6 +559,21 @@ def test_the_failure_causes_are_recomputed_from_rows(full_report):
         assert int(line["failed"]) == len(failed)
         for cause in ("no_symbolic_plan", "execution", "small_errors"):
             assert int(line[f"`{cause}`"]) == failed.count(cause), (line, cause)
+
+
+def test_the_dynamics_models_misses_and_calibration_are_recomputed_from_rows(full_report):
+    """Section 16: per method and n, executed steps, the shares that missed by 2 and 5 cm or more and beyond
+    the model's 95 % bound; per action class the same over every method."""
+    _, data, s = full_report
+    methods, classes = s["16"]["tables"]
+    rows = [r for r in data.rows if r["outcome"] != "error"]
+    for line in methods:
+        mine = [p for r in rows if r["method"] == line["method"].strip("`") and
+                (line["n"] == "all" or r["n"] == int(line["n"])) for p in r["predictions"]]
+        assert int(line["steps"]) == len(mine)
+        close(line[">= 2 cm (%)"], 100 * np.mean([p["miss_m"] >= 0.02 for p in mine]), 1)
+        close(line["beyond the 95 % bound (%)"], 100 * np.mean([p["miss_m"] > p["bound_m"] for p in mine]), 1)
+    assert {line["action"] for line in classes} == {"cube on a cube", "bar beside a cube"}
 
 
 def test_figures_and_json(full_report):

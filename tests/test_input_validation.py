@@ -281,6 +281,7 @@ def test_damaged_operators_file_is_named(tmp_path, capsys, text, message):
     _one_line_error(capsys, str(models / "domain" / "operators.json"), message)
 
 
+@pytest.mark.sim  # `tamp plan` checks kinematics: it builds the simulator
 def test_a_gzipped_operators_file_is_read_and_a_damaged_one_is_named(tmp_path, capsys):
     """Bundled domains ship operators.json.gz: the same operators as the plain file; a damaged one is a
     one-line error naming it."""

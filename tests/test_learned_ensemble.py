@@ -92,11 +92,12 @@ def test_members_draw_their_share_of_the_extra_data_and_differ():
 
 def test_members_warm_start_from_a_model_without_a_spread_head_and_resume(tmp_path):
     data = generate(300, seed=0)
-    single = train_model(data, ModelConfig(**SMALL), TrainConfig(epochs=1), progress=False).model
+    single = train_model(data, ModelConfig(**SMALL, n_max=6), TrainConfig(epochs=1), progress=False).model
     save_checkpoint(tmp_path / "init.pt", single)
     kwargs = dict(train=TrainConfig(epochs=2, batch_size=64), ensemble=EnsembleConfig(members=2), progress=False)
     train_ensemble(data, tmp_path / "dyn.pt", init=tmp_path / "init.pt", **kwargs)
     first = load_dynamics(tmp_path / "dyn.pt")
+    assert first.config.n_max == 6  # the limit of the model it started from, not the data's 4
     stamp = member_path(tmp_path / "dyn.pt", 0).stat().st_mtime_ns
     train_ensemble(data, tmp_path / "dyn.pt", init=tmp_path / "init.pt", **kwargs)  # members done: kept
     assert member_path(tmp_path / "dyn.pt", 0).stat().st_mtime_ns == stamp

@@ -26,6 +26,14 @@ def positive_int(text: str) -> int:
     return _number(text, int, lambda v: v >= 1, "a positive integer")
 
 
+def int_list(text: str) -> tuple[int, ...]:
+    """argparse type: comma-separated integers, e.g. 2,3,4."""
+    try:
+        return tuple(int(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected integers like 1,2,3, got {text!r}") from None
+
+
 def object_count(text: str) -> int:
     """argparse type: a number of objects >= 2 (a block and an object to place it on)."""
     return _number(text, int, lambda v: v >= 2, "an integer >= 2")
