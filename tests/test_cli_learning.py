@@ -184,3 +184,26 @@ def test_train_on_two_datasets_then_fine_tune_on_more_blocks(tiny_dataset, tmp_p
                  "--out", str(tmp_path / "x.pt"), *base]) == 2
     err = capsys.readouterr().err
     assert "small.pt" in err and "activation 'sigmoid' (its 'gumbel_sigmoid')" in err and "Traceback" not in err
+
+
+def test_train_an_ensemble_with_practice_data_then_plan_with_it(tiny_dataset, tmp_path, capsys):
+    """`tamp train --ensemble`: members with spread heads in one file, which a models directory takes as its
+    Dynamics Model; the ensemble's own flags are refused without it."""
+    from learned.ensemble import EffectEnsemble, load_dynamics
+    from learned.synthetic import write_synthetic_dataset
+
+    practice = write_synthetic_dataset(tmp_path / "practice", 60, seed=7)
+    out = tmp_path / "m" / "dynamics.pt"
+    base = ["--epochs", "1", "--batch-size", "64", "--precision", "float32"]
+    assert main(["train", "--data", str(tiny_dataset), "--extra-data", str(practice), "--ensemble", "2",
+                 "--out", str(out), *base]) == 0
+    printed = capsys.readouterr().out
+    assert "member 1:" in printed and "inside their 95 % ellipsoid" in printed and "ensemble of 2" in printed
+    model = load_dynamics(out)
+    assert isinstance(model, EffectEnsemble) and len(model) == 2 and model.config.spread
+    assert sorted(p.name for p in out.parent.iterdir()) == ["dynamics.pt"]  # the members' own files removed
+    for flags, said in ((["--extra-data", str(practice)], "give --ensemble too"),
+                        (["--ensemble", "2", "--bottleneck", "gumbel_sigmoid"], "Dynamics Model"),
+                        (["--ensemble", "2", "--extra-data", str(practice), "--extra-share", "0"], "--extra-share")):
+        assert main(["train", "--data", str(tiny_dataset), "--out", str(tmp_path / "x.pt"), *flags, *base]) == 2
+        assert said in capsys.readouterr().err
