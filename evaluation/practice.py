@@ -274,7 +274,8 @@ def write_curve(out: Path, curve: list[dict[str, Any]]) -> None:
     atomic_write_text(out / CURVE_JSON, json.dumps(curve, indent=2) + "\n")
     ns = sorted({n for p in curve for n in p["success_by_n"]}, key=int)
     header = ["round", "problems", "success (%)", *[f"n = {n} (%)" for n in ns], "steps", ">= 2 cm (%)",
-              ">= 5 cm (%)", "beyond bound (%)", "transitions", "train (min)", "practice (min)"]
+              ">= 5 cm (%)", "beyond bound (%)", "median miss / bound (cm)", "transitions", "train (min)",
+              "practice (min)"]
     lines = ["# Practice: the learning curve", "",
              "Each round's models measured on that round's own problems, which no model before it learned from "
              "(`tamp practice`; round 0: the given models).", "",
@@ -283,12 +284,16 @@ def write_curve(out: Path, curve: list[dict[str, Any]]) -> None:
     def pct(x: float | None) -> str:
         return "—" if x is None else f"{x:.1f}"
 
+    def cm(metres: float | None) -> str:
+        return "—" if metres is None else f"{100 * metres:.1f}"
+
     for p in curve:
         s = p["steps"]
         cells = [str(p["round"]), str(p["problems"]), pct(p["success_pct"]),
                  *[pct(p["success_by_n"].get(n)) for n in ns], str(s.get("steps", 0)),
                  pct(s.get("miss_ge_2cm_pct")), pct(s.get("miss_ge_5cm_pct")), pct(s.get("exceeded_pct")),
-                 str(p["transitions"]), f"{p['wall_s'].get('train_s', 0.0) / 60:.1f}",
+                 f"{cm(s.get('median_miss_m'))} / {cm(s.get('median_bound_m'))}", str(p["transitions"]),
+                 f"{p['wall_s'].get('train_s', 0.0) / 60:.1f}",
                  f"{(p['wall_s'].get('practice_s', 0.0) + p['wall_s'].get('problems_s', 0.0)) / 60:.1f}"]
         lines.append("| " + " | ".join(cells) + " |")
     atomic_write_text(out / CURVE_MD, "\n".join(lines) + "\n")
