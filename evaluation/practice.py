@@ -5,7 +5,8 @@ the actions the model is optimistic about. Practice closes that loop, round afte
 
     round r:  problems of its own (seed PRACTICE_SEED + r, never a user's evaluation seed)
               -> the closed loop plans them with round r's models and executes them in the world
-              -> every executed transition (X, a, X') written as a dataset (the format `tamp collect` writes)
+              -> every executed transition (X, a, X') written as a dataset (the format `tamp collect` writes),
+                 and from every state it visited, other actions the planner would consider run beside the plan
               -> an ensemble Dynamics Model trained on the random data and every round's practice so far
                  (`learned.ensemble_train`: a share of each member's resample is practice), warm-started
                  from round r's, becomes round r + 1's
@@ -20,6 +21,7 @@ Layout of OUT:
     OUT/round-R/problems.jsonl   the round's problems (strict and paper protocol, names prefixed)
     OUT/round-R/eval/            `tamp evaluate` rows of the round's models on them
     OUT/round-R/data/            the round's executed transitions
+    OUT/round-R/explore/         steps beside the plans from the states the round visited (`evaluation.explore`)
     OUT/round-R/models/          the round's models (round 0: a copy-free reference to --models)
     OUT/curve.json, curve.md     the learning curve, rewritten after every round
     OUT/models/                  the last round's models (`tamp plan --models OUT/models`)
@@ -58,8 +60,11 @@ class PracticeConfig:
     seed: int = PRACTICE_SEED
     method: str = "bilevel_loop"  # the closed loop that does not know k: the product's planner
     fidelity: str = "fast"  # the world the plans are executed in ("full": the arm under physics)
+    # goal-oriented actions run beside the plan from every visited state (`evaluation.explore`; 0: none): the
+    # executed steps alone are too few to learn from (a model fitted to them misses the next round's as before)
+    explore: int = 16
     members: int = 5  # ensemble members (`learned.ensemble_train.EnsembleConfig`)
-    extra_share: float = 0.1  # share of each member's resample drawn from the practice data
+    extra_share: float = 0.2  # share of each member's resample drawn from the practice data
     epochs: int = 300  # per member, at most (warm start: early stopping ends it far sooner)
     patience: int = 20  # epochs without a better validation error before a member stops
     lr: float = 4e-4  # half the from-scratch rate of batch 1024: a fine-tune
@@ -67,6 +72,8 @@ class PracticeConfig:
     backend: str = "local"  # "local" process pool or "ray" (the evaluation)
 
     def __post_init__(self) -> None:
+        if isinstance(self.explore, bool) or not isinstance(self.explore, int) or self.explore < 0:
+            raise UserError(f"--explore must be a whole number of actions, 0 or more, got {self.explore!r}")
         for name in ("rounds", "per_cell", "members", "epochs", "patience", "workers"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
@@ -229,7 +236,7 @@ def practise(models: Path, data: list[Path], out: Path, config: PracticeConfig =
         timings: dict[str, float] = {}
         if r > 0:
             t = time.perf_counter()
-            practice = [d for d in (round_dir(out, q) / "data" for q in range(r))
+            practice = [d for q in range(r) for d in (round_dir(out, q) / "data", round_dir(out, q) / "explore")
                         if (d / ".complete").is_file() and any(d.glob("shard-*.npz"))]
             current = train_round_models(models, current, data, practice, rd / "models", config, progress)
             timings["train_s"] = time.perf_counter() - t
@@ -242,8 +249,16 @@ def practise(models: Path, data: list[Path], out: Path, config: PracticeConfig =
         rows = evaluate(current, problems, rd / "eval", [config.method], eval_config)
         timings["practice_s"] = time.perf_counter() - t
         transitions = write_transitions(rows, rd / "data", config.seed + r)
+        explored = 0
+        if config.explore and r < config.rounds:  # the last round only measures: nothing trains on its steps
+            from evaluation.explore import explore
+
+            t = time.perf_counter()
+            explored = explore(rows, problems, rd / "explore", config.explore, config.seed + r, config.workers,
+                               config.backend, progress)
+            timings["explore_s"] = time.perf_counter() - t
         point = {"round": r, "models": str(current), "seed": config.seed + r, "transitions": transitions,
-                 **round_figures(rows), "wall_s": timings}
+                 "explored": explored, **round_figures(rows), "wall_s": timings}
         previous = next((p for p in state.get("rounds", []) if p["round"] == r), None)
         if previous is not None:  # a resumed round keeps the wall times of the run that did the work
             point["wall_s"] = {k: max(v, previous.get("wall_s", {}).get(k, 0.0)) for k, v in timings.items()}
@@ -266,7 +281,7 @@ def format_point(p: dict[str, Any]) -> str:
         f"{s['steps']} steps, {s['miss_ge_2cm_pct']:.1f} % >= 2 cm, {s['miss_ge_5cm_pct']:.1f} % >= 5 cm"
         + ("" if s.get("exceeded_pct") is None else f", {s['exceeded_pct']:.1f} % beyond the 95 % bound"))
     return (f"round {p['round']}: success {p['success_pct']:.1f} % of {p['problems']}; {miss}; "
-            f"{p['transitions']} transitions")
+            f"{p['transitions']} transitions, {p.get('explored', 0)} beside the plans")
 
 
 def write_curve(out: Path, curve: list[dict[str, Any]]) -> None:
@@ -274,8 +289,8 @@ def write_curve(out: Path, curve: list[dict[str, Any]]) -> None:
     atomic_write_text(out / CURVE_JSON, json.dumps(curve, indent=2) + "\n")
     ns = sorted({n for p in curve for n in p["success_by_n"]}, key=int)
     header = ["round", "problems", "success (%)", *[f"n = {n} (%)" for n in ns], "steps", ">= 2 cm (%)",
-              ">= 5 cm (%)", "beyond bound (%)", "median miss / bound (cm)", "transitions", "train (min)",
-              "practice (min)"]
+              ">= 5 cm (%)", "beyond bound (%)", "median miss / bound (cm)", "transitions (executed + beside)",
+              "train (min)", "practice (min)"]
     lines = ["# Practice: the learning curve", "",
              "Each round's models measured on that round's own problems, which no model before it learned from "
              "(`tamp practice`; round 0: the given models).", "",
@@ -292,9 +307,9 @@ def write_curve(out: Path, curve: list[dict[str, Any]]) -> None:
         cells = [str(p["round"]), str(p["problems"]), pct(p["success_pct"]),
                  *[pct(p["success_by_n"].get(n)) for n in ns], str(s.get("steps", 0)),
                  pct(s.get("miss_ge_2cm_pct")), pct(s.get("miss_ge_5cm_pct")), pct(s.get("exceeded_pct")),
-                 f"{cm(s.get('median_miss_m'))} / {cm(s.get('median_bound_m'))}", str(p["transitions"]),
-                 f"{p['wall_s'].get('train_s', 0.0) / 60:.1f}",
-                 f"{(p['wall_s'].get('practice_s', 0.0) + p['wall_s'].get('problems_s', 0.0)) / 60:.1f}"]
+                 f"{cm(s.get('median_miss_m'))} / {cm(s.get('median_bound_m'))}",
+                 f"{p['transitions']} + {p.get('explored', 0)}", f"{p['wall_s'].get('train_s', 0.0) / 60:.1f}",
+                 f"{sum(p['wall_s'].get(k, 0.0) for k in ('practice_s', 'problems_s', 'explore_s')) / 60:.1f}"]
         lines.append("| " + " | ".join(cells) + " |")
     atomic_write_text(out / CURVE_MD, "\n".join(lines) + "\n")
 
@@ -306,7 +321,7 @@ def cmd_practice(args: argparse.Namespace) -> int:
 
     check_output_dir(args.out, "--out")
     config = PracticeConfig(rounds=args.rounds, per_cell=args.per_cell, objects=tuple(args.objects),
-                            seed=args.seed, fidelity=args.fidelity, members=args.members,
+                            seed=args.seed, fidelity=args.fidelity, explore=args.explore, members=args.members,
                             extra_share=args.extra_share, workers=args.workers, backend=args.backend)
     from tamp.planning.models import pretrained_dir
 
@@ -350,6 +365,9 @@ def add_practice(sub) -> None:
                    "one evaluates on)")
     p.add_argument("--fidelity", choices=("fast", "full"), default="fast",
                    help="the world plans are executed in: fast (default) or full (the arm under physics)")
+    p.add_argument("--explore", type=non_negative_int, default=PracticeConfig.explore, metavar="ACTIONS",
+                   help="from every state a round visited, run up to this many other goal-oriented actions beside the "
+                   f"plan and learn from them too (default {PracticeConfig.explore}; 0: the executed steps alone)")
     p.add_argument("--members", type=positive_int, default=PracticeConfig.members,
                    help=f"ensemble members of the Dynamics Model (default {PracticeConfig.members})")
     p.add_argument("--extra-share", type=fraction, default=PracticeConfig.extra_share,

@@ -286,7 +286,7 @@ def _transitions(states: Sequence[np.ndarray], actions, infos) -> list[dict]:
         out.append({"X": np.round(np.asarray(states[k], dtype=float), 5).tolist(),
                     "action": [int(v) for v in action],
                     "X_next": np.round(np.asarray(states[k + 1], dtype=float), 5).tolist(),
-                    "grasped": -1 if info is None else int(info.grasped),
+                    "grasped": -1 if info is None or not info.changed else int(info.grasped),  # as `tamp collect`
                     "status": "ok" if info is None else str(info.status.value)})
     return out
 

@@ -66,7 +66,16 @@ def member_path(out_path: str | Path, m: int) -> Path:
 
 
 def _load(source) -> Transitions:
-    return source if isinstance(source, Transitions) else load_transitions(source)
+    """The transitions of one dataset directory or of several, concatenated. Unlike `load_transitions`, several
+    directories need not share their world settings: the robot's own steps (`tamp practice`) run in the world
+    that executes plans, whose arm paths are simplified, beside data collected in the collection's world."""
+    if isinstance(source, Transitions):
+        return source
+    if isinstance(source, (str, Path)):
+        return load_transitions(source)
+    parts = [load_transitions(d) for d in source]
+    n_max = max(p.n_max for p in parts)
+    return Transitions.concatenate([p.padded(n_max) for p in parts])
 
 
 def _splits(data: Transitions, extra: Transitions | None, train: TrainConfig

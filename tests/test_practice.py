@@ -40,6 +40,10 @@ def test_each_round_plans_executes_records_and_learns(practised):
     t = first["transitions"][0]
     assert np.allclose(data.X[0, :len(t["X"])], t["X"], atol=1e-5) and list(data.action[0]) == t["action"]
     assert [p["class"] for p in first["predictions"]] and first["predictions"][0]["miss_m"] >= 0
+    # beside the plans: from round 0's visited states, other goal-oriented actions, in the collection's format
+    beside = load_transitions(out / "round-0" / "explore")
+    assert len(beside) == curve[0]["explored"] > curve[0]["transitions"] and curve[1]["explored"] == 0
+    assert beside.meta["collection"]["per_state"] == TINY.explore
     # round 1 plans with an ensemble trained on the random data and round 0's practice
     model = load_dynamics(out / "round-1" / "models" / "dynamics.pt")
     assert isinstance(model, EffectEnsemble) and len(model) == 2
