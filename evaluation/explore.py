@@ -46,7 +46,7 @@ def beside_actions(X: np.ndarray, X_goal: np.ndarray, taken: Sequence[int], per_
 
 def state_tasks(rows: Sequence[dict], goals: dict[str, np.ndarray], per_state: int, seed: int) -> list[StateTask]:
     """One task per executed transition of the rows (its state before), with its problem's goal."""
-    tasks = []
+    tasks: list[StateTask] = []
     for p, row in enumerate(sorted(rows, key=lambda r: r["problem"])):
         for k, t in enumerate(row.get("transitions") or []):
             X = np.asarray(t["X"], dtype=float)
@@ -107,7 +107,7 @@ def explore(rows_path: Path, problems_path: Path, directory: Path, per_state: in
         return len(load_transitions(directory)) if any(directory.glob("shard-*.npz")) else 0
     if directory.exists():
         shutil.rmtree(directory)
-    goals = {p.name: p.X_goal for p in read_problem_set(problems_path)}
+    goals = {str(p.name): p.X_goal for p in read_problem_set(problems_path)}
     tasks = state_tasks(read_rows(rows_path), goals, per_state, seed)
     results: dict[int, list[dict[str, Any]]] = {}
     with tqdm(total=len(tasks), desc="explore", unit="state", disable=not progress) as bar:
