@@ -219,13 +219,12 @@ def practise(models: Path, data: list[Path], out: Path, config: PracticeConfig =
     """Run `config.rounds` practice rounds and one more that measures the last models (module docstring);
     returns the learning curve, one record per round."""
     from evaluation.run import EvalConfig, evaluate
+    from learned import read_meta
     from tamp.planning.models import load_models
 
     models, out = Path(models), Path(out)
     load_models(models)  # every input checked before anything is written
     for d in data:
-        from learned import read_meta
-
         read_meta(d)
     state = _prepare(out, models, data, config)
     curve: list[dict[str, Any]] = []

@@ -100,9 +100,6 @@ class EffectEnsemble:
     def __len__(self) -> int:
         return len(self.members)
 
-    def eval(self) -> "EffectEnsemble":
-        return self
-
     def distribution(self, Xs: np.ndarray, actions) -> EffectDistribution:
         """Each member's displacement and variance (M, B, n, 3) for B scenes Xs (B, n, 5), one action each."""
         parts = [m.predict_gaussian(Xs, actions) for m in self.members]

@@ -135,11 +135,11 @@ def _train_member(task: tuple) -> dict[str, Any]:
     data_tr, extra_tr, val = _splits(_load(data), None if extra is None else _load(extra), train)
     sample = resample(data_tr, extra_tr, m, train.seed, ensemble.extra_share)
     member_train = dataclasses.replace(train, seed=train.seed + m)
+    start = _member_init(init, Path(out_path), m)
     result = train_model(sample, config, member_train, path, val_data=val, resume=True, progress=progress,
-                         init=_member_init(init, Path(out_path), m))
+                         init=start)
     if not result.finished:
         return {"member": m, "finished": False}
-    start = _member_init(init, Path(out_path), m)
     if start is not None:  # the object limit of the model it started from, if larger (raised on evidence)
         limit = member_models(start)[0].config.n_max
         if limit > result.model.config.n_max:
@@ -166,6 +166,8 @@ def train_ensemble(data: DataSource, out_path: str | Path, *, extra: DataSource 
     parallel = ensemble.workers > 1 and ensemble.members > 1
     if parallel and (isinstance(data, Transitions) or isinstance(extra, Transitions)):
         raise ValueError("parallel members read their data from disk: give dataset directories, not Transitions")
+    if not parallel:  # one process: the data is read once for every member
+        data, extra = _load(data), None if extra is None else _load(extra)
     tasks = [(data, extra, config, train, ensemble, init, out_path, m, progress and not parallel)
              for m in range(ensemble.members)]
     if parallel:
