@@ -231,8 +231,8 @@ def test_bilevel_alg1_never_returns_an_alternative_or_a_forced_nonempty_plan(dom
     # its Level 2 is the paper's search: the paper's pruning rule, the first goal state returned
     import tamp.planning.level2 as level2
     searched = []
-    monkeypatch.setattr(level2, "continuous_search", lambda model, x, g, config, *rest:
-                        searched.append(config) or continuous_search(model, x, g, config, *rest))
+    monkeypatch.setattr(level2, "continuous_search", lambda model, x, g, config, *rest, **kw:
+                        searched.append(config) or continuous_search(model, x, g, config, *rest, **kw))
     plan("bilevel_alg1", models(shift), X, goal, with_level1(n_domains=20))
     assert searched and all(not c.release_targets and c.look_on == 0 for c in searched)
     assert alg1_shift.level == 2  # Level 1's plan was not cut or kept: alg1's rules are the paper's

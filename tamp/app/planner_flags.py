@@ -98,7 +98,7 @@ def add_planner_arguments(p: argparse.ArgumentParser, backends: tuple[str, ...] 
                    "at its goal)")
     p.add_argument("--max-expansions", type=positive_int, default=default.search.max_expansions,
                    help="continuous search node limit per planning call: it decides when the search gives up, "
-                   f"whatever the machine's load (default {default.search.max_expansions}, about 10 s at 4 objects)")
+                   f"whatever the machine's load (default {default.search.max_expansions}, about 4 s at 4 objects)")
     p.add_argument("--confident", type=positive_float, default=default.search.confident, metavar="METRES",
                    help="the continuous search ends at a goal state whose every object is predicted within this "
                    f"distance of its goal (default {default.search.confident:g} m); a goal state within the success "
@@ -123,9 +123,15 @@ def add_planner_arguments(p: argparse.ArgumentParser, backends: tuple[str, ...] 
                    "a misplaced block goes onto the object closest to its goal or onto itself (default: also onto "
                    "the object with an offset release point closest to its goal, when that is another object; "
                    "`bilevel_alg1` always uses the paper's rule)")
-    p.add_argument("--time-limit", type=positive_float, default=default.search.time_limit,
-                   help="continuous search wall-clock limit per planning call, s: a safety net behind "
-                   f"--max-expansions (default {default.search.time_limit:g})")
+    p.add_argument("--time-limit", type=positive_float, default=default.search.time_limit, metavar="SECONDS",
+                   help="wall-clock bound on every planning call (each round of a closed loop is one): its continuous "
+                   "searches end and no further plan is refined once it has run this long, and the result says so "
+                   "(default: off, so that --max-expansions and --stall decide, whatever the machine's load)")
+    p.add_argument("--stall", type=positive_int, default=default.search.stall, metavar="EXPANSIONS",
+                   help="the continuous search ends after this many expansions without a state closer to the goal "
+                   f"(default {default.search.stall}; searches that find a plan plateau for fewer)")
+    p.add_argument("--no-stall", dest="stall", action="store_const", const=None,
+                   help="the continuous search runs to --max-expansions however long it stays on a plateau")
     if feasibility:
         p.add_argument("--no-feasibility", dest="feasibility", action="store_false",
                        help="cfs and bilevel without kinematics in the planning loop (no feasibility check of "
@@ -139,7 +145,7 @@ PLANNER_FLAGS: dict[str, dict[str, str]] = {
                "objects": "level1_objects", "serial": "level1_serial", "confident": "level1_confident",
                "cut": "level1_cut", "settle": "level1_settle"},
     "verify": {},
-    "search": {"max_expansions": "max_expansions", "time_limit": "time_limit", "confident": "confident",
+    "search": {"max_expansions": "max_expansions", "time_limit": "time_limit", "stall": "stall", "confident": "confident",
                "look_on": "look_on", "max_fragility": "max_fragility", "release_targets": "release_targets",
                "max_doubt": "max_doubt"},
     "kinematics": {"feasibility": "feasibility"},  # `tamp evaluate` sets it per method instead

@@ -111,6 +111,8 @@ def _no_plan(f: Failure) -> tuple[Cause, str]:
         return Cause.EMPTY_PLAN, "the planner returned no action while a block was off its goal" + after
     if f.search in ("node_limit", "time_limit"):
         return Cause.SEARCH_BUDGET, f"the continuous search reached its {f.search.replace('_', ' ')}{after}"
+    if f.search == "stalled":
+        return Cause.SEARCH_BUDGET, f"the continuous search stopped coming closer to the goal{after}"
     if f.search is None and f.loop is None:
         return Cause.NO_SYMBOLIC_PLAN, "no symbolic plan reaches the goal's symbols"
     if f.search == "refinement_budget" or f.rejected:

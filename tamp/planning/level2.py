@@ -22,7 +22,7 @@ def level2(models: Models, X_init, X_goal, cfg: PlanConfig, result: PlanResult,
     check = None if feas is None else feas.action
     while True:
         out = continuous_search(models.require_dynamics(), X_init, X_goal, search_cfg, check,
-                                frozenset() if feas is None else feas.pruned)
+                                frozenset() if feas is None else feas.pruned, started=result.started)
         if feas is not None:
             feas.rejected[2].update(out.rejected)
             if result.search is not None:  # a search again after a refinement failure: count all
@@ -30,6 +30,11 @@ def level2(models: Models, X_init, X_goal, cfg: PlanConfig, result: PlanResult,
                     setattr(out, name, getattr(out, name) + getattr(result.search, name))
         result.search = out
         if not out.solved or feas is None or not out.plan:
+            break
+        if out_of_time(cfg, result):
+            result.reasons.append(f"level 2: time limit ({cfg.search.time_limit:g} s) reached; the plan found was "
+                                  "not refined")
+            result.search.status, result.search.reason = SearchStatus.TIME_LIMIT, "time limit reached before refinement"
             break
         if feas.refinements_left <= 0:
             result.reasons.append(f"level 2: refinement budget ({cfg.kinematics.max_refinements}) used up; the plan "
@@ -52,4 +57,10 @@ def level2(models: Models, X_init, X_goal, cfg: PlanConfig, result: PlanResult,
     return result
 
 
-__all__: Sequence[str] = ["level2"]
+def out_of_time(cfg: PlanConfig, result: PlanResult) -> bool:
+    """Whether the planning call of `result` has run past cfg.search.time_limit (never, when it is None)."""
+    limit = cfg.search.time_limit
+    return limit is not None and time.perf_counter() - result.started > limit
+
+
+__all__: Sequence[str] = ["level2", "out_of_time"]

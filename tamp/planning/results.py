@@ -52,6 +52,7 @@ class PlanResult:
     #   anew, judged by the plan's own prediction ("on course") or by a rollout from the observed state ("rollout")
     widened: bool = False  # closed loop: the plan of a search over every action, after the planner found none
     toward: bool = False  # closed loop, widened: no plan reaches the goal; the path to the closest state found
+    started: float = field(default_factory=time.perf_counter)  # time.perf_counter() when the planning call began
 
     @property
     def solved(self) -> bool:

@@ -35,6 +35,12 @@ extension), a goal state whose plan has a step that may miss by more than `max_d
 Duplicate detection:
 positions rounded to a `resolution` grid; a state is pushed again only when reached with fewer
 actions. Limits: expansions, wall-clock time and plan depth; the result says which one ended it.
+
+Stagnation (our extension, `stall`): a search whose closest expanded state (least h) has not come
+closer to the goal for `stall` expansions ends, counted in expansions so that the cut never depends
+on the machine's load. Searches that find a plan seldom plateau for more than a few hundred
+expansions; searches that end without one stop improving early and spend most of their budget on a
+plateau (docs/benchmarks.md, the slow tail).
 """
 from __future__ import annotations
 
@@ -63,11 +69,16 @@ class SearchConfig:
     eps: float = EPS_SUCCESS  # metres: goal test, every object within eps (3-D)
     misplaced: float = EPS_SUCCESS  # metres: 2-D distance beyond which an object is misplaced
     resolution: float = 0.01  # metres: grid of the duplicate-detection key
-    # The node budget decides: about 10 s of search at n = 4 with kinematics on this machine (5-7 ms
-    # per expansion), so a result does not depend on the machine's load; the wall clock is a safety net.
+    # The node budget decides, so a result does not depend on the machine's load: about 4 s of search at
+    # n = 4 with kinematics on the 2-core development machine (2-3 ms per expansion)
     max_expansions: int = 1500
-    time_limit: float = 60.0  # seconds of wall-clock time (figures published before issue 26: 10 s, 5000 nodes)
+    # seconds of wall clock from the start of a planning call after which its searches end (a bound users set;
+    #   None: the node budget and the stall cut decide, so that results never depend on the machine's load)
+    time_limit: float | None = None
     max_depth: int = 10  # longest plan considered
+    # expansions without a state closer to the goal (least h) before the search ends: no tuning search that found
+    #   a plan plateaued longer than 624, failing ones plateau for over 1,000 (None: run to the node budget)
+    stall: int | None = 700
     confident: float = 0.035  # metres: a goal state predicted this close (worst object) ends the search
     look_on: int = 30  # expansions spent looking for a confident goal state after a less confident one
     batched: bool = True  # one predict_effect call per expansion (False: one per action, for the benchmark)
@@ -81,7 +92,10 @@ class SearchConfig:
     max_doubt: float | None = None
 
     def __post_init__(self) -> None:
-        if not self.time_limit > 0 or self.max_expansions < 1 or self.max_depth < 1:
+        if self.stall is not None and self.stall < 1:
+            raise UserError(f"the continuous search's stall must be a positive number of expansions (or None), "
+                            f"got {self.stall}")
+        if self.time_limit is not None and not self.time_limit > 0 or self.max_expansions < 1 or self.max_depth < 1:
             raise UserError(f"the continuous search needs a positive time limit, node limit and depth, got "
                             f"{self.time_limit} s, {self.max_expansions} nodes, depth {self.max_depth}")
         if self.max_fragility is not None and not 0 <= self.max_fragility < 1 or not self.noise > 0:
@@ -101,6 +115,7 @@ class SearchStatus(StrEnum):
     SOLVED = "solved"
     EXHAUSTED = "exhausted"  # every state within max_depth actions was expanded
     NODE_LIMIT = "node_limit"
+    STALLED = "stalled"  # no state closer to the goal for `stall` expansions
     TIME_LIMIT = "time_limit"
     REFINEMENT_BUDGET = "refinement_budget"  # its plans kept failing refinement (bilevel with kinematics)
 
@@ -193,15 +208,18 @@ def state_key(P: np.ndarray, resolution: float) -> bytes:
 
 def continuous_search(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarray,
                       config: SearchConfig = SearchConfig(), feasible: FeasibilityFn | None = None,
-                      pruned: AbstractSet[tuple[bytes, tuple]] = frozenset()) -> SearchResult:
+                      pruned: AbstractSet[tuple[bytes, tuple]] = frozenset(), started: float | None = None
+                      ) -> SearchResult:
     """Weighted A* from X_init to X_goal with the Dynamics Model as the transition.
 
     `feasible` (optional, e.g. the kinematic check of tamp.sim.feasibility) prunes successors whose action
     is infeasible in its parent's predicted state. It is called lazily, when a successor is expanded
     or reaches the goal, so only the edges the search actually follows are checked (a few per
     expansion instead of every generated successor). `pruned` holds (state_key(X), action) pairs left
-    out altogether (e.g. known to fail refinement)."""
+    out altogether (e.g. known to fail refinement). `config.time_limit` counts from `started`
+    (time.perf_counter() when the planning call began; default: now)."""
     t0 = time.perf_counter()
+    deadline = float("inf") if config.time_limit is None else (t0 if started is None else started) + config.time_limit
     X_init, X_goal = states_pair(X_init, X_goal)
     goal = X_goal[:, :3]
     types = X_init[:, 3:]
@@ -295,6 +313,7 @@ def continuous_search(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarr
 
     frontier = [(config.weight * d0.sum() / config.h_unit, d0.sum(), 0)]  # (f, h, node index)
     closest = (d0.sum() / config.h_unit, 0)  # (h, node index) of the expanded state closest to the goal
+    closer_at = 0  # expansions when the closest state last came closer
     n_objects = len(X_init)
     every = all_actions(n_objects)
     while frontier:
@@ -303,7 +322,10 @@ def continuous_search(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarr
         if out.expanded >= config.max_expansions:
             return stop(SearchStatus.NODE_LIMIT, f"node limit: {out.expanded} expansions without reaching the goal "
                           f"(closest predicted state {out.best_error * 100:.1f} cm from it)")
-        if time.perf_counter() - t0 > config.time_limit:
+        if config.stall is not None and out.expanded - closer_at >= config.stall:
+            return stop(SearchStatus.STALLED, f"stalled: no state closer to the goal in {config.stall} expansions "
+                          f"({out.expanded} in all; closest predicted state {out.best_error * 100:.1f} cm from it)")
+        if time.perf_counter() > deadline:
             return stop(SearchStatus.TIME_LIMIT, f"time limit: {config.time_limit:g} s ({out.expanded} expansions) "
                           f"without reaching the goal (closest predicted state {out.best_error * 100:.1f} cm from it)")
         _, h_here, index = heapq.heappop(frontier)
@@ -314,7 +336,8 @@ def continuous_search(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarr
             del best_g[key(P)]  # the state may still be reached by a feasible action
             continue
         out.expanded += 1
-        closest = min(closest, (h_here, index))
+        if h_here < closest[0]:
+            closest, closer_at = (h_here, index), out.expanded
         actions = goal_oriented_actions(full(P), X_goal, config.misplaced, config.eps,
                                         config.release_targets) if config.prune else every
         if len(actions) == 0:

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
@@ -29,15 +30,28 @@ from pydrake.math import RigidTransform
 from tamp.planning.structs import Infeasible, PickPlace, RefinementOutcome
 from tamp.sim.kinematics import Q_HOME, solve_chain
 from tamp.sim.refine import step_failure
-from tamp.sim.skill import Scene, approach_poses, carried_shapes, held_block, pick_place_waypoints
+from tamp.sim.skill import (Box, PickWaypoints, Scene, approach_poses, carried_shapes, held_block, pick_place_waypoints,
+                            pick_waypoints)
 from tamp.sim.structs import WorldConfig
 from tamp.sim.world import World
 
 # Collision set-up of each waypoint configuration, as `World.step` plans the motions through it.
 WITH_ALL_BLOCKS = ("pregrasp", "grasp")  # jaws open around the picked block
-CARRYING = ("liftoff", "lift", "preplace", "place")  # carried blocks attached to the gripper
+CARRYING = ("liftoff", "lift", "preplace", "place")  # carried blocks attached to the gripper (lift-off: the pick half)
 AFTER_RELEASE = ("retreat",)  # carried blocks released below the jaws: not obstacles
 REFINE_REASONS = {"ik": Infeasible.REFINE_IK, "motion": Infeasible.REFINE_MOTION, "grasp": Infeasible.REFINE_GRASP}
+
+
+_MAX_PICKS = 100_000  # remembered pick halves before the memo starts again (each a few kB)
+
+
+@dataclass(frozen=True)
+class _Pick:
+    """A feasible pick half: its waypoints, the arm at the lift-off, the carried blocks' boxes."""
+
+    waypoints: PickWaypoints
+    q_liftoff: np.ndarray
+    shapes: list[Box]
 
 
 class FeasibilityChecker:
@@ -60,6 +74,7 @@ class FeasibilityChecker:
         self.q = Q_HOME.copy()
         self.num_checks = 0
         self.check_time_s = 0.0
+        self._picks: dict[tuple[bytes, int, int], _Pick | Infeasible] = {}
 
     # --- the observed scene ----------------------------------------------------------------------
     def reset(self, X_init: np.ndarray) -> Scene:
@@ -69,12 +84,14 @@ class FeasibilityChecker:
         scene = self.world.scene
         assert scene is not None  # reset placed the blocks
         self.scene, self.q = scene, self.world.q.copy()
+        self._picks.clear()
         return scene
 
     def observe(self, scene: Scene, q: np.ndarray | None = None) -> None:
         """Plan from an exact simulator state (block poses with orientation, arm joints)."""
         self.scene = Scene(np.array(scene.types), list(scene.X_WB))
         self.q = Q_HOME.copy() if q is None else np.array(q, dtype=float)
+        self._picks.clear()
 
     def predicted_scene(self, X: np.ndarray) -> Scene:
         """Positions from X, orientations carried over from the observed scene."""
@@ -88,23 +105,61 @@ class FeasibilityChecker:
 
     # --- the cheap check ---------------------------------------------------------------------------
     def check(self, X: np.ndarray, actions) -> list[Infeasible | None]:
-        """Per action (B, 4) in the predicted scene X (n, 5): None if feasible, else the first reason."""
+        """Per action (B, 4) in the predicted scene X (n, 5): None if feasible, else the first reason.
+
+        The pick half of a check (`_pick`) is remembered per (X, pick, grasp offset) until the next
+        `reset`/`observe`: the search checks the successors of one state one at a time, up to nine of
+        them with the same grasp, and most rejections are the grasp's (nothing held, the jaws or the
+        lifted block hitting a neighbour)."""
         t0 = time.perf_counter()
+        X = np.asarray(X, dtype=float)
         scene = self.predicted_scene(X)
-        out = [self.check_scene(scene, PickPlace(*(int(v) for v in a))) for a in np.asarray(actions).reshape(-1, 4)]
+        state = X[:, :3].tobytes()
+        out = [self.check_scene(scene, PickPlace(*(int(v) for v in a)), state)
+               for a in np.asarray(actions).reshape(-1, 4)]
         self.num_checks += len(out)
         self.check_time_s += time.perf_counter() - t0
         return out
 
-    def check_scene(self, scene: Scene, action: PickPlace) -> Infeasible | None:
-        """The check of one action in an exact scene (cheapest stage first)."""
+    def check_scene(self, scene: Scene, action: PickPlace, state: bytes | None = None) -> Infeasible | None:
+        """The check of one action in an exact scene, pick half first (`state`: a key of the scene, to
+        remember the pick half under)."""
+        pick = self._pick(scene, action, state)
+        if isinstance(pick, Infeasible):
+            return pick
+        wp = pick_place_waypoints(scene, action, action.pick, self.config, pick.waypoints)
+        qs, failed = solve_chain(wp.named()[3:], pick.q_liftoff)
+        if failed is not None:
+            return Infeasible.IK
+        planner = self.world.motion_planner(scene.types)
+        planner.set_block_poses(scene.X_WB, parked=tuple(wp.carried))
+        # The carried blocks attached for the carrying waypoints (a no-op when the pick half just did).
+        planner.attach(pick.shapes)
+        if not all(planner.is_valid(qs[name]) for name in CARRYING[1:]):
+            return Infeasible.COLLISION
+        planner.detach()
+        return None if all(planner.is_valid(qs[name]) for name in AFTER_RELEASE) else Infeasible.COLLISION
+
+    def _pick(self, scene: Scene, action: PickPlace, state: bytes | None) -> _Pick | Infeasible:
+        """The pick half of the check (grasp contact, IK up to the lift-off, its collisions), remembered
+        under (state, pick, grasp offset) when `state` is given."""
+        key = None if state is None else (state, action.pick, action.grasp_offset)
+        if key in self._picks:
+            return self._picks[key]
+        if len(self._picks) >= _MAX_PICKS:
+            self._picks.clear()
+        pick = self._check_pick(scene, action)
+        if key is not None:
+            self._picks[key] = pick
+        return pick
+
+    def _check_pick(self, scene: Scene, action: PickPlace) -> _Pick | Infeasible:
         cfg = self.config
         approach = approach_poses(scene, action, cfg)
         if held_block(scene, dict(approach)["grasp"]) != action.pick:
             return Infeasible.NO_GRASP
-        wp = pick_place_waypoints(scene, action, action.pick, cfg)
-        named = wp.named()
-        qs, failed = solve_chain(named, Q_HOME)
+        wp = pick_waypoints(scene, action, action.pick, cfg)
+        qs, failed = solve_chain(wp.named(), Q_HOME)
         if failed is not None:
             return Infeasible.IK
         planner = self.world.motion_planner(scene.types)
@@ -112,16 +167,15 @@ class FeasibilityChecker:
         planner.set_block_poses(scene.X_WB)
         if not all(planner.is_valid(qs[name]) for name in WITH_ALL_BLOCKS):
             return Infeasible.COLLISION
+        # From the lift-off on, the carried blocks are attached to the gripper and parked out of the scene.
+        # Attaching costs about half a millisecond, building a checker per grasp ~150 ms (and predicted grasps
+        # rarely repeat).
+        shapes = carried_shapes(scene, wp, cfg)
         planner.set_block_poses(scene.X_WB, parked=tuple(wp.carried))
-        if not all(planner.is_valid(qs[name]) for name in AFTER_RELEASE):
+        planner.attach(shapes)
+        if not planner.is_valid(qs["liftoff"]):
             return Infeasible.COLLISION
-        # The carried blocks attached to the gripper for the carrying waypoints: attaching costs about
-        # half a millisecond, building a checker per grasp ~150 ms (and predicted grasps rarely repeat).
-        planner.attach(carried_shapes(scene, wp, cfg))
-        try:
-            return None if all(planner.is_valid(qs[name]) for name in CARRYING) else Infeasible.COLLISION
-        finally:
-            planner.detach()
+        return _Pick(wp, qs["liftoff"], shapes)
 
     # --- full refinement ---------------------------------------------------------------------------
     def refine(self, actions: Sequence[Sequence[int]], trajectory: np.ndarray | None = None) -> RefinementOutcome:

@@ -61,6 +61,7 @@ class MotionPlanner:
             self._set_block(i, _PARKED)
         self._joint_step = joint_step
         self.num_checks = 0
+        self._attached: tuple | None = None  # key of the boxes attached to the gripper (None: unknown)
 
         self._space = ob.RealVectorStateSpace(6)
         bounds = ob.RealVectorBounds(6)
@@ -88,15 +89,22 @@ class MotionPlanner:
                 self._set_block(i, np.r_[X_WBi.rotation().ToQuaternion().wxyz(), X_WBi.translation()])
 
     def attach(self, shapes: list[tuple[tuple[float, float, float], RigidTransform]]) -> None:
-        """Attach boxes (size, pose in the gripper body frame) to the gripper."""
+        """Attach boxes (size, pose in the gripper body frame) to the gripper; nothing is done when
+        exactly these boxes are attached already (adding a shape costs about half a millisecond)."""
+        key = tuple((tuple(size), X_GB.GetAsMatrix34().tobytes()) for size, X_GB in shapes)
+        if key == self._attached:
+            return
         self.detach()
         for size, X_GB in shapes:
             self.scene.checker.AddCollisionShapeToBody(
                 _CARRIED_GROUP, self.scene.gripper_body, Box(*size), X_GB
             )
+        self._attached = key
 
     def detach(self) -> None:
-        self.scene.checker.RemoveAllAddedCollisionShapes(_CARRIED_GROUP)
+        if self._attached != ():
+            self.scene.checker.RemoveAllAddedCollisionShapes(_CARRIED_GROUP)
+            self._attached = ()
 
     def full_configuration(self, q_arm: np.ndarray) -> np.ndarray:
         q = self._q_full.copy()

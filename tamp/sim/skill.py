@@ -155,11 +155,35 @@ def held_block(scene: Scene, X_WG: RigidTransform) -> int:
     return -1
 
 
-def pick_place_waypoints(scene: Scene, action: PickPlace, grasped: int, config: WorldConfig) -> Waypoints:
-    """All tcp poses of the action once `grasped` is known to be held at the grasp pose."""
-    X_WGrasp = grasp_pose(scene, action, config)
+@dataclass
+class PickWaypoints:
+    """The pick half of an action: its first three tcp poses and what they carry away. A function of
+    the scene and (pick, grasp offset) alone, so one result serves every place of that grasp."""
+
+    pregrasp: RigidTransform
+    grasp: RigidTransform
+    liftoff: RigidTransform
+    carried: list[int]  # grasped block first, then blocks resting on it
+    X_GC: list[RigidTransform]  # each carried block's pose in the tcp frame
+
+    def named(self) -> list[tuple[str, RigidTransform]]:
+        return [("pregrasp", self.pregrasp), ("grasp", self.grasp), ("liftoff", self.liftoff)]
+
+
+def pick_waypoints(scene: Scene, action: PickPlace, grasped: int, config: WorldConfig) -> PickWaypoints:
+    """Pre-grasp, grasp and lift-off poses, once `grasped` is known to be held at the grasp pose."""
+    (_, X_WPregrasp), (_, X_WGrasp) = approach_poses(scene, action, config)
     carried = [grasped] + scene.resting_on(grasped)
-    X_GC = [X_WGrasp.inverse() @ scene.X_WB[c] for c in carried]
+    return PickWaypoints(X_WPregrasp, X_WGrasp, _raised_to(X_WGrasp, X_WGrasp.translation()[2] + config.lift_off),
+                         carried, [X_WGrasp.inverse() @ scene.X_WB[c] for c in carried])
+
+
+def pick_place_waypoints(scene: Scene, action: PickPlace, grasped: int, config: WorldConfig,
+                         pick: PickWaypoints | None = None) -> Waypoints:
+    """All tcp poses of the action once `grasped` is known to be held at the grasp pose (`pick`: its
+    pick half, if already computed)."""
+    pick = pick or pick_waypoints(scene, action, grasped, config)
+    X_WGrasp, carried, X_GC = pick.grasp, pick.carried, pick.X_GC
     # Depth of the carried blocks' lowest corner below the tcp (a yaw about z keeps it).
     below = X_WGrasp.translation()[2] - min(scene.bottom(c) for c in carried)
     j = action.place
@@ -180,11 +204,10 @@ def pick_place_waypoints(scene: Scene, action: PickPlace, grasped: int, config: 
                   place_z + config.approach_height,
                   tallest + config.carry_clearance + below)
     up = _raised_to
-    (_, X_WPregrasp), _ = approach_poses(scene, action, config)
     return Waypoints(
-        pregrasp=X_WPregrasp,
+        pregrasp=pick.pregrasp,
         grasp=X_WGrasp,
-        liftoff=up(X_WGrasp, X_WGrasp.translation()[2] + config.lift_off),
+        liftoff=pick.liftoff,
         lift=up(X_WGrasp, carry_z),
         preplace=up(X_WPlace, carry_z),
         place=X_WPlace,
@@ -197,7 +220,7 @@ def pick_place_waypoints(scene: Scene, action: PickPlace, grasped: int, config: 
 Box = tuple[tuple[float, float, float], RigidTransform]  # (size in metres, pose in the gripper body frame)
 
 
-def carried_shapes(scene: Scene, wp: Waypoints, config: WorldConfig) -> list[Box]:
+def carried_shapes(scene: Scene, wp: Waypoints | PickWaypoints, config: WorldConfig) -> list[Box]:
     """Collision boxes of the carried blocks in the gripper body frame (`MotionPlanner.attach`),
     narrowed by `config.carried_inset` on each side: a block standing face to face with another one
     slides up past it, which a padded box the block's full width would call a collision."""
