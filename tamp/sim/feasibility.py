@@ -61,9 +61,12 @@ class FeasibilityChecker:
     `observe(scene, q)` (an exact simulator state, e.g. in closed loop) before planning from it.
     """
 
-    def __init__(self, world: World | None = None, config: WorldConfig | None = None) -> None:
+    def __init__(self, world: World | None = None, config: WorldConfig | None = None, remember_picks: bool = True
+                 ) -> None:
         """`world`: a `fast` World whose Drake plants are reused (ideally with simplify_paths=True,
-        the world refinement uses); by default one is made from `config`."""
+        the world refinement uses); by default one is made from `config`. `remember_picks`: keep the pick
+        half of each check for the other places of the same grasp (False: every check from scratch, the
+        benchmark's baseline; the verdicts are the same)."""
         if world is None:
             world = World(dataclasses.replace(config or WorldConfig(), fidelity="fast", simplify_paths=True))
         if world.config.fidelity != "fast":
@@ -74,6 +77,7 @@ class FeasibilityChecker:
         self.q = Q_HOME.copy()
         self.num_checks = 0
         self.check_time_s = 0.0
+        self.remember_picks = remember_picks
         self._picks: dict[tuple[bytes, int, int], _Pick | Infeasible] = {}
 
     # --- the observed scene ----------------------------------------------------------------------
@@ -143,7 +147,7 @@ class FeasibilityChecker:
     def _pick(self, scene: Scene, action: PickPlace, state: bytes | None) -> _Pick | Infeasible:
         """The pick half of the check (grasp contact, IK up to the lift-off, its collisions), remembered
         under (state, pick, grasp offset) when `state` is given."""
-        key = None if state is None else (state, action.pick, action.grasp_offset)
+        key = None if state is None or not self.remember_picks else (state, action.pick, action.grasp_offset)
         if key in self._picks:
             return self._picks[key]
         if len(self._picks) >= _MAX_PICKS:
