@@ -68,3 +68,31 @@ def test_refinement_plans_each_action_in_the_predicted_scene_without_physics(che
     assert checker.refine(plan[:1], trajectory[:2]).success
     out = checker.refine(plan, trajectory)
     assert (out.action_index, out.reason) == (1, Infeasible.REFINE_IK)
+
+
+def test_remembered_pick_halves_give_the_verdicts_of_checks_from_scratch(checker):
+    """The search checks the places of one grasp one at a time, in any order and between other states: the
+    pick half kept for them must never change a verdict, whatever was checked (and attached) before."""
+    from tamp.planning.search import all_actions
+
+    scratch = FeasibilityChecker(world=checker.world, remember_picks=False)
+    X = np.array([[0.6, -0.1, 0.025, *CUBE], [0.7, 0.15, 0.025, *BAR], [0.62, -0.04, 0.025, *CUBE],
+                  [0.8, -0.2, 0.025, *CUBE]])
+    stacked = X.copy()
+    stacked[0, :3] = [0.7, 0.15, 0.075]  # the cube predicted on the bar's centre
+    near = X.copy()
+    near[3, :3] = [0.66, -0.1, 0.025]  # a cube predicted beside another: grasps collide
+    checker.reset(X)
+    scratch.reset(X)
+    rng = np.random.default_rng(0)
+    actions = all_actions(4)
+    queries = [(S, a) for S in (X, stacked, near) for a in actions]
+    order = rng.permutation(len(queries))  # states and grasps interleaved, as the search pops them
+    remembered = [checker.check(queries[k][0], [queries[k][1]])[0] for k in order]
+    fresh = [scratch.check(queries[k][0], [queries[k][1]])[0] for k in order]
+    assert [r is None for r in remembered] == [r is None for r in fresh]
+    verdicts = set(remembered)
+    assert None in verdicts and Infeasible.NO_GRASP in verdicts and Infeasible.COLLISION in verdicts
+    # a new observation forgets what the last scene's grasps gave
+    checker.reset(stacked)
+    assert checker.check(stacked, [(1, 0, 0, 0)]) == [Infeasible.COLLISION]

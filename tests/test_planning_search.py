@@ -11,6 +11,7 @@ import pytest
 sys.path.insert(0, str(Path(__file__).parent))
 from planning_stubs import StubModel, world_step
 
+from tamp.errors import UserError
 from tamp.planning.search import SearchConfig, continuous_search, goal_oriented_actions
 from tamp.planning.verify import goal_error, rollout
 
@@ -98,6 +99,23 @@ def test_depth_limit_and_exhaustion_are_reported():
     assert continuous_search(StubModel(), X, X).plan == []
     with pytest.raises(ValueError, match="must both be"):
         continuous_search(StubModel(), X, X[:2])
+
+
+def test_a_search_on_a_plateau_stops_after_stall_expansions_and_keeps_its_closest_state():
+    X4 = np.array([[0.6, 0.0, 0.025, 1, 0], [0.7, 0.1, 0.025, 1, 0], [0.8, -0.2, 0.025, 1, 0], [0.5, 0.3, 0.025, 0, 1]])
+    G = X4.copy()
+    G[0, :2] = (1.0, 0.5)  # on the table within reach, but no pick-place of the stub world puts the cube there
+    budget = continuous_search(StubModel(), X4, G, SearchConfig(max_expansions=300, stall=None))
+    assert budget.status == "node_limit" and budget.expanded == 300
+    stalled = continuous_search(StubModel(), X4, G, SearchConfig(max_expansions=300, stall=25))
+    assert stalled.status == "stalled" and stalled.expanded < 300 and "no state closer" in stalled.reason
+    # the cut comes `stall` expansions after the closest state was expanded (the same search up to there),
+    # and a closed loop may still step toward that state
+    assert stalled.closest_plan
+    first = continuous_search(StubModel(), X4, G, SearchConfig(max_expansions=stalled.expanded - 25, stall=None))
+    assert first.closest_plan == stalled.closest_plan
+    with pytest.raises(UserError, match="stall"):
+        SearchConfig(stall=0)
 
 
 def test_a_search_that_must_avoid_an_infeasible_action_finds_another_plan():
