@@ -42,7 +42,8 @@ def summary(rows: list[dict]) -> str:
     t = [r["time_s"] for r in rows]
     success = [r["success"] for r in rows if r["success"] is not None]
     text = (f"median {1e3 * statistics.median(t):6.0f} ms, mean {statistics.mean(t):5.2f} s, "
-            f"p95 {percentile(t, 95):5.2f} s, max {max(t):5.2f} s; plans {sum(r['solved'] for r in rows):3d}/{len(rows)}")
+            f"p95 {percentile(t, 95):5.2f} s, max {max(t):5.2f} s; "
+            f"plans {sum(r['solved'] for r in rows):3d}/{len(rows)}")
     if success:
         text += f", success {100 * statistics.mean(success):5.1f} %"
     return text + (f"; checks per problem median {statistics.median(r['checks'] for r in rows):5.0f}, "

@@ -15,8 +15,8 @@ from tamp.sim.feasibility import FeasibilityChecker
 
 pytestmark = [pytest.mark.sim, pytest.mark.slow]
 
-# four problems of results/practice/n2-4-problems.jsonl.gz (seed 4242): Level-2 plans found after 215-340 expansions, and a search that finds none (the stall cut ends it
-# after about 1,000 expansions instead of 1,500)
+# four problems of results/practice/n2-4-problems.jsonl.gz (seed 4242): Level-2 plans found after 215-340
+# expansions, and a search that finds none (the stall cut ends it after about 1,000 expansions instead of 1,500)
 PROBLEMS = Path(__file__).parent / "data" / "tail-problems.jsonl"
 NAMES = ("n4-k4-000", "n3-k5-001", "n2-k5-008", "n2-k3-005")
 

@@ -145,9 +145,9 @@ PLANNER_FLAGS: dict[str, dict[str, str]] = {
                "objects": "level1_objects", "serial": "level1_serial", "confident": "level1_confident",
                "cut": "level1_cut", "settle": "level1_settle"},
     "verify": {},
-    "search": {"max_expansions": "max_expansions", "time_limit": "time_limit", "stall": "stall", "confident": "confident",
-               "look_on": "look_on", "max_fragility": "max_fragility", "release_targets": "release_targets",
-               "max_doubt": "max_doubt"},
+    "search": {"max_expansions": "max_expansions", "time_limit": "time_limit", "stall": "stall",
+               "confident": "confident", "look_on": "look_on", "max_fragility": "max_fragility",
+               "release_targets": "release_targets", "max_doubt": "max_doubt"},
     "kinematics": {"feasibility": "feasibility"},  # `tamp evaluate` sets it per method instead
     "loop": {"keep_plan": "keep_plan", "on_course": "on_course", "max_actions": "max_actions", "widen": "widen",
              "search_budget": "loop_search_budget"},

@@ -8,7 +8,7 @@ inputs, so the report recomputes the causes from the rows). In order of preceden
 - ``aimed_near_tolerance``: no step missed, but the plan taken was predicted `AIMED` (2 cm) or more
   from the goal: small errors were enough to end beyond the 5 cm tolerance.
 - ``small_errors``: neither: errors under 2 cm per step added up.
-- ``search_budget``: no plan: the continuous search reached its node or time limit.
+- ``search_budget``: no plan: the continuous search reached its node or time limit, or stalled.
 - ``pruned``: no plan: the search expanded every state its actions reach (goal-oriented pruning,
   plan depth) without a goal state.
 - ``kinematics``: no plan: the plans and successors found were rejected by the kinematic check or

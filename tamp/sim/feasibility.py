@@ -30,8 +30,16 @@ from pydrake.math import RigidTransform
 from tamp.planning.structs import Infeasible, PickPlace, RefinementOutcome
 from tamp.sim.kinematics import Q_HOME, solve_chain
 from tamp.sim.refine import step_failure
-from tamp.sim.skill import (Box, PickWaypoints, Scene, approach_poses, carried_shapes, held_block, pick_place_waypoints,
-                            pick_waypoints)
+from tamp.sim.skill import (
+    Box,
+    PickWaypoints,
+    Scene,
+    approach_poses,
+    carried_shapes,
+    held_block,
+    pick_place_waypoints,
+    pick_waypoints,
+)
 from tamp.sim.structs import WorldConfig
 from tamp.sim.world import World
 
