@@ -70,12 +70,13 @@ def test_refinement_plans_each_action_in_the_predicted_scene_without_physics(che
     assert (out.action_index, out.reason) == (1, Infeasible.REFINE_IK)
 
 
-def test_remembered_pick_halves_give_the_verdicts_of_checks_from_scratch(checker):
+def test_reused_pick_halves_and_attached_boxes_give_the_verdicts_of_checks_from_scratch(checker):
     """The search checks the places of one grasp one at a time, in any order and between other states: the
-    pick half kept for them must never change a verdict, whatever was checked (and attached) before."""
+    pick half kept for them, and the boxes left attached in the carrying checker, must never change a verdict,
+    whatever was checked (and attached) before."""
     from tamp.planning.search import all_actions
 
-    scratch = FeasibilityChecker(world=checker.world, remember_picks=False)
+    scratch = FeasibilityChecker(world=checker.world, reuse=False)
     X = np.array([[0.6, -0.1, 0.025, *CUBE], [0.7, 0.15, 0.025, *BAR], [0.62, -0.04, 0.025, *CUBE],
                   [0.8, -0.2, 0.025, *CUBE]])
     stacked = X.copy()

@@ -29,6 +29,8 @@ from pydrake.math import RigidTransform
 
 from tamp.planning.structs import Infeasible, PickPlace, RefinementOutcome
 from tamp.sim.kinematics import Q_HOME, solve_chain
+from tamp.sim.motion import MotionPlanner
+from tamp.sim.plants import build_motion_scene
 from tamp.sim.refine import step_failure
 from tamp.sim.skill import (
     Box,
@@ -69,12 +71,12 @@ class FeasibilityChecker:
     `observe(scene, q)` (an exact simulator state, e.g. in closed loop) before planning from it.
     """
 
-    def __init__(self, world: World | None = None, config: WorldConfig | None = None, remember_picks: bool = True
-                 ) -> None:
+    def __init__(self, world: World | None = None, config: WorldConfig | None = None, reuse: bool = True) -> None:
         """`world`: a `fast` World whose Drake plants are reused (ideally with simplify_paths=True,
-        the world refinement uses); by default one is made from `config`. `remember_picks`: keep the pick
-        half of each check for the other places of the same grasp (False: every check from scratch, the
-        benchmark's baseline; the verdicts are the same)."""
+        the world refinement uses); by default one is made from `config`. `reuse`: keep the pick half of
+        each check for the other places of the same grasp, and the carried boxes attached in a collision
+        checker of their own (False: every check from scratch on the world's checker, the benchmark's
+        baseline; the verdicts are the same)."""
         if world is None:
             world = World(dataclasses.replace(config or WorldConfig(), fidelity="fast", simplify_paths=True))
         if world.config.fidelity != "fast":
@@ -85,7 +87,8 @@ class FeasibilityChecker:
         self.q = Q_HOME.copy()
         self.num_checks = 0
         self.check_time_s = 0.0
-        self.remember_picks = remember_picks
+        self.reuse = reuse
+        self._carrying: dict[tuple[int, ...], MotionPlanner] = {}  # per layout (`_carrying_planner`)
         self._picks: dict[tuple[bytes, int, int], _Pick | Infeasible] = {}
 
     # --- the observed scene ----------------------------------------------------------------------
@@ -144,18 +147,33 @@ class FeasibilityChecker:
         if failed is not None:
             return Infeasible.IK
         planner = self.world.motion_planner(scene.types)
-        planner.set_block_poses(scene.X_WB, parked=tuple(wp.carried))
-        # The carried blocks attached for the carrying waypoints (a no-op when the pick half just did).
-        planner.attach(pick.shapes)
-        if not all(planner.is_valid(qs[name]) for name in CARRYING[1:]):
-            return Infeasible.COLLISION
         planner.detach()
-        return None if all(planner.is_valid(qs[name]) for name in AFTER_RELEASE) else Infeasible.COLLISION
+        planner.set_block_poses(scene.X_WB, parked=tuple(wp.carried))
+        if not all(planner.is_valid(qs[name]) for name in AFTER_RELEASE):
+            return Infeasible.COLLISION
+        carrying = self._carrying_planner(scene, wp.carried, pick.shapes)
+        return None if all(carrying.is_valid(qs[name]) for name in CARRYING[1:]) else Infeasible.COLLISION
+
+    def _carrying_planner(self, scene: Scene, carried: Sequence[int], shapes: list[Box]) -> MotionPlanner:
+        """The collision model of the carrying waypoints: the carried blocks parked and their boxes attached to
+        the gripper. A checker of its own per layout keeps the boxes attached between checks (adding them
+        costs about 0.35 ms; the search checks many places of one grasp); the world's checker stays bare."""
+        key = tuple(int(t) for t in scene.types)
+        if not self.reuse:
+            self._carrying[key] = self.world.motion_planner(scene.types)
+        elif key not in self._carrying:
+            cfg = self.config
+            self._carrying[key] = MotionPlanner(build_motion_scene(scene.types, cfg.padding), cfg.joint_step,
+                                                cfg.padding)
+        planner = self._carrying[key]
+        planner.set_block_poses(scene.X_WB, parked=tuple(carried))
+        planner.attach(shapes)
+        return planner
 
     def _pick(self, scene: Scene, action: PickPlace, state: bytes | None) -> _Pick | Infeasible:
         """The pick half of the check (grasp contact, IK up to the lift-off, its collisions), remembered
         under (state, pick, grasp offset) when `state` is given."""
-        key = None if state is None or not self.remember_picks else (state, action.pick, action.grasp_offset)
+        key = None if state is None or not self.reuse else (state, action.pick, action.grasp_offset)
         if key in self._picks:
             return self._picks[key]
         if len(self._picks) >= _MAX_PICKS:
@@ -180,12 +198,8 @@ class FeasibilityChecker:
         if not all(planner.is_valid(qs[name]) for name in WITH_ALL_BLOCKS):
             return Infeasible.COLLISION
         # From the lift-off on, the carried blocks are attached to the gripper and parked out of the scene.
-        # Attaching costs about half a millisecond, building a checker per grasp ~150 ms (and predicted grasps
-        # rarely repeat).
         shapes = carried_shapes(scene, wp, cfg)
-        planner.set_block_poses(scene.X_WB, parked=tuple(wp.carried))
-        planner.attach(shapes)
-        if not planner.is_valid(qs["liftoff"]):
+        if not self._carrying_planner(scene, wp.carried, shapes).is_valid(qs["liftoff"]):
             return Infeasible.COLLISION
         return _Pick(wp, qs["liftoff"], shapes)
 
