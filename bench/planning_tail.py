@@ -7,7 +7,7 @@
 Plans every problem with `bilevel` twice in one process, one after the other, with the bundled models
 and kinematics in the planning loop, default limits otherwise:
 - baseline: the search runs to its node budget (`SearchConfig(stall=None)`) and the kinematic check
-  starts every action from scratch on the world's collision checker (`FeasibilityChecker(reuse=False)`);
+  starts every action from scratch on the world's collision checker (`FeasibilityChecker(shortcuts=False)`);
 - new: the defaults (the stall cut; the pick half of a check remembered for the other places of the
   same grasp, the carried boxes kept attached in a collision checker of their own).
 Prints, per number of blocks and in all: planning time per problem (median, mean, p95, max), plans
@@ -82,7 +82,7 @@ def main() -> int:
     models = load_models(args.models)
     new_checker = FeasibilityChecker()
     setups = {"baseline": (replace(PlanConfig(), search=replace(PlanConfig().search, stall=None)),
-                           FeasibilityChecker(world=new_checker.world, reuse=False)),
+                           FeasibilityChecker(world=new_checker.world, shortcuts=False)),
               "new": (PlanConfig(), new_checker)}
     world = executing_world("fast") if args.execute else None
     rows: dict[str, list[dict]] = {name: [] for name in setups}

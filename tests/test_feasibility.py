@@ -76,7 +76,7 @@ def test_reused_pick_halves_and_attached_boxes_give_the_verdicts_of_checks_from_
     whatever was checked (and attached) before."""
     from tamp.planning.search import all_actions
 
-    scratch = FeasibilityChecker(world=checker.world, reuse=False)
+    scratch = FeasibilityChecker(world=checker.world, shortcuts=False)
     X = np.array([[0.6, -0.1, 0.025, *CUBE], [0.7, 0.15, 0.025, *BAR], [0.62, -0.04, 0.025, *CUBE],
                   [0.8, -0.2, 0.025, *CUBE]])
     stacked = X.copy()

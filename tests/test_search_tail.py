@@ -26,7 +26,7 @@ def test_the_search_finds_the_plans_it_found_without_its_shortcuts():
     models = load_models(pretrained_dir())
     new = FeasibilityChecker()
     baseline_cfg = replace(PlanConfig(), search=replace(PlanConfig().search, stall=None))
-    setups = ((baseline_cfg, FeasibilityChecker(world=new.world, reuse=False)), (PlanConfig(), new))
+    setups = ((baseline_cfg, FeasibilityChecker(world=new.world, shortcuts=False)), (PlanConfig(), new))
     for name in NAMES:
         problem = problems[name]
         results = []

@@ -194,6 +194,7 @@ def _round(method: str, models: Models, X: np.ndarray, X_goal: np.ndarray, out: 
                             f"(over {cfg.search.confident * 100:g} cm); a new plan aims closer"]
         else:
             _absorb(kept, result, "planned")
+            kept.search = result.search  # the round's search: its expansions count against the loop's budget
             return kept
     if kept is not None:
         _absorb(result, kept)

@@ -89,9 +89,9 @@ class MotionPlanner:
                 self._set_block(i, np.r_[X_WBi.rotation().ToQuaternion().wxyz(), X_WBi.translation()])
 
     def attach(self, shapes: list[tuple[tuple[float, float, float], RigidTransform]]) -> None:
-        """Attach boxes (size, pose in the gripper body frame) to the gripper; nothing is done when
-        exactly these boxes are attached already (adding a shape costs about half a millisecond)."""
-        key = tuple((tuple(size), X_GB.GetAsMatrix34().tobytes()) for size, X_GB in shapes)
+        """Attach boxes (size, pose in the gripper body frame) to the gripper; nothing is done when these
+        boxes are attached already, to a tenth of a micrometre (adding a shape costs about 0.35 ms)."""
+        key = tuple((tuple(size), np.round(X_GB.GetAsMatrix34(), 7).tobytes()) for size, X_GB in shapes)
         if key == self._attached:
             return
         self.detach()

@@ -239,3 +239,19 @@ def _raised_to(X_WG: RigidTransform, z: float) -> RigidTransform:
 
 def _wrap(a: float) -> float:
     return (a + np.pi) % (2 * np.pi) - np.pi
+
+
+def boxes_overlap(X_WA: RigidTransform, size_A, X_WB: RigidTransform, size_B, margin: float = 1e-4) -> bool:
+    """Whether two boxes (sizes in metres, centred at their poses) interpenetrate by more than `margin`
+    along every separating axis (the 15 of the separating axis theorem): then any collision checker that
+    knows these boxes reports a collision. A cheap, conservative test: False does not mean free."""
+    R_A, R_B = X_WA.rotation().matrix(), X_WB.rotation().matrix()
+    h_A, h_B = np.asarray(size_A, dtype=float) / 2, np.asarray(size_B, dtype=float) / 2
+    T = X_WB.translation() - X_WA.translation()
+    cross = np.cross(R_A.T[:, None, :], R_B.T[None, :, :]).reshape(9, 3)
+    axes = np.concatenate([R_A.T, R_B.T, cross])
+    norms = np.linalg.norm(axes, axis=1)
+    axes = axes[norms > 1e-9] / norms[norms > 1e-9, None]  # parallel edges give no axis of their own
+    reach = np.abs(axes @ R_A) @ h_A + np.abs(axes @ R_B) @ h_B
+    return bool(np.all(np.abs(axes @ T) < reach - margin))
+
