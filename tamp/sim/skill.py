@@ -247,7 +247,7 @@ def boxes_overlap(X_WA: RigidTransform, size_A, X_WB: RigidTransform, size_B, ma
     knows these boxes reports a collision. A cheap, conservative test: False does not mean free."""
     R_A, R_B = X_WA.rotation().matrix(), X_WB.rotation().matrix()
     h_A, h_B = np.asarray(size_A, dtype=float) / 2, np.asarray(size_B, dtype=float) / 2
-    T = X_WB.translation() - X_WA.translation()
+    T = np.asarray(X_WB.translation()) - np.asarray(X_WA.translation())
     cross = np.cross(R_A.T[:, None, :], R_B.T[None, :, :]).reshape(9, 3)
     axes = np.concatenate([R_A.T, R_B.T, cross])
     norms = np.linalg.norm(axes, axis=1)
