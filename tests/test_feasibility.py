@@ -97,3 +97,19 @@ def test_reused_pick_halves_and_attached_boxes_give_the_verdicts_of_checks_from_
     # a new observation forgets what the last scene's grasps gave
     checker.reset(stacked)
     assert checker.check(stacked, [(1, 0, 0, 0)]) == [Infeasible.COLLISION]
+
+
+def test_the_box_test_says_overlap_only_where_the_boxes_interpenetrate():
+    from pydrake.math import RigidTransform, RotationMatrix
+
+    from tamp.sim.skill import boxes_overlap
+
+    cube, bar = (0.05, 0.05, 0.05), (0.05, 0.25, 0.05)
+    at = RigidTransform([0.6, 0.0, 0.025])
+    assert boxes_overlap(at, cube, RigidTransform([0.62, 0.01, 0.03]), cube)  # 3 cm deep
+    assert not boxes_overlap(at, cube, RigidTransform([0.65, 0.0, 0.025]), cube)  # face to face: touching
+    assert not boxes_overlap(at, cube, RigidTransform([0.6, 0.0, 0.0755]), cube)  # stacked, 0.5 mm apart
+    # a bar turned 45 degrees whose bounding box covers the cube's corner region but whose body misses it
+    turned = RigidTransform(RotationMatrix.MakeZRotation(np.pi / 4), [0.6 + 0.09, 0.09, 0.025])
+    assert not boxes_overlap(at, cube, turned, bar)
+    assert boxes_overlap(at, cube, RigidTransform(RotationMatrix.MakeZRotation(np.pi / 4), [0.63, 0.03, 0.025]), bar)
