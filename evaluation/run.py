@@ -150,7 +150,7 @@ class EvalConfig:
         out = {"fidelity": self.fidelity, "eps_m": p.verify.eps, "tau_verify_m": p.verify.tau_verify,
                "n_domains": p.level1.n_domains,
                "search_time_limit_s": p.search.time_limit, "search_max_expansions": p.search.max_expansions,
-               "search_stall": p.search.stall,
+               "search_stall": p.search.stall, "search_stall_max_objects": p.search.stall_max_objects,
                "search_confident_m": p.search.confident, "search_look_on": p.search.look_on,
                "search_release_targets": p.search.release_targets,
                "search_max_fragility": p.search.max_fragility, "search_noise_m": p.search.noise,

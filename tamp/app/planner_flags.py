@@ -128,8 +128,9 @@ def add_planner_arguments(p: argparse.ArgumentParser, backends: tuple[str, ...] 
                    "searches end and no further plan is refined once it has run this long, and the result says so "
                    "(default: off, so that --max-expansions and --stall decide, whatever the machine's load)")
     p.add_argument("--stall", type=positive_int, default=default.search.stall, metavar="EXPANSIONS",
-                   help="the continuous search ends after this many expansions without a state closer to the goal "
-                   f"(default {default.search.stall}; searches that find a plan plateau for fewer)")
+                   help="with up to 4 blocks, the continuous search ends after this many expansions without a state "
+                   f"closer to the goal (default {default.search.stall}; searches that find a plan plateau for fewer; "
+                   "with more blocks they may not, and the search runs to --max-expansions)")
     p.add_argument("--no-stall", dest="stall", action="store_const", const=None,
                    help="the continuous search runs to --max-expansions however long it stays on a plateau")
     if feasibility:
@@ -156,7 +157,7 @@ PLANNER_FLAGS: dict[str, dict[str, str]] = {
 NOT_EXPOSED = {"level1": ("seed", "time_budget", "verify_all", "alternatives", "alternatives_total", "nonempty"),
                "verify": ("tau_verify", "eps"), "kinematics": ("max_refinements",),
                "search": ("weight", "h_unit", "eps", "misplaced", "resolution", "max_depth", "batched", "prune",
-                          "noise"),
+                          "noise", "stall_max_objects"),
                "loop": ("widen_expansions", "revisit", "progress")}
 
 

@@ -36,11 +36,11 @@ Duplicate detection:
 positions rounded to a `resolution` grid; a state is pushed again only when reached with fewer
 actions. Limits: expansions, wall-clock time and plan depth; the result says which one ended it.
 
-Stagnation (our extension, `stall`): a search whose closest expanded state (least h) has not come
-closer to the goal for `stall` expansions ends, counted in expansions so that the cut never depends
-on the machine's load. Searches that find a plan seldom plateau for more than a few hundred
-expansions; searches that end without one stop improving early and spend most of their budget on a
-plateau (docs/benchmarks.md, the slow tail).
+Stagnation (our extension, `stall`): in a scene of at most `stall_max_objects` blocks, a search whose
+closest expanded state (least h) has not come closer to the goal for `stall` expansions ends, counted
+in expansions so that the cut never depends on the machine's load. There, searches that find a plan
+seldom plateau for more than a few hundred expansions, while searches that end without one stop
+improving early and spend most of their budget on a plateau (docs/beyond-the-paper.md).
 """
 from __future__ import annotations
 
@@ -79,6 +79,9 @@ class SearchConfig:
     # expansions without a state closer to the goal (least h) before the search ends: no tuning search that found
     #   a plan plateaued longer than 624, failing ones plateau for over 1,000 (None: run to the node budget)
     stall: int | None = 700
+    # the stall cut applies to scenes of at most this many blocks: at 5-6, held-out searches found plans after
+    #   plateaus of 748-1,231 expansions
+    stall_max_objects: int = 4
     confident: float = 0.035  # metres: a goal state predicted this close (worst object) ends the search
     look_on: int = 30  # expansions spent looking for a confident goal state after a less confident one
     batched: bool = True  # one predict_effect call per expansion (False: one per action, for the benchmark)
@@ -92,9 +95,10 @@ class SearchConfig:
     max_doubt: float | None = None
 
     def __post_init__(self) -> None:
-        if self.stall is not None and self.stall < 1:
-            raise UserError(f"the continuous search's stall must be a positive number of expansions (or None), "
-                            f"got {self.stall}")
+        if self.stall is not None and self.stall < 1 or self.stall_max_objects < 1:
+            raise UserError(f"the continuous search's stall must be a positive number of expansions (or None) and "
+                            f"stall_max_objects a positive number of blocks, got {self.stall} and "
+                            f"{self.stall_max_objects}")
         if self.time_limit is not None and not self.time_limit > 0 or self.max_expansions < 1 or self.max_depth < 1:
             raise UserError(f"the continuous search needs a positive time limit, node limit and depth, got "
                             f"{self.time_limit} s, {self.max_expansions} nodes, depth {self.max_depth}")
@@ -314,6 +318,7 @@ def continuous_search(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarr
     frontier = [(config.weight * d0.sum() / config.h_unit, d0.sum(), 0)]  # (f, h, node index)
     closest = (d0.sum() / config.h_unit, 0)  # (h, node index) of the expanded state closest to the goal
     closer_at = 0  # expansions when the closest state last came closer
+    stall = config.stall if len(X_init) <= config.stall_max_objects else None
     n_objects = len(X_init)
     every = all_actions(n_objects)
     while frontier:
@@ -322,7 +327,7 @@ def continuous_search(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarr
         if out.expanded >= config.max_expansions:
             return stop(SearchStatus.NODE_LIMIT, f"node limit: {out.expanded} expansions without reaching the goal "
                           f"(closest predicted state {out.best_error * 100:.1f} cm from it)")
-        if config.stall is not None and out.expanded - closer_at >= config.stall:
+        if stall is not None and out.expanded - closer_at >= stall:
             return stop(SearchStatus.STALLED, f"stalled: no state closer to the goal in {config.stall} expansions "
                           f"({out.expanded} in all; closest predicted state {out.best_error * 100:.1f} cm from it)")
         if time.perf_counter() > deadline:
