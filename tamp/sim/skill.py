@@ -10,7 +10,7 @@ it held it: the block ends at target - (grasp point - block centre), rotated wit
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from pydrake.math import RigidTransform, RotationMatrix
@@ -19,6 +19,10 @@ from tamp.planning.structs import BLOCK_SIZES, LARGE, OFFSET_STEP, PickPlace
 from tamp.sim.plants import X_FlangeTcp
 from tamp.sim.structs import WorldConfig
 
+_CORNER_SIGNS = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], dtype=float)
+_LEVI_CIVITA = np.zeros((3, 3, 3))
+_LEVI_CIVITA[0, 1, 2] = _LEVI_CIVITA[1, 2, 0] = _LEVI_CIVITA[2, 0, 1] = 1.0
+_LEVI_CIVITA[0, 2, 1] = _LEVI_CIVITA[2, 1, 0] = _LEVI_CIVITA[1, 0, 2] = -1.0
 JAW_OPENING = 0.08  # metres between the open jaws' inner faces
 _GRASP_TOLERANCE = 0.005  # metres: the grasp point may lie this far outside a block and still hold it
 
@@ -29,6 +33,7 @@ class Scene:
 
     types: np.ndarray
     X_WB: list[RigidTransform]
+    _corners: dict[int, tuple[RigidTransform, np.ndarray]] = field(default_factory=dict, repr=False, compare=False)
 
     @property
     def n(self) -> int:
@@ -46,10 +51,13 @@ class Scene:
         return np.array(BLOCK_SIZES[int(self.types[i])])
 
     def corners(self, i: int) -> np.ndarray:
-        """(8, 3) world coordinates of block i's corners."""
-        h = self.size(i) / 2
-        signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
-        return (self.X_WB[i] @ (signs * h).T).T
+        """(8, 3) world coordinates of block i's corners (kept while block i keeps its pose object: the
+        skill's geometry asks for them many times per action)."""
+        pose = self.X_WB[i]
+        known = self._corners.get(i)
+        if known is None or known[0] is not pose:
+            known = self._corners[i] = (pose, (pose @ (_CORNER_SIGNS * (self.size(i) / 2)).T).T)
+        return known[1]
 
     def top(self, i: int) -> float:
         return float(self.corners(i)[:, 2].max())
@@ -245,10 +253,12 @@ def boxes_overlap(X_WA: RigidTransform, size_A, X_WB: RigidTransform, size_B, ma
     """Whether two boxes (sizes in metres, centred at their poses) interpenetrate by more than `margin`
     along every separating axis (the 15 of the separating axis theorem): then any collision checker that
     knows these boxes reports a collision. A cheap, conservative test: False does not mean free."""
-    R_A, R_B = X_WA.rotation().matrix(), X_WB.rotation().matrix()
     h_A, h_B = np.asarray(size_A, dtype=float) / 2, np.asarray(size_B, dtype=float) / 2
     T = np.asarray(X_WB.translation()) - np.asarray(X_WA.translation())
-    cross = np.cross(R_A.T[:, None, :], R_B.T[None, :, :]).reshape(9, 3)
+    if np.linalg.norm(T) >= np.linalg.norm(h_A) + np.linalg.norm(h_B):  # their bounding spheres do not meet
+        return False
+    R_A, R_B = X_WA.rotation().matrix(), X_WB.rotation().matrix()
+    cross = np.einsum("klm,il,jm->ijk", _LEVI_CIVITA, R_A.T, R_B.T).reshape(9, 3)  # every edge pair's axis
     axes = np.concatenate([R_A.T, R_B.T, cross])
     norms = np.linalg.norm(axes, axis=1)
     axes = axes[norms > 1e-9] / norms[norms > 1e-9, None]  # parallel edges give no axis of their own
