@@ -108,15 +108,10 @@ def read_json_object(path: Path, what: str) -> dict:
 
 
 def _read_symbols(path: Path) -> list[dict]:
-    """OUT/symbols.json (`learned.interpret.BitReport.to_dict` per bit); a ValueError names the file."""
-    try:
-        data = json.loads(path.read_text())
-    except json.JSONDecodeError as error:
-        raise UserError(f"{path}: not valid JSON ({error.msg}, line {error.lineno})") from None
-    keys = {"name", "rate", "count", "best", "agreement", "negated", "phi"}
-    if not isinstance(data, list) or not all(isinstance(b, dict) and keys <= set(b) for b in data):
-        raise UserError(f"{path}: expected a list of bits with fields {', '.join(sorted(keys))}")
-    return data
+    """OUT/symbols.json (`learned.interpret.read_symbols`); a ValueError names the file and the bit."""
+    from learned.interpret import read_symbols
+
+    return read_symbols(path)
 
 
 def load_ablation(path: Path) -> dict:
