@@ -71,6 +71,7 @@ import numpy as np
 
 from evaluation.methods import METHODS, SYMBOLIC_BACKENDS, Method, load_method_models, required_files, resolve_methods
 from evaluation.problems import read_problems
+from guarded import LARGE, Schema, read_json, read_jsonl
 from tamp.app.args import check_output_dir
 from tamp.app.faults import Faults
 from tamp.app.parallel import BACKENDS, run_tasks
@@ -532,24 +533,26 @@ def read_rows(path: str | Path) -> list[dict]:
     return _scan_rows(Path(path))[0]
 
 
+# what a resumed run needs of a row already written (the report checks the rest: evaluation.report.rows)
+_ROW = Schema({"type": "object", "required": ["problem", "method"],
+               "properties": {"problem": {"type": "string"}, "method": {"type": "string"}}})
+# meta.json fields a resumed run compares and extends
+META_SCHEMA = Schema({"type": "object", "required": ["format", *DEFINING_KEYS], "properties": {
+    "format": {"enum": [FORMAT]}, "model_files": {"type": "object"}, "problems_sha256": {"type": "string"},
+    "config": {"type": "object"}, "methods": {"type": "array", "items": {"type": "string"}},
+    "runs": {"type": "array"}, "versions": {"type": "object"}}})
+
+
 def _scan_rows(path: Path) -> tuple[list[dict], int]:
-    """(complete rows, byte length of the complete lines); a broken line before the last is an error."""
+    """(complete rows, byte length of the complete lines); the text after the last newline is a row cut
+    short by a kill (left out); a broken line before it is an error."""
     if not path.exists():
         return [], 0
-    data = path.read_bytes()
-    rows, end = [], 0
-    lines = data.split(b"\n")
-    for number, line in enumerate(lines[:-1], start=1):  # lines[-1]: after the last newline
-        try:
-            row = json.loads(line)
-            if not isinstance(row, dict) or "problem" not in row or "method" not in row:
-                raise UserError("not a result row")
-        except ValueError as error:
-            raise UserError(f"{path} line {number} is not a result row ({error}); the file was damaged "
-                             "by something other than an interrupted evaluation") from None
-        rows.append(row)
-        end += len(line) + 1
-    return rows, end
+    lines = read_jsonl(path, "rows file", LARGE, unfinished=True)
+    for number, row in lines.values:
+        _ROW.check(row, f"{path} line {number} (the file was damaged by something other than an interrupted "
+                   "evaluation)")
+    return [row for _, row in lines.values], lines.end
 
 
 def _prepare(out: Path, meta: dict) -> None:
@@ -560,12 +563,10 @@ def _prepare(out: Path, meta: dict) -> None:
             raise UserError(f"{out} has {ROWS_NAME} but no {META_NAME}; give a new --out directory")
         atomic_write_text(path, json.dumps(meta, indent=2) + "\n")
         return
-    try:
-        old = json.loads(path.read_text())
-    except json.JSONDecodeError as error:
-        raise UserError(f"{path}: not valid JSON ({error})") from None
-    if old.get("format") != FORMAT:
+    old = read_json(path, "meta file")
+    if not isinstance(old, dict) or old.get("format") != FORMAT:
         raise UserError(f"{path} is not the meta file of a `tamp evaluate` results directory")
+    META_SCHEMA.check(old, str(path))
     diffs = []
     for key in DEFINING_KEYS:
         a, b = old.get(key), meta[key]

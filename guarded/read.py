@@ -131,8 +131,9 @@ def _short(text: str, keep: int = 24) -> str:
 
 
 def _position(text: str, offset: int) -> str:
-    line = text.count("\n", 0, offset) + 1
-    return f"line {line}, column {offset - (text.rfind(chr(10), 0, offset) + 1) + 1}"
+    """Line and column of `offset` (the column alone in a text of one line: a line of JSON Lines)."""
+    line, column = text.count("\n", 0, offset) + 1, offset - (text.rfind("\n", 0, offset) + 1) + 1
+    return f"column {column}" if "\n" not in text else f"line {line}, column {column}"
 
 
 def _literal_at(text: str, literal: str) -> str:
@@ -182,7 +183,7 @@ def parse_json(text: str, where: str, limits: Limits = Limits()) -> Any:
         value = json.loads(text, **_hooks(text, limits))
         too_deep = _depth_exceeded(value, limits.max_depth)
     except json.JSONDecodeError as error:
-        raise InputError(f"{where}: not valid JSON: {error.msg} (line {error.lineno}, column {error.colno})") from None
+        raise InputError(f"{where}: not valid JSON: {error.msg} ({_position(text, error.pos)})") from None
     except _BadNumber as bad:
         raise InputError(f"{where}: {bad.reason}{_literal_at(text, bad.literal)}") from None
     except RecursionError:  # nested beyond the parser's reach: deeper than any limit
@@ -201,11 +202,13 @@ def read_json(path: str | Path, what: str, limits: Limits = Limits()) -> Any:
 @dataclass(frozen=True)
 class JsonLines:
     """A JSON Lines file: its values with their line numbers (blank lines left out); with `unfinished`
-    (see `read_jsonl`) the bytes of content up to the end of the last newline, and the text after it."""
+    (see `read_jsonl`) the bytes of content up to the end of the last newline, and the text after it
+    with its line number."""
 
     values: list[tuple[int, Any]]
     end: int
-    tail: str
+    tail: str = ""
+    tail_line: int = 0
 
 
 def read_jsonl(path: str | Path, what: str, limits: Limits = Limits(), unfinished: bool = False) -> JsonLines:
@@ -217,7 +220,7 @@ def read_jsonl(path: str | Path, what: str, limits: Limits = Limits(), unfinishe
     complete, newline, tail = text.rpartition("\n")
     if not unfinished:
         complete, tail = text, ""
-    lines = complete.split("\n") if complete else []
+    lines = complete.split("\n") if complete or newline else []
     values = [(number, parse_json(line, f"{path} line {number}", limits))
               for number, line in enumerate(lines, start=1) if line.strip()]
-    return JsonLines(values, len(data) - len(tail.encode()), tail)
+    return JsonLines(values, len(data) - len(tail.encode()), tail, len(lines) + 1)
