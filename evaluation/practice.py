@@ -340,7 +340,7 @@ def cmd_practice(args: argparse.Namespace) -> int:
 
 def add_practice(sub) -> None:
     """`tamp practice`."""
-    from tamp.app.args import fraction, int_list, models_directory, non_negative_int, positive_int
+    from tamp.app.args import fraction, int_list, models_directory, non_negative_int, positive_int, seed
 
     p = sub.add_parser(
         "practice",
@@ -365,7 +365,7 @@ def add_practice(sub) -> None:
                    "200 problems a round)")
     p.add_argument("--objects", type=int_list, default=PracticeConfig.objects,
                    help="object counts of the practice problems (default 2,3,4,5,6)")
-    p.add_argument("--seed", type=non_negative_int, default=PRACTICE_SEED,
+    p.add_argument("--seed", type=seed, default=PRACTICE_SEED,
                    help=f"round r's problems have seed SEED + r (default {PRACTICE_SEED}, far from the seeds "
                    "one evaluates on)")
     p.add_argument("--fidelity", choices=("fast", "full"), default="fast",

@@ -341,7 +341,7 @@ def test_a_negative_seed_is_refused_in_one_line(command, capsys, tmp_path, monke
         main(command + ["--seed", "-1"])
     assert exit_.value.code == 2
     err = capsys.readouterr().err
-    assert "argument --seed: expected an integer >= 0, got '-1'" in err and "Traceback" not in err
+    assert "argument --seed: expected an integer in [0, 2^63), got '-1'" in err and "Traceback" not in err
     assert list(tmp_path.iterdir()) == []  # nothing written
 
 
