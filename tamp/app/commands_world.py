@@ -112,7 +112,7 @@ def view_trajectory(path: Path, out: Path) -> int:
     check_output_file(out, "--out")
     by = f" by {trajectory.source}" if trajectory.source else ""
     print(f"{path}: {len(trajectory.actions)} action(s), {trajectory.samples} samples within the UR10e's limits, "
-          f"continuous; recorded in the {trajectory.world} world{by}")
+          f"consistent and continuous; recorded in the {trajectory.world} world{by}")
     for skipped in trajectory.skipped:
         print(f"  (executed action {skipped.get('index')} moved nothing: {skipped.get('reason', '')})")
     timeline = Timeline()
