@@ -1,6 +1,6 @@
 """Every reader of a file from outside, fed mutated copies of a valid file (hypothesis): it returns, or
-refuses with a one-line user error naming the file; never another exception (a traceback for the user),
-and nothing is written when it refuses.
+refuses with a one-line user error naming the file; never another exception (a traceback for the user)
+or a warning, and nothing is written when it refuses.
 
 Mutations: a value anywhere in the document replaced by another JSON value (numbers beyond float and
 int64, deep lists, strings where numbers belong, ...), a field deleted, bytes flipped, inserted, deleted
@@ -15,6 +15,7 @@ from __future__ import annotations
 import gzip
 import json
 import os
+import warnings
 from pathlib import Path
 from typing import Any, Callable
 
@@ -115,7 +116,9 @@ def _fuzz(reader: Callable[[Path], Any], base: bytes, path: Path, after: Callabl
     def run(data: bytes) -> None:
         path.write_bytes(data)
         try:
-            reader(path)
+            with warnings.catch_warnings():
+                warnings.simplefilter("error")  # a warning would be a second line for the user
+                reader(path)
         except Exception as error:  # noqa: BLE001 - the property: which exceptions, and how they read
             assert is_user_error(error), f"{type(error).__name__}: {error}"
             message = str(error)

@@ -249,7 +249,10 @@ def to_document(plan: PlanTrajectory) -> dict[str, Any]:
     }
 
 
-_NUMBERS = {n: {"type": "array", "minItems": n, "maxItems": n, "items": {"type": "number"}} for n in (3, 4, 6)}
+# every number of a file is far inside these bounds (metres, radians, rad/s, rad/s^2); beyond them the
+# checks' arithmetic would overflow before it could say what is wrong
+_BOUNDED = {"type": "number", "minimum": -1e6, "maximum": 1e6}
+_NUMBERS = {n: {"type": "array", "minItems": n, "maxItems": n, "items": _BOUNDED} for n in (3, 4, 6)}
 _POSE = {"type": "object", "required": ["position", "quaternion_wxyz"],
          "properties": {"position": _NUMBERS[3], "quaternion_wxyz": _NUMBERS[4]}}
 _TIME = {"type": "number", "minimum": 0, "maximum": MAX_ACTION_S}
