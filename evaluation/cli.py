@@ -11,8 +11,8 @@ from tamp.app.args import (
     check_output_file,
     int_list,
     models_directory,
-    non_negative_int,
     positive_int,
+    seed,
 )
 from tamp.app.parallel import add_arguments as add_parallel_arguments
 from tamp.app.planner_flags import add_planner_arguments
@@ -212,7 +212,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--actions", type=int_list, default=(1, 2, 3, 4, 5),
                    help="numbers k of random actions per goal (default 1,2,3,4,5)")
     p.add_argument("--per-cell", type=positive_int, default=10, help="problems per (objects, k) (default 10)")
-    p.add_argument("--seed", type=non_negative_int, default=0, help="seed of the set (default 0); run j uses seed + j")
+    p.add_argument("--seed", type=seed, default=0, help="seed of the set (default 0); run j uses seed + j")
     p.add_argument("--protocol", choices=PROTOCOLS, default="strict",
                    help="strict: every action moves something (default); paper: actions kept whatever their "
                    "outcome, as the paper's authors do")

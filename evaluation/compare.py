@@ -8,11 +8,10 @@ so that a test can recompute every cell from rows.
 """
 from __future__ import annotations
 
-import gzip
-import json
 from pathlib import Path
 from typing import Any, Sequence
 
+from guarded import LARGE, Schema, read_jsonl
 from tamp.errors import UserError
 
 from .format import fmt_ms, fmt_p, fmt_pct, md_table
@@ -21,16 +20,24 @@ from .stats import mean_std, median, paired_ttest, rate_pct
 MAX_NAMED = 8  # problems named per gained / lost cell
 
 
-def load_rows(directory: Path) -> list[dict]:
-    """The rows of a results directory: rows.jsonl, else rows.jsonl.gz."""
-    from .run import read_rows
+# the fields of a row a comparison reads
+ROW_SCHEMA = Schema({"type": "object", "required": ["problem", "method", "n", "success", "planning_time_s"],
+                     "properties": {"problem": {"type": "string"}, "method": {"type": "string"},
+                                    "run": {"type": ["integer", "null"], "minimum": 0},
+                                    "n": {"type": "integer", "minimum": 1}, "success": {"type": "boolean"},
+                                    "planning_time_s": {"type": "number"}, "outcome": {"type": "string"}}})
 
+
+def load_rows(directory: Path) -> list[dict]:
+    """The rows of a results directory: rows.jsonl, else rows.jsonl.gz (a last line cut short by a
+    kill is left out), each checked against `ROW_SCHEMA`."""
     plain, packed = directory / "rows.jsonl", directory / "rows.jsonl.gz"
-    if plain.is_file():
-        return read_rows(plain)
-    if packed.is_file():
-        with gzip.open(packed, "rt") as f:
-            return [json.loads(line) for line in f if line.strip()]
+    if plain.is_file() or packed.is_file():
+        path = plain if plain.is_file() else packed
+        lines = read_jsonl(path, "rows file", LARGE, unfinished=True)
+        for number, row in lines.values:
+            ROW_SCHEMA.check(row, f"{path} line {number}")
+        return [row for _, row in lines.values]
     raise UserError(f"no rows.jsonl or rows.jsonl.gz in {directory} (the --out directory of `tamp evaluate`)")
 
 

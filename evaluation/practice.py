@@ -41,6 +41,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from guarded import Schema, read_json
 from tamp.errors import UserError
 from tamp.records import atomic_write_text
 
@@ -192,18 +193,23 @@ def round_figures(rows_path: Path) -> dict[str, Any]:
 
 # --------------------------------------------------------------------------- the rounds
 
+# what a resumed practice compares and extends (each round's record is its own: `_round`)
+STATE_SCHEMA = Schema({"type": "object", "required": ["models", "data", "config", "rounds"], "properties": {
+    "models": {"type": "string"}, "data": {"type": "array", "items": {"type": "string"}}, "config": {"type": "object"},
+    "rounds": {"type": "array", "items": {"type": "object", "required": ["round"],
+                                          "properties": {"round": {"type": "integer", "minimum": 0}}}}}})
+
+
 def _prepare(out: Path, models: Path, data: list[Path], config: PracticeConfig) -> dict[str, Any]:
     """OUT/practice.json: written on the first run, compared on a resume."""
     state = {"format": FORMAT, "models": str(models.resolve()), "data": [str(d.resolve()) for d in data],
              "config": config.defining()}
     path = out / STATE_NAME
     if path.is_file():
-        try:
-            old = json.loads(path.read_text())
-        except ValueError as error:
-            raise UserError(f"{path}: not valid JSON ({error})") from None
+        old = read_json(path, "practice state file")
         if not isinstance(old, dict) or old.get("format") != FORMAT:
             raise UserError(f"{path} is not the state file of a `tamp practice` directory")
+        STATE_SCHEMA.check(old, str(path))
         differ = [k for k in ("models", "data", "config") if old.get(k) != state[k]]
         if differ:
             raise UserError(f"{out} was practised with other {', '.join(differ)}; give a new --out, or the same "
@@ -334,7 +340,7 @@ def cmd_practice(args: argparse.Namespace) -> int:
 
 def add_practice(sub) -> None:
     """`tamp practice`."""
-    from tamp.app.args import fraction, int_list, models_directory, non_negative_int, positive_int
+    from tamp.app.args import fraction, int_list, models_directory, non_negative_int, positive_int, seed
 
     p = sub.add_parser(
         "practice",
@@ -359,7 +365,7 @@ def add_practice(sub) -> None:
                    "200 problems a round)")
     p.add_argument("--objects", type=int_list, default=PracticeConfig.objects,
                    help="object counts of the practice problems (default 2,3,4,5,6)")
-    p.add_argument("--seed", type=non_negative_int, default=PRACTICE_SEED,
+    p.add_argument("--seed", type=seed, default=PRACTICE_SEED,
                    help=f"round r's problems have seed SEED + r (default {PRACTICE_SEED}, far from the seeds "
                    "one evaluates on)")
     p.add_argument("--fidelity", choices=("fast", "full"), default="fast",

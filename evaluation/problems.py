@@ -23,9 +23,10 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from tamp.app.problem import PROTOCOLS, Problem, StuckScene, random_problem
+from tamp.app.problem import MAX_K, PROTOCOLS, Problem, StuckScene, random_problem
 from tamp.app.problem import read_problem_set as read_problems  # noqa: F401 (the set reader, here by its old name)
 from tamp.errors import UserError
+from tamp.inputs import SEED_LIMIT
 from tamp.records import atomic_write_text
 
 MAX_ATTEMPTS = 10  # scenes drawn per problem before giving up (see `generate_problems`)
@@ -82,12 +83,12 @@ def generate_problems(ns: Sequence[int] = (2, 3, 4), ks: Sequence[int] = (1, 2, 
     share the cells; the problems do not depend on how many."""
     from tqdm import tqdm
 
-    ns, ks = _counts(ns, "--objects", 1, 6), _counts(ks, "--actions", 1, None)
+    ns, ks = _counts(ns, "--objects", 1, 6), _counts(ks, "--actions", 1, MAX_K)
     if per_cell < 1:
         raise UserError(f"--per-cell must be a positive integer, got {per_cell}")
     if runs < 1:
         raise UserError(f"--runs must be a positive integer, got {runs}")
-    if not (0 <= seed and seed + runs - 1 < 2**63):
+    if not (0 <= seed and seed + runs - 1 < SEED_LIMIT):
         raise UserError(f"--seed must be in [0, 2^63 - runs], got {seed}")
     if protocol not in PROTOCOLS:
         raise UserError(f"--protocol must be one of {', '.join(PROTOCOLS)}, got {protocol!r}")

@@ -35,6 +35,7 @@ from multiprocessing import get_context
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from guarded import Schema, read_json
 from tamp.errors import UserError
 from tamp.records import atomic_write_text
 
@@ -120,6 +121,10 @@ def _say(message: str) -> None:
     print(f"[{time.strftime('%H:%M:%S')}] {message}", flush=True)
 
 
+STAGES_SCHEMA = Schema({"type": "object", "required": ["setup", "finished"], "properties": {
+    "setup": {"type": "object"}, "finished": {"type": "object", "additionalProperties": {"type": "object"}}}})
+
+
 class Stages:
     """OUT/stages.json: which stages finished, and how long they took (seconds)."""
 
@@ -129,7 +134,8 @@ class Stages:
         setup = {"scale": scale_name, "config": json.loads(json.dumps(config))}
         setup.update({k: v for k, v in options.items() if v != DEFAULT_OPTIONS[k]})  # older OUTs stay resumable
         if self.path.is_file():
-            self.state = json.loads(self.path.read_text())
+            self.state = read_json(self.path, "stages file")
+            STAGES_SCHEMA.check(self.state, str(self.path))
             if self.state.get("setup") != setup:
                 raise UserError(f"{out} holds a reproduction with other settings ({self.path}: scale "
                                  f"{self.state.get('setup', {}).get('scale')!r}); use another --out")

@@ -62,6 +62,7 @@ import json
 import os
 import sys
 import traceback
+from contextlib import closing
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
@@ -71,9 +72,11 @@ import numpy as np
 
 from evaluation.methods import METHODS, SYMBOLIC_BACKENDS, Method, load_method_models, required_files, resolve_methods
 from evaluation.problems import read_problems
+from guarded import LARGE, Schema, read_json, read_jsonl
 from tamp.app.args import check_output_dir
 from tamp.app.faults import Faults
 from tamp.app.parallel import BACKENDS, run_tasks
+from tamp.app.planner_flags import loop_flags_given
 from tamp.app.problem import Problem
 from tamp.errors import UserError
 from tamp.planning.causes import cause_of, stop_record
@@ -533,24 +536,26 @@ def read_rows(path: str | Path) -> list[dict]:
     return _scan_rows(Path(path))[0]
 
 
+# what a resumed run needs of a row already written (the report checks the rest: evaluation.report.rows)
+_ROW = Schema({"type": "object", "required": ["problem", "method"],
+               "properties": {"problem": {"type": "string"}, "method": {"type": "string"}}})
+# meta.json fields a resumed run compares and extends
+META_SCHEMA = Schema({"type": "object", "required": ["format", *DEFINING_KEYS], "properties": {
+    "format": {"enum": [FORMAT]}, "model_files": {"type": "object"}, "problems_sha256": {"type": "string"},
+    "config": {"type": "object"}, "methods": {"type": "array", "items": {"type": "string"}},
+    "runs": {"type": "array"}, "versions": {"type": "object"}}})
+
+
 def _scan_rows(path: Path) -> tuple[list[dict], int]:
-    """(complete rows, byte length of the complete lines); a broken line before the last is an error."""
+    """(complete rows, byte length of the complete lines); the text after the last newline is a row cut
+    short by a kill (left out); a broken line before it is an error."""
     if not path.exists():
         return [], 0
-    data = path.read_bytes()
-    rows, end = [], 0
-    lines = data.split(b"\n")
-    for number, line in enumerate(lines[:-1], start=1):  # lines[-1]: after the last newline
-        try:
-            row = json.loads(line)
-            if not isinstance(row, dict) or "problem" not in row or "method" not in row:
-                raise UserError("not a result row")
-        except ValueError as error:
-            raise UserError(f"{path} line {number} is not a result row ({error}); the file was damaged "
-                             "by something other than an interrupted evaluation") from None
-        rows.append(row)
-        end += len(line) + 1
-    return rows, end
+    lines = read_jsonl(path, "rows file", LARGE, unfinished=True)
+    for number, row in lines.values:
+        _ROW.check(row, f"{path} line {number} (the file was damaged by something other than an interrupted "
+                   "evaluation)")
+    return [row for _, row in lines.values], lines.end
 
 
 def _prepare(out: Path, meta: dict) -> None:
@@ -561,12 +566,10 @@ def _prepare(out: Path, meta: dict) -> None:
             raise UserError(f"{out} has {ROWS_NAME} but no {META_NAME}; give a new --out directory")
         atomic_write_text(path, json.dumps(meta, indent=2) + "\n")
         return
-    try:
-        old = json.loads(path.read_text())
-    except json.JSONDecodeError as error:
-        raise UserError(f"{path}: not valid JSON ({error})") from None
-    if old.get("format") != FORMAT:
+    old = read_json(path, "meta file")
+    if not isinstance(old, dict) or old.get("format") != FORMAT:
         raise UserError(f"{path} is not the meta file of a `tamp evaluate` results directory")
+    META_SCHEMA.check(old, str(path))
     diffs = []
     for key in DEFINING_KEYS:
         a, b = old.get(key), meta[key]
@@ -616,6 +619,23 @@ def _write_symbols(out: Path, problems: Sequence[Problem], models_dir: Path, met
     atomic_write_text(out / SYMBOLS_NAME, json.dumps([b.to_dict() for b in report], indent=1) + "\n")
 
 
+def refuse_inapplicable(methods: Sequence[str], config: EvalConfig) -> None:
+    """UserError for a setting that none of `methods` would apply (a flag given in vain): meta.json
+    records the settings the rows were computed with, and nothing else."""
+    names = ", ".join(methods)
+    if not any(METHODS[m].closed_loop for m in methods):
+        given = (["--noise/--push"] if config.faults.any else []) + loop_flags_given(config.planner)
+        if given:
+            raise UserError(f"{given[0]} acts on closed loops (bilevel_replan, bilevel_loop); none of the methods "
+                            f"({names}) runs one")
+    if not any(METHODS[m].loop == "goal" for m in methods) and (
+            given := loop_flags_given(config.planner, until_goal_only=True)):
+        raise UserError(f"{given[0]} sets the loop that runs until the goal (bilevel_loop); none of the methods "
+                        f"({names}) runs it")
+    if config.oracle_max_plans != EvalConfig.oracle_max_plans and not any(METHODS[m].oracle for m in methods):
+        raise UserError(f"--oracle-max-plans sets probabilistic_oracle; none of the methods ({names}) is it")
+
+
 def evaluate(models_dir: str | Path, problems_path: str | Path, out_dir: str | Path,
              methods: Sequence[str] | None = None, config: EvalConfig = EvalConfig(),
              models: dict | None = None) -> Path:
@@ -636,6 +656,7 @@ def evaluate(models_dir: str | Path, problems_path: str | Path, out_dir: str | P
         missing = [m for m in methods if m not in models]
         if missing:
             raise UserError(f"no models given for method {missing[0]}")
+    refuse_inapplicable(methods, config)
     problems = read_problems(problems_path)
     loaded = models if models is not None else load_method_models(models_dir, methods)
     for method in methods:
@@ -666,16 +687,18 @@ def evaluate(models_dir: str | Path, problems_path: str | Path, out_dir: str | P
         with open(rows_path, "a") as f, tqdm(total=len(pairs), initial=len(pairs) - len(tasks), desc="evaluate",
                                              unit="row", disable=not config.progress, file=sys.stderr) as bar:
             if tasks:
-                rows_run = run_tasks(tasks, EvalWorker, (str(models_dir), methods, models, config),
-                                     workers=config.workers, backend=config.backend, address=config.address)
-                for row in rows_run:
-                    if row["outcome"] == ERROR_OUTCOME:
-                        tqdm.write(f"warning: problem {row['problem']}, method {row['method']}: {row['error']}; "
-                                   f"recorded as an error row (traceback in {rows_path}), the run goes on",
-                                   file=sys.stderr)
-                    f.write(json.dumps(row) + "\n")
-                    f.flush()
-                    bar.update()
+                # closed on every exit (Ctrl-C between two rows included): the pool stops, its workers with it
+                with closing(run_tasks(tasks, EvalWorker, (str(models_dir), methods, models, config),
+                                       workers=config.workers, backend=config.backend,
+                                       address=config.address)) as rows_run:
+                    for row in rows_run:
+                        if row["outcome"] == ERROR_OUTCOME:
+                            tqdm.write(f"warning: problem {row['problem']}, method {row['method']}: {row['error']}; "
+                                       f"recorded as an error row (traceback in {rows_path}), the run goes on",
+                                       file=sys.stderr)
+                        f.write(json.dumps(row) + "\n")
+                        f.flush()
+                        bar.update()
         return rows_path
 
 
@@ -684,5 +707,5 @@ def strip_timings(row: dict) -> dict:
     return {k: v for k, v in row.items() if k not in TIMING_KEYS}
 
 
-__all__ = ["ERROR_OUTCOME", "EvalConfig", "Evaluator", "OUTCOMES", "ROW_KEYS", "evaluate", "read_rows", "row_cause",
-           "row_outcome", "strip_timings"]
+__all__ = ["ERROR_OUTCOME", "EvalConfig", "Evaluator", "OUTCOMES", "ROW_KEYS", "evaluate", "read_rows",
+           "refuse_inapplicable", "row_cause", "row_outcome", "strip_timings"]

@@ -23,6 +23,8 @@ from typing import Any
 import numpy as np
 import torch
 
+from guarded import Schema, read_json
+
 from .checkpoint import load_model, read_checkpoint
 from .dataset import Transitions, atomic_write_bytes, load_transitions
 from .model import ACTIVATIONS, ModelConfig
@@ -183,24 +185,28 @@ def summarize_ablation_dir(data: "str | Path | Transitions", out_dir: str | Path
     return summary
 
 
+_NUMBERS = {"type": "array", "items": {"type": "number"}}
+TABLE_SCHEMA = Schema({
+    "type": "object",
+    "required": ["epochs", "seed", "num_train_val", "num_test", "zero_effect_cm", "config", "training", "activations"],
+    "properties": {
+        "epochs": {"type": "integer", "minimum": 0}, "seed": {"type": "integer"},
+        "num_train_val": {"type": "integer", "minimum": 0}, "num_test": {"type": "integer", "minimum": 0},
+        "zero_effect_cm": {"type": "number"}, "config": {"type": "object"}, "training": {"type": "object"},
+        "activations": {"type": "object", "additionalProperties": {
+            "type": "object", "required": ["runs_cm", "val_cm", "epochs"],
+            "properties": {"runs_cm": _NUMBERS, "val_cm": _NUMBERS, "epochs": {"type": "array"},
+                           "run_ids": {"type": "array", "items": {"type": "integer", "minimum": 0}},
+                           "in_progress": {"type": "array", "items": {
+                               "type": "object", "required": ["run"],
+                               "properties": {"run": {"type": "integer", "minimum": 0}}}}}}}}})
+
+
 def read_table(path: str | Path) -> dict[str, Any]:
-    """A Table I JSON (`write_ablation_report`'s ablation.json); ValueError naming the file and what is
-    missing when it is not one."""
-    path = Path(path)
-    try:
-        table = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise ValueError(f"no file {path}") from None
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
-        raise ValueError(f"{path}: not a readable JSON file ({e})") from None
-    need = ("epochs", "seed", "num_train_val", "num_test", "zero_effect_cm", "config", "training", "activations")
-    missing = [k for k in need if not isinstance(table, dict) or k not in table]
-    if not missing and (not isinstance(table["activations"], dict) or not all(
-            isinstance(r, dict) and all(isinstance(r.get(f), list) for f in ("runs_cm", "val_cm", "epochs"))
-            for r in table["activations"].values())):
-        missing = ["activations.<name>.{runs_cm, val_cm, epochs}"]
-    if missing:
-        raise ValueError(f"{path}: not a Table I of `tamp ablate-activations` (missing {', '.join(missing)})")
+    """A Table I JSON (`write_ablation_report`'s ablation.json), through the guarded reader and
+    `TABLE_SCHEMA`; ValueError naming the file and the field when it is not one."""
+    table = read_json(path, "Table I JSON")
+    TABLE_SCHEMA.check(table, f"{path} (a Table I of `tamp ablate-activations`)")
     return table
 
 

@@ -34,6 +34,8 @@ from typing import Any
 import numpy as np
 import torch
 
+from guarded import Schema, read_json
+
 from .effects import STATE_DIM, as_action_array
 
 FORMAT = "tamp-transitions/1"
@@ -324,14 +326,24 @@ class DatasetWriter:
 
 # ----------------------------------------------------------------------------- reading
 
+META_SCHEMA = Schema({
+    "type": "object", "required": ["format", "n_max", "status_codes", "world_config"],
+    "properties": {"format": {"enum": [FORMAT]}, "n_max": {"type": "integer", "minimum": 1, "maximum": 64},
+                   "world_config": {"type": "object"}, "seed": {"type": "integer", "minimum": 0},
+                   "status_codes": {"type": "object", "additionalProperties": {"type": "integer"}},
+                   "collection": {"type": "object", "properties": {
+                       "objects": {"type": "array", "items": {"type": "integer", "minimum": 1}},
+                       "shards": {"type": "integer", "minimum": 0}}}}})
+
+
 def read_meta(directory: str | Path) -> dict[str, Any]:
+    """A dataset's meta.json, through the guarded reader and `META_SCHEMA`; ValueError naming it otherwise."""
     path = Path(directory) / META_NAME
-    try:
-        meta = json.loads(path.read_text())
-    except (OSError, json.JSONDecodeError) as e:
-        raise ValueError(f"{path}: cannot read dataset meta ({e})") from e
-    if meta.get("format") != FORMAT:
-        raise ValueError(f"{path}: format {meta.get('format')!r}, expected {FORMAT!r}")
+    meta = read_json(path, "dataset meta file (meta.json)")
+    if not isinstance(meta, dict) or meta.get("format") != FORMAT:
+        got = meta.get("format") if isinstance(meta, dict) else type(meta).__name__
+        raise ValueError(f"{path}: format {str(got)[:40]!r}, expected {FORMAT!r}")
+    META_SCHEMA.check(meta, str(path))
     return meta
 
 

@@ -17,9 +17,12 @@ problem set (never trained on) or of a dataset.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Callable, Sequence
 
 import numpy as np
+
+from guarded import Schema, read_json
 
 BLOCK_HALF_XY = np.array([[0.025, 0.025], [0.025, 0.125]])  # small cube, large bar (along y): half sizes, metres
 HEIGHT_M = 0.05  # every block is 5 cm tall
@@ -165,6 +168,26 @@ FACT_PHRASES = {
     "i nearer the arm (> 2 cm)": "{i} {neg}nearer the arm than {j}",
     "j nearer the arm (> 2 cm)": "{j} {neg}nearer the arm than {i}",
     "same type": "{i} {neg}the same type as {j}", "i large": "{i} {neg}large", "j large": "{j} {neg}large"}
+
+
+_BY_FACT = {"type": "object", "additionalProperties": {"type": "number"}}
+# a symbols table (`tamp symbols --json`, an evaluation's symbols.json): BitReport.to_dict per bit
+SYMBOLS_SCHEMA = Schema({"type": "array", "items": {
+    "type": "object", "required": ["name", "rate", "count", "best", "agreement", "negated", "phi"],
+    "properties": {"name": {"type": "string"}, "rate": {"type": "number"}, "count": {"type": "integer", "minimum": 0},
+                   "best": {"type": "string"}, "agreement": _BY_FACT, "phi": _BY_FACT,
+                   "negated": {"type": "object", "additionalProperties": {"type": "boolean"}}}}})
+
+
+def read_symbols(path: str | Path) -> list[dict]:
+    """A symbols table, through the guarded reader and `SYMBOLS_SCHEMA`; ValueError naming the file
+    and the bit otherwise."""
+    table = read_json(path, "symbols table")
+    SYMBOLS_SCHEMA.check(table, f"{path} (a symbols table of `tamp symbols --json`)")
+    for i, bit in enumerate(table):
+        if bit["best"] not in bit["phi"] or bit["best"] not in bit["negated"]:
+            raise ValueError(f"{path}: [{i}].best: {bit['best'][:40]!r} is not one of the bit's facts")
+    return table
 
 
 @dataclass

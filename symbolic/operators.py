@@ -29,15 +29,16 @@ price of coverage.
 
 from __future__ import annotations
 
-import gzip
 import itertools
 import json
 from collections import Counter, defaultdict
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
+from guarded import LARGE, Schema, read_json
 from symbolic.structs import Effect, Operator, OperatorSet, SymbolicDataset
 
 FORMAT = "symbolic-operators"
@@ -302,27 +303,75 @@ def to_json(ops: OperatorSet) -> dict:
     }
 
 
-def from_json(doc: dict) -> OperatorSet:
-    if not isinstance(doc, dict):
-        raise ValueError(f"not an operators file (expected a JSON object, got {type(doc).__name__})")
-    if doc.get("format") != FORMAT:
-        raise ValueError(f"not an operators file (format={doc.get('format')!r})")
+_BITS = {"type": "array", "items": {"type": "array", "items": {"enum": [0, 1]}}}
+_FLIPS = {"type": "array", "items": {"type": "array", "items": {"type": "integer", "minimum": 0}}}
+# the structure of an operators file; shapes and flip indices against n_unary, n_relations and arity are
+# checked after it (`_operator`)
+SCHEMA = Schema({
+    "type": "object", "required": ["n_unary", "n_relations", "operators"],
+    "properties": {"n_unary": {"type": "integer", "minimum": 0, "maximum": 1024},
+                   "n_relations": {"type": "integer", "minimum": 0, "maximum": 64},
+                   "operators": {"type": "array", "items": {
+                       "type": "object",
+                       "required": ["name", "arity", "same", "grasp", "release", "pre_unary", "pre_rel", "effects"],
+                       "properties": {
+                           "name": {"type": "string"}, "arity": {"type": "integer", "minimum": 1, "maximum": 16},
+                           "same": {"type": "boolean"}, "grasp": {"enum": [-1, 0, 1]}, "release": {"enum": [-1, 0, 1]},
+                           "pre_unary": _BITS, "pre_rel": {"type": "array", "items": _BITS},
+                           "known_unary": _BITS, "known_rel": {"type": "array", "items": _BITS},
+                           "effects": {"type": "array", "minItems": 1, "items": {
+                               "type": "object", "required": ["unary_flips", "rel_flips", "count"],
+                               "properties": {"unary_flips": _FLIPS, "rel_flips": _FLIPS,
+                                              "count": {"type": "integer", "minimum": 0}}}}}}}}})
+
+
+def _bits(value: list, shape: tuple[int, ...], where: str, dtype: type = np.uint8) -> np.ndarray:
+    """A schema-checked nest of 0/1 lists as an array of `shape`; ValueError naming `where` otherwise."""
+    try:
+        array: np.ndarray = np.array(value, dtype=dtype)
+    except ValueError:  # ragged
+        array = np.zeros(0)
+    if array.shape != shape:
+        raise ValueError(f"{where}: expected {' x '.join(map(str, shape))} bits")
+    return array
+
+
+def _flips(value: list, bounds: tuple[int, ...], where: str) -> Any:
+    """Schema-checked flips as a tuple of index tuples, each of len(bounds) indices below `bounds`."""
+    for i, flip in enumerate(value):
+        if len(flip) != len(bounds) or any(v >= b for v, b in zip(flip, bounds)):
+            raise ValueError(f"{where}[{i}]: expected {len(bounds)} indices below {list(bounds)}, got {flip}")
+    return tuple(tuple(f) for f in value)
+
+
+def _operator(o: dict, d: int, K: int, where: str) -> Operator:
+    a = o["arity"]
+    known = "known_unary" in o
+    if known != ("known_rel" in o):
+        raise ValueError(f"{where}: known_unary and known_rel come together")
+    effects = tuple(Effect(_flips(e["unary_flips"], (a, d), f"{where}.effects[{i}].unary_flips"),
+                           _flips(e["rel_flips"], (K, a, a), f"{where}.effects[{i}].rel_flips"))
+                    for i, e in enumerate(o["effects"]))
+    return Operator(o["name"], a, o["same"], o["grasp"], o["release"],
+                    _bits(o["pre_unary"], (a, d), f"{where}.pre_unary"),
+                    _bits(o["pre_rel"], (K, a, a), f"{where}.pre_rel"), effects,
+                    tuple(e["count"] for e in o["effects"]),
+                    _bits(o["known_unary"], (a, d), f"{where}.known_unary", bool) if known else None,
+                    _bits(o["known_rel"], (K, a, a), f"{where}.known_rel", bool) if known else None)
+
+
+def from_json(doc: Any, where: str = "operators") -> OperatorSet:
+    """The OperatorSet of a parsed operators file: format and version, `SCHEMA`, then every operator's
+    shapes and flips; ValueError naming `where` and the field otherwise."""
+    if not isinstance(doc, dict) or doc.get("format") != FORMAT:
+        got = doc.get("format") if isinstance(doc, dict) else type(doc).__name__
+        raise ValueError(f"{where}: not an operators file (format {str(got)[:40]!r}, expected {FORMAT!r})")
     if doc.get("version") not in READABLE:
-        raise ValueError(f"operators.json version {doc.get('version')} unsupported (expected one of {READABLE})")
-    d, K = int(doc["n_unary"]), int(doc["n_relations"])
-    operators = []
-    for o in doc["operators"]:
-        a = int(o["arity"])
-        pre_u = np.asarray(o["pre_unary"], np.uint8).reshape(a, d)
-        pre_r = np.asarray(o["pre_rel"], np.uint8).reshape(K, a, a)
-        effects = tuple(Effect(tuple(tuple(f) for f in e["unary_flips"]), tuple(tuple(f) for f in e["rel_flips"]))
-                        for e in o["effects"])
-        known_u = np.asarray(o["known_unary"], bool).reshape(a, d) if "known_unary" in o else None
-        known_r = np.asarray(o["known_rel"], bool).reshape(K, a, a) if "known_rel" in o else None
-        operators.append(Operator(o["name"], a, bool(o["same"]), int(o["grasp"]), int(o["release"]),
-                                  pre_u, pre_r, effects, tuple(int(e["count"]) for e in o["effects"]),
-                                  known_u, known_r))
-    return OperatorSet(operators, d, K)
+        raise ValueError(f"{where}: operators.json version {str(doc.get('version'))[:40]} unsupported "
+                         f"(expected one of {READABLE})")
+    SCHEMA.check(doc, where)
+    d, K = doc["n_unary"], doc["n_relations"]
+    return OperatorSet([_operator(o, d, K, f"{where}: operators[{i}]") for i, o in enumerate(doc["operators"])], d, K)
 
 
 def save_operators(ops: OperatorSet, path: str | Path) -> None:
@@ -330,17 +379,6 @@ def save_operators(ops: OperatorSet, path: str | Path) -> None:
 
 
 def load_operators(path: str | Path) -> OperatorSet:
-    """Operators of an operators.json (or .json.gz); a missing, truncated or malformed file is a ValueError
-    naming it."""
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"no operators file at {path}")
-    try:
-        text = gzip.decompress(path.read_bytes()).decode() if path.suffix == ".gz" else path.read_text()
-        return from_json(json.loads(text))
-    except (json.JSONDecodeError, gzip.BadGzipFile, EOFError, UnicodeDecodeError) as error:
-        raise ValueError(f"{path}: not valid JSON ({error}); the file is damaged or truncated") from None
-    except ValueError as error:
-        raise ValueError(f"{path}: {error}") from None
-    except (KeyError, TypeError, AttributeError) as error:  # a field missing or of the wrong shape
-        raise ValueError(f"{path}: not a valid operators file ({type(error).__name__}: {error})") from None
+    """Operators of an operators.json (or .json.gz), through the guarded reader; a missing, damaged or
+    malformed file is a ValueError (`guarded.InputError` for the reader's and schema's findings) naming it."""
+    return from_json(read_json(path, "operators file", LARGE), str(path))

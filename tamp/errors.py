@@ -4,10 +4,13 @@ the user with its traceback.
 
 A subclass of ValueError, so library callers that catch ValueError keep working. The libraries
 below `tamp` (`learned`, `symbolic`) do not know this type: they raise ValueError for bad input,
-and `is_user_error` counts those (raised by their own code, not deeper) as the user's."""
+and `is_user_error` counts those (raised by their own code, not deeper) as the user's, and so the
+`guarded.InputError` of a file that failed the guarded reader or its schema, whoever read it."""
 from __future__ import annotations
 
 from pathlib import Path
+
+from guarded import InputError
 
 # packages whose own ValueErrors are about their input (which the command line took from the user)
 LIBRARIES = tuple(str(Path(__file__).resolve().parents[1] / name) for name in ("learned", "symbolic"))
@@ -18,9 +21,9 @@ class UserError(ValueError):
 
 
 def is_user_error(error: BaseException) -> bool:
-    """UserError; an OSError about a file (missing, unreadable); or a ValueError raised by the code
-    of `learned` or `symbolic` themselves (their input checks), not by code they call."""
-    if isinstance(error, UserError):
+    """UserError or InputError; an OSError about a file (missing, unreadable); or a ValueError raised by
+    the code of `learned` or `symbolic` themselves (their input checks), not by code they call."""
+    if isinstance(error, (UserError, InputError)):
         return True
     if isinstance(error, OSError) and error.filename is not None:
         return True

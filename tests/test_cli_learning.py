@@ -154,9 +154,9 @@ def test_finishing_a_file_that_is_not_a_table_is_a_clear_error(tiny_dataset, tmp
     (tmp_path / "rows.json").write_text('{"activations": {}}')
     assert main(base + [str(tmp_path / "rows.json")]) == 2
     err = capsys.readouterr().err
-    assert "--finish" in err and "not a Table I" in err and "epochs" in err and "Traceback" not in err
+    assert "--finish" in err and "a Table I of" in err and "missing field 'epochs'" in err and "Traceback" not in err
     assert main(base + [str(tmp_path / "missing.json")]) == 2
-    assert "no file" in capsys.readouterr().err
+    assert "no Table I JSON at" in capsys.readouterr().err
     assert main(base + [str(tmp_path / "rows.json"), "--resume"]) == 2
     assert "without --resume" in capsys.readouterr().err
 

@@ -141,7 +141,7 @@ def test_several_runs_are_the_sets_of_consecutive_seeds():
     (lambda lines: lines[:2] + [lines[2].replace('"X_goal"', '"X_gaol"')] + lines[3:],
      "line 3: missing field 'X_goal'"),
     (lambda lines: lines[:1] + [lines[1].replace('"seed": ', '"seed": "x", "s": ')] + lines[2:],
-     "line 2: field 'seed' must be an integer"),
+     "line 2: seed: expected an integer, got \"x\""),
     (lambda lines: lines + [lines[0]], "line 5: duplicate problem name 'n2-k1-000' (also on line 1)"),
 ])
 def test_a_malformed_problem_set_names_the_line_and_field(problems_file, tmp_path, edit, message):

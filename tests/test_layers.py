@@ -1,4 +1,4 @@
-"""The layers import one way: evaluation -> tamp.app -> tamp.sim -> tamp.planning -> (symbolic, learned)."""
+"""The layers import one way: evaluation -> tamp.app -> tamp.sim -> tamp.planning -> (symbolic, learned) -> guarded."""
 import ast
 import subprocess
 import sys
@@ -15,6 +15,7 @@ FORBIDDEN = {
     "tamp/app": ("evaluation",),
     "learned": ("tamp", "evaluation", *DRAKE_SIDE),
     "symbolic": ("tamp", "learned", "evaluation", "torch", *DRAKE_SIDE),
+    "guarded": ("tamp", "learned", "symbolic", "evaluation", "numpy", "torch", *DRAKE_SIDE),
 }
 
 

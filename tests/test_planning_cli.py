@@ -29,13 +29,14 @@ def test_problem_round_trip(tmp_path):
     ({"X_goal": GOAL}, "'X_init'"),
     ({"X_init": X}, "'X_goal'"),
     ({"X_init": X, "X_goal": [[0.7, -0.1, 0.075, 1, 0]]}, "'X_goal' has 1 objects"),
-    ({"X_init": X, "X_goal": [[0.7, -0.1, 0.075, 1], [0.7, -0.1, 0.025, 0, 1]]}, "'X_goal' row 0"),
+    ({"X_init": X, "X_goal": [[0.7, -0.1, 0.075, 1], [0.7, -0.1, 0.025, 0, 1]]},
+     "X_goal[0]: expected at least 5 items, got 4"),
     ({"X_init": [[0.6, 0.15, 0.025, 1, 1], X[1]], "X_goal": GOAL}, "'X_init' row 0: the type must be one-hot"),
     ({"X_init": X, "X_goal": [GOAL[0][:3] + [0, 1], GOAL[1]]}, "'X_goal' row 0 has another block type"),
-    ({"X_init": X, "X_goal": GOAL, "k": 0}, "'k' must be a positive integer"),
-    ({"X_init": X, "X_goal": GOAL, "seed": "7"}, "'seed' must be an integer"),
+    ({"X_init": X, "X_goal": GOAL, "k": 0}, "k: expected a value >= 1, got 0"),
+    ({"X_init": X, "X_goal": GOAL, "seed": "7"}, "seed: expected an integer, got \"7\""),
     ({"X_init": X, "X_goal": GOAL, "goal": GOAL}, "unknown field 'goal'"),
-    ({"X_init": "abc", "X_goal": GOAL}, "'X_init' must be a non-empty list"),
+    ({"X_init": "abc", "X_goal": GOAL}, "X_init: expected a list, got \"abc\""),
 ])
 def test_malformed_problem_names_the_field(tmp_path, data, field):
     path = tmp_path / "bad.json"

@@ -8,7 +8,6 @@ import pytest
 from evaluation import refinability
 from learned.interpret import BitNames, interpret_symbols
 from tamp.app.steps import format_steps, step_panel_html, step_records
-from tamp.errors import UserError
 from tamp.planning.models import Models, load_bit_names
 from tamp.planning.steps import symbolic_steps
 from tests.planning_stubs import StubModel, two_block_domain, world_step
@@ -146,7 +145,7 @@ def test_bit_names_come_from_the_symbols_table(tmp_path):
     assert names.describe("r", 1, 1, "o1", "o0") == "r1(o1,o0)=1"  # no strong meaning: the raw bit
     assert load_bit_names(tmp_path / "nowhere").facts == {}
     (tmp_path / "symbols.json").write_text('{"not": "a table"}')
-    with pytest.raises(UserError, match="symbols.json: not a symbols table"):
+    with pytest.raises(ValueError, match=r"symbols.json \(a symbols table of `tamp symbols --json`\): expected a list"):
         load_bit_names(tmp_path)
 
 

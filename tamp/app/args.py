@@ -8,6 +8,7 @@ import os
 from pathlib import Path
 
 from tamp.errors import UserError
+from tamp.inputs import SEED_LIMIT
 
 
 def _number(text: str, parse, ok, expected: str):
@@ -42,6 +43,11 @@ def object_count(text: str) -> int:
 def non_negative_int(text: str) -> int:
     """argparse type: an integer >= 0."""
     return _number(text, int, lambda v: v >= 0, "an integer >= 0")
+
+
+def seed(text: str) -> int:
+    """argparse type: a seed, an integer in [0, 2^63) (`tamp.inputs.SEED_LIMIT`), as problem files take them."""
+    return _number(text, int, lambda v: 0 <= v < SEED_LIMIT, "an integer in [0, 2^63)")
 
 
 def positive_float(text: str) -> float:

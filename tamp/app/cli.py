@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import gc
 import os
 import sys
 
@@ -59,6 +60,10 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"tamp {args.command}: interrupted", file=sys.stderr)
         code = 130
+    if code == 130:
+        # an interrupted process pool (tamp.app.parallel) is unreachable now but held in reference cycles:
+        # collected here, its queues release their semaphores before `entry` leaves without a teardown
+        gc.collect()
     return code
 
 
@@ -70,6 +75,9 @@ def entry() -> None:
         sys.stderr.flush()
     except BrokenPipeError:  # the reader of stdout went away (`tamp ... | head`): nothing more to say
         code = 0
+    except KeyboardInterrupt:  # Ctrl-C before the command ran (while its modules load)
+        print("tamp: interrupted", file=sys.stderr)
+        code = 130
     # OMPL's nanobind bindings print "leaked instances" warnings at interpreter exit; nothing is
     # left to clean up here, so leave without running the interpreter's teardown.
     os._exit(code)

@@ -31,6 +31,7 @@ import numpy as np
 
 from tamp.app.parallel import BACKENDS, import_ray, run_tasks
 from tamp.errors import UserError
+from tamp.inputs import SEED_LIMIT
 from tamp.planning.validate import MAX_OBJECTS
 from tamp.records import exclusive, package_versions
 from tamp.sim.structs import STATUSES, StepStatus, WorldConfig
@@ -68,7 +69,7 @@ class CollectConfig:
             raise UserError(f"--actions-per-scene must be at least 1, got {self.actions_per_scene}")
         if self.scenes_per_shard < 1:
             raise UserError(f"--scenes-per-shard must be at least 1, got {self.scenes_per_shard}")
-        if not 0 <= self.seed < 2**63:
+        if not 0 <= self.seed < SEED_LIMIT:
             raise UserError(f"--seed must be in [0, 2^63), got {self.seed}")
 
     @property

@@ -7,7 +7,7 @@ from pathlib import Path
 from tamp.app.args import (
     check_output_dir,
     check_output_file,
-    non_negative_int,
+    seed,
 )
 from tamp.app.parallel import add_arguments as add_parallel_arguments
 
@@ -64,7 +64,7 @@ def add_collect(sub) -> None:
                    help="object counts drawn uniformly per scene, e.g. 2,3,4 (default)")
     p.add_argument("--out", type=Path, required=True, help="dataset directory (new, or the one to resume)")
     add_parallel_arguments(p)
-    p.add_argument("--seed", type=non_negative_int, default=0, help="dataset seed (default 0)")
+    p.add_argument("--seed", type=seed, default=0, help="dataset seed (default 0)")
     p.add_argument("--actions-per-scene", type=int, default=10, metavar="M",
                    help="chained random actions per scene (default 10)")
     p.add_argument("--scenes-per-shard", type=int, default=20, metavar="K",

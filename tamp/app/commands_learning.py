@@ -12,6 +12,7 @@ from tamp.app.args import (
     non_negative_int,
     positive_float,
     positive_int,
+    seed,
 )
 from tamp.errors import UserError
 
@@ -113,7 +114,7 @@ def _add_train_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--precision", choices=("float32", "bfloat16"), default=None,
                    help="forward/backward precision (default: bfloat16 autocast where the CPU has native "
                    "bfloat16, else float32; weights and loss stay float32)")
-    p.add_argument("--seed", type=non_negative_int, default=0,
+    p.add_argument("--seed", type=seed, default=0,
                    help="seed of the split, the initial weights and the batches")
     p.add_argument("--threads", type=positive_int, default=1, help="torch threads (default 1)")
 

@@ -12,6 +12,7 @@ from tamp.app.args import (
     models_directory,
     non_negative_int,
     positive_int,
+    seed,
 )
 
 
@@ -76,7 +77,7 @@ def add_demo(sub) -> None:
         "each action (orange) as translucent blocks beside the executed ones. Exit status 0 on "
         "success, 1 if there was no plan, the plan could not be refined or it missed the goal.",
     )
-    p.add_argument("--seed", type=non_negative_int, default=0, help="seed of the problem and the planner (default 0)")
+    p.add_argument("--seed", type=seed, default=0, help="seed of the problem and the planner (default 0)")
     p.add_argument("--objects", type=positive_int, default=3, help="number of blocks (default 3)")
     p.add_argument("--actions", type=positive_int, default=3,
                    help="k: random actions that generate the goal (default 3)")

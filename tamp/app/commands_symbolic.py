@@ -15,6 +15,7 @@ from tamp.app.args import (
     non_negative_int,
     positive_int,
     probability,
+    seed,
 )
 from tamp.errors import UserError
 
@@ -155,7 +156,7 @@ def add_domain(sub) -> None:
                    help="drop effects of probability below P and renormalise (default 0; the paper's authors: 0.1)")
     p.add_argument("--any-bottleneck", action="store_true",
                    help="accept a --model that is not a Symbolic Model (e.g. the Fig. 4 Sigmoid variant)")
-    p.add_argument("--seed", type=non_negative_int, default=0)
+    p.add_argument("--seed", type=seed, default=0)
     p.set_defaults(func=cmd_domain)
 
 
@@ -178,7 +179,7 @@ def add_pddl(sub) -> None:
     p.add_argument("--problem", type=Path, default=None, help="problem file (JSON: X_init, X_goal) to export")
     p.add_argument("--sampled", type=non_negative_int, default=0, metavar="N",
                    help="also write the distinct domains among N sampled ones (sampled/, with sampled.json)")
-    p.add_argument("--seed", type=non_negative_int, default=0, help="seed of the sampled domains (default 0)")
+    p.add_argument("--seed", type=seed, default=0, help="seed of the sampled domains (default 0)")
     p.set_defaults(func=cmd_pddl)
 
 
@@ -201,7 +202,7 @@ def add_symbols(sub) -> None:
     p.add_argument("--problems", type=Path, default=None, help="problem set (tamp problems --out): its scenes")
     p.add_argument("--data", type=Path, default=None, help="or a dataset directory: states of its transitions")
     p.add_argument("--max-scenes", type=positive_int, default=5000, help="scenes read at most (default 5000)")
-    p.add_argument("--seed", type=non_negative_int, default=0, help="seed of the scenes drawn from --data (default 0)")
+    p.add_argument("--seed", type=seed, default=0, help="seed of the scenes drawn from --data (default 0)")
     p.add_argument("--png", type=Path, default=None, help="write the table as a heat map (PNG)")
     p.add_argument("--json", type=Path, default=None, help="write every figure as JSON")
     p.set_defaults(func=cmd_symbols)

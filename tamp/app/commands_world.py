@@ -11,8 +11,8 @@ import numpy as np
 from tamp.app.args import (
     _html_path,
     check_output_file,
-    non_negative_int,
     positive_int,
+    seed,
 )
 from tamp.errors import UserError
 
@@ -112,7 +112,7 @@ def view_trajectory(path: Path, out: Path) -> int:
     check_output_file(out, "--out")
     by = f" by {trajectory.source}" if trajectory.source else ""
     print(f"{path}: {len(trajectory.actions)} action(s), {trajectory.samples} samples within the UR10e's limits, "
-          f"continuous; recorded in the {trajectory.world} world{by}")
+          f"consistent and continuous; recorded in the {trajectory.world} world{by}")
     for skipped in trajectory.skipped:
         print(f"  (executed action {skipped.get('index')} moved nothing: {skipped.get('reason', '')})")
     timeline = Timeline()
@@ -144,7 +144,7 @@ def add_simulate(sub) -> None:
         "happened and where the time went.",
     )
     p.add_argument("--objects", type=positive_int, default=3, help="number of blocks, 1..6 (default 3)")
-    p.add_argument("--seed", type=non_negative_int, default=0, help="seed of the scene and the actions (default 0)")
+    p.add_argument("--seed", type=seed, default=0, help="seed of the scene and the actions (default 0)")
     p.add_argument("--steps", type=positive_int, default=5, help="number of random actions (default 5)")
     p.add_argument("--json", action="store_true", help="print JSON lines instead of text")
     p.add_argument("--replay", type=_html_path, metavar="OUT.html",

@@ -3,16 +3,21 @@ process, in a local spawn pool, or on Ray actors (a local Ray cluster, or the on
 
 `tamp collect` and `tamp evaluate` share it. A worker is built once by `make(*args)` (a picklable
 top-level function) and answers `worker.run(task)`; results come back in completion order. Pool
-workers exit when their parent dies (kill -9 included), so no orphan keeps computing.
+workers exit when their parent dies (kill -9 included), so no orphan keeps computing. Pool workers
+ignore SIGINT from their first instruction on: Ctrl-C in a terminal reaches the whole process group,
+and the parent alone answers it (it stops the pool, the command exits with status 130); a worker still
+importing would otherwise print a KeyboardInterrupt traceback.
 """
 from __future__ import annotations
 
 import logging
 import multiprocessing as mp
 import os
+import signal
 import threading
 import time
-from typing import Any, Callable, Iterator, Protocol, Sequence
+from contextlib import contextmanager
+from typing import Any, Callable, Generator, Iterator, Protocol, Sequence
 
 from tamp.app.args import positive_int
 from tamp.errors import UserError
@@ -43,18 +48,23 @@ def import_ray():
 
 
 def run_tasks(tasks: Sequence[Any], make: Callable[..., Worker], args: tuple = (), *, workers: int | None = None,
-              backend: str = "local", address: str | None = None) -> Iterator[Any]:
+              backend: str = "local", address: str | None = None) -> Generator[Any, None, None]:
     """`make(*args).run(task)` for every task, on `workers` workers (default: all CPUs, of the Ray
-    cluster at `address` if given), in completion order. Close the iterator to stop the workers."""
+    cluster at `address` if given), in completion order. Close the generator to stop the workers
+    (`contextlib.closing`), also when the caller is interrupted between two results."""
     if backend not in BACKENDS:
         raise UserError(f"--backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
     if address and backend != "ray":
         raise UserError("--address joins a Ray cluster; use it with --backend ray")
     if not tasks:
-        return iter(())
+        return _nothing()
     if backend == "ray":
         return _run_ray(tasks, make, args, workers, address)
     return _run_local(tasks, make, args, min(workers or available_cpus(), len(tasks)))
+
+
+def _nothing() -> Generator[Any, None, None]:
+    yield from ()
 
 
 # --------------------------------------------------------------------------- local processes
@@ -63,7 +73,10 @@ _WORKER: Worker | None = None  # the one worker object of a pool process
 
 
 def _init_pool_worker(make: Callable[..., Worker], args: tuple, parent_pid: int) -> None:
-    """Pool initializer: build the worker, and exit if the parent dies."""
+    """Pool initializer: build the worker, and exit if the parent dies. (SIGINT is ignored already, see
+    `_children_ignore_sigint`; this covers a worker the pool starts again later.)"""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
     def watch() -> None:
         while os.getppid() == parent_pid:
             time.sleep(0.5)
@@ -79,15 +92,33 @@ def _pool_run(task: Any) -> Any:
     return _WORKER.run(task)
 
 
-def _run_local(tasks: Sequence[Any], make: Callable[..., Worker], args: tuple, workers: int) -> Iterator[Any]:
+def _run_local(tasks: Sequence[Any], make: Callable[..., Worker], args: tuple,
+               workers: int) -> Generator[Any, None, None]:
     if workers == 1:
         worker = make(*args)
         for task in tasks:
             yield worker.run(task)
         return
     ctx = mp.get_context("spawn")
-    with ctx.Pool(workers, initializer=_init_pool_worker, initargs=(make, args, os.getpid())) as pool:
+    with _children_ignore_sigint():
+        pool = ctx.Pool(workers, initializer=_init_pool_worker, initargs=(make, args, os.getpid()))
+    with pool:
         yield from pool.imap_unordered(_pool_run, tasks, chunksize=1)
+
+
+@contextmanager
+def _children_ignore_sigint() -> Iterator[None]:
+    """Processes started in the block ignore SIGINT from their start: a spawned child inherits an ignored
+    signal, and Python then installs no KeyboardInterrupt handler. The parent's handler is back after
+    the block (a few milliseconds: the workers' fork and exec)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 # --------------------------------------------------------------------------- Ray
@@ -103,7 +134,7 @@ class _RayWorker:
 
 
 def _run_ray(tasks: Sequence[Any], make: Callable[..., Worker], args: tuple, workers: int | None,
-             address: str | None) -> Iterator[Any]:
+             address: str | None) -> Generator[Any, None, None]:
     """Every node of an existing cluster must have this package installed (same versions)."""
     ray = import_ray()
     started_here = not ray.is_initialized()

@@ -21,7 +21,7 @@ from tamp.app.args import (
     non_negative_int,
 )
 from tamp.app.plan_file import fmt_action
-from tamp.app.planner_flags import add_planner_arguments, planner_config
+from tamp.app.planner_flags import add_planner_arguments, loop_flags_given, planner_config
 from tamp.errors import UserError
 from tamp.planning.causes import cause_of, stop_record
 from tamp.planning.closed_loop import loop_outcome
@@ -228,6 +228,10 @@ def run_plan(problem_path: Path, models_dir: Path, options: PlanOptions) -> int:
     problem = load_problem(problem_path)
     if options.rounds is not None and not options.replan:
         raise UserError("--rounds sets the replanning rounds of the closed loop; give it with --replan")
+    if not options.replan and (given := loop_flags_given(options.planner)):
+        raise UserError(f"{given[0]} sets the closed loop; give it with --replan")
+    if options.rounds is not None and (given := loop_flags_given(options.planner, until_goal_only=True)):
+        raise UserError(f"{given[0]} sets the loop that runs until the goal; the paper's loop of --rounds has none")
     if options.replan and options.execute == "none":
         raise UserError("--replan executes actions and observes the world; it needs --execute fast or full")
     if options.replay is not None and options.execute == "none":

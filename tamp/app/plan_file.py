@@ -4,7 +4,7 @@
      "actions": [[0, 0, 1, 0]]}
 
 `X` is (n, 5): x, y, z in metres and a one-hot type (small cube, large bar); each action is
-(pick, grasp_offset, place, release_offset). `X_init` is accepted for `X`.
+(pick, grasp_offset, place, release_offset), naming blocks of the scene. `X_init` is accepted for `X`.
 """
 from __future__ import annotations
 
@@ -13,7 +13,9 @@ from pathlib import Path
 
 import numpy as np
 
+from guarded import Schema, read_json
 from tamp.errors import UserError
+from tamp.inputs import ACTION, SCENE, blocks_out_of_range
 from tamp.planning.structs import PickPlace
 from tamp.planning.validate import check_scene
 
@@ -23,45 +25,26 @@ def fmt_action(a) -> str:
     return f"pick {a[0]} at {a[1]:+d}, place on {a[2]} at {a[3]:+d}"
 
 
-def read_json_file(path: str | Path, kind: str):
-    """The parsed content of a JSON file; a missing file or bad JSON is an error naming the file."""
-    path = Path(path)
-    if not path.is_file():
-        raise UserError(f"no {kind} file at {path}")
-    try:
-        return json.loads(path.read_text())
-    except json.JSONDecodeError as error:
-        raise UserError(f"{path}: not valid JSON ({error})") from None
+PLAN = Schema({"type": "object", "required": ["actions"], "additionalProperties": False,
+               "properties": {"X": SCENE, "X_init": SCENE,
+                              "actions": {"type": "array", "minItems": 1, "maxItems": 1000, "items": ACTION}}})
 
 
 def load_plan_file(path: str | Path) -> tuple[np.ndarray, list[PickPlace]]:
-    """Read and check a plan file; errors name the file and the field."""
-    path = Path(path)
-    data = read_json_file(path, "plan")
-    if not isinstance(data, dict):
-        raise UserError(f"{path}: expected a JSON object with fields 'X' and 'actions'")
+    """Read and check a plan file (the guarded reader, `PLAN`, then the scene); errors name the file
+    and the field."""
+    data = read_json(path, "plan file")
+    PLAN.check(data, str(path))
     key = "X" if "X" in data else "X_init" if "X_init" in data else None
     if key is None:
         raise UserError(f"{path}: missing field 'X' (the initial scene, n rows of x, y, z, small, large)")
-    try:
-        X = np.array(data[key], dtype=float)
-    except (TypeError, ValueError):
-        raise UserError(f"{path}: field '{key}' must be a list of [x, y, z, small, large] rows") from None
-    if X.ndim != 2 or X.shape[1] != 5:
-        raise UserError(f"{path}: field '{key}' must have rows of 5 numbers, got shape {X.shape}")
+    X = np.array(data[key], dtype=float)
     check_scene(X, where=str(path), field=key, upright=True)  # the scene is placed as given
-    if "actions" not in data:
-        raise UserError(f"{path}: missing field 'actions' (a list of [pick, grasp_offset, place, release_offset])")
     actions = data["actions"]
-    if not isinstance(actions, list) or not actions:
-        raise UserError(f"{path}: field 'actions' must be a non-empty list")
-    plan = []
-    for k, a in enumerate(actions):
-        if not (isinstance(a, list) and len(a) == 4 and all(isinstance(v, int) and not isinstance(v, bool) for v in a)):
-            raise UserError(f"{path}: actions[{k}] must be 4 integers "
-                            f"[pick, grasp_offset, place, release_offset], got {a!r}")
-        plan.append(PickPlace(*a))
-    return X, plan
+    if (bad := blocks_out_of_range(actions, len(X))) is not None:
+        raise UserError(f"{path}: actions[{bad}]: {actions[bad]} names a block beyond the scene's {len(X)} "
+                        f"(0..{len(X) - 1})")
+    return X, [PickPlace(*a) for a in actions]
 
 
 def write_plan_file(path: str | Path, X: np.ndarray, plan: list) -> None:

@@ -167,3 +167,19 @@ def planner_config(args: argparse.Namespace) -> PlanConfig:
     return PlanConfig(**{part: dataclasses.replace(getattr(default, part), **{
         name: getattr(args, dest) for name, dest in flags.items() if hasattr(args, dest)})
         for part, flags in PLANNER_FLAGS.items()})
+
+
+# the closed loop's flags by LoopConfig field: both loops keep plans; the loop that does not know k (`tamp plan
+# --replan` without --rounds, `bilevel_loop`) alone has a budget and widens
+LOOP_FLAGS = {"keep_plan": "--no-keep-plan", "on_course": "--on-course/--no-on-course",
+              "max_actions": "--max-actions", "search_budget": "--loop-search-budget", "widen": "--no-widen"}
+UNTIL_GOAL_FIELDS = ("max_actions", "search_budget", "widen")
+
+
+def loop_flags_given(config: PlanConfig, until_goal_only: bool = False) -> list[str]:
+    """The closed-loop flags whose settings in `config` differ from the defaults (the flags a user gave),
+    those of the loop that does not know k alone with `until_goal_only`; a command refuses them where no
+    such loop runs."""
+    default = PlanConfig().loop
+    fields = UNTIL_GOAL_FIELDS if until_goal_only else tuple(LOOP_FLAGS)
+    return [LOOP_FLAGS[f] for f in fields if getattr(config.loop, f) != getattr(default, f)]

@@ -8,12 +8,15 @@ A problem file is one JSON object (a problem set is one such object per line, JS
 
 `X_init` and `X_goal` are (n, 5): x, y, z in metres and a one-hot type (small cube, large bar), the
 same objects in the same order (types must agree). `k` (optional, positive integer) is the number of
-actions that generated the goal; closed-loop replanning uses up to k - 1 rounds. `seed` (optional,
-integer) seeds the sampled symbolic domains. `name` (optional string) names the problem within a set,
-`actions` (optional) are the actions that generated the goal. Generated problems also say how they
-were made: `protocol` ("strict" or "paper", see `PROTOCOLS`), `moved` (how many of the k actions
-moved a block) and `run` (which of several problem sets of one file). Errors name the file and the
-field; the scenes are checked by `tamp.planning.validate.check_problem` (reach, resting, no overlap).
+actions that generated the goal (at most MAX_K); closed-loop replanning uses up to k - 1 rounds. `seed`
+(optional, an integer in [0, 2^63), as every --seed) seeds the sampled symbolic domains. `name`
+(optional string) names the problem within a set, `actions` (optional) are the actions that generated
+the goal, each naming blocks of the scene. Generated problems also say how they were made: `protocol`
+("strict" or "paper", see `PROTOCOLS`), `moved` (how many of the k actions moved a block) and `run`
+(which of several problem sets of one file). Files are read by the guarded reader (`guarded`) and
+checked against `PROBLEM` (a JSON Schema) before anything else; errors name the file (and line) and
+the field. The scenes are then checked by `tamp.planning.validate.check_problem` (reach, resting, no
+overlap).
 `random_problem(n, k, seed)` makes one from a random scene and k random actions in the fast world.
 """
 from __future__ import annotations
@@ -25,8 +28,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from tamp.app.plan_file import read_json_file
+from guarded import Schema, read_json, read_jsonl
 from tamp.errors import UserError
+from tamp.inputs import ACTION, SCENE, SEED, blocks_out_of_range
 from tamp.planning.validate import check_problem
 
 if TYPE_CHECKING:
@@ -38,6 +42,7 @@ MOVED_M = 0.01  # metres: a goal-generating action counts when some block moved 
 #   paper   every drawn action is kept whatever its outcome, as the paper's authors do
 #           (sym_learning scripts/test.py; about half of them move nothing in our world)
 PROTOCOLS = ("strict", "paper")
+MAX_K = 100  # goal-generating actions a problem may name (sets have 1..5)
 
 
 @dataclass(frozen=True)
@@ -71,17 +76,18 @@ class Problem:
         return d
 
 
+PROBLEM = Schema({
+    "type": "object", "required": ["X_init", "X_goal"], "additionalProperties": False,
+    "properties": {"X_init": SCENE, "X_goal": SCENE, "k": {"type": "integer", "minimum": 1, "maximum": MAX_K},
+                   "seed": SEED, "name": {"type": "string", "maxLength": 200},
+                   "actions": {"type": "array", "maxItems": MAX_K, "items": ACTION},
+                   "protocol": {"enum": list(PROTOCOLS)}, "moved": {"type": "integer", "minimum": 0},
+                   "run": {"type": "integer", "minimum": 0}}})
+
+
 def _state(data: dict, field: str, where: str) -> np.ndarray:
-    if field not in data:
-        raise UserError(f"{where}: missing field '{field}' (n rows of [x, y, z, small, large])")
-    rows = data[field]
-    if not isinstance(rows, list) or not rows or not all(isinstance(r, list) for r in rows):
-        raise UserError(f"{where}: field '{field}' must be a non-empty list of [x, y, z, small, large] rows")
-    for i, row in enumerate(rows):
-        if len(row) != 5 or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in row):
-            raise UserError(f"{where}: field '{field}' row {i} must be 5 numbers [x, y, z, small, large], got {row!r}")
-    X = np.array(rows, dtype=float)
-    if not np.all(np.isfinite(X)):
+    X = np.array(data[field], dtype=float)
+    if not np.all(np.isfinite(X)):  # (a file's numbers are finite; a dict from Python may hold nan)
         raise UserError(f"{where}: field '{field}' contains a non-finite number")
     onehot = X[:, 3:]
     bad = np.flatnonzero(~(np.isin(onehot, (0.0, 1.0)).all(axis=1) & (onehot.sum(axis=1) == 1)))
@@ -91,54 +97,29 @@ def _state(data: dict, field: str, where: str) -> np.ndarray:
     return X
 
 
-FIELDS = ("X_init", "X_goal", "k", "seed", "name", "actions", "protocol", "moved", "run")
-
-
 def problem_from_dict(data: object, where: str = "problem") -> Problem:
-    """Check a parsed problem object; ValueError naming `where` and the field."""
-    if not isinstance(data, dict):
-        raise UserError(f"{where}: expected a JSON object with fields 'X_init' and 'X_goal'")
+    """Check a parsed problem object (the schema, then the scenes); UserError naming `where` and the field."""
+    PROBLEM.check(data, where)
+    assert isinstance(data, dict)
     X_init, X_goal = _state(data, "X_init", where), _state(data, "X_goal", where)
     if X_goal.shape != X_init.shape:
         raise UserError(f"{where}: field 'X_goal' has {len(X_goal)} objects, 'X_init' has {len(X_init)}")
     differs = np.flatnonzero(np.any(X_goal[:, 3:] != X_init[:, 3:], axis=1))
     if differs.size:
         raise UserError(f"{where}: field 'X_goal' row {differs[0]} has another block type than in 'X_init'")
-    k = data.get("k")
-    if k is not None and (not isinstance(k, int) or isinstance(k, bool) or k < 1):
-        raise UserError(f"{where}: field 'k' must be a positive integer, got {k!r}")
-    seed = data.get("seed", 0)
-    if not isinstance(seed, int) or isinstance(seed, bool):
-        raise UserError(f"{where}: field 'seed' must be an integer, got {seed!r}")
-    unknown = sorted(set(data) - set(FIELDS))
-    if unknown:
-        raise UserError(f"{where}: unknown field '{unknown[0]}' (expected {', '.join(FIELDS)})")
-    name = data.get("name")
-    if name is not None and not isinstance(name, str):
-        raise UserError(f"{where}: field 'name' must be a string, got {name!r}")
-    actions = data.get("actions", [])
-    n = len(X_init)
-    if not isinstance(actions, list) or not all(
-            isinstance(a, list) and len(a) == 4 and all(isinstance(v, int) and not isinstance(v, bool) for v in a)
-            and 0 <= a[0] < n and 0 <= a[2] < n and a[1] in (-1, 0, 1) and a[3] in (-1, 0, 1) for a in actions):
-        raise UserError(f"{where}: field 'actions' must be a list of [pick, grasp_offset, place, release_offset] "
-                         f"with objects in 0..{n - 1} and offsets in -1, 0, 1")
-    protocol = data.get("protocol")
-    if protocol is not None and protocol not in PROTOCOLS:
-        raise UserError(f"{where}: field 'protocol' must be one of {', '.join(PROTOCOLS)}, got {protocol!r}")
-    moved, run = data.get("moved"), data.get("run")
-    for field_name, value in (("moved", moved), ("run", run)):
-        if value is not None and (not isinstance(value, int) or isinstance(value, bool) or value < 0):
-            raise UserError(f"{where}: field '{field_name}' must be a non-negative integer, got {value!r}")
+    k, moved, actions, n = data.get("k"), data.get("moved"), data.get("actions", []), len(X_init)
+    if (bad := blocks_out_of_range(actions, n)) is not None:
+        raise UserError(f"{where}: actions[{bad}]: {actions[bad]} names a block beyond the scene's {n} (0..{n - 1})")
     if moved is not None and k is not None and moved > k:
         raise UserError(f"{where}: field 'moved' is {moved}, more than the k = {k} actions")
     check_problem(X_init, X_goal, where)
-    return Problem(X_init, X_goal, k, seed, name, tuple(tuple(a) for a in actions), protocol, moved, run)
+    return Problem(X_init, X_goal, k, data.get("seed", 0), data.get("name"), tuple(tuple(a) for a in actions),
+                   data.get("protocol"), moved, data.get("run"))
 
 
 def load_problem(path: str | Path) -> Problem:
-    """Read one problem file (JSON)."""
-    return problem_from_dict(read_json_file(path, "problem"), str(path))
+    """Read one problem file (JSON, through the guarded reader)."""
+    return problem_from_dict(read_json(path, "problem file"), str(path))
 
 
 def save_problem(path: str | Path, problem: Problem) -> None:
@@ -148,18 +129,11 @@ def save_problem(path: str | Path, problem: Problem) -> None:
 def read_problem_set(path: str | Path) -> list[Problem]:
     """Read a problem set; errors name the file, the line and the field. Names must be unique."""
     path = Path(path)
-    if not path.is_file():
-        raise UserError(f"no problem set at {path}")
+    lines = read_jsonl(path, "problem set")
     problems: list[Problem] = []
     first_line: dict[str, int] = {}
-    for number, line in enumerate(path.read_text().splitlines(), start=1):
-        if not line.strip():
-            continue
+    for number, data in lines.values:
         where = f"{path} line {number}"
-        try:
-            data = json.loads(line)
-        except json.JSONDecodeError as error:
-            raise UserError(f"{where}: not valid JSON ({error})") from None
         problem = problem_from_dict(data, where)
         if problem.name is None:
             raise UserError(f"{where}: missing field 'name' (every problem of a set is named)")

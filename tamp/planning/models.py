@@ -93,17 +93,10 @@ def load_bit_names(directory: str | Path):
     """The names of the Symbolic Model's bits from DIR/symbols.json (`tamp symbols --json`; bits
     without a strong meaning keep their raw names); raw names only when the file is absent. A file
     that cannot be read is a UserError naming it."""
-    import json
-
-    from learned.interpret import BitNames
+    from learned.interpret import BitNames, read_symbols
 
     path = Path(directory) / SYMBOLS_FILE
-    if not path.is_file():
-        return BitNames.none()
-    try:
-        return BitNames.from_report(json.loads(path.read_text()))
-    except (ValueError, KeyError, TypeError) as error:
-        raise UserError(f"{path}: not a symbols table written by `tamp symbols --json` ({error})") from None
+    return BitNames.from_report(read_symbols(path)) if path.is_file() else BitNames.none()
 
 
 def load_models(directory: str | Path, need_symbolic: bool | None = True) -> Models:

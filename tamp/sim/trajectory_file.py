@@ -10,15 +10,16 @@ piecewise-quadratic time parameterization (tamp/sim/trajectory.py), so cubic Her
 of positions and velocities between samples reproduces the planned motion exactly. Every motion
 starts and ends at rest. docs/trajectories.md describes the format.
 
-Writing and reading check the same things: every sample within the model's position and velocity
-limits (read from drake_models/ur10e.urdf) and the acceleration limit A_MAX (the model gives none),
-segments and actions continuous in position and velocity where they join; a bad file is one
-`TrajectoryError` line. `execute_trajectory` runs a file with the full arm under physics.
+Reading goes through the guarded reader (`guarded`) and `SCHEMA`; writing and reading then run the
+same checks (`tamp.sim.trajectory_checks`): limits read from drake_models/ur10e.urdf (acceleration:
+A_MAX, the model gives none), velocities and accelerations consistent with the positions, continuity,
+segments and gripper events where they belong, blocks of the scene, a bounded duration. A bad file is
+one `TrajectoryError` (or `guarded.InputError`) line. `execute_trajectory` runs a file with the full
+arm under physics.
 """
 from __future__ import annotations
 
 import json
-import math
 from dataclasses import dataclass, field
 from functools import cache
 from pathlib import Path
@@ -31,7 +32,8 @@ from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.trajectories import PiecewisePolynomial
 
-from tamp.errors import UserError
+from guarded import Schema, parse_json, read_json
+from tamp.inputs import ACTION, BLOCK
 from tamp.planning.structs import TYPE_NAMES, PickPlace
 from tamp.records import atomic_write_text
 from tamp.sim.execute import ExecutionResult, Executor
@@ -40,6 +42,7 @@ from tamp.sim.plants import ARM_FILE, ARM_JOINTS
 from tamp.sim.skill import Scene
 from tamp.sim.structs import WorldConfig
 from tamp.sim.trajectory import A_MAX, MOTION_ORDER, RefinedAction, RefinedPlan
+from tamp.sim.trajectory_checks import MAX_ACTION_S, SEGMENT_ORDER, TOLERANCE, TrajectoryError, check
 
 FORMAT = "tamp-trajectory"
 VERSION = 1  # bumped when a reader of the old version would misread a new file
@@ -47,14 +50,9 @@ ROBOT = "UR10e"
 SAMPLE_PERIOD = 0.02  # s between samples inside a segment, besides the knots of the time parameterization
 DECIMALS = 9  # positions, velocities, accelerations, block positions rounded to 1e-9 (rad, rad/s, ..., m)
 ROUND_TRIP_TOLERANCE = 0.002  # m: a file recorded in the full world, executed again, ends this close to the record
-TOLERANCE = 1e-5  # rad, rad/s, rad/s^2 and s: slack of the limit and continuity checks (rounding)
 DWELLS = {"descend": "grasp", "lower": "release"}  # a still segment follows these motions: jaws close / open
 ACCELERATION_NOTE = ("the model file gives no acceleration limits: these are tamp's A_MAX "
                      "(tamp/sim/trajectory.py), the limit of the time parameterization")
-
-
-class TrajectoryError(UserError):
-    """A trajectory file (or an executed motion being written) that fails its checks, in one line."""
 
 
 @dataclass(frozen=True)
@@ -202,49 +200,6 @@ def action_motion(index: int, step: RefinedAction, X_after: np.ndarray) -> Actio
                         list(step.carried), step.X_GC[0], np.asarray(X_after, dtype=float))
 
 
-# --- checks ------------------------------------------------------------------------------------------
-def check(plan: PlanTrajectory, limits: JointLimits, where: str) -> None:
-    """Times increasing, samples within `limits`, continuity at every join; TrajectoryError naming
-    `where` (the file), the action, segment and sample otherwise."""
-    q_prev, v_prev, prev = np.asarray(plan.q_init), np.zeros(6), "the initial configuration"
-    for action in plan.actions:
-        t_action = 0.0
-        for seg in action.segments:
-            at = f"{where}: action {action.index} segment {seg.name!r}"
-            if abs(seg.start - t_action) > TOLERANCE:
-                raise TrajectoryError(f"{at} starts at {seg.start:.6f} s, where the one before ended at "
-                                      f"{t_action:.6f} s")
-            if len(seg.t) < 2 or seg.t[0] != 0.0 or np.any(np.diff(seg.t) <= 0):
-                raise TrajectoryError(f"{at}: time_from_start must start at 0 and increase, over 2 or more points")
-            for what, before, now in (("position", q_prev, seg.q[0]), ("velocity", v_prev, seg.qdot[0])):
-                jump = float(np.max(np.abs(now - before)))
-                if jump > TOLERANCE:
-                    raise TrajectoryError(f"{at} starts {jump:.3g} away in {what} from where {prev} ended "
-                                          "(rad, rad/s): segments must join continuously")
-            for what, values, lo, hi, unit in (
-                    ("position", seg.q, limits.lower, limits.upper, "rad"),
-                    ("velocity", seg.qdot, -limits.velocity, limits.velocity, "rad/s"),
-                    ("acceleration", seg.qddot, -limits.acceleration, limits.acceleration, "rad/s^2")):
-                bad = np.argwhere((values < lo - TOLERANCE) | (values > hi + TOLERANCE))
-                if len(bad):
-                    k, j = bad[0]
-                    raise TrajectoryError(f"{at} point {k}: {ARM_JOINTS[j]} {what} {values[k, j]:.6g} {unit} is "
-                                          f"outside the UR10e's limits [{lo[j]:.6g}, {hi[j]:.6g}]")
-            q_prev, v_prev, prev = seg.q[-1], seg.qdot[-1], f"segment {seg.name!r}"
-            t_action = seg.end
-        at = f"{where}: action {action.index}"
-        if not 0.0 <= action.t_close < action.t_open <= action.duration + TOLERANCE:
-            raise TrajectoryError(f"{at}: the jaws must close, then open, within the action's "
-                                  f"{action.duration:.3f} s (close {action.t_close:.3f} s, open {action.t_open:.3f} s)")
-        n = plan.scene_init.n
-        if not (0 <= action.block < n and action.block in action.carried and all(0 <= c < n for c in action.carried)):
-            raise TrajectoryError(f"{at}: grasped block {action.block} (carried {action.carried}) is not one of the "
-                                  f"scene's {n} blocks")
-        if action.X_after.shape != (n, 5):
-            raise TrajectoryError(f"{at}: blocks_after must give {n} positions")
-        prev = f"action {action.index}"
-
-
 # --- JSON --------------------------------------------------------------------------------------------
 def _duration(t: float) -> dict[str, int]:
     """builtin_interfaces/Duration of t seconds (t >= 0)."""
@@ -294,155 +249,114 @@ def to_document(plan: PlanTrajectory) -> dict[str, Any]:
     }
 
 
-class _Reader:
-    """Typed access to a parsed document; every error names the file and the field."""
+# every number of a file is far inside these bounds (metres, radians, rad/s, rad/s^2); beyond them the
+# checks' arithmetic would overflow before it could say what is wrong
+_BOUNDED = {"type": "number", "minimum": -1e6, "maximum": 1e6}
+_NUMBERS = {n: {"type": "array", "minItems": n, "maxItems": n, "items": _BOUNDED} for n in (3, 4, 6)}
+_POSE = {"type": "object", "required": ["position", "quaternion_wxyz"],
+         "properties": {"position": _NUMBERS[3], "quaternion_wxyz": _NUMBERS[4]}}
+_TIME = {"type": "number", "minimum": 0, "maximum": MAX_ACTION_S}
+_POINT = {"type": "object", "required": ["positions", "velocities", "accelerations", "time_from_start"],
+          "properties": {"positions": _NUMBERS[6], "velocities": _NUMBERS[6], "accelerations": _NUMBERS[6],
+                         "time_from_start": {"type": "object", "required": ["sec", "nanosec"], "properties": {
+                             "sec": {"type": "integer", "minimum": 0, "maximum": int(MAX_ACTION_S)},
+                             "nanosec": {"type": "integer", "minimum": 0, "maximum": 999_999_999}}}}}
+_SEGMENT = {"type": "object", "required": ["name", "start_time", "trajectory"], "properties": {
+    "name": {"enum": list(SEGMENT_ORDER)}, "start_time": _TIME,
+    "trajectory": {"type": "object", "required": ["joint_names", "points"], "properties": {
+        "joint_names": {"enum": [list(ARM_JOINTS)]}, "points": {"type": "array", "minItems": 2, "items": _POINT}}}}}
+_CLOSE = {"type": "object", "required": ["event", "time", "block", "carried", "block_in_tcp"], "properties": {
+    "event": {"enum": ["close"]}, "time": _TIME, "block": BLOCK,
+    "carried": {"type": "array", "minItems": 1, "items": BLOCK}, "block_in_tcp": _POSE}}
+_OPEN = {"type": "object", "required": ["event", "time"], "properties": {"event": {"enum": ["open"]}, "time": _TIME}}
+_ACTION = {"type": "object", "required": ["index", "action", "duration", "segments", "gripper", "blocks_after"],
+           "properties": {"index": {"type": "integer", "minimum": 0}, "action": ACTION, "duration": _TIME,
+                          "segments": {"type": "array", "minItems": 2, "maxItems": len(SEGMENT_ORDER),
+                                       "items": _SEGMENT},
+                          "gripper": {"type": "array", "minItems": 2, "maxItems": 2, "items": [_CLOSE, _OPEN]},
+                          "blocks_after": {"type": "array", "items": _NUMBERS[3]}}}
+# the structure of a version-1 file (docs/trajectories.md), checked after its format, version and robot
+SCHEMA = Schema({"type": "object", "required": ["robot", "recorded_world", "scene", "actions"], "properties": {
+    "source": {"type": "string"}, "recorded_world": {"enum": ["fast", "full"]},
+    "scene": {"type": "object", "required": ["blocks", "arm_positions"], "properties": {
+        "blocks": {"type": "array", "minItems": 1, "items": {
+            "type": "object", "required": ["type", "position", "quaternion_wxyz"],
+            "properties": {"type": {"enum": list(TYPE_NAMES)}, "position": _NUMBERS[3],
+                           "quaternion_wxyz": _NUMBERS[4]}}},
+        "arm_positions": _NUMBERS[6]}},
+    "actions": {"type": "array", "items": _ACTION},
+    "skipped": {"type": "array", "items": {"type": "object", "required": ["index", "action", "reason"], "properties": {
+        "index": {"type": "integer", "minimum": 0}, "action": ACTION, "reason": {"type": "string"}}}}}})
 
-    def __init__(self, where: str) -> None:
-        self.where = where
 
-    def fail(self, path: str, expected: str) -> TrajectoryError:
-        return TrajectoryError(f"{self.where}: {path}: expected {expected}")
-
-    def get(self, obj: Any, key: str, path: str) -> Any:
-        if not isinstance(obj, dict):
-            raise self.fail(path, "an object")
-        if key not in obj:
-            raise TrajectoryError(f"{self.where}: {path}: missing field {key!r}")
-        return obj[key]
-
-    def list(self, value: Any, path: str) -> list:
-        if not isinstance(value, list):
-            raise self.fail(path, "a list")
-        return value
-
-    def number(self, value: Any, path: str) -> float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-            raise self.fail(path, "a finite number")
-        return float(value)
-
-    def integer(self, value: Any, path: str) -> int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise self.fail(path, "an integer")
-        return value
-
-    def vector(self, value: Any, n: int, path: str) -> np.ndarray:
-        items = self.list(value, path)
-        if len(items) != n:
-            raise self.fail(path, f"{n} numbers, got {len(items)}")
-        return np.array([self.number(v, f"{path}[{i}]") for i, v in enumerate(items)])
-
-    def pose(self, obj: Any, path: str) -> RigidTransform:
-        p = self.vector(self.get(obj, "position", path), 3, f"{path}.position")
-        w = self.vector(self.get(obj, "quaternion_wxyz", path), 4, f"{path}.quaternion_wxyz")
-        if abs(np.linalg.norm(w) - 1.0) > 1e-6:
-            raise self.fail(f"{path}.quaternion_wxyz", "a unit quaternion")
-        return RigidTransform(RotationMatrix(Quaternion(w / np.linalg.norm(w))), p)  # type: ignore[arg-type]
+def _read_pose(obj: dict, where: str) -> RigidTransform:
+    w = np.array(obj["quaternion_wxyz"], dtype=float)
+    if abs(np.linalg.norm(w) - 1.0) > 1e-6:
+        raise TrajectoryError(f"{where}.quaternion_wxyz: expected a unit quaternion, got {obj['quaternion_wxyz']}")
+    return RigidTransform(RotationMatrix(Quaternion(w / np.linalg.norm(w))), obj["position"])
 
 
 def from_document(doc: Any, where: str) -> PlanTrajectory:
-    """A PlanTrajectory of a parsed file, its structure and robot checked (not yet its samples)."""
-    r = _Reader(where)
+    """A PlanTrajectory of a parsed file: its format, version and robot, then `SCHEMA` (not yet its
+    motion: `check`)."""
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         raise TrajectoryError(f"{where}: not a tamp trajectory file (no \"format\": \"{FORMAT}\")")
-    version = r.integer(r.get(doc, "version", "version"), "version")
-    if version != VERSION:
-        raise TrajectoryError(f"{where}: trajectory format version {version}; this tamp reads version {VERSION}")
-    robot = r.get(doc, "robot", "robot")
-    name, joints = r.get(robot, "name", "robot"), r.get(robot, "joint_names", "robot")
+    if doc.get("version") != VERSION:
+        raise TrajectoryError(f"{where}: trajectory format version {_short(doc.get('version'))}; this tamp reads "
+                              f"version {VERSION}")
+    robot = doc.get("robot")
+    name, joints = (robot.get("name"), robot.get("joint_names")) if isinstance(robot, dict) else (None, None)
     if name != ROBOT or joints != list(ARM_JOINTS):
-        raise TrajectoryError(f"{where}: a trajectory for robot {name!r} with joints {joints}; this is the "
-                              f"{ROBOT} model with joints {list(ARM_JOINTS)}")
-    scene = r.get(doc, "scene", "scene")
-    blocks = r.list(r.get(scene, "blocks", "scene"), "scene.blocks")
-    if not blocks:
-        raise r.fail("scene.blocks", "one block or more")
-    types, poses = [], []
-    for i, b in enumerate(blocks):
-        kind = r.get(b, "type", f"scene.blocks[{i}]")
-        if kind not in TYPE_NAMES:
-            raise r.fail(f"scene.blocks[{i}].type", f"one of {list(TYPE_NAMES)}")
-        types.append(TYPE_NAMES.index(kind))
-        poses.append(r.pose(b, f"scene.blocks[{i}]"))
-    scene_init = Scene(np.array(types), poses)
-    q_init = r.vector(r.get(scene, "arm_positions", "scene"), 6, "scene.arm_positions")
-    world = r.get(doc, "recorded_world", "recorded_world")
-    if world not in ("fast", "full"):
-        raise r.fail("recorded_world", "'fast' or 'full'")
-    actions = [_action(r, a, f"actions[{k}]", scene_init)
-               for k, a in enumerate(r.list(r.get(doc, "actions", "actions"), "actions"))]
-    skipped = r.list(doc.get("skipped", []), "skipped")
-    if not all(isinstance(s, dict) for s in skipped):
-        raise r.fail("skipped", "a list of objects (index, action, reason)")
-    source = doc.get("source", "")
-    return PlanTrajectory(scene_init, q_init, actions, world, source if isinstance(source, str) else "", skipped)
+        raise TrajectoryError(f"{where}: a trajectory for robot {_short(name)} with joints {_short(joints)}; this is "
+                              f"the {ROBOT} model with joints {list(ARM_JOINTS)}")
+    SCHEMA.check(doc, where)
+    blocks = doc["scene"]["blocks"]
+    scene = Scene(np.array([TYPE_NAMES.index(b["type"]) for b in blocks]),
+                  [_read_pose(b, f"{where}: scene.blocks[{i}]") for i, b in enumerate(blocks)])
+    actions = [_action(a, f"{where}: actions[{k}]", scene) for k, a in enumerate(doc["actions"])]
+    return PlanTrajectory(scene, np.array(doc["scene"]["arm_positions"], dtype=float), actions,
+                          doc["recorded_world"], doc.get("source", ""), doc.get("skipped", []))
 
 
-def _action(r: _Reader, obj: Any, path: str, scene: Scene) -> ActionMotion:
-    index = r.integer(r.get(obj, "index", path), f"{path}.index")
-    raw = r.list(r.get(obj, "action", path), f"{path}.action")
-    if len(raw) != 4:
-        raise r.fail(f"{path}.action", "4 integers [pick, grasp_offset, place, release_offset]")
-    action = PickPlace(*(r.integer(v, f"{path}.action") for v in raw))
+def _short(value: Any) -> str:
+    text = repr(value)
+    return text if len(text) <= 80 else text[:77] + "..."
+
+
+def _action(obj: dict, where: str, scene: Scene) -> ActionMotion:
     segments = []
-    for k, seg in enumerate(r.list(r.get(obj, "segments", path), f"{path}.segments")):
-        at = f"{path}.segments[{k}]"
-        name = r.get(seg, "name", at)
-        start = r.number(r.get(seg, "start_time", at), f"{at}.start_time")
-        traj = r.get(seg, "trajectory", at)
-        if r.get(traj, "joint_names", f"{at}.trajectory") != list(ARM_JOINTS):
-            raise r.fail(f"{at}.trajectory.joint_names", f"the {ROBOT}'s joints {list(ARM_JOINTS)}")
-        points = r.list(r.get(traj, "points", f"{at}.trajectory"), f"{at}.trajectory.points")
-        if len(points) < 2:
-            raise r.fail(f"{at}.trajectory.points", "2 points or more")
-        t, q, qdot, qddot = [], [], [], []
-        for i, point in enumerate(points):
-            pt = f"{at}.trajectory.points[{i}]"
-            q.append(r.vector(r.get(point, "positions", pt), 6, f"{pt}.positions"))
-            qdot.append(r.vector(r.get(point, "velocities", pt), 6, f"{pt}.velocities"))
-            qddot.append(r.vector(r.get(point, "accelerations", pt), 6, f"{pt}.accelerations"))
-            d = r.get(point, "time_from_start", pt)
-            sec, ns = (r.integer(r.get(d, key, f"{pt}.time_from_start"), f"{pt}.time_from_start.{key}")
-                       for key in ("sec", "nanosec"))
-            t.append(sec + ns * 1e-9)
-        segments.append(Segment(str(name), start, np.array(t), np.array(q), np.array(qdot), np.array(qddot)))
-    if not segments:
-        raise r.fail(f"{path}.segments", "one segment or more")
-    gripper = r.list(r.get(obj, "gripper", path), f"{path}.gripper")
-    events = {e.get("event") if isinstance(e, dict) else None: e for e in gripper}
-    if set(events) != {"close", "open"} or len(gripper) != 2:
-        raise r.fail(f"{path}.gripper", "one 'close' and one 'open' event")
-    close = events["close"]
-    at = f"{path}.gripper[close]"
-    carried = [r.integer(c, f"{at}.carried") for c in r.list(r.get(close, "carried", at), f"{at}.carried")]
-    positions = r.list(r.get(obj, "blocks_after", path), f"{path}.blocks_after")
-    if len(positions) != scene.n:
-        raise r.fail(f"{path}.blocks_after", f"{scene.n} positions (one per block)")
+    for seg in obj["segments"]:
+        points = seg["trajectory"]["points"]
+        t = np.array([p["time_from_start"]["sec"] + p["time_from_start"]["nanosec"] * 1e-9 for p in points])
+        q, qdot, qddot = (np.array([p[key] for p in points], dtype=float)
+                          for key in ("positions", "velocities", "accelerations"))
+        segments.append(Segment(seg["name"], float(seg["start_time"]), t, q, qdot, qddot))
+    if len(obj["blocks_after"]) != scene.n:
+        raise TrajectoryError(f"{where}.blocks_after: expected {scene.n} positions (one per block), "
+                              f"got {len(obj['blocks_after'])}")
     X_after = scene.X()
-    X_after[:, :3] = [r.vector(p, 3, f"{path}.blocks_after[{i}]") for i, p in enumerate(positions)]
-    return ActionMotion(index, action, segments, r.number(r.get(close, "time", at), f"{at}.time"),
-                        r.number(r.get(events["open"], "time", f"{path}.gripper[open]"), f"{path}.gripper[open].time"),
-                        r.integer(r.get(close, "block", at), f"{at}.block"), carried,
-                        r.pose(r.get(close, "block_in_tcp", at), f"{at}.block_in_tcp"), X_after)
+    X_after[:, :3] = obj["blocks_after"]
+    close, open_ = obj["gripper"]
+    motion = ActionMotion(obj["index"], PickPlace(*obj["action"]), segments, float(close["time"]),
+                          float(open_["time"]), close["block"], list(close["carried"]),
+                          _read_pose(close["block_in_tcp"], f"{where}.gripper[0].block_in_tcp"), X_after)
+    if abs(motion.duration - obj["duration"]) > TOLERANCE:
+        raise TrajectoryError(f"{where}.duration: {obj['duration']} s, but the segments end at {motion.duration:.9f} s")
+    return motion
 
 
 def write_trajectory(path: str | Path, plan: PlanTrajectory) -> Path:
     """Check `plan` as the file will read back (rounded), then write it atomically; returns the path."""
     text = json.dumps(to_document(plan), separators=(",", ":")) + "\n"
-    check(from_document(json.loads(text), str(path)), model_limits(), f"{path} (being written)")
+    where = f"{path} (being written)"
+    check(from_document(parse_json(text, where), where), model_limits(), where)
     return atomic_write_text(path, text)
 
 
 def read_trajectory(path: str | Path) -> PlanTrajectory:
-    """Read and check a trajectory file against the UR10e model; TrajectoryError (one line) if it is
-    missing, malformed, truncated, for another robot, off the limits or discontinuous."""
-    path = Path(path)
-    if not path.is_file():
-        raise TrajectoryError(f"no trajectory file at {path}")
-    try:
-        doc = json.loads(path.read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError) as error:
-        raise TrajectoryError(f"{path}: not valid JSON, malformed or truncated ({error})") from None
-    plan = from_document(doc, str(path))
+    """Read a trajectory file through the guarded reader and check it against the UR10e model
+    (`tamp.sim.trajectory_checks`); TrajectoryError or InputError (one line) if it fails."""
+    plan = from_document(read_json(path, "trajectory file"), str(path))
     check(plan, model_limits(), str(path))
     return plan
 
