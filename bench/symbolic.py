@@ -1,5 +1,5 @@
-"""Level 1 per problem on a learned domain, n = 2 to 6, stage by stage, against the planner before
-issue 26, measured in the same run.
+"""Level 1 per problem on a learned domain, n = 2 to 6, stage by stage, against the plain planner of
+`symbolic.reference` (one search per domain over the grounded task), measured in the same run.
 
     .venv/bin/python bench/symbolic.py                     # bundled models, n = 2..6, 10 problems per n
     .venv/bin/python bench/symbolic.py --quick             # 4 problems per n
@@ -16,7 +16,7 @@ search meets), search (the one search for all N domains, backward distances incl
 (ranked plans and their alternatives rolled out with the Dynamics Model). Level 1 = their sum.
 
 Baseline (n <= --baseline-max-n; the grounded task of the old planner has 466k ground actions at
-n = 5, 1.27 million at n = 6): the planner before issue 26 (`symbolic.reference.plan_each_domain`: a
+n = 5, 1.27 million at n = 6): the plain planner (`symbolic.reference.plan_each_domain`: a
 random stream per domain, one breadth-first search per domain over the grounded task, reused between
 domains that agree on the operators it touched, 10,000 expansions shared) on the same symbolic
 problems and seeds; grounding is paid once per n, outside the timings, as the old planner cached it.

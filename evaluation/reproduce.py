@@ -98,7 +98,7 @@ SCALES: dict[str, Scale] = {
     # existing quick OUTs stay resumable; the fast settings would do better here (learned/README.md, training)
     "quick": Scale(samples=40_000, epochs=250, train_time_limit_s=None, ablation_runs=2, ablation_epochs=15,
                    per_cell=10, search_time_limit_s=10.0),
-    # to convergence (patience 100 epochs, at most the paper's 4000) at the fast settings of issue 19
+    # to convergence (patience 100 epochs, at most the paper's 4000) at the fast settings
     # (learned.TrainConfig.fast(): batch 1024, lr 1e-4 scaled linearly, bfloat16 autocast)
     # Table I over 3 seeds per activation (the paper: 10), trained to convergence as the models are
     "paper": Scale(samples=160_000, epochs=4000, train_time_limit_s=None, ablation_runs=3, ablation_epochs=4000,

@@ -9,7 +9,7 @@ known exactly). The zero-effect baseline (predict X' = X) is reported next to it
 Files: ``out_path`` holds the best model by validation error; ``<out>.last.pt`` holds the
 latest epoch with optimizer and RNG state, which ``resume=True`` continues from exactly.
 
-Speed (issue 19). The paper's settings (batch 128, lr 1e-4, float32) spend nearly all their time
+Speed. The paper's settings (batch 128, lr 1e-4, float32) spend nearly all their time
 in matrix products that already run near one core's float32 peak, so the levers are fewer
 cheaper flops and fewer steps: ``precision="bfloat16"`` runs the forward and backward passes under
 bfloat16 autocast (weights, Adam state, loss and validation stay float32), about 3x the samples/s
@@ -25,7 +25,7 @@ Stopping. ``epochs`` is a maximum; with ``patience_epochs`` training stops once 
 error has not improved by ``min_delta_cm`` for that many epochs ("converged"). Why a run stopped
 is a `StopReason`, kept in the result, in both checkpoints and on the last history record. Only
 ``time_limit_s`` depends on the machine: such a run is ``finished == False`` and resuming it gives
-what one sitting would have; resuming a finished run returns its result without training.
+what one uninterrupted run would have; resuming a finished run returns its result without training.
 """
 from __future__ import annotations
 
@@ -83,7 +83,7 @@ def bf16_fast() -> bool:
 class TrainConfig:
     """How to train (the architecture is `ModelConfig`'s). The defaults are the paper's settings, those
     of the bundled models: Adam at batch 128 and lr 1e-4 in float32 for a fixed number of epochs.
-    `TrainConfig.fast()` gives issue 19's: batch 1024 with the learning rate scaled linearly,
+    `TrainConfig.fast()` gives faster ones: batch 1024 with the learning rate scaled linearly,
     bfloat16 autocast where the CPU has it natively, one thread, early stopping."""
 
     epochs: int = 100  # at most
@@ -139,7 +139,7 @@ class TrainConfig:
 
     @classmethod
     def fast(cls, batch_size: int = 1024, **changes: Any) -> "TrainConfig":
-        """Issue 19's settings (learned/README.md): `lr` scaled linearly with the batch unless given,
+        """The fast settings (learned/README.md): `lr` scaled linearly with the batch unless given,
         bfloat16 where `bf16_fast()`, one thread, patience 100 epochs, at most 1000 epochs."""
         settings: dict[str, Any] = {"epochs": 1000, "batch_size": batch_size, "lr": scaled_lr(batch_size),
                                     "precision": "bfloat16" if bf16_fast() else "float32", "threads": 1,

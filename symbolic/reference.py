@@ -3,11 +3,11 @@
 Every ground action of the task is enumerated up front (operator, then binding in
 `itertools.permutations` order), each with a (mask, value) precondition over the packed state and one
 XOR mask per effect; each sampled domain gets a breadth-first search of its own with the goal test at
-generation. This was the planner until issue 26 (`plan_each_domain`: N domains drawn with a random
-stream per domain, searches reused between domains that agree on the operators a search touched,
-a shared expansion budget). It stays, independent of `symbolic.lifted` and `symbolic.search`:
-`tests/test_symbolic_search.py` checks that one shared search gives every domain this plan, and
-`bench/symbolic.py` measures the shared search against it.
+generation (`plan_each_domain`: N domains drawn with a random stream per domain, searches reused
+between domains that agree on the operators a search touched, a shared expansion budget),
+independent of `symbolic.lifted` and `symbolic.search`: `tests/test_symbolic_search.py` checks
+that one shared search gives every domain this plan, and `bench/symbolic.py` measures the shared
+search against it.
 """
 
 from __future__ import annotations
@@ -101,7 +101,7 @@ def bfs(task: GroundTask, choice, init: int, goal: int, nonempty: bool = False, 
 
 
 def sample_per_domain_stream(ops: OperatorSet, n_domains: int, seed: int) -> np.ndarray:
-    """(N, n_operators) effect choices as drawn until issue 26: domain k's uniforms from its own
+    """(N, n_operators) effect choices drawn per domain: domain k's uniforms from its own
     `np.random.default_rng([seed, k])`, one per operator, compared with the cumulative probabilities."""
     cum = EffectSampler(ops).cumulative
     return np.stack([(np.random.default_rng([seed, k]).random(len(ops))[:, None] >= cum).sum(axis=1)

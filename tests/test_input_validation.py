@@ -1,4 +1,4 @@
-"""Bad input is refused before the work (issue 18): one line, exit 2, never a traceback or a silent answer.
+"""Bad input is refused before the work: one line, exit 2, never a traceback or a silent answer.
 
 One test per class: impossible scenes (tamp.planning.validate), `tamp evaluate`'s inputs and its error rows,
 output paths, numeric flags and model kinds, damaged domain files. Fast: stub models, the bundled

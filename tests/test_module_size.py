@@ -1,4 +1,4 @@
-"""Modules stay small enough to read whole: no Python file under tamp/ over 500 lines (issue 42)."""
+"""Modules stay small enough to read whole: no Python file under tamp/ over 500 lines."""
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]

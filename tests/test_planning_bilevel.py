@@ -391,7 +391,7 @@ def test_a_plan_on_course_is_kept_whatever_a_swinging_rollout_of_its_rest_says(d
     assert kept.kept and kept.kept_by == "on course" and kept.plan == [actions[1]] and "on course" in kept.reasons[-1]
     assert np.array_equal(kept.predicted[0], observed(0.005)) and np.array_equal(kept.predicted[1], predicted[2])
     assert kept.predicted_error == pytest.approx(goal_errors(predicted[-1], goal).max())
-    # the rule before: the rollout from the observed state decides, and it ends 20 cm off
+    # without on_course: the rollout from the observed state decides, and it ends 20 cm off
     blind = keep_rest(swinging, observed(0.005), goal, last, PlanConfig(loop=LoopConfig(on_course=None)))
     assert not blind.solved and blind.reasons[0].startswith("keep: the rest of the last plan is predicted 2")
     # 2.5 cm off the plan's prediction is off course: the rollout decides again

@@ -1,4 +1,4 @@
-"""The per-step view of a plan (issue 28): each step's symbols, operator and what execution made of
+"""The per-step view of a plan: each step's symbols, operator and what execution made of
 them; the bits' names; the refinability table and the abstraction fidelity recomputed from rows."""
 import json
 

@@ -50,7 +50,7 @@ def add_planner_arguments(p: argparse.ArgumentParser, backends: tuple[str, ...] 
                    f"(default {default.level1.objects}: the bundled models' 2-4 block training scenes; "
                    "`bilevel_alg1` always plans in the whole scene)")
     p.add_argument("--no-level1-objects", dest="level1_objects", action="store_const", const=None,
-                   help="Level 1 plans in the whole scene at any number of blocks (the rule before --level1-objects)")
+                   help="Level 1 plans in the whole scene at any number of blocks")
     p.add_argument("--no-level1-serial", dest="level1_serial", action="store_false",
                    help="with --focus-from blocks or more, when Level 1 gives no verified plan it does not plan one "
                    "misplaced block at a time (default: it does, lowest goal first, each block in the scene of the "
@@ -82,8 +82,8 @@ def add_planner_arguments(p: argparse.ArgumentParser, backends: tuple[str, ...] 
                    "expected, and the model's rollouts swing under millimetre changes "
                    f"(default {default.loop.on_course:g} m)")
     p.add_argument("--no-on-course", dest="on_course", action="store_const", const=None,
-                   help="keep the rest of the last plan only by its rollout from the observed state (the rule before "
-                   "--on-course)")
+                   help="keep the rest of the last plan only by its rollout from the observed state, however close the "
+                   "blocks are to the plan's own prediction")
     p.add_argument("--max-actions", type=positive_int, default=default.loop.max_actions,
                    help="the closed loop (--replan; bilevel_loop) gives up after sending this many actions to the "
                    f"world (default {default.loop.max_actions}: a goal of up to 5 random actions, with room to "
@@ -113,7 +113,7 @@ def add_planner_arguments(p: argparse.ArgumentParser, backends: tuple[str, ...] 
                    "otherwise the search looks on as for a goal state beyond --confident, and Level 1's plan waits "
                    "for the continuous search as beyond --level1-confident")
     p.add_argument("--no-fragility", dest="max_fragility", action="store_const", const=None,
-                   help="take plans by their predicted error alone (the rule before the fragility test)")
+                   help="take plans by their predicted error alone (no perturbed rollouts)")
     p.add_argument("--max-doubt", type=positive_float, default=default.search.max_doubt, metavar="METRES",
                    help="with an ensemble Dynamics Model (tamp train --ensemble, tamp practice): a plan is taken at "
                    "once only if no step of it may miss by more than this, by the model's own 95 %% bound; otherwise "

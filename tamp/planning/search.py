@@ -18,8 +18,7 @@ an axis-aligned block; X holds no yaw), so the object closest to o_i's goal need
 place it on: another, one or two offsets away, may put it right there. The object with the release
 point closest (2-D) to o_i's goal is added as a third target when it is not the closest object
 (at most 27 actions per misplaced object). From 4 blocks on the closest object is often the wrong
-one, and the search then ran to its node budget (seed-13 tuning problems of 5 and 6 blocks: 7 of
-40 ended without a plan, 3 with these targets).
+one, and without this target the search runs to its node budget (docs/beyond-the-paper.md).
 
 Goal test at generation: every object within `eps` (5 cm) of its goal in 3-D. A goal state whose
 worst object is predicted farther than `confident` (3.5 cm) is kept as a candidate while the search
