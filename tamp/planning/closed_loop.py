@@ -148,10 +148,12 @@ def plan_closed_loop(method: str, models: Models, X_init, X_goal,
 
 def _within(cfg: PlanConfig, expansions: int, spent: int) -> PlanConfig:
     """cfg with a continuous search of at most `expansions` nodes, and no more than the loop's search budget
-    has left after `spent`."""
+    has left after `spent`, stalling after cfg.loop.stall expansions (if set)."""
     allowed = max(1, min(expansions, cfg.loop.search_budget - spent))
-    return cfg if allowed == cfg.search.max_expansions else replace(cfg, search=replace(cfg.search,
-                                                                                         max_expansions=allowed))
+    stall = cfg.search.stall if cfg.loop.stall is None else cfg.loop.stall
+    if allowed == cfg.search.max_expansions and stall == cfg.search.stall:
+        return cfg
+    return replace(cfg, search=replace(cfg.search, max_expansions=allowed, stall=stall))
 
 
 def _expanded(result: PlanResult) -> int:

@@ -110,6 +110,8 @@ class LoopConfig:
     widen_expansions: int = 400  # node budget of the widened search (about 2-4 s at 4 blocks with kinematics)
     search_budget: int = 3000  # search expansions over all rounds: a loop whose rounds keep failing ends in about
     #   the time of two failed searches
+    stall: int | None = 300  # the stall cut of its rounds' searches (`SearchConfig.stall`, which it replaces there;
+    #   None: the search's own): a round that fails has a widened search and the next round behind it
     progress: float = 0.02  # metres, summed over blocks: without a plan, a step toward the closest state the round's
     #   searches expanded is taken only if that state is this much closer to the goal
     revisit: float = 0.01  # metres: back this close to an observed state, leave out the actions taken from there
@@ -119,6 +121,8 @@ class LoopConfig:
         if not self.revisit >= 0 or not self.progress >= 0:
             raise UserError(f"LoopConfig.revisit and .progress must be distances of 0 m or more, got {self.revisit} "
                             f"and {self.progress}")
+        if self.stall is not None and self.stall < 1:
+            raise UserError(f"LoopConfig.stall must be a positive number of expansions or None, got {self.stall}")
         if self.max_actions < 1 or self.widen_expansions < 1 or self.search_budget < 1:
             raise UserError(f"the closed loop needs at least 1 action and 1 expansion of its searches, got "
                             f"{self.max_actions} actions, {self.widen_expansions} expansions widened and a search "
