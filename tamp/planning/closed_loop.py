@@ -188,6 +188,9 @@ def _round(method: str, models: Models, X: np.ndarray, X_goal: np.ndarray, out: 
     marginal = until_goal and kept_error is not None and kept_error >= cfg.search.confident
     if kept is not None and kept.solved and not marginal:
         return kept
+    if marginal:  # a search for a plan aimed closer than one that already predicts success: no longer than a widening
+        cfg = replace(cfg, search=replace(cfg.search, max_expansions=min(cfg.search.max_expansions,
+                                                                         cfg.loop.widen_expansions)))
     result = (planner or plan)(method, models, X, X_goal, cfg, **extra)
     if kept is not None and kept_error is not None and marginal:  # a plan aimed closer replaces it
         new_error = result.predicted_error if result.solved and result.plan else None
