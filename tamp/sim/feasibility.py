@@ -178,12 +178,13 @@ class FeasibilityChecker:
         costs about 0.35 ms; the search checks many places of one grasp); the world's checker stays bare."""
         key = tuple(int(t) for t in scene.types)
         if not self.shortcuts:
-            self._carrying[key] = self.world.motion_planner(scene.types)
-        elif key not in self._carrying:
-            cfg = self.config
-            self._carrying[key] = MotionPlanner(build_motion_scene(scene.types, cfg.padding), cfg.joint_step,
-                                                cfg.padding)
-        planner = self._carrying[key]
+            planner = self.world.motion_planner(scene.types)
+        else:
+            if key not in self._carrying:
+                cfg = self.config
+                self._carrying[key] = MotionPlanner(build_motion_scene(scene.types, cfg.padding), cfg.joint_step,
+                                                    cfg.padding)
+            planner = self._carrying[key]
         planner.set_block_poses(scene.X_WB, parked=tuple(carried))
         planner.attach(shapes)
         return planner

@@ -116,25 +116,6 @@ def topdown(p_W: np.ndarray, yaw: float) -> RigidTransform:
     return RigidTransform(RotationMatrix.MakeZRotation(yaw) @ RotationMatrix.MakeXRotation(np.pi), p_W)  # type: ignore[arg-type]
 
 
-@dataclass
-class Waypoints:
-    """Tcp poses of one pick-place, in execution order, and the carried blocks' grasp."""
-
-    pregrasp: RigidTransform
-    grasp: RigidTransform
-    liftoff: RigidTransform
-    lift: RigidTransform
-    preplace: RigidTransform
-    place: RigidTransform
-    retreat: RigidTransform
-    carried: list[int]  # grasped block first, then blocks resting on it
-    X_GC: list[RigidTransform]  # each carried block's pose in the tcp frame
-
-    def named(self) -> list[tuple[str, RigidTransform]]:
-        return [("pregrasp", self.pregrasp), ("grasp", self.grasp), ("liftoff", self.liftoff), ("lift", self.lift),
-                ("preplace", self.preplace), ("place", self.place), ("retreat", self.retreat)]
-
-
 def grasp_pose(scene: Scene, action: PickPlace, config: WorldConfig) -> RigidTransform:
     """Tcp pose that closes the jaws around the picked block at its grasp offset."""
     i = action.pick
@@ -176,6 +157,21 @@ class PickWaypoints:
 
     def named(self) -> list[tuple[str, RigidTransform]]:
         return [("pregrasp", self.pregrasp), ("grasp", self.grasp), ("liftoff", self.liftoff)]
+
+
+@dataclass
+class Waypoints(PickWaypoints):
+    """Tcp poses of one pick-place, in execution order (the pick half's, then the place's), and the carried
+    blocks' grasp."""
+
+    lift: RigidTransform
+    preplace: RigidTransform
+    place: RigidTransform
+    retreat: RigidTransform
+
+    def named(self) -> list[tuple[str, RigidTransform]]:
+        return super().named() + [("lift", self.lift), ("preplace", self.preplace), ("place", self.place),
+                                  ("retreat", self.retreat)]
 
 
 def pick_waypoints(scene: Scene, action: PickPlace, grasped: int, config: WorldConfig) -> PickWaypoints:
@@ -228,7 +224,7 @@ def pick_place_waypoints(scene: Scene, action: PickPlace, grasped: int, config: 
 Box = tuple[tuple[float, float, float], RigidTransform]  # (size in metres, pose in the gripper body frame)
 
 
-def carried_shapes(scene: Scene, wp: Waypoints | PickWaypoints, config: WorldConfig) -> list[Box]:
+def carried_shapes(scene: Scene, wp: PickWaypoints, config: WorldConfig) -> list[Box]:
     """Collision boxes of the carried blocks in the gripper body frame (`MotionPlanner.attach`),
     narrowed by `config.carried_inset` on each side: a block standing face to face with another one
     slides up past it, which a padded box the block's full width would call a collision."""

@@ -55,21 +55,29 @@ def _check_limits(seg: Segment, limits: JointLimits, at: str) -> None:
                                   f"outside the UR10e's limits [{lo[j]:.6g}, {hi[j]:.6g}]")
 
 
+def _worst(residual: np.ndarray, tolerance: float) -> tuple[int, int] | None:
+    """(sample interval, joint) of the largest residual (samples - 1, joints), if it exceeds `tolerance`."""
+    if residual.size == 0 or not residual.max() > tolerance:
+        return None
+    k, j = np.unravel_index(np.argmax(residual), residual.shape)
+    return int(k), int(j)
+
+
 def _check_consistency(seg: Segment, at: str) -> None:
     """Velocities move the positions and accelerations the velocities, between every two samples."""
     h = np.diff(seg.t)[:, None]
     moved, by_velocity = np.diff(seg.q, axis=0), 0.5 * (seg.qdot[:-1] + seg.qdot[1:]) * h
-    residual = np.abs(moved - by_velocity)
-    if residual.max() > POSITION_TOLERANCE:
-        k, j = np.unravel_index(np.argmax(residual), residual.shape)
+    worst = _worst(np.abs(moved - by_velocity), POSITION_TOLERANCE)
+    if worst is not None:
+        k, j = worst
         raise TrajectoryError(
             f"{at} points {k}-{k + 1}: {ARM_JOINTS[j]} moves {moved[k, j]:.6g} rad in {h[k, 0]:.6g} s, but its "
             f"velocities ({seg.qdot[k, j]:.6g}, {seg.qdot[k + 1, j]:.6g} rad/s) move it {by_velocity[k, j]:.6g} rad "
             f"(tolerance {POSITION_TOLERANCE:g} rad): velocities and positions disagree")
     change, by_acceleration = np.diff(seg.qdot, axis=0), seg.qddot[:-1] * h
-    residual = np.abs(change - by_acceleration)
-    if residual.max() > VELOCITY_TOLERANCE:
-        k, j = np.unravel_index(np.argmax(residual), residual.shape)
+    worst = _worst(np.abs(change - by_acceleration), VELOCITY_TOLERANCE)
+    if worst is not None:
+        k, j = worst
         raise TrajectoryError(
             f"{at} points {k}-{k + 1}: {ARM_JOINTS[j]} velocity changes by {change[k, j]:.6g} rad/s in "
             f"{h[k, 0]:.6g} s, but its acceleration {seg.qddot[k, j]:.6g} rad/s^2 changes it by "
