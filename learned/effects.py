@@ -43,6 +43,14 @@ TYPE_NAMES = ("small", "large")
 STATE_DIM = 5
 ACTION_ENC_DIM = 10
 """Per-object action encoding: is_pick, grasp one-hot(3), is_place, release one-hot(3), arm_xy(2)."""
+WHOLE_ACTION_DIM = 10
+"""Added with ``whole=True``: on the picked object the release one-hot(3) and the target's type(2), on the target
+the grasp one-hot(3) and the picked object's type(2)."""
+
+
+def action_encoding_dim(whole: bool = False) -> int:
+    """Width of `encode_actions`' per-object encoding."""
+    return ACTION_ENC_DIM + (WHOLE_ACTION_DIM if whole else 0)
 
 
 def as_action_array(actions: np.ndarray | Sequence[Sequence[int]]) -> np.ndarray:
@@ -108,14 +116,19 @@ def effect_targets(X: torch.Tensor, X_next: torch.Tensor, action: torch.Tensor,
 
 
 def encode_actions(X: torch.Tensor, action: torch.Tensor, arm_scale_m: float | torch.Tensor = 1.0,
-                   arm: bool = True) -> torch.Tensor:
-    """Per-object action encoding (B, N, ACTION_ENC_DIM).
+                   arm: bool = True, whole: bool = False) -> torch.Tensor:
+    """Per-object action encoding (B, N, `action_encoding_dim(whole)`).
 
     For each object: [is_pick, grasp-offset one-hot (if pick), is_place, release-offset one-hot
     (if place), arm_xy / arm_scale_m (if pick)]. Permuting objects permutes the rows. With
     ``arm=False`` the arm_xy columns are zero: the encoding is then purely symbolic (which objects,
     which offsets), so whatever the decoder needs about positions must pass through the bottleneck
-    (the Symbolic Model; the paper's network gets no continuous displacement either).
+    (the Symbolic Model; the paper's network gets no continuous displacement either). With ``whole=True``
+    the picked object also reads the release offset and the target's type, and the target the grasp offset
+    and the picked object's type: the picked block then knows where along what it lands, (release - grasp) *
+    OFFSET_M from a cube's or a bar's centre, which decides whether a bar comes to rest on its target or
+    beside it. In the paper's encoding these reach it only through its relations to the target, which the
+    scene alone decides, and a bar released two offsets off a cube was predicted to rest on it.
     """
     B, N, _ = X.shape
     dev, dt = X.device, X.dtype
@@ -125,10 +138,16 @@ def encode_actions(X: torch.Tensor, action: torch.Tensor, arm_scale_m: float | t
     grasp = torch.nn.functional.one_hot(action[:, 1] + 1, 3).to(dt)     # (B, 3)
     release = torch.nn.functional.one_hot(action[:, 3] + 1, 3).to(dt)
     arm_xy = arm_displacement(X, action) / arm_scale_m if arm else X.new_zeros(B, 2)  # (B, 2)
-    return torch.cat([
+    parts = [
         is_pick[..., None],
         is_pick[..., None] * grasp[:, None],
         is_place[..., None],
         is_place[..., None] * release[:, None],
         is_pick[..., None] * arm_xy[:, None],
-    ], dim=-1)
+    ]
+    if whole:
+        b = torch.arange(B, device=dev)
+        pick_type, place_type = X[b, action[:, 0], 3:5], X[b, action[:, 2], 3:5]  # (B, 2) one-hot types
+        parts += [is_pick[..., None] * release[:, None], is_pick[..., None] * place_type[:, None],
+                  is_place[..., None] * grasp[:, None], is_place[..., None] * pick_type[:, None]]
+    return torch.cat(parts, dim=-1)

@@ -27,7 +27,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from .effects import ACTION_ENC_DIM, STATE_DIM, arm_shift, as_action_array, check_actions, encode_actions
+from .effects import STATE_DIM, action_encoding_dim, arm_shift, as_action_array, check_actions, encode_actions
 
 ACTIVATIONS = ("gumbel_sigmoid", "sigmoid", "tanh", "none")
 RELATIONS = ("attention", "pairwise")
@@ -78,6 +78,14 @@ class ModelConfig:
     # from the decoder's features (gradient stopped) and the action, trained by the Gaussian likelihood of the mean's
     # residual (`TrainConfig` trains it whenever it is there): the mean stays the paper's Eq. 1 prediction
     spread: bool = False
+    # both objects of an action read all of it (the picked block the release offset, the target the grasp
+    #   offset), so the picked block knows where along its target it lands (False: the paper's encoding)
+    whole_action: bool = False
+
+    @property
+    def action_dim(self) -> int:
+        """Width of the per-object action encoding (`learned.effects.action_encoding_dim`)."""
+        return action_encoding_dim(self.whole_action)
 
     @property
     def n_unary(self) -> int:
@@ -107,6 +115,22 @@ class ModelConfig:
         if unknown:
             raise ValueError(f"unknown model config keys {sorted(unknown)}")
         return cls(**d)
+
+
+def with_whole_action(state: dict[str, torch.Tensor], config: ModelConfig) -> dict[str, torch.Tensor]:
+    """A state dict of a network with the paper's action encoding, for the same network with `whole_action`:
+    the first layers that read the action encoding (it ends their input) get zero weights for the columns
+    `whole_action` adds, so the widened network predicts exactly what the given one did until it trains."""
+    if config.transition_decoder:
+        raise ValueError("whole_action cannot widen a network with a transition decoder (its action columns "
+                         "sit inside its input)")
+    extra = config.action_dim - action_encoding_dim(False)
+    out = dict(state)
+    for name in ("object_mlp.0.weight", "spread_head.0.weight"):
+        if name in out:
+            w = out[name]
+            out[name] = torch.cat([w, w.new_zeros(w.shape[0], extra)], dim=1)
+    return out
 
 
 def mlp(sizes: Sequence[int]) -> nn.Sequential:
@@ -160,18 +184,18 @@ class EffectModel(nn.Module):
             self.key = nn.Linear(c.hidden, c.heads * c.d_key)
         else:  # pairwise: [x_i, x_j, (x_j - x_i)[:3]] per ordered pair, K logits out
             self.pair = mlp([2 * STATE_DIM + 3, *hid, c.heads])
-        self.object_mlp = mlp([c.n_unary + ACTION_ENC_DIM, *hid, c.d_msg])
+        self.object_mlp = mlp([c.n_unary + c.action_dim, *hid, c.d_msg])
         self.decoder = mlp([c.heads * c.d_msg, *hid, 3])
         if c.spread:
-            self.spread_head = mlp([c.heads * c.d_msg + ACTION_ENC_DIM, *hid, 3])
+            self.spread_head = mlp([c.heads * c.d_msg + c.action_dim, *hid, 3])
         if c.offset_decoder:
             self.offset_head = mlp([(0 if c.offset_from_relations else 2 * c.n_unary) + 2 * c.heads, *hid, 3])
         if c.position_decoder:
             self.position_head = mlp([c.n_unary, *hid, len(c.position_axes)])
         if c.transition_decoder:  # per object: [u_i, a_i, context_i]; per pair: both of those and r_.(i, j), r_.(j, i)
             context = 4 * c.heads + 2 * c.n_unary  # the object's relations both ways to the pick and the target; theirs
-            self.next_unary_head = mlp([c.n_unary + ACTION_ENC_DIM + context, *hid, c.d_z])
-            self.next_relation_head = mlp([2 * (c.n_unary + ACTION_ENC_DIM + context) + 2 * c.heads, *hid, c.heads])
+            self.next_unary_head = mlp([c.n_unary + c.action_dim + context, *hid, c.d_z])
+            self.next_relation_head = mlp([2 * (c.n_unary + c.action_dim + context) + 2 * c.heads, *hid, c.heads])
         self.bottleneck = Bottleneck(c.activation, c.temperature)
         # Normalisation statistics (metres), set from training data by ``set_normalisation``.
         self.register_buffer("pos_mean", torch.zeros(3))
@@ -186,6 +210,10 @@ class EffectModel(nn.Module):
         self.arm_scale.fill_(float(arm_scale))
 
     # -- encoders -----------------------------------------------------------------------
+    def encode_actions(self, X: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
+        """(B, N, config.action_dim) each object's action encoding (`learned.effects.encode_actions`)."""
+        return encode_actions(X, action, self.arm_scale, arm=self.config.arm_input, whole=self.config.whole_action)
+
     def _normalise(self, X: torch.Tensor) -> torch.Tensor:
         return torch.cat([(X[..., :3] - self.pos_mean) / self.pos_std, X[..., 3:]], dim=-1)
 
@@ -243,14 +271,14 @@ class EffectModel(nn.Module):
 
     def spread_input(self, h: torch.Tensor, X: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
         """What the spread head reads: the decoder's features (gradient stopped) and the object's action encoding."""
-        return torch.cat([h.detach(), encode_actions(X, action, self.arm_scale, arm=self.config.arm_input).to(h.dtype)],
+        return torch.cat([h.detach(), self.encode_actions(X, action).to(h.dtype)],
                          dim=-1)
 
     def messages(self, X: torch.Tensor, action: torch.Tensor, mask: torch.Tensor, u: torch.Tensor,
                  r: torch.Tensor) -> torch.Tensor:
         """The decoder's input (B, N, K d_msg): h_i^k = sum_j s_k(i,j) z_j for every head k."""
         B, N, _ = X.shape
-        a = encode_actions(X, action, self.arm_scale, arm=self.config.arm_input)
+        a = self.encode_actions(X, action)
         z = self.object_mlp(torch.cat([u.expand(B, -1, -1), a], dim=-1))
         # h_i^k = sum_j s_k(i,j) z_j as one (K*N x N) @ (N x d_msg) product per scene: this op trains
         # 2-4x faster than broadcasting r (B, K, N, N) against z (B, 1, N, d_msg); same sums, but
@@ -298,7 +326,7 @@ class EffectModel(nn.Module):
         is seen with its action encoding, its relations both ways to the picked block and to the target,
         and their unary bits; each pair with both objects' and its own two relations."""
         B, N, _ = X.shape
-        a = encode_actions(X, action, self.arm_scale, arm=self.config.arm_input)
+        a = self.encode_actions(X, action)
         batch = torch.arange(B, device=X.device)
         rij = r.permute(0, 2, 3, 1)  # (B, N, N, K)
         pick, target = action[:, 0], action[:, 2]

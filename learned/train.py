@@ -45,7 +45,7 @@ from tqdm.auto import tqdm
 from .checkpoint import model_from_payload, read_checkpoint, save_checkpoint, update_train_state
 from .dataset import Transitions, load_transitions
 from .effects import arm_displacement, effect_targets, moved_picks
-from .model import EffectModel, ModelConfig
+from .model import EffectModel, ModelConfig, with_whole_action
 
 Precision = Literal["float32", "bfloat16"]
 PAPER_BATCH, PAPER_LR = 128, 1e-4
@@ -373,6 +373,8 @@ def train_model(data: "str | Path | Sequence[str | Path] | Transitions", config:
         own = {**initial.config.to_dict(), "n_max": data.n_max}
         if config is not None and config.spread:  # a spread head may be added to a network without one
             own["spread"] = True
+        if config is not None and config.whole_action:  # and the whole action to the paper's encoding
+            own["whole_action"] = True
         given = own if config is None else {**config.to_dict(), "n_max": data.n_max}
         if given != own:
             differ = ", ".join(f"{k} {given[k]!r} (its {own[k]!r})" for k in own if given[k] != own[k])
@@ -395,7 +397,10 @@ def train_model(data: "str | Path | Sequence[str | Path] | Transitions", config:
     stats = normalisation(tr)
     model.set_normalisation(**stats)
     if initial is not None:  # its weights and normalisation buffers (a spread head it lacks starts anew)
-        missing, unexpected = model.load_state_dict(initial.state_dict(), strict=False)
+        state = initial.state_dict()
+        if config.whole_action and not initial.config.whole_action:
+            state = with_whole_action(state, config)
+        missing, unexpected = model.load_state_dict(state, strict=False)
         if unexpected or any(not k.startswith("spread_head.") for k in missing):
             raise ValueError(f"{init}: its weights do not fit the network ({missing + unexpected})")
     opt = torch.optim.Adam(model.parameters(), lr=train.lr)

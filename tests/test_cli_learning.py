@@ -207,3 +207,25 @@ def test_train_an_ensemble_with_practice_data_then_plan_with_it(tiny_dataset, tm
                         (["--ensemble", "2", "--extra-data", str(practice), "--extra-share", "0"], "--extra-share")):
         assert main(["train", "--data", str(tiny_dataset), "--out", str(tmp_path / "x.pt"), *flags, *base]) == 2
         assert said in capsys.readouterr().err
+
+
+def test_fine_tune_a_dynamics_model_into_the_whole_action_encoding(tiny_dataset, tmp_path, capsys):
+    """--whole-action widens a paper-encoded network (single or ensemble); a network with the whole action
+    keeps it when fine-tuned again without the flag."""
+    from learned.ensemble import load_dynamics
+
+    base = ["--epochs", "1", "--batch-size", "64", "--precision", "float32"]
+    paper, whole = tmp_path / "paper.pt", tmp_path / "whole.pt"
+    assert main(["train", "--data", str(tiny_dataset), "--bottleneck", "sigmoid", "--out", str(paper), *base]) == 0
+    assert not learned.load_model(paper).config.whole_action
+    assert main(["train", "--data", str(tiny_dataset), "--init", str(paper), "--whole-action",
+                 "--out", str(whole), *base]) == 0
+    assert learned.load_model(whole).config.whole_action
+    again = tmp_path / "again.pt"
+    assert main(["train", "--data", str(tiny_dataset), "--init", str(whole), "--out", str(again), *base]) == 0
+    assert learned.load_model(again).config.whole_action
+    ensemble = tmp_path / "e" / "dynamics.pt"
+    assert main(["train", "--data", str(tiny_dataset), "--init", str(paper), "--whole-action", "--ensemble", "2",
+                 "--out", str(ensemble), *base]) == 0
+    assert load_dynamics(ensemble).config.whole_action
+    capsys.readouterr()

@@ -226,3 +226,34 @@ def test_learned_imports_no_drake_and_no_other_package():
             "bad = [m for m in sys.modules if m.split('.')[0] in "
             "('pydrake', 'tamp', 'symbolic', 'evaluation')]; print(bad); assert not bad")
     subprocess.run([sys.executable, "-c", code], check=True, capture_output=True, text=True)
+
+
+def test_the_whole_action_tells_the_picked_block_the_release_offset_and_the_targets_type():
+    """whole=True: the picked object reads the release offset and the target's type, the target the grasp offset
+    and the picked object's type (the paper's columns unchanged); a bystander reads nothing of the action."""
+    from learned.effects import action_encoding_dim, encode_actions
+
+    X = torch.tensor(scene(3, seed=4))[None].float()
+    X[0, :, 3:] = torch.tensor([[0.0, 1.0], [1.0, 0.0], [1.0, 0.0]])  # a bar, then two cubes
+    action = torch.tensor([[0, 1, 1, -1]])  # the bar, grasped at +1, released at -1 on cube 1
+    paper, whole = encode_actions(X, action), encode_actions(X, action, whole=True)
+    assert paper.shape[-1] == action_encoding_dim(False) and whole.shape[-1] == action_encoding_dim(True)
+    torch.testing.assert_close(whole[..., :paper.shape[-1]], paper)
+    extra = whole[0, :, paper.shape[-1]:]
+    torch.testing.assert_close(extra[0], torch.tensor([1.0, 0, 0, 1, 0, 0, 0, 0, 0, 0]))  # release -1; on a cube
+    torch.testing.assert_close(extra[1], torch.tensor([0.0, 0, 0, 0, 0, 0, 0, 1, 0, 1]))  # grasp +1; a bar
+    assert not extra[2].any()
+
+
+def test_a_network_widened_to_the_whole_action_predicts_as_before_until_it_trains():
+    from learned.model import with_whole_action
+
+    m = make_model(seed=3, spread=True)
+    config = ModelConfig(**{**m.config.to_dict(), "whole_action": True})
+    wide = EffectModel(config)
+    wide.load_state_dict(with_whole_action(m.state_dict(), config))
+    wide.eval()
+    X, acts = scene(4, seed=5), np.array(all_actions(4))
+    for a, b in zip(m.predict_gaussian(X[None].repeat(len(acts), 0), acts),
+                    wide.predict_gaussian(X[None].repeat(len(acts), 0), acts)):
+        np.testing.assert_allclose(b, a, rtol=1e-5, atol=1e-9)

@@ -42,6 +42,7 @@ def cmd_train(args: argparse.Namespace) -> int:
                                ("arm_input", False if args.no_arm_input else None),
                                ("relations", args.relations),
                                ("type_symbol", True if args.type_symbol else None),
+                               ("whole_action", True if args.whole_action else None),
                                ("offset_decoder", True if args.offset_loss else None),
                                ("offset_from_relations", True if args.offset_from_relations else None),
                                ("position_decoder", True if args.position_loss else None),
@@ -188,6 +189,11 @@ def add_train(sub) -> None:
                    help="give the decoder each block's type (large or not) as a fixed unary symbol after the "
                    "learned bits, so that no learned bit or relation is spent on it (the domain then has d_z + 1 "
                    "unary symbols)")
+    p.add_argument("--whole-action", action="store_true",
+                   help="both objects of an action read all of it: the picked block the release offset, the target "
+                   "the grasp offset, so the picked block knows where along its target it lands (on a cube or beside "
+                   "it); with --init, the network is widened with zero weights and predicts as before until it trains "
+                   "(default: the paper's encoding)")
     p.add_argument("--bit-usage", type=non_negative_float, default=0.0, metavar="WEIGHT",
                    help="weight of a penalty on learned bits and relations set in under 5 %% or over 95 %% of a "
                    "batch, so that the effect loss cannot leave a relation constant (default 0: the paper's loss)")
