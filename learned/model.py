@@ -5,7 +5,8 @@
                relations="pairwise": act(MLP_r(x_i, x_j, x_j - x_i)_k), which sees the offset directly,
                and s_k(i,i) = 1 (each object always hears itself; the diagonal is no learned bit)
     z_i      = MLP_z([u_i, a_i])                       a_i: per-object action encoding (with type_symbol,
-               u_i ends with the block's given type bit, so that no learned bit or relation must carry it)
+               u_i ends with the block's given type bit, so that no learned bit or relation must carry it;
+               with whole_action, the picked block's and the target's a_i carry both offsets and the other's type)
     h_i^k    = sum_j s_k(i,j) z_j                      (padded j excluded)
     e_i      = MLP_e([h_i^1, ..., h_i^K])              effect, metres (see ``effects``)
 
