@@ -128,7 +128,7 @@ def encode_actions(X: torch.Tensor, action: torch.Tensor, arm_scale_m: float | t
     and the picked object's type: the picked block then knows where along what it lands, (release - grasp) *
     OFFSET_M from a cube's or a bar's centre, which decides whether a bar comes to rest on its target or
     beside it. In the paper's encoding these reach it only through its relations to the target, which the
-    scene alone decides, and a bar released two offsets off a cube was predicted to rest on it.
+    scene alone decides.
     """
     B, N, _ = X.shape
     dev, dt = X.device, X.dtype

@@ -79,8 +79,9 @@ class ModelConfig:
     # from the decoder's features (gradient stopped) and the action, trained by the Gaussian likelihood of the mean's
     # residual (`TrainConfig` trains it whenever it is there): the mean stays the paper's Eq. 1 prediction
     spread: bool = False
-    # both objects of an action read all of it (the picked block the release offset, the target the grasp
-    #   offset), so the picked block knows where along its target it lands (False: the paper's encoding)
+    # both objects of an action read all of it (the picked block the release offset and the target's type, the
+    #   target the grasp offset and the picked block's type), so the picked block knows where it lands (False: the
+    #   paper's encoding)
     whole_action: bool = False
 
     @property
@@ -272,8 +273,7 @@ class EffectModel(nn.Module):
 
     def spread_input(self, h: torch.Tensor, X: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
         """What the spread head reads: the decoder's features (gradient stopped) and the object's action encoding."""
-        return torch.cat([h.detach(), self.encode_actions(X, action).to(h.dtype)],
-                         dim=-1)
+        return torch.cat([h.detach(), self.encode_actions(X, action).to(h.dtype)], dim=-1)
 
     def messages(self, X: torch.Tensor, action: torch.Tensor, mask: torch.Tensor, u: torch.Tensor,
                  r: torch.Tensor) -> torch.Tensor:

@@ -190,10 +190,10 @@ def add_train(sub) -> None:
                    "learned bits, so that no learned bit or relation is spent on it (the domain then has d_z + 1 "
                    "unary symbols)")
     p.add_argument("--whole-action", action="store_true",
-                   help="both objects of an action read all of it: the picked block the release offset, the target "
-                   "the grasp offset, so the picked block knows where along its target it lands (on a cube or beside "
-                   "it); with --init, the network is widened with zero weights and predicts as before until it trains "
-                   "(default: the paper's encoding)")
+                   help="both objects of an action read all of it: the picked block the release offset and the "
+                   "target's type, the target the grasp offset and the picked block's type, so the picked block knows "
+                   "where it lands (on a cube or beside it); with --init, the network is widened with zero weights and "
+                   "predicts as before until it trains (default: the paper's encoding)")
     p.add_argument("--bit-usage", type=non_negative_float, default=0.0, metavar="WEIGHT",
                    help="weight of a penalty on learned bits and relations set in under 5 %% or over 95 %% of a "
                    "batch, so that the effect loss cannot leave a relation constant (default 0: the paper's loss)")
