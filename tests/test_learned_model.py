@@ -208,6 +208,12 @@ def test_foreign_or_corrupt_checkpoints_give_clear_errors(tmp_path):
     with pytest.raises(ValueError, match="unknown_key.pt"):
         load_model(unknown_key)
 
+    for key, value in (("whole_action", "yes"), ("spread", 1), ("d_z", 6.0)):  # a switch or width of another type
+        mistyped = tmp_path / f"mistyped_{key}.pt"
+        torch.save({**payload, "config": {**payload["config"], key: value}}, mistyped)
+        with pytest.raises(ValueError, match=f"mistyped_{key}.pt.*{key} must be"):
+            load_model(mistyped)
+
     truncated = tmp_path / "truncated.pt"
     truncated.write_bytes(good.read_bytes()[:2000])
     with pytest.raises(ValueError, match="truncated.pt.*not a readable checkpoint"):
