@@ -101,11 +101,11 @@ class ModelConfig:
             raise ValueError(f"relations {self.relations!r} not in {RELATIONS}")
         if self.position_axes not in POSITION_AXES:
             raise ValueError(f"position_axes {self.position_axes!r} not in {POSITION_AXES}")
-        for f in fields(self):  # a checkpoint's config comes from a file: "yes" is no switch, 4.5 no width
-            kind = {"bool": (bool, "true or false"), "int": (int, "a whole number")}.get(str(f.type))
-            value = getattr(self, f.name)
+        for setting in fields(self):  # a checkpoint's config comes from a file: "yes" is no switch, 4.5 no width
+            kind = {"bool": (bool, "true or false"), "int": (int, "a whole number")}.get(str(setting.type))
+            value = getattr(self, setting.name)
             if kind is not None and type(value) is not kind[0]:
-                raise ValueError(f"{f.name} must be {kind[1]}, got {value!r}")
+                raise ValueError(f"{setting.name} must be {kind[1]}, got {value!r}")
         if self.offset_from_relations and not self.offset_decoder:
             raise ValueError("offset_from_relations needs offset_decoder=True (the head it changes)")
         for f in ("n_max", "d_z", "heads", "d_key", "d_msg", "hidden", "layers"):
