@@ -111,6 +111,26 @@ def test_full_fidelity_stacking_plan_ends_near_the_fast_result():
     assert X_full[2, 2] == pytest.approx(0.125, abs=0.01)  # a three-block tower stands
 
 
+def test_full_arm_sets_a_bar_down_flush_beside_a_cube_where_the_fast_world_does():
+    """Released two offsets off a cube, a bar's end comes down exactly against the cube's face (12.5 +
+    2.5 cm = 2 x 7.5 cm): a knife edge. The arm holds the place pose before it opens the jaws and
+    carries the bar's weight, so under physics it lets go where the plan says (it used to sag by
+    millimetres and set the bar down on the cube's edge, 2.4 cm higher) and both worlds agree."""
+    X = np.array([[0.64, -0.20, 0.025] + SMALL, [0.49, -0.04, 0.025] + LARGE])
+    action = PickPlace(1, 1, 0, -1)
+    outcomes = []
+    for fidelity in ("fast", "full"):
+        world = World(WorldConfig(fidelity=fidelity), seed=0)
+        world.reset(X=X)
+        X_after, info = world.step(action)
+        assert info.status == "ok"
+        outcomes.append(X_after)
+    X_fast, X_full = outcomes
+    assert X_fast[1, 2] == pytest.approx(0.025, abs=0.003)  # beside the cube, on the table
+    assert X_full[1, 2] == pytest.approx(0.025, abs=0.003)
+    assert np.max(np.linalg.norm(X_full[:, :3] - X_fast[:, :3], axis=1)) < 0.005
+
+
 def test_impossible_plan_names_the_action_and_executes_nothing_past_it():
     X = np.array([[0.6, 0.15, 0.025] + SMALL, [0.7, -0.1, 0.025] + SMALL, [1.6, 0.0, 0.025] + SMALL])
     plan = [PickPlace(0, 0, 1, 0), PickPlace(0, 0, 2, 0), PickPlace(0, 0, 0, 1)]

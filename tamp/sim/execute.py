@@ -3,7 +3,9 @@
 The plant holds the arm, the gripper, the table and the blocks, with hydroelastic contact. Each arm
 joint is a PD-controlled actuator (Drake's implicit PD in the discrete solver) tracking the
 trajectory's position and velocity; gravity is off for the arm and gripper, as a real UR's
-controller compensates it. The gripper holds a block with a **weld constraint** activated when the
+controller compensates it, and the weight of the carried blocks is compensated by a feed-forward
+torque J^T m g, as a UR compensates its configured payload (without it the loaded arm sags by a
+millimetre or more, enough to set a block down on an edge it was planned to clear). The gripper holds a block with a **weld constraint** activated when the
 jaws close and removed when they open: the jaws are rigid and open (see drake_models/gripper.sdf),
 so a weld gives the firm grasp of a real parallel gripper without finger contact dynamics. The
 weld holds the block at the planned grasp; if, at the moment of closing, the block is not where the
@@ -27,7 +29,8 @@ import numpy as np
 from pydrake.math import RigidTransform
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import AddMultibodyPlantSceneGraph, ContactModel, DiscreteContactApproximation
-from pydrake.multibody.tree import FixedOffsetFrame, JointActuatorIndex, PdControllerGains, SpatialInertia
+from pydrake.multibody.tree import (FixedOffsetFrame, JacobianWrtVariable, JointActuatorIndex, PdControllerGains,
+                                    SpatialInertia)
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, TrajectorySource
@@ -97,15 +100,21 @@ class Executor:
         builder.AddSystem(source)
         self._source = source
         builder.Connect(self._source.get_output_port(), plant.get_desired_state_input_port(arm))
-        zero = builder.AddSystem(ConstantVectorSource(np.zeros(6)))  # type: ignore[arg-type]  # pydrake stubs
-        builder.Connect(zero.get_output_port(), plant.get_actuation_input_port(arm))
+        # Feed-forward joint torques (N m): the payload's, updated at every control tick.
+        self._feedforward = builder.AddSystem(ConstantVectorSource(np.zeros(6)))  # type: ignore[arg-type]
+        builder.Connect(self._feedforward.get_output_port(), plant.get_actuation_input_port(arm))
         self.plant, self.arm, self.gripper_body = plant, arm, gripper_body
         self.diagram = builder.Build()
         self.simulator = Simulator(self.diagram)
         self.context = self.simulator.get_mutable_context()
         self.plant_context = plant.GetMyMutableContextFromRoot(self.context)
+        self._feedforward_value = self._feedforward.get_mutable_source_value(
+            self._feedforward.GetMyMutableContextFromRoot(self.context))
         self._arm_idx = np.array([plant.get_joint(j).position_start() for j in plant.GetJointIndices(arm)
                                   if plant.get_joint(j).num_positions() == 1])
+        self._arm_v_idx = np.array([plant.get_joint(j).velocity_start() for j in plant.GetJointIndices(arm)
+                                    if plant.get_joint(j).num_velocities() == 1])
+        self._payload: list[int] = []  # blocks whose weight the arm carries
 
     def _scene(self) -> Scene:
         poses = [self.plant.EvalBodyPoseInWorld(self.plant_context, b) for b in self._block_bodies]
@@ -124,6 +133,7 @@ class Executor:
         self.diagram.SetDefaultContext(self.context)  # as built: no state or grasp left by an earlier plan
         for weld in self._welds:
             plant.SetConstraintActiveStatus(ctx, weld, False)
+        self._payload = []
         scene0 = refined.scene_init
         for body, X_WB in zip(self._block_bodies, scene0.X_WB):
             plant.SetFreeBodyPose(ctx, body, X_WB)
@@ -152,13 +162,17 @@ class Executor:
         for t_event, event in events:
             while t < t_event - 1e-9:
                 t = min(t + FRAME_PERIOD, t_event)
+                self._compensate_payload()
                 self.simulator.AdvanceTo(t)
                 max_error = max(max_error, float(np.max(np.abs(self._q_arm() - step.trajectory.value(t).ravel()))))
                 frames.append(self._frame(t))
             if event == "grasp":
                 grasped, note = self._close(step)
+                self._payload = list(step.carried) if grasped else []
             elif event == "release":
                 plant.SetConstraintActiveStatus(ctx, self._welds[step.grasped], False)
+                self._payload = []
+        self._compensate_payload()
         # Hold still until the blocks are at rest.
         cfg = self.config
         still_since, t_end = t, t
@@ -190,6 +204,22 @@ class Executor:
         self._grasp_frame.SetPoseInParentFrame(self.plant_context, X_FlangeTcp @ step.X_GC[0])
         self.plant.SetConstraintActiveStatus(self.plant_context, self._welds[step.grasped], True)
         return True, ""
+
+    def _compensate_payload(self) -> None:
+        """Set the feed-forward torques that hold the payload's weight at the current configuration:
+        tau = sum over carried blocks of J_v(gripper at the block's centre of mass)^T m g z_W."""
+        plant, ctx = self.plant, self.plant_context
+        tau = np.zeros(6)
+        X_WG = plant.EvalBodyPoseInWorld(ctx, self.gripper_body)
+        for b in self._payload:
+            body = self._block_bodies[b]
+            p_WBcm = plant.EvalBodyPoseInWorld(ctx, body) @ body.CalcCenterOfMassInBodyFrame(ctx)
+            J = plant.CalcJacobianTranslationalVelocity(ctx, JacobianWrtVariable.kV, self.gripper_body.body_frame(),
+                                                        X_WG.inverse() @ p_WBcm, plant.world_frame(),
+                                                        plant.world_frame())
+            weight = body.get_mass(ctx) * -plant.gravity_field().gravity_vector()
+            tau += J[:, self._arm_v_idx].T @ weight
+        self._feedforward_value.SetFromVector(tau)
 
     def _at_rest(self) -> bool:
         return blocks_at_rest(self.plant, self.plant_context, self._block_bodies, self.config.settle_speed,

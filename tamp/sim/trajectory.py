@@ -28,6 +28,7 @@ if TYPE_CHECKING:
 # arm tracks closely under the PD controller with a carried block.
 A_MAX = np.full(6, 3.0)
 GRASP_DWELL = 0.25  # seconds still at the grasp pose while the jaws close
+PLACE_DWELL = 0.25  # seconds still at the place pose before the jaws open: the arm settles onto it
 RELEASE_DWELL = 0.25  # seconds still at the place pose after the jaws open
 CARRY_MOTIONS = ("liftoff", "lift", "transfer", "lower")
 MOTION_ORDER = ("approach", "descend", "liftoff", "lift", "transfer", "lower", "retreat")
@@ -131,6 +132,7 @@ def refined_action(action: PickPlace, info, X_before: np.ndarray, X_after: np.nd
             builder.dwell(GRASP_DWELL)
             t_grasp = builder.t
         if name == "lower":
+            builder.dwell(PLACE_DWELL)
             t_release = builder.t
             builder.dwell(RELEASE_DWELL)
     return RefinedAction(
