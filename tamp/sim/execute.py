@@ -5,13 +5,14 @@ joint is a PD-controlled actuator (Drake's implicit PD in the discrete solver) t
 trajectory's position and velocity; gravity is off for the arm and gripper, as a real UR's
 controller compensates it, and the weight of the carried blocks is compensated by a feed-forward
 torque J^T m g, as a UR compensates its configured payload (without it the loaded arm sags by a
-millimetre or more, enough to set a block down on an edge it was planned to clear). The gripper holds a block with a **weld constraint** activated when the
-jaws close and removed when they open: the jaws are rigid and open (see drake_models/gripper.sdf),
-so a weld gives the firm grasp of a real parallel gripper without finger contact dynamics. The
-weld holds the block at the planned grasp; if, at the moment of closing, the block is not where the
-plan expects it between the jaws (more than GRASP_TOLERANCE away), nothing is welded and the log
-says the grasp missed. Blocks resting on the grasped one ride on it by contact. After each action
-the arm holds still until every block is at rest (as in the `fast` world).
+millimetre or more, enough to set a block down on an edge it was planned to clear). The gripper
+holds a block with a **weld constraint** activated when the jaws close and removed when they open:
+the jaws are rigid and open (see drake_models/gripper.sdf), so a weld gives the firm grasp of a real
+parallel gripper without finger contact dynamics. The weld holds the block at the planned grasp; if,
+at the moment of closing, the block is not where the plan expects it between the jaws (more than
+GRASP_TOLERANCE away), nothing is welded and the log says the grasp missed. Blocks resting on the
+grasped one ride on it by contact. After each action the arm holds still until every block is at
+rest (as in the `fast` world).
 
 The diagram is built once per block layout and reused for every plan. Drake 1.51 fixes a weld
 constraint's frames (X_AP, X_BQ) when it is added, before Finalize; only its active status lives in
@@ -29,8 +30,13 @@ import numpy as np
 from pydrake.math import RigidTransform
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import AddMultibodyPlantSceneGraph, ContactModel, DiscreteContactApproximation
-from pydrake.multibody.tree import (FixedOffsetFrame, JacobianWrtVariable, JointActuatorIndex, PdControllerGains,
-                                    SpatialInertia)
+from pydrake.multibody.tree import (
+    FixedOffsetFrame,
+    JacobianWrtVariable,
+    JointActuatorIndex,
+    PdControllerGains,
+    SpatialInertia,
+)
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, TrajectorySource
@@ -101,7 +107,8 @@ class Executor:
         self._source = source
         builder.Connect(self._source.get_output_port(), plant.get_desired_state_input_port(arm))
         # Feed-forward joint torques (N m): the payload's, updated at every control tick.
-        self._feedforward = builder.AddSystem(ConstantVectorSource(np.zeros(6)))  # type: ignore[arg-type]
+        self._feedforward = ConstantVectorSource(np.zeros(6))  # type: ignore[arg-type]  # pydrake stubs
+        builder.AddSystem(self._feedforward)
         builder.Connect(self._feedforward.get_output_port(), plant.get_actuation_input_port(arm))
         self.plant, self.arm, self.gripper_body = plant, arm, gripper_body
         self.diagram = builder.Build()
@@ -219,7 +226,7 @@ class Executor:
                                                         plant.world_frame())
             weight = body.get_mass(ctx) * -plant.gravity_field().gravity_vector()
             tau += J[:, self._arm_v_idx].T @ weight
-        self._feedforward_value.SetFromVector(tau)
+        self._feedforward_value.SetFromVector(tau)  # type: ignore[arg-type]  # pydrake stubs
 
     def _at_rest(self) -> bool:
         return blocks_at_rest(self.plant, self.plant_context, self._block_bodies, self.config.settle_speed,
