@@ -308,7 +308,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "interrupted run resumes. --scale quick fits in an hour on 2 cores; --scale paper is the "
         "paper's size (160k samples, 4000 epochs, 100 problems per cell) for bigger machines or Ray. "
         "With --models DIR only the problems, the evaluation and the report are made, for DIR's models "
-        "(e.g. `--models tamp/pretrained --protocol paper --runs 3`: the paper's protocol, three runs).",
+        "(e.g. `--models paper --protocol paper --runs 3`: the bundled paper set, the paper's protocol, three runs).",
     )
     p.add_argument("--scale", choices=("quick", "paper"), default="quick", help="sizes (default quick)")
     p.add_argument("--out", type=Path, required=True, help="output directory (new, or the one to resume)")
@@ -321,8 +321,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--runs", type=positive_int, default=1,
                    help="problem sets of consecutive seeds, reported as mean ± std over runs "
                         "(default 1; the paper: 10)")
-    p.add_argument("--models", type=Path, default=None,
-                   help="evaluate this models directory (e.g. tamp/pretrained) instead of collecting and training")
+    p.add_argument("--models", type=models_directory, default=None,
+                   help="evaluate this models directory, or a bundled set (paper: the paper's configuration), "
+                        "instead of collecting and training")
     p.add_argument("--symbolic-backend", choices=SYMBOLIC_BACKENDS, default="python",
                    help="symbolic planner: python (in-process search, default) or fd (Fast Downward, as in the paper)")
     p.set_defaults(func=cmd_reproduce)

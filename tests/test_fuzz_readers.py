@@ -160,7 +160,7 @@ def test_operators_files(tmp_path, name):
     from symbolic.structs import OperatorSet
     from tamp.planning.models import pretrained_dir
 
-    ops = load_operators(pretrained_dir() / "domain" / "operators.json")
+    ops = load_operators(pretrained_dir() / "paper" / "domain" / "operators.json")
     small = json.dumps(to_json(OperatorSet(ops.operators[:6], ops.n_unary, ops.n_relations))).encode()
     _fuzz(load_operators, small, tmp_path / name, gz=name.endswith(".gz"))
 

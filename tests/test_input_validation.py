@@ -290,7 +290,7 @@ def test_a_gzipped_operators_file_is_read_and_a_damaged_one_is_named(tmp_path, c
     from symbolic import load_domain
 
     models = tmp_path / "models"
-    shutil.copytree(pretrained_dir(), models)
+    shutil.copytree(pretrained_dir() / "paper", models)  # the paper set's domain is shipped plain
     plain = models / "domain" / "operators.json"
     packed = plain.with_name("operators.json.gz")
     packed.write_bytes(gzip.compress(plain.read_bytes()))
@@ -353,7 +353,7 @@ def test_a_domain_with_operators_the_search_cannot_take_is_refused_when_the_mode
     from tamp.planning.models import load_models
 
     models = tmp_path / "models"
-    shutil.copytree(pretrained_dir(), models, ignore=shutil.ignore_patterns("domain"))
+    shutil.copytree(pretrained_dir() / "paper", models, ignore=shutil.ignore_patterns("domain"))  # d_z 1, K 3
     rng = np.random.default_rng(0)
     T, n = 40, 5
     unary, rel = rng.integers(0, 2, (T, n, 1), np.uint8), rng.integers(0, 2, (T, 3, n, n), np.uint8)

@@ -1,5 +1,5 @@
 """The slow tail of planning: the remembered pick halves and the stall cut find the plans that the search
-without them found within its budget (bundled models, kinematics in the loop, fixed held-out problems)."""
+without them found within its budget (the paper set's models, kinematics in the loop, fixed held-out problems)."""
 from __future__ import annotations
 
 from dataclasses import replace
@@ -23,7 +23,7 @@ NAMES = ("n4-k4-000", "n3-k5-001", "n2-k5-008", "n2-k3-005")
 
 def test_the_search_finds_the_plans_it_found_without_its_shortcuts():
     problems = {p.name: p for p in read_problem_set(PROBLEMS)}
-    models = load_models(pretrained_dir())
+    models = load_models(pretrained_dir() / "paper")
     new = FeasibilityChecker()
     baseline_cfg = replace(PlanConfig(), search=replace(PlanConfig().search, stall=None))
     setups = ((baseline_cfg, FeasibilityChecker(world=new.world, shortcuts=False)), (PlanConfig(), new))

@@ -1,7 +1,8 @@
 """Level 1's symbolic search: one search for N domains gives each domain its own breadth-first plan;
-lifted successors equal grounded ones; the bundled domain's ranked plans stay what they were.
+lifted successors equal grounded ones; the paper set's domain's ranked plans stay what they were.
 
-tests/data/level1_golden.json holds symbolic problems of the bundled models (30: n = 2, 3, 4) with the
+tests/data/level1_golden.json holds symbolic problems of the paper set's models (tamp/pretrained/paper/;
+30: n = 2, 3, 4) with the
 ranked plans Level 1 gave them. A change of the search, the sampler or the ranking that changes any of
 them fails `test_ranked_plans_of_the_bundled_domain_are_unchanged`; if the change is meant, say so in
 the closing note and rewrite the file:
@@ -33,7 +34,7 @@ from symbolic.structs import SymbolicProblem
 
 ROOT = Path(__file__).resolve().parents[1]
 GOLDEN = Path(__file__).resolve().parent / "data" / "level1_golden.json"
-BUNDLED_DOMAIN = ROOT / "tamp" / "pretrained" / "domain"
+BUNDLED_DOMAIN = ROOT / "tamp" / "pretrained" / "paper" / "domain"
 
 
 @pytest.fixture(scope="module")
@@ -200,7 +201,7 @@ def test_the_budget_decides_and_no_state_is_kept(bundled, golden):
 
 
 def _write(problems_file: str) -> None:
-    """Regenerate the golden file from a problem set with the bundled models (needs torch)."""
+    """Regenerate the golden file from a problem set with the paper set's models (needs torch)."""
     import torch
 
     from tamp.app.problem import read_problem_set
@@ -209,7 +210,7 @@ def _write(problems_file: str) -> None:
     from tamp.planning.models import load_models, pretrained_dir
 
     torch.set_num_threads(1)
-    models = load_models(pretrained_dir())
+    models = load_models(pretrained_dir() / "paper")
     cfg = PlanConfig()
     planner = SymbolicPlanner(models.domain)
     entries = []

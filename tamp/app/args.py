@@ -56,11 +56,14 @@ def positive_float(text: str) -> float:
 
 
 # name -> folder under tamp/pretrained/
-BUNDLED_MODELS = {"pretrained": "", "pairwise": "pairwise", "spatial": "spatial", "regions": "regions"}
+BUNDLED_MODELS = {"pretrained": "", "paper": "paper", "pairwise": "pairwise", "spatial": "spatial",
+                  "regions": "regions"}
 MODELS_HELP = ("a models directory (symbolic.pt, dynamics.pt, domain/), or a bundled set: pretrained (the "
-               "paper's configuration), pairwise (pairwise relations with the type symbol), spatial (pairwise "
-               "relations that say on which side of a block another stands) or regions (unary bits that say in "
-               "which part of the table a block stands, relations about neighbours; docs/learned-symbols.md)")
+               "default: symbols that say where a block stands and what stands beside it, a Dynamics Model that "
+               "reads the whole action; both learned from data of today's world), paper (the paper's "
+               "configuration), pairwise (pairwise relations with the type symbol), spatial (pairwise relations "
+               "that say on which side of a block another stands) or regions (the default's symbols learned from "
+               "earlier data, with the paper set's Dynamics Model); tamp/pretrained/PROVENANCE.md")
 
 
 def models_directory(text: str) -> Path:
