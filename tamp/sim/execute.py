@@ -117,10 +117,9 @@ class Executor:
         self.plant_context = plant.GetMyMutableContextFromRoot(self.context)
         self._feedforward_value = self._feedforward.get_mutable_source_value(
             self._feedforward.GetMyMutableContextFromRoot(self.context))
-        self._arm_idx = np.array([plant.get_joint(j).position_start() for j in plant.GetJointIndices(arm)
-                                  if plant.get_joint(j).num_positions() == 1])
-        self._arm_v_idx = np.array([plant.get_joint(j).velocity_start() for j in plant.GetJointIndices(arm)
-                                    if plant.get_joint(j).num_velocities() == 1])
+        arm_joints = [plant.get_joint(j) for j in plant.GetJointIndices(arm) if plant.get_joint(j).num_positions() == 1]
+        self._arm_idx = np.array([joint.position_start() for joint in arm_joints])
+        self._arm_v_idx = np.array([joint.velocity_start() for joint in arm_joints])
         self._payload: list[int] = []  # blocks whose weight the arm carries
 
     def _scene(self) -> Scene:
@@ -215,14 +214,17 @@ class Executor:
     def _compensate_payload(self) -> None:
         """Set the feed-forward torques that hold the payload's weight at the current configuration:
         tau = sum over carried blocks of J_v(gripper at the block's centre of mass)^T m g z_W."""
+        if not self._payload:
+            self._feedforward_value.SetFromVector(np.zeros(6))  # type: ignore[arg-type]  # pydrake stubs
+            return
         plant, ctx = self.plant, self.plant_context
         tau = np.zeros(6)
-        X_WG = plant.EvalBodyPoseInWorld(ctx, self.gripper_body)
+        X_GW = plant.EvalBodyPoseInWorld(ctx, self.gripper_body).inverse()
         for b in self._payload:
             body = self._block_bodies[b]
             p_WBcm = plant.EvalBodyPoseInWorld(ctx, body) @ body.CalcCenterOfMassInBodyFrame(ctx)
             J = plant.CalcJacobianTranslationalVelocity(ctx, JacobianWrtVariable.kV, self.gripper_body.body_frame(),
-                                                        X_WG.inverse() @ p_WBcm, plant.world_frame(),
+                                                        X_GW @ p_WBcm, plant.world_frame(),
                                                         plant.world_frame())
             weight = body.get_mass(ctx) * -plant.gravity_field().gravity_vector()
             tau += J[:, self._arm_v_idx].T @ weight
