@@ -377,7 +377,7 @@ class EffectModel(nn.Module):
                              f"{self.config.n_max}")
         return torch.as_tensor(X, dtype=torch.float32)[None]
 
-    @torch.no_grad()
+    @torch.inference_mode()
     def predict_effect(self, X: np.ndarray, actions) -> np.ndarray:
         """Absolute position displacements (B, n, 3) in metres for B actions on one scene.
 
@@ -400,7 +400,7 @@ class EffectModel(nn.Module):
             shift = arm_shift(torch.as_tensor(np.asarray(X, np.float64))[None].expand(B, n, 5), at)
         return (e + shift).numpy()
 
-    @torch.no_grad()
+    @torch.inference_mode()
     def predict_effects(self, Xs: np.ndarray, actions) -> np.ndarray:
         """Displacements (B, n, 3) in metres for B different scenes Xs (B, n, 5), one action each.
 
@@ -409,7 +409,7 @@ class EffectModel(nn.Module):
         """
         return self._predict(Xs, actions, spread=False)[0]
 
-    @torch.no_grad()
+    @torch.inference_mode()
     def predict_gaussian(self, Xs: np.ndarray, actions) -> tuple[np.ndarray, np.ndarray]:
         """`predict_effects` and each displacement's variance per axis (B, n, 3), metres squared: how widely
         the world scatters the outcome about the mean (the ``spread`` head; zeros for a model without one).
@@ -449,7 +449,7 @@ class EffectModel(nn.Module):
             shift = arm_shift(torch.as_tensor(Xs), at)
         return (e.double() + shift).numpy(), variance
 
-    @torch.no_grad()
+    @torch.inference_mode()
     def symbols(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Discrete symbols of one scene: unary bits (n, n_unary) and relation bits (K, n, n), uint8.
 
@@ -459,7 +459,7 @@ class EffectModel(nn.Module):
         u, r = self.symbols_batch(Xt.numpy(), np.ones(Xt.shape[:2], dtype=bool))
         return u[0], r[0]
 
-    @torch.no_grad()
+    @torch.inference_mode()
     def symbols_batch(self, X: np.ndarray, mask: np.ndarray, batch_size: int = 4096
                       ) -> tuple[np.ndarray, np.ndarray]:
         """Symbols of many padded scenes: unary (S, N, n_unary) and relations (S, K, N, N), uint8.

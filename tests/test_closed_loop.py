@@ -104,6 +104,9 @@ class RejectGoalMoves:
     """A kinematic check that rejects every action onto the other block: no plan can put A on B, and the
     widened search finds none either; only shifts of a block on itself are left."""
 
+    def graspable(self, X):
+        return np.ones((len(X), 3), dtype=bool)
+
     def check(self, X, actions):
         return [Infeasible.COLLISION if a[0] != a[2] else None for a in np.asarray(actions)]
 
@@ -132,6 +135,9 @@ def test_the_loop_is_deterministic(models):
 
 class AcceptAll:
     """A kinematic check that accepts every action, and a refinement that always succeeds."""
+
+    def graspable(self, X):
+        return np.ones((len(X), 3), dtype=bool)
 
     def check(self, X, actions):
         return [None] * len(np.asarray(actions))

@@ -30,6 +30,62 @@ def test_an_action_whose_grasp_point_misses_its_block_is_rejected(checker):
     assert info.status == "nothing_grasped"
 
 
+def test_graspable_says_which_grasps_can_never_hold_a_block(checker):
+    """The search leaves out, before predicting them, the actions `graspable` forbids: each must be one that
+    every check rejects with NO_GRASP, here in a scene where the cube stands beside and on the bar."""
+    from tamp.planning.search import all_actions
+
+    X = np.array([[0.6, -0.1, 0.025, *CUBE], [0.7, 0.15, 0.025, *BAR], [0.7, 0.225, 0.075, *CUBE]])
+    mask = checker.graspable(X)
+    assert mask.tolist() == [[False, True, False], [True, True, True], [False, True, False]]
+    checker.reset(X)
+    actions = all_actions(3)
+    forbidden = actions[~mask[actions[:, 0], actions[:, 1] + 1]]
+    assert len(forbidden) == 2 * 2 * 9
+    assert set(checker.check(X, forbidden)) == {Infeasible.NO_GRASP}
+
+
+def test_stand_ins_collide_as_boxes_added_to_the_gripper():
+    """The carrying checker poses stand-in bodies instead of adding shapes to Drake's checker: the same
+    verdicts, for one box and for a stack of two, and for more boxes than it has stand-ins (shapes then)."""
+    from pydrake.math import RigidTransform
+
+    from tamp.sim.kinematics import Q_HOME
+    from tamp.sim.motion import MotionPlanner
+    from tamp.sim.plants import build_motion_scene
+    from tamp.sim.skill import carried_size
+    from tamp.sim.structs import WorldConfig
+
+    cfg = WorldConfig()
+    types = np.array([0, 1])
+    X_WB = [RigidTransform([0.6, -0.1, 0.025]), RigidTransform([0.7, 0.15, 0.025])]
+    shapes_of = {"cube": [(carried_size(0, cfg), RigidTransform([0.0, 0.0, 0.13]))],
+                 "stack": [(carried_size(1, cfg), RigidTransform([0.0, 0.075, 0.13])),
+                           (carried_size(0, cfg), RigidTransform([0.0, 0.03, 0.18]))],
+                 "three": [(carried_size(0, cfg), RigidTransform([0.0, 0.0, 0.13 + 0.05 * k])) for k in range(3)]}
+    stand_ins = MotionPlanner(build_motion_scene(types, cfg.padding, stand_ins=[carried_size(t, cfg) for t in types]),
+                              cfg.joint_step, cfg.padding)
+    shapes = MotionPlanner(build_motion_scene(types, cfg.padding), cfg.joint_step, cfg.padding)
+    rng = np.random.default_rng(0)
+    from tamp.sim.kinematics import analytic_ik
+    from tamp.sim.skill import topdown
+
+    qs = [q for q in (analytic_ik(topdown(np.array([x, y, z]), 0.0), Q_HOME)
+                      for x, y, z in rng.uniform([0.55, -0.15, 0.0], [0.75, 0.2, 0.2], size=(80, 3))) if q is not None]
+    for planner in (stand_ins, shapes):
+        planner.set_block_poses(X_WB)
+    for name, boxes in shapes_of.items():
+        verdicts = []
+        for planner in (stand_ins, shapes):
+            planner.attach(boxes)
+            verdicts.append([planner.is_valid(q) for q in qs])
+        assert verdicts[0] == verdicts[1], name
+        assert True in verdicts[0] and False in verdicts[0], name  # both kinds of configuration are asked
+    stand_ins.detach()
+    shapes.detach()
+    assert [stand_ins.is_valid(q) for q in qs] == [shapes.is_valid(q) for q in qs]
+
+
 def test_the_check_uses_the_predicted_positions_not_the_observed_ones(checker):
     X = np.array([[0.6, -0.1, 0.025, *CUBE], [0.7, 0.15, 0.025, *BAR]])
     checker.reset(X)

@@ -472,6 +472,9 @@ class StubKinematics:
         self.infeasible, self.unrefinable = set(infeasible), set(unrefinable)
         self.refined: list[list[tuple]] = []
 
+    def graspable(self, X):
+        return np.ones((len(X), 3), dtype=bool)
+
     def check(self, X, actions):
         from tamp.planning.structs import Infeasible
 

@@ -287,3 +287,23 @@ def test_a_goal_state_the_model_doubts_waits_for_one_it_does_not():
     assert only.solved and len(only.plan) == 1 and "95 % bound" in only.reason
     with pytest.raises(ValueError, match="max_doubt"):
         SearchConfig(max_doubt=0.0)
+
+
+def test_actions_whose_grasp_cannot_hold_the_block_are_never_predicted():
+    G = goal_after([(1, 0, 2, 0)])  # cube 1 onto cube 2
+    seen = []
+
+    class Recording(StubModel):
+        def predict_effect(self, X_, actions):
+            seen.extend(map(tuple, np.asarray(actions)))
+            return super().predict_effect(X_, actions)
+
+    graspable = np.ones((3, 3), dtype=bool)
+    graspable[1:, [0, 2]] = False  # the cubes only at their centre, as the kinematic check says
+    out = continuous_search(Recording(), X, G, graspable=graspable)
+    assert out.plan == [(1, 0, 2, 0)]
+    assert seen and all(a[1] == 0 for a in seen if a[0] in (1, 2))
+    assert out.ungraspable == 12  # of cube 1's 18 actions (onto cube 2 and itself), 6 grasp its centre
+    # a plan that needs a grasp the mask forbids is not found
+    assert continuous_search(StubModel(), X, G, SearchConfig(max_depth=1),
+                             graspable=np.zeros((3, 3), dtype=bool)).plan is None

@@ -20,13 +20,15 @@ def level2(models: Models, X_init, X_goal, cfg: PlanConfig, result: PlanResult,
     refine_before = result.timings.get("refine", 0.0)
     search_cfg = replace(cfg.search, eps=cfg.verify.eps)
     check = None if feas is None else feas.action
+    graspable = None if feas is None else feas.kinematics.graspable(X_init)
     while True:
         out = continuous_search(models.require_dynamics(), X_init, X_goal, search_cfg, check,
-                                frozenset() if feas is None else feas.pruned, started=result.started)
+                                frozenset() if feas is None else feas.pruned, started=result.started,
+                                graspable=graspable)
         if feas is not None:
             feas.rejected[2].update(out.rejected)
             if result.search is not None:  # a search again after a refinement failure: count all
-                for name in ("expanded", "generated", "duplicates", "predict_calls"):
+                for name in ("expanded", "generated", "duplicates", "predict_calls", "ungraspable"):
                     setattr(out, name, getattr(out, name) + getattr(result.search, name))
         result.search = out
         if not out.solved or feas is None or not out.plan:

@@ -138,6 +138,7 @@ class SearchResult:
     rejected: Counter = field(default_factory=Counter)  # reason -> successors the feasibility check pruned
     pruned: int = 0  # successors left out as (state, action) pairs known to fail refinement
     fragility_checks: int = 0  # goal states whose plans were rolled out perturbed (`verify.fragility`)
+    ungraspable: int = 0  # actions left out before their prediction: the jaws cannot hold the block there (`graspable`)
     # unsolved: the path to the expanded state closest to the goal (least h), if closer than X_init; a closed
     # loop may take its first action to make progress from where the world is (`closed_loop.widened_search`)
     closest_plan: list[tuple[int, int, int, int]] | None = None
@@ -211,16 +212,19 @@ def state_key(P: np.ndarray, resolution: float) -> bytes:
 
 def continuous_search(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarray,
                       config: SearchConfig = SearchConfig(), feasible: FeasibilityFn | None = None,
-                      pruned: AbstractSet[tuple[bytes, tuple]] = frozenset(), started: float | None = None
-                      ) -> SearchResult:
+                      pruned: AbstractSet[tuple[bytes, tuple]] = frozenset(), started: float | None = None,
+                      graspable: np.ndarray | None = None) -> SearchResult:
     """Weighted A* from X_init to X_goal with the Dynamics Model as the transition.
 
     `feasible` (optional, e.g. the kinematic check of tamp.sim.feasibility) prunes successors whose action
     is infeasible in its parent's predicted state. It is called lazily, when a successor is expanded
     or reaches the goal, so only the edges the search actually follows are checked (a few per
     expansion instead of every generated successor). `pruned` holds (state_key(X), action) pairs left
-    out altogether (e.g. known to fail refinement). `config.time_limit` counts from `started`
-    (time.perf_counter() when the planning call began; default: now)."""
+    out altogether (e.g. known to fail refinement). `graspable` ((n, 3) bool per object and grasp offset
+    -1, 0, +1; `KinematicFeasibility.graspable`) leaves out, before they are predicted, the actions whose
+    grasp can never hold the picked block (a cube grasped off its centre): `feasible` would reject every
+    one of them. `config.time_limit` counts from `started` (time.perf_counter() when the planning call
+    began; default: now)."""
     t0 = time.perf_counter()
     deadline = float("inf") if config.time_limit is None else (t0 if started is None else started) + config.time_limit
     X_init, X_goal = states_pair(X_init, X_goal)
@@ -344,6 +348,10 @@ def continuous_search(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarr
             closest, closer_at = (h_here, index), out.expanded
         actions = goal_oriented_actions(full(P), X_goal, config.misplaced, config.eps,
                                         config.release_targets) if config.prune else every
+        if graspable is not None:
+            holds = graspable[actions[:, 0], actions[:, 1] + 1]
+            out.ungraspable += len(actions) - int(holds.sum())
+            actions = actions[holds]
         if len(actions) == 0:
             continue
         succ, calls = predict_positions(model, full(P), actions, config.batched)

@@ -67,6 +67,10 @@ class KinematicFeasibility(Protocol):
     def check(self, X: np.ndarray, actions: np.ndarray) -> list[Infeasible | None]:
         """Per action (B, 4) in the predicted scene X (n, 5): None if feasible, else why not."""
 
+    def graspable(self, X: np.ndarray) -> np.ndarray:
+        """(n, 3) bool per block of X and grasp offset (-1, 0, +1): False where `check` says NO_GRASP for every
+        action of that pick and grasp, whatever the scene (the search leaves them out before predicting them)."""
+
     def refine(self, actions: Sequence[Sequence[int]], trajectory: np.ndarray | None = None) -> RefinementOutcome:
         """Fully refine the plan (IK, OMPL motions, grasps) from the observed scene, each action in
         the scene `trajectory` (the predicted states along the plan) gives before it; no physics."""

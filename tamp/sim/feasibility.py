@@ -27,7 +27,7 @@ from typing import Sequence
 import numpy as np
 from pydrake.math import RigidTransform
 
-from tamp.planning.structs import Infeasible, PickPlace, RefinementOutcome
+from tamp.planning.structs import OFFSETS, Infeasible, PickPlace, RefinementOutcome
 from tamp.sim.kinematics import Q_HOME, solve_chain
 from tamp.sim.motion import MotionPlanner
 from tamp.sim.plants import build_motion_scene
@@ -39,7 +39,9 @@ from tamp.sim.skill import (
     Waypoints,
     approach_poses,
     boxes_overlap,
+    can_hold,
     carried_shapes,
+    carried_size,
     held_block,
     pick_place_waypoints,
     pick_waypoints,
@@ -123,6 +125,13 @@ class FeasibilityChecker:
                      [RigidTransform(X_WB.rotation(), p) for X_WB, p in zip(self.scene.X_WB, X[:, :3])])
 
     # --- the cheap check ---------------------------------------------------------------------------
+    @staticmethod
+    def graspable(X: np.ndarray) -> np.ndarray:
+        """(n, 3) bool: False where no pose of block i lets the jaws hold it at grasp offset -1, 0, +1
+        (`skill.can_hold`: a cube grasped off its centre), so that every check of such an action says NO_GRASP."""
+        types = np.argmax(np.asarray(X, dtype=float)[:, 3:], axis=1)
+        return np.array([[can_hold(int(t), g) for g in OFFSETS] for t in types], dtype=bool)
+
     def check(self, X: np.ndarray, actions) -> list[Infeasible | None]:
         """Per action (B, 4) in the predicted scene X (n, 5): None if feasible, else the first reason.
 
@@ -174,16 +183,18 @@ class FeasibilityChecker:
 
     def _carrying_planner(self, scene: Scene, carried: Sequence[int], shapes: list[Box]) -> MotionPlanner:
         """The collision model of the carrying waypoints: the carried blocks parked and their boxes attached to
-        the gripper. A checker of its own per layout keeps the boxes attached between checks (adding them
-        costs about 0.35 ms; the search checks many places of one grasp); the world's checker stays bare."""
+        the gripper. A checker of its own per layout, with a stand-in box for every block (`plants.StandIn`):
+        attaching is setting joint positions, not adding shapes to the checker (0.35 ms each); the world's
+        checker stays bare."""
         key = tuple(int(t) for t in scene.types)
         if not self.shortcuts:
             planner = self.world.motion_planner(scene.types)
         else:
             if key not in self._carrying:
                 cfg = self.config
-                self._carrying[key] = MotionPlanner(build_motion_scene(scene.types, cfg.padding), cfg.joint_step,
-                                                    cfg.padding)
+                stand_ins = [carried_size(t, cfg) for t in scene.types]  # enough for any stack
+                self._carrying[key] = MotionPlanner(build_motion_scene(scene.types, cfg.padding, stand_ins=stand_ins),
+                                                    cfg.joint_step, cfg.padding)
             planner = self._carrying[key]
         planner.set_block_poses(scene.X_WB, parked=tuple(carried))
         planner.attach(shapes)

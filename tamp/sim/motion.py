@@ -2,8 +2,9 @@
 
 Every motion is first tried as the straight joint-space segment (OMPL's motion validator at the
 configured resolution); RRTConnect runs only when that segment is blocked. A grasped block is
-attached to the gripper as an added collision shape and its free body is moved out of the scene,
-so carried motions are checked with the block in the jaws.
+attached to the gripper (as an added collision shape, or as a stand-in box on a joint to the gripper
+where the scene has one) and its free body is moved out of the scene, so carried motions are checked
+with the block in the jaws.
 """
 from __future__ import annotations
 
@@ -24,6 +25,7 @@ ou.setLogLevel(ou.LogLevel.LOG_WARN)
 
 _PARKED = np.array([1.0, 0.0, 0.0, 0.0, 0.0, 0.0, -10.0])  # free-body pose far below the table
 _CARRIED_GROUP = "carried"
+_STAND_IN_PARKED = np.array([1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 100.0])  # a stand-in 100 m from the gripper: touches nothing
 
 
 def _seed_ompl(seed: int) -> None:
@@ -59,9 +61,12 @@ class MotionPlanner:
         self._q_full = np.zeros(self._n_q)
         for i in range(len(scene.blocks)):
             self._set_block(i, _PARKED)
+        for stand_in in scene.stand_ins:
+            self._q_full[stand_in.position_start : stand_in.position_start + 7] = _STAND_IN_PARKED
         self._joint_step = joint_step
         self.num_checks = 0
         self._attached: tuple | None = None  # key of the boxes attached to the gripper (None: unknown)
+        self._shapes_added = True  # whether boxes may have been added to the checker as shapes (unknown: yes)
 
         self._space = ob.RealVectorStateSpace(6)
         bounds = ob.RealVectorBounds(6)
@@ -90,20 +95,40 @@ class MotionPlanner:
 
     def attach(self, shapes: list[tuple[tuple[float, float, float], RigidTransform]]) -> None:
         """Attach boxes (size, pose in the gripper body frame) to the gripper; nothing is done when these
-        boxes are attached already, to a tenth of a micrometre (adding a shape costs about 0.35 ms)."""
+        boxes are attached already, to a tenth of a micrometre. The scene's stand-ins of the same sizes take
+        the boxes' poses when there are enough of them; otherwise the boxes are added to the collision
+        checker as shapes (about 0.35 ms each)."""
         key = tuple((tuple(size), np.round(X_GB.GetAsMatrix34(), 7).tobytes()) for size, X_GB in shapes)
         if key == self._attached:
             return
         self.detach()
+        free = list(range(len(self.scene.stand_ins)))
+        posed = []
         for size, X_GB in shapes:
-            self.scene.checker.AddCollisionShapeToBody(
-                _CARRIED_GROUP, self.scene.gripper_body, Box(*size), X_GB
-            )
+            k = next((k for k in free if self.scene.stand_ins[k].size == tuple(size)), None)
+            if k is None:
+                break
+            free.remove(k)
+            posed.append((k, X_GB))
+        if len(posed) == len(shapes):
+            for k, X_GB in posed:
+                s = self.scene.stand_ins[k].position_start
+                self._q_full[s : s + 7] = np.r_[X_GB.rotation().ToQuaternion().wxyz(), X_GB.translation()]
+        else:
+            for size, X_GB in shapes:
+                self.scene.checker.AddCollisionShapeToBody(
+                    _CARRIED_GROUP, self.scene.gripper_body, Box(*size), X_GB
+                )
+            self._shapes_added = True
         self._attached = key
 
     def detach(self) -> None:
         if self._attached != ():
-            self.scene.checker.RemoveAllAddedCollisionShapes(_CARRIED_GROUP)
+            for stand_in in self.scene.stand_ins:
+                self._q_full[stand_in.position_start : stand_in.position_start + 7] = _STAND_IN_PARKED
+            if self._shapes_added:
+                self.scene.checker.RemoveAllAddedCollisionShapes(_CARRIED_GROUP)
+                self._shapes_added = False
             self._attached = ()
 
     def full_configuration(self, q_arm: np.ndarray) -> np.ndarray:

@@ -144,6 +144,15 @@ def held_block(scene: Scene, X_WG: RigidTransform) -> int:
     return -1
 
 
+def can_hold(block_type: int, grasp_offset: int) -> bool:
+    """Whether some pose of a block of `block_type` puts the grasp point of `grasp_offset` inside it: the point
+    lies |grasp_offset| * OFFSET_STEP from the block's centre on the table, and no point of the block (with the
+    grasp tolerance) is farther than half its diagonal. False for a cube grasped off its centre: `held_block`
+    never returns the picked block there, whatever the scene."""
+    reach = np.linalg.norm(np.asarray(BLOCK_SIZES[int(block_type)]) / 2 + _GRASP_TOLERANCE)
+    return bool(abs(grasp_offset) * OFFSET_STEP <= reach)
+
+
 @dataclass
 class PickWaypoints:
     """The pick half of an action: its first three tcp poses and what they carry away. A function of
@@ -224,16 +233,19 @@ def pick_place_waypoints(scene: Scene, action: PickPlace, grasped: int, config: 
 Box = tuple[tuple[float, float, float], RigidTransform]  # (size in metres, pose in the gripper body frame)
 
 
+def carried_size(block_type: int, config: WorldConfig) -> tuple[float, float, float]:
+    """Size (metres) of a carried block's collision box: narrowed by `config.carried_inset` on each side, so
+    that a block standing face to face with another one slides up past it, which a padded box the block's
+    full width would call a collision."""
+    sx, sy, sz = BLOCK_SIZES[int(block_type)]
+    inset = 2 * config.carried_inset
+    return (sx - inset, sy - inset, sz)
+
+
 def carried_shapes(scene: Scene, wp: PickWaypoints, config: WorldConfig) -> list[Box]:
-    """Collision boxes of the carried blocks in the gripper body frame (`MotionPlanner.attach`),
-    narrowed by `config.carried_inset` on each side: a block standing face to face with another one
-    slides up past it, which a padded box the block's full width would call a collision."""
-    shapes = []
-    for c, X_GC in zip(wp.carried, wp.X_GC):
-        sx, sy, sz = BLOCK_SIZES[int(scene.types[c])]
-        inset = 2 * config.carried_inset
-        shapes.append(((sx - inset, sy - inset, sz), X_FlangeTcp @ X_GC))
-    return shapes
+    """Collision boxes of the carried blocks in the gripper body frame (`MotionPlanner.attach`), of
+    `carried_size`."""
+    return [(carried_size(scene.types[c], config), X_FlangeTcp @ X_GC) for c, X_GC in zip(wp.carried, wp.X_GC)]
 
 
 def _raised_to(X_WG: RigidTransform, z: float) -> RigidTransform:
