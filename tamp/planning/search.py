@@ -170,24 +170,36 @@ def goal_oriented_actions(X: np.ndarray, X_goal: np.ndarray, misplaced: float = 
     object: the closest other object, the one with the closest release point (if `release_targets`
     and it differs), itself."""
     wrong = misplaced_objects(X, X_goal, misplaced, eps)
-    n, rows = len(X), []
-    points = X[:, None, :2] + _RELEASE_SHIFTS[None]  # (n, 5, 2) release points of every object
-    for i in wrong:
-        targets = [int(i)]
-        if n > 1:
-            dist = np.linalg.norm(X[:, :2] - X_goal[i, :2], axis=1)
-            dist[i] = np.inf
-            closest = int(np.argmin(dist))
-            targets.insert(0, closest)
-            if release_targets:
-                reach = np.linalg.norm(points - X_goal[i, :2], axis=2).min(axis=1)
-                reach[i] = np.inf
-                best = int(np.argmin(reach))
-                if best != closest:
-                    targets.insert(1, best)
-        for j in targets:
-            rows.append(np.column_stack([np.full(9, i), _PAIRS[:, 0], np.full(9, j), _PAIRS[:, 1]]))
-    return np.concatenate(rows).astype(np.int64) if rows else np.zeros((0, 4), np.int64)
+    n = len(X)
+    if wrong.size == 0:
+        return np.zeros((0, 4), np.int64)
+    targets = wrong[:, None]  # (w, 1): each misplaced object onto itself
+    if n > 1:
+        goals = X_goal[wrong, None, :2]  # (w, 1, 2)
+        mine = (np.arange(len(wrong)), wrong)
+        dist = np.linalg.norm(X[None, :, :2] - goals, axis=2)  # (w, n)
+        dist[mine] = np.inf
+        closest = np.argmin(dist, axis=1)
+        targets = np.column_stack([closest, wrong])
+        if release_targets:
+            points = X[:, None, :2] + _RELEASE_SHIFTS[None]  # (n, 5, 2) release points of every object
+            reach = np.linalg.norm(points[None] - goals[:, None], axis=3).min(axis=2)  # (w, n)
+            reach[mine] = np.inf
+            best = np.argmin(reach, axis=1)
+            if np.any(best != closest):
+                rows = [[c, b, i] if b != c else [c, i] for c, b, i in zip(closest, best, wrong)]
+                return np.concatenate([_actions_onto(i, row) for i, row in zip(wrong, rows)])
+    return np.concatenate([_actions_onto(i, row) for i, row in zip(wrong, targets)])
+
+
+def _actions_onto(i: int, targets) -> np.ndarray:
+    """The (9 len(targets), 4) actions picking object i and placing it on each target, every offset pair."""
+    rows = np.empty((9 * len(targets), 4), np.int64)
+    rows[:, 0] = i
+    rows[:, 1] = np.tile(_PAIRS[:, 0], len(targets))
+    rows[:, 2] = np.repeat(np.asarray(targets, dtype=np.int64), 9)
+    rows[:, 3] = np.tile(_PAIRS[:, 1], len(targets))
+    return rows
 
 
 def all_actions(n: int) -> np.ndarray:

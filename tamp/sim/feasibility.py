@@ -79,10 +79,10 @@ class FeasibilityChecker:
                  ) -> None:
         """`world`: a `fast` World whose Drake plants are reused (ideally with simplify_paths=True,
         the world refinement uses); by default one is made from `config`. `shortcuts`: keep the pick half
-        of each check for the other places of the same grasp, keep the carried boxes attached in a
-        collision checker of their own, and reject a place whose box overlaps a standing block before IK
-        (False: every check from scratch on the world's checker, the benchmark's baseline; the verdicts
-        are the same)."""
+        of each check for the other places of the same grasp, pose the carried boxes as stand-ins in a
+        collision checker of their own, reject a place whose box overlaps a standing block before IK, and
+        tell the search which grasps can never hold a block (`graspable`) (False: every check from scratch
+        on the world's checker, the benchmark's baseline; the verdicts are the same)."""
         if world is None:
             world = World(dataclasses.replace(config or WorldConfig(), fidelity="fast", simplify_paths=True))
         if world.config.fidelity != "fast":
@@ -125,12 +125,12 @@ class FeasibilityChecker:
                      [RigidTransform(X_WB.rotation(), p) for X_WB, p in zip(self.scene.X_WB, X[:, :3])])
 
     # --- the cheap check ---------------------------------------------------------------------------
-    @staticmethod
-    def graspable(X: np.ndarray) -> np.ndarray:
+    def graspable(self, X: np.ndarray) -> np.ndarray:
         """(n, 3) bool: False where no pose of block i lets the jaws hold it at grasp offset -1, 0, +1
-        (`skill.can_hold`: a cube grasped off its centre), so that every check of such an action says NO_GRASP."""
+        (`skill.can_hold`: a cube grasped off its centre), so that every check of such an action says NO_GRASP.
+        Without shortcuts every grasp is left to the check."""
         types = np.argmax(np.asarray(X, dtype=float)[:, 3:], axis=1)
-        return np.array([[can_hold(int(t), g) for g in OFFSETS] for t in types], dtype=bool)
+        return np.array([[can_hold(int(t), g) or not self.shortcuts for g in OFFSETS] for t in types], dtype=bool)
 
     def check(self, X: np.ndarray, actions) -> list[Infeasible | None]:
         """Per action (B, 4) in the predicted scene X (n, 5): None if feasible, else the first reason.
