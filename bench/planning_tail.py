@@ -9,7 +9,8 @@ and kinematics in the planning loop, default limits otherwise:
 - baseline: the search runs to its node budget (`SearchConfig(stall=None)`) and the kinematic check
   starts every action from scratch on the world's collision checker (`FeasibilityChecker(shortcuts=False)`);
 - new: the defaults (the stall cut; the pick half of a check remembered for the other places of the
-  same grasp, the carried boxes kept attached in a collision checker of their own).
+  same grasp, the carried boxes posed as stand-ins in a collision checker of their own, a place into a
+  standing block rejected before IK, grasps that cannot hold a block left out before prediction).
 Prints, per number of blocks and in all: planning time per problem (median, mean, p95, max), plans
 found, success (the plan refined and executed in the fast world, within the 5 cm tolerance; a plan equal
 to the baseline's is not executed again), kinematic checks and expansions per problem, the ratios new /
