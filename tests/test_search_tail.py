@@ -1,5 +1,6 @@
-"""The slow tail of planning: the remembered pick halves and the stall cut find the plans that the search
-without them found within its budget (the paper set's models, kinematics in the loop, fixed held-out problems)."""
+"""The slow tail of planning: the kinematic check's shortcuts (remembered pick halves, stand-ins for the carried
+boxes, the box test, grasps that cannot hold left out) and the stall cut find the plans that the search without
+them found within its budget (the paper set's models, kinematics in the loop, fixed held-out problems)."""
 from __future__ import annotations
 
 from dataclasses import replace
@@ -25,8 +26,10 @@ def test_the_search_finds_the_plans_it_found_without_its_shortcuts():
     problems = {p.name: p for p in read_problem_set(PROBLEMS)}
     models = load_models(pretrained_dir() / "paper")
     new = FeasibilityChecker()
-    baseline_cfg = replace(PlanConfig(), search=replace(PlanConfig().search, stall=None))
-    setups = ((baseline_cfg, FeasibilityChecker(world=new.world, shortcuts=False)), (PlanConfig(), new))
+    stalling = replace(PlanConfig(), search=replace(PlanConfig().search, stall=700))
+    setups = ((PlanConfig(), FeasibilityChecker(world=new.world, shortcuts=False)), (PlanConfig(), new),
+              (stalling, new))
+    left_out = 0
     for name in NAMES:
         problem = problems[name]
         results = []
@@ -34,11 +37,15 @@ def test_the_search_finds_the_plans_it_found_without_its_shortcuts():
             checker.reset(problem.X_init)
             results.append(plan("bilevel", models, problem.X_init, problem.X_goal, cfg.with_seed(problem.seed),
                                 kinematics=checker))
-        before, after = results
-        assert before.plan == after.plan, name
+        before, after, stalled = results
+        assert before.plan == after.plan == stalled.plan, name
         assert before.level == after.level == (None if name == "n2-k3-005" else 2), name
-        if before.solved:  # the same search, expansion for expansion
-            assert after.search.expanded == before.search.expanded, name
-        else:  # ended on its plateau
-            assert before.search.status == "node_limit" and after.search.status == "stalled", name
-            assert after.search.expanded < before.search.expanded, name
+        # grasps that cannot hold are never generated, so a state one of them reached first may be kept
+        # through another action: the same plan, within a few expansions
+        assert abs(after.search.expanded - before.search.expanded) <= 0.05 * before.search.expanded, name
+        assert before.search.ungraspable == 0, name
+        left_out += after.search.ungraspable
+        if not before.solved:  # the stall cut ends it on its plateau
+            assert before.search.status == after.search.status == "node_limit", name
+            assert stalled.search.status == "stalled" and stalled.search.expanded < after.search.expanded, name
+    assert left_out > 0  # cubes grasped off their centre: never predicted

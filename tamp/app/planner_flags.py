@@ -133,8 +133,8 @@ def add_planner_arguments(p: argparse.ArgumentParser, backends: tuple[str, ...] 
                    "(default: off, so that --max-expansions and --stall decide, whatever the machine's load)")
     p.add_argument("--stall", type=positive_int, default=default.search.stall, metavar="EXPANSIONS",
                    help="with up to 4 blocks, the continuous search ends after this many expansions without a state "
-                   f"closer to the goal (default {default.search.stall}; searches that find a plan plateau for fewer; "
-                   "with more blocks they may not, and the search runs to --max-expansions)")
+                   "closer to the goal (default: off, the search runs to --max-expansions: most searches that find "
+                   "a plan plateau for a few hundred expansions, a few for more)")
     p.add_argument("--no-stall", dest="stall", action="store_const", const=None,
                    help="the continuous search runs to --max-expansions however long it stays on a plateau")
     if feasibility:

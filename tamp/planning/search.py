@@ -35,11 +35,12 @@ Duplicate detection:
 positions rounded to a `resolution` grid; a state is pushed again only when reached with fewer
 actions. Limits: expansions, wall-clock time and plan depth; the result says which one ended it.
 
-Stagnation (our extension, `stall`): in a scene of at most `stall_max_objects` blocks, a search whose
-closest expanded state (least h) has not come closer to the goal for `stall` expansions ends, counted
-in expansions so that the cut never depends on the machine's load. There, searches that find a plan
-seldom plateau for more than a few hundred expansions, while searches that end without one stop
-improving early and spend most of their budget on a plateau (docs/beyond-the-paper.md).
+Stagnation (our extension, `stall`, off unless set): in a scene of at most `stall_max_objects` blocks, a
+search whose closest expanded state (least h) has not come closer to the goal for `stall` expansions
+ends, counted in expansions so that the cut never depends on the machine's load. Searches that end
+without a plan stop improving early and spend most of their budget on a plateau; most that find one
+plateau for a few hundred expansions, but not all: the closed loop's rounds use it (`LoopConfig.stall`),
+since a round that fails has a widened search and the next round behind it (docs/beyond-the-paper.md).
 """
 from __future__ import annotations
 
@@ -75,9 +76,10 @@ class SearchConfig:
     #   None: the node budget and the stall cut decide, so that results never depend on the machine's load)
     time_limit: float | None = None
     max_depth: int = 10  # longest plan considered
-    # expansions without a state closer to the goal (least h) before the search ends: no tuning search that found
-    #   a plan plateaued longer than 624, failing ones plateau for over 1,000 (None: run to the node budget)
-    stall: int | None = 700
+    # expansions without a state closer to the goal (least h) before the search ends (None: run to the node budget;
+    #   off by default, since some searches find a plan after a plateau of 700 or more, and a failing search
+    #   to the budget now takes 2-3 s at n = 4; the closed loop's rounds use `LoopConfig.stall`)
+    stall: int | None = None
     # the stall cut applies to scenes of at most this many blocks: at 5-6, held-out searches found plans after
     #   plateaus of 748-1,231 expansions
     stall_max_objects: int = 4
