@@ -169,6 +169,9 @@ class EvalConfig:
             out["level1_settle"] = p.level1.settle
         if p.search.max_doubt is not None:
             out["search_max_doubt_m"] = p.search.max_doubt
+        if p.search.greedy_from is not None:
+            out["search_greedy_from"] = p.search.greedy_from
+            out["search_greedy_h_unit_m"] = p.search.greedy_h_unit
         # the loop that does not know k: the same, by the fields other than keep_plan and on_course (above)
         loop = {k: v for k, v in dataclasses.asdict(p.loop).items() if k not in ("keep_plan", "on_course")}
         if loop != {k: v for k, v in dataclasses.asdict(LoopConfig()).items() if k not in ("keep_plan", "on_course")}:

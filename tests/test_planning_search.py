@@ -307,3 +307,21 @@ def test_actions_whose_grasp_cannot_hold_the_block_are_never_predicted():
     # a plan that needs a grasp the mask forbids is not found
     assert continuous_search(StubModel(), X, G, SearchConfig(max_depth=1),
                              graspable=np.zeros((3, 3), dtype=bool)).plan is None
+
+
+def test_from_greedy_from_blocks_on_h_counts_in_its_own_unit():
+    """With many blocks a search in the paper's units (h in metres) is nearly breadth-first: counting h in
+    decimetres from `greedy_from` blocks on reaches a deep goal after fewer expansions; below it, nothing changes."""
+    X5 = np.array([[0.5, -0.2, 0.025, 1, 0], [0.6, 0.1, 0.025, 1, 0], [0.7, -0.1, 0.025, 1, 0],
+                   [0.8, 0.2, 0.025, 1, 0], [0.55, 0.3, 0.025, 0, 1]])
+    G = X5
+    for action in [(0, 0, 1, 0), (2, 0, 3, 0), (4, 0, 4, 1)]:
+        G = world_step(G, action)
+    paper = continuous_search(StubModel(), X5, G, SearchConfig(max_fragility=None))
+    below = continuous_search(StubModel(), X5, G, SearchConfig(max_fragility=None, greedy_from=6, greedy_h_unit=0.1))
+    greedy = continuous_search(StubModel(), X5, G, SearchConfig(max_fragility=None, greedy_from=5, greedy_h_unit=0.1))
+    assert paper.solved and greedy.solved
+    assert (below.plan, below.expanded) == (paper.plan, paper.expanded)
+    assert greedy.expanded < paper.expanded
+    with pytest.raises(UserError, match="units of h"):
+        SearchConfig(greedy_from=0)

@@ -122,6 +122,14 @@ def add_planner_arguments(p: argparse.ArgumentParser, backends: tuple[str, ...] 
                    help="with an ensemble Dynamics Model (tamp train --ensemble, tamp practice): a plan is taken at "
                    "once only if no step of it may miss by more than this, by the model's own 95 %% bound; otherwise "
                    "it waits as a fragile one does (default: off)")
+    p.add_argument("--greedy-from", type=positive_int, default=default.search.greedy_from, metavar="N",
+                   help="from N blocks on, the continuous search counts the distance to the goal in units of "
+                   "--greedy-h-unit metres instead of metres, so that an action weighs less against the distance "
+                   f"still to go (default: {default.search.greedy_from or 'off'})")
+    p.add_argument("--no-greedy", dest="greedy_from", action="store_const", const=None,
+                   help="the continuous search counts the distance to the goal in metres at any number of blocks")
+    p.add_argument("--greedy-h-unit", type=positive_float, default=default.search.greedy_h_unit, metavar="METRES",
+                   help=f"the unit of --greedy-from (default {default.search.greedy_h_unit})")
     p.add_argument("--paper-pruning", dest="release_targets", action="store_false",
                    help="the continuous search (cfs, and bilevel's Level 2) prunes actions by the paper's rule alone: "
                    "a misplaced block goes onto the object closest to its goal or onto itself (default: also onto "
@@ -151,6 +159,7 @@ PLANNER_FLAGS: dict[str, dict[str, str]] = {
                "cut": "level1_cut", "settle": "level1_settle"},
     "verify": {},
     "search": {"max_expansions": "max_expansions", "time_limit": "time_limit", "stall": "stall",
+               "greedy_from": "greedy_from", "greedy_h_unit": "greedy_h_unit",
                "confident": "confident", "look_on": "look_on", "max_fragility": "max_fragility",
                "release_targets": "release_targets", "max_doubt": "max_doubt"},
     "kinematics": {"feasibility": "feasibility"},  # `tamp evaluate` sets it per method instead

@@ -79,13 +79,13 @@ def plan_bilevel_alg1(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConf
                       kinematics: KinematicFeasibility | None = None) -> PlanResult:
     """The paper's Algorithm 1 exactly: ranked symbolic plans verified alone (no look-alike
     alternatives, any block picked) and the empty plan allowed whenever Sigma_init = Sigma_goal; its
-    Level 2 returns the continuous search's first goal state, prunes actions by the paper's rule and runs to its
-    node budget (no stall cut)."""
+    Level 2 returns the continuous search's first goal state, prunes actions by the paper's rule, counts h in metres
+    and runs to its node budget (no stall cut)."""
     paper = replace(cfg, level1=replace(cfg.level1, alternatives=0, nonempty=False, focus_from=None, confident=None,
                                         cut=False),
                     kinematics=replace(cfg.kinematics, feasibility=False),
                     search=replace(cfg.search, look_on=0, release_targets=False, max_fragility=None, max_doubt=None,
-                                   stall=None))
+                                   stall=None, greedy_from=None))
     result = plan_bilevel(models, X_init, X_goal, paper)
     result.method = "bilevel_alg1"
     return result
