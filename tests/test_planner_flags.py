@@ -101,7 +101,7 @@ def test_the_defining_settings_of_a_results_directory_are_unchanged():
                "on_course_m": 0.015, "oracle_max_plans": 20, "search_confident_m": 0.035, "search_look_on": 30,
                "search_max_expansions": 1500, "search_max_fragility": 0.3, "search_noise_m": 0.005,
                "search_release_targets": True, "search_time_limit_s": None, "search_stall": None,
-               "search_stall_max_objects": 4,
+               "search_stall_max_objects": 4, "search_greedy_from": 5, "search_greedy_h_unit_m": 0.5,
                "symbolic_backend": "python",
                "tau_verify_m": 0.07}
     assert EvalConfig().defining() == default

@@ -317,7 +317,7 @@ def test_from_greedy_from_blocks_on_h_counts_in_its_own_unit():
     G = X5
     for action in [(0, 0, 1, 0), (2, 0, 3, 0), (4, 0, 4, 1)]:
         G = world_step(G, action)
-    paper = continuous_search(StubModel(), X5, G, SearchConfig(max_fragility=None))
+    paper = continuous_search(StubModel(), X5, G, SearchConfig(max_fragility=None, greedy_from=None))
     below = continuous_search(StubModel(), X5, G, SearchConfig(max_fragility=None, greedy_from=6, greedy_h_unit=0.1))
     greedy = continuous_search(StubModel(), X5, G, SearchConfig(max_fragility=None, greedy_from=5, greedy_h_unit=0.1))
     assert paper.solved and greedy.solved

@@ -69,7 +69,7 @@ class SearchConfig:
     h_unit: float = 1.0  # metres per unit of h (1.0: h in metres, as in the paper)
     # from this many blocks on, h counts in units of `greedy_h_unit` metres instead: with up to 27 successors per
     #   misplaced block, h in metres leaves the search nearly breadth-first, out of nodes before depth 4-5 (None: never)
-    greedy_from: int | None = None
+    greedy_from: int | None = 5
     greedy_h_unit: float = 0.5  # metres per unit of h from greedy_from blocks on
     eps: float = EPS_SUCCESS  # metres: goal test, every object within eps (3-D)
     misplaced: float = EPS_SUCCESS  # metres: 2-D distance beyond which an object is misplaced
