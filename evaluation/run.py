@@ -172,6 +172,7 @@ class EvalConfig:
         if p.search.greedy_from is not None:
             out["search_greedy_from"] = p.search.greedy_from
             out["search_greedy_h_unit_m"] = p.search.greedy_h_unit
+            out["search_greedy_per_misplaced"] = p.search.greedy_per_misplaced
         # the loop that does not know k: the same, by the fields other than keep_plan and on_course (above)
         loop = {k: v for k, v in dataclasses.asdict(p.loop).items() if k not in ("keep_plan", "on_course")}
         if loop != {k: v for k, v in dataclasses.asdict(LoopConfig()).items() if k not in ("keep_plan", "on_course")}:

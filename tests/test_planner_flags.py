@@ -102,6 +102,7 @@ def test_the_defining_settings_of_a_results_directory_are_unchanged():
                "search_max_expansions": 1500, "search_max_fragility": 0.3, "search_noise_m": 0.005,
                "search_release_targets": True, "search_time_limit_s": None, "search_stall": None,
                "search_stall_max_objects": 4, "search_greedy_from": 5, "search_greedy_h_unit_m": 0.5,
+               "search_greedy_per_misplaced": 0.3,
                "symbolic_backend": "python",
                "tau_verify_m": 0.07}
     assert EvalConfig().defining() == default

@@ -323,5 +323,13 @@ def test_from_greedy_from_blocks_on_h_counts_in_its_own_unit():
     assert paper.solved and greedy.solved
     assert (below.plan, below.expanded) == (paper.plan, paper.expanded)
     assert greedy.expanded < paper.expanded
-    with pytest.raises(UserError, match="units of h"):
+    # counting the blocks still off their goal too: at most as many expansions as the distance alone
+    counted = continuous_search(StubModel(), X5, G, SearchConfig(max_fragility=None, greedy_from=5, greedy_h_unit=0.1,
+                                                                  greedy_per_misplaced=1.0))
+    alone = continuous_search(StubModel(), X5, G, SearchConfig(max_fragility=None, greedy_from=5, greedy_h_unit=0.1,
+                                                                greedy_per_misplaced=0.0))
+    assert counted.solved and counted.expanded <= alone.expanded
+    with pytest.raises(UserError, match="unit of h"):
         SearchConfig(greedy_from=0)
+    with pytest.raises(UserError, match="greedy_per_misplaced"):
+        SearchConfig(greedy_per_misplaced=-1.0)

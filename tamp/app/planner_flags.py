@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 
-from tamp.app.args import fraction, non_negative_int, object_count, positive_float, positive_int
+from tamp.app.args import fraction, non_negative_float, non_negative_int, object_count, positive_float, positive_int
 from tamp.planning.config import SYMBOLIC_BACKENDS, PlanConfig
 
 
@@ -130,6 +130,10 @@ def add_planner_arguments(p: argparse.ArgumentParser, backends: tuple[str, ...] 
                    help="the continuous search counts the distance to the goal in metres at any number of blocks")
     p.add_argument("--greedy-h-unit", type=positive_float, default=default.search.greedy_h_unit, metavar="METRES",
                    help=f"the unit of --greedy-from (default {default.search.greedy_h_unit})")
+    p.add_argument("--greedy-per-misplaced", type=non_negative_float, default=default.search.greedy_per_misplaced,
+                   metavar="UNITS", help="from --greedy-from blocks on, the distance to the goal also counts this many "
+                   "units per block still off its goal: each needs an action (default "
+                   f"{default.search.greedy_per_misplaced})")
     p.add_argument("--paper-pruning", dest="release_targets", action="store_false",
                    help="the continuous search (cfs, and bilevel's Level 2) prunes actions by the paper's rule alone: "
                    "a misplaced block goes onto the object closest to its goal or onto itself (default: also onto "
@@ -160,6 +164,7 @@ PLANNER_FLAGS: dict[str, dict[str, str]] = {
     "verify": {},
     "search": {"max_expansions": "max_expansions", "time_limit": "time_limit", "stall": "stall",
                "greedy_from": "greedy_from", "greedy_h_unit": "greedy_h_unit",
+               "greedy_per_misplaced": "greedy_per_misplaced",
                "confident": "confident", "look_on": "look_on", "max_fragility": "max_fragility",
                "release_targets": "release_targets", "max_doubt": "max_doubt"},
     "kinematics": {"feasibility": "feasibility"},  # `tamp evaluate` sets it per method instead
@@ -169,7 +174,7 @@ PLANNER_FLAGS: dict[str, dict[str, str]] = {
 # the fields deliberately without a flag (their defaults hold; tests and benchmarks set them in code)
 NOT_EXPOSED = {"level1": ("seed", "time_budget", "verify_all", "alternatives", "alternatives_total", "nonempty"),
                "verify": ("tau_verify", "eps"), "kinematics": ("max_refinements",),
-               "search": ("weight", "h_unit", "eps", "misplaced", "resolution", "max_depth", "batched", "prune",
+               "search": ("weight", "eps", "misplaced", "resolution", "max_depth", "batched", "prune",
                           "noise", "stall_max_objects"),
                "loop": ("widen_expansions", "revisit", "progress")}
 

@@ -1,10 +1,11 @@
 """Continuous Forward Search (paper, Level 2): weighted A* in the continuous state space.
 
 A node is (X, g, plan); f = g + w h(X) with g = number of actions, w = 1.5 and
-h(X) = sum_i ||pos_i(X) - pos_i(X_goal)||_2 in units of `h_unit` metres (1 m: the paper's formula
-with positions in metres; from `greedy_from` blocks on, our extension, `greedy_h_unit` metres, so that
-an action weighs less against the distance still to go). The Dynamics Model is the transition,
-X' = X + e_hat; all successors of one expansion are predicted in one batched `predict_effect` call.
+h(X) = sum_i ||pos_i(X) - pos_i(X_goal)||_2 in metres (the paper's formula). From `greedy_from` blocks
+on (our extension) h counts in units of `greedy_h_unit` metres, so that an action weighs less against
+the distance still to go, plus `greedy_per_misplaced` per block still off its goal in 2-D. The
+Dynamics Model is the transition, X' = X + e_hat; all successors of one expansion are predicted in one
+batched `predict_effect` call.
 
 Goal-oriented action pruning (paper): objects whose 2-D (x, y) distance to their goal exceeds
 `misplaced` are misplaced; for each misplaced o_i, the actions from o_i onto the other object o_j
@@ -66,11 +67,13 @@ _RELEASE_SHIFTS = np.array([(0.0, s * OFFSET_STEP) for s in range(-2, 3)])
 @dataclass(frozen=True)
 class SearchConfig:
     weight: float = 1.5  # w in f = g + w h
-    h_unit: float = 1.0  # metres per unit of h (1.0: h in metres, as in the paper)
     # from this many blocks on, h counts in units of `greedy_h_unit` metres instead: with up to 27 successors per
     #   misplaced block, h in metres leaves the search nearly breadth-first, out of nodes before depth 4-5 (None: never)
     greedy_from: int | None = 5
     greedy_h_unit: float = 0.5  # metres per unit of h from greedy_from blocks on
+    # from greedy_from blocks on, h also counts this many units per block farther than `misplaced` (2-D) from its
+    #   goal: each needs an action still
+    greedy_per_misplaced: float = 0.3
     eps: float = EPS_SUCCESS  # metres: goal test, every object within eps (3-D)
     misplaced: float = EPS_SUCCESS  # metres: 2-D distance beyond which an object is misplaced
     resolution: float = 0.01  # metres: grid of the duplicate-detection key
@@ -114,10 +117,12 @@ class SearchConfig:
         if self.max_doubt is not None and not self.max_doubt > 0:
             raise UserError(f"the continuous search's max_doubt must be a positive distance (or None), got "
                             f"{self.max_doubt} m")
-        if not self.h_unit > 0 or not self.greedy_h_unit > 0 or self.greedy_from is not None and self.greedy_from < 1:
-            raise UserError(f"the continuous search needs positive units of h and greedy_from of at least 1 block (or "
-                            f"None), got h_unit {self.h_unit} m, greedy_h_unit {self.greedy_h_unit} m, greedy_from "
-                            f"{self.greedy_from}")
+        if not self.greedy_h_unit > 0 or self.greedy_from is not None and self.greedy_from < 1:
+            raise UserError(f"the continuous search needs a positive unit of h and greedy_from of at least 1 block (or "
+                            f"None), got greedy_h_unit {self.greedy_h_unit} m, greedy_from {self.greedy_from}")
+        if not self.greedy_per_misplaced >= 0:
+            raise UserError(f"the continuous search's greedy_per_misplaced must be 0 or more units of h, got "
+                            f"{self.greedy_per_misplaced}")
         if not 0 < self.confident <= self.eps or self.look_on < 0:
             raise UserError(f"the continuous search needs 0 < confident <= eps and look_on >= 0, got confident "
                             f"{self.confident} m, eps {self.eps} m, look_on {self.look_on}")
@@ -342,9 +347,19 @@ def continuous_search(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarr
                       f"{out.expanded} expansions)", index)
 
     greedy = config.greedy_from is not None and len(X_init) >= config.greedy_from
-    h_unit = config.greedy_h_unit if greedy else config.h_unit
-    frontier = [(config.weight * d0.sum() / h_unit, d0.sum(), 0)]  # (f, h, node index)
-    closest = (d0.sum() / h_unit, 0)  # (h, node index) of the expanded state closest to the goal
+    h_unit = config.greedy_h_unit if greedy else 1.0  # metres per unit of h
+    per_misplaced = config.greedy_per_misplaced if greedy else 0.0
+
+    def heuristic(Ps: np.ndarray, dist: np.ndarray) -> np.ndarray:
+        """h of the (B, n, 3) states whose (B, n) distances to the goal are `dist`."""
+        h = dist.sum(axis=1) / h_unit
+        if per_misplaced:
+            h = h + per_misplaced * (np.linalg.norm(Ps[:, :, :2] - goal[None, :, :2], axis=2) > config.misplaced).sum(1)
+        return h
+
+    h0 = float(heuristic(X_init[None, :, :3], d0[None])[0])
+    frontier = [(config.weight * h0, h0, 0)]  # (f, h, node index)
+    closest = (h0, 0)  # (h, node index) of the expanded state closest to the goal
     closer_at = 0  # expansions when the closest state last came closer
     stall = config.stall if len(X_init) <= config.stall_max_objects else None
     n_objects = len(X_init)
@@ -385,7 +400,7 @@ def continuous_search(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarr
         dist = np.linalg.norm(succ - goal[None], axis=2)  # (B, n)
         worst = dist.max(axis=1)
         out.best_error = min(out.best_error, float(worst.min()))
-        h = (dist.sum(axis=1) / h_unit).tolist()
+        h = heuristic(succ, dist).tolist()
         reached = (worst < config.eps).tolist()
         keys = keys_of(succ)
         here = key(P) if pruned else b""
