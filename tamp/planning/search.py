@@ -189,22 +189,19 @@ def goal_oriented_actions(X: np.ndarray, X_goal: np.ndarray, misplaced: float = 
     n = len(X)
     if wrong.size == 0:
         return np.zeros((0, 4), np.int64)
-    targets = wrong[:, None]  # (w, 1): each misplaced object onto itself
+    targets = [[i] for i in wrong.tolist()]  # each misplaced object onto itself
     if n > 1:
         goals = X_goal[wrong, None, :2]  # (w, 1, 2)
         mine = (np.arange(len(wrong)), wrong)
         dist = np.linalg.norm(X[None, :, :2] - goals, axis=2)  # (w, n)
         dist[mine] = np.inf
-        closest = np.argmin(dist, axis=1)
-        targets = np.column_stack([closest, wrong])
+        closest = best = np.argmin(dist, axis=1)
         if release_targets:
             points = X[:, None, :2] + _RELEASE_SHIFTS[None]  # (n, 5, 2) release points of every object
             reach = np.linalg.norm(points[None] - goals[:, None], axis=3).min(axis=2)  # (w, n)
             reach[mine] = np.inf
             best = np.argmin(reach, axis=1)
-            if np.any(best != closest):
-                rows = [[c, b, i] if b != c else [c, i] for c, b, i in zip(closest, best, wrong)]
-                return np.concatenate([_actions_onto(i, row) for i, row in zip(wrong, rows)])
+        targets = [[c, b, i] if b != c else [c, i] for c, b, i in zip(closest.tolist(), best.tolist(), wrong.tolist())]
     return np.concatenate([_actions_onto(i, row) for i, row in zip(wrong, targets)])
 
 

@@ -130,7 +130,9 @@ class FeasibilityChecker:
         (`skill.can_hold`: a cube grasped off its centre), so that every check of such an action says NO_GRASP.
         Without shortcuts every grasp is left to the check."""
         types = np.argmax(np.asarray(X, dtype=float)[:, 3:], axis=1)
-        return np.array([[can_hold(int(t), g) or not self.shortcuts for g in OFFSETS] for t in types], dtype=bool)
+        if not self.shortcuts:
+            return np.ones((len(types), len(OFFSETS)), dtype=bool)
+        return np.array([[can_hold(int(t), g) for g in OFFSETS] for t in types], dtype=bool)
 
     def check(self, X: np.ndarray, actions) -> list[Infeasible | None]:
         """Per action (B, 4) in the predicted scene X (n, 5): None if feasible, else the first reason.

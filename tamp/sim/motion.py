@@ -28,6 +28,11 @@ _CARRIED_GROUP = "carried"
 _STAND_IN_PARKED = np.array([1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 100.0])  # a stand-in 100 m from the gripper: touches nothing
 
 
+def _positions(X: RigidTransform) -> np.ndarray:
+    """The 7 positions of a floating joint at pose X: quaternion (w, x, y, z), then translation."""
+    return np.r_[X.rotation().ToQuaternion().wxyz(), X.translation()]
+
+
 def _seed_ompl(seed: int) -> None:
     """Reseed OMPL's generator so a motion's path depends on its seed only. OMPL logs an error
     when reseeding after its first use, yet the reseeding takes effect, so the log is muted."""
@@ -61,8 +66,7 @@ class MotionPlanner:
         self._q_full = np.zeros(self._n_q)
         for i in range(len(scene.blocks)):
             self._set_block(i, _PARKED)
-        for stand_in in scene.stand_ins:
-            self._q_full[stand_in.position_start : stand_in.position_start + 7] = _STAND_IN_PARKED
+        self._park_stand_ins()
         self._joint_step = joint_step
         self.num_checks = 0
         self._attached: tuple | None = None  # key of the boxes attached to the gripper (None: unknown)
@@ -85,13 +89,21 @@ class MotionPlanner:
         s = self._block_idx[i]
         self._q_full[s : s + 7] = q7
 
+    def _set_stand_in(self, k: int, q7: np.ndarray) -> None:
+        s = self.scene.stand_ins[k].position_start
+        self._q_full[s : s + 7] = q7
+
+    def _park_stand_ins(self) -> None:
+        for k in range(len(self.scene.stand_ins)):
+            self._set_stand_in(k, _STAND_IN_PARKED)
+
     def set_block_poses(self, X_WB: list[RigidTransform], parked: tuple[int, ...] = ()) -> None:
         """Block poses for collision checking; blocks in `parked` are removed from the scene."""
         for i, X_WBi in enumerate(X_WB):
             if i in parked:
                 self._set_block(i, _PARKED)
             else:
-                self._set_block(i, np.r_[X_WBi.rotation().ToQuaternion().wxyz(), X_WBi.translation()])
+                self._set_block(i, _positions(X_WBi))
 
     def attach(self, shapes: list[tuple[tuple[float, float, float], RigidTransform]]) -> None:
         """Attach boxes (size, pose in the gripper body frame) to the gripper; nothing is done when these
@@ -112,8 +124,7 @@ class MotionPlanner:
             posed.append((k, X_GB))
         if len(posed) == len(shapes):
             for k, X_GB in posed:
-                s = self.scene.stand_ins[k].position_start
-                self._q_full[s : s + 7] = np.r_[X_GB.rotation().ToQuaternion().wxyz(), X_GB.translation()]
+                self._set_stand_in(k, _positions(X_GB))
         else:
             for size, X_GB in shapes:
                 self.scene.checker.AddCollisionShapeToBody(
@@ -124,8 +135,7 @@ class MotionPlanner:
 
     def detach(self) -> None:
         if self._attached != ():
-            for stand_in in self.scene.stand_ins:
-                self._q_full[stand_in.position_start : stand_in.position_start + 7] = _STAND_IN_PARKED
+            self._park_stand_ins()
             if self._shapes_added:
                 self.scene.checker.RemoveAllAddedCollisionShapes(_CARRIED_GROUP)
                 self._shapes_added = False
