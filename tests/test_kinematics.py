@@ -53,3 +53,19 @@ def test_topdown_ik_round_trip_on_branch():
 def test_ik_out_of_reach_is_none():
     X = RigidTransform(RotationMatrix.MakeXRotation(np.pi), [1.6, 0.0, 0.05])
     assert analytic_ik(X, Q_HOME) is None
+
+
+def test_remembered_ik_answers_depend_on_pose_and_reference_and_cannot_be_corrupted():
+    """analytic_ik remembers its answers: the same pose from another reference configuration still gets the
+    solution nearest that reference (wrapped by 2 pi), and a caller changing a returned array changes no later
+    answer."""
+    X = tcp_pose(Q_HOME + 0.2)
+    q = analytic_ik(X, Q_HOME)
+    assert q is not None
+    q_first = q.copy()
+    q[:] = 0.0  # a caller writes into its answer
+    np.testing.assert_array_equal(analytic_ik(X, Q_HOME), q_first)
+    shifted = Q_HOME - np.array([0.0, 0.0, 0.0, 0.0, 0.0, 2 * np.pi])  # the wrist within its limits either way
+    q_shifted = analytic_ik(X, shifted)
+    assert q_shifted is not None
+    np.testing.assert_allclose(q_shifted, q_first - [0, 0, 0, 0, 0, 2 * np.pi], atol=1e-12)

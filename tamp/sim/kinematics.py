@@ -6,6 +6,7 @@ solutions by joint distance alone can flip the elbow or wrist between waypoints.
 """
 from __future__ import annotations
 
+import functools
 from typing import Callable
 
 import numpy as np
@@ -61,20 +62,31 @@ def _wrap_near(q: np.ndarray, q_ref: np.ndarray) -> np.ndarray:
 
 def analytic_ik(X_WTcp: RigidTransform, q_ref: np.ndarray) -> np.ndarray | None:
     """The on-branch closed-form solution nearest q_ref, or None when there is none (all eight
-    solutions filtered at once: this runs inside the planners' feasibility check)."""
-    solutions = np.asarray(ur_analytic_ik.ur10e.inverse_kinematics(flange_pose_in_base(X_WTcp)), dtype=float)
+    solutions filtered at once: this runs inside the planners' feasibility check). Answers are
+    remembered per (pose, q_ref): the search checks the same pick from the same arm configuration
+    for every place of a grasp, and four in ten of its calls repeat one made before."""
+    q_ref = np.asarray(q_ref, dtype=float)
+    q = _analytic_ik_memo(flange_pose_in_base(X_WTcp).tobytes() + q_ref.tobytes())
+    return None if q is None else q.copy()
+
+
+@functools.lru_cache(maxsize=1 << 16)
+def _analytic_ik_memo(key: bytes) -> np.ndarray | None:
+    """`analytic_ik` of a key made of the flange pose in the base frame (4x4) and q_ref (6), as bytes."""
+    values = np.frombuffer(key, dtype=float)
+    T, q_ref = values[:16].reshape(4, 4), values[16:]
+    solutions = np.asarray(ur_analytic_ik.ur10e.inverse_kinematics(T), dtype=float)
     if solutions.size == 0:
         return None
     solutions = solutions.reshape(-1, 6)
     keep = np.all(np.isfinite(solutions), axis=1) & (np.sin(solutions[:, 2]) > 0.0) & (np.sin(solutions[:, 4]) < 0.0)
     if not keep.any():
         return None
-    q_ref = np.asarray(q_ref, dtype=float)
     q = _wrap_near(solutions[keep], q_ref)
     dist = np.linalg.norm(q - q_ref, axis=1)
-    if np.all(np.isnan(dist)):
-        return None
-    return q[int(np.nanargmin(dist))]
+    dist[np.isnan(dist)] = np.inf  # wrapped out of the joint limits
+    best = int(np.argmin(dist))
+    return None if np.isinf(dist[best]) else q[best]
 
 
 def solve_chain(

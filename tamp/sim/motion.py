@@ -30,7 +30,7 @@ _STAND_IN_PARKED = np.array([1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 100.0])  # a stand-in
 
 def _positions(X: RigidTransform) -> np.ndarray:
     """The 7 positions of a floating joint at pose X: quaternion (w, x, y, z), then translation."""
-    return np.r_[X.rotation().ToQuaternion().wxyz(), X.translation()]
+    return np.concatenate((X.rotation().ToQuaternion().wxyz(), X.translation()))
 
 
 def _seed_ompl(seed: int) -> None:

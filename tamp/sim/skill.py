@@ -120,8 +120,8 @@ def grasp_pose(scene: Scene, action: PickPlace, config: WorldConfig) -> RigidTra
     """Tcp pose that closes the jaws around the picked block at its grasp offset."""
     i = action.pick
     c = scene.X_WB[i].translation()
-    p = np.r_[c[:2] + action.grasp_offset * OFFSET_STEP * scene.offset_axis_xy(i), scene.top(i) - config.grasp_depth]
-    return topdown(p, scene.yaw(i))
+    x, y = c[:2] + action.grasp_offset * OFFSET_STEP * scene.offset_axis_xy(i)
+    return topdown(np.array([x, y, scene.top(i) - config.grasp_depth]), scene.yaw(i))
 
 
 def approach_poses(scene: Scene, action: PickPlace, config: WorldConfig) -> list[tuple[str, RigidTransform]]:
@@ -209,7 +209,7 @@ def pick_place_waypoints(scene: Scene, action: PickPlace, grasped: int, config: 
     yaw = scene.yaw(j)
     if abs(_wrap(yaw + np.pi - grasp_yaw)) < abs(_wrap(yaw - grasp_yaw)):
         yaw += np.pi
-    X_WPlace = topdown(np.r_[target_xy, place_z], yaw)
+    X_WPlace = topdown(np.array([target_xy[0], target_xy[1], place_z]), yaw)
 
     others = [k for k in range(scene.n) if k not in carried]
     tallest = max([scene.top(k) for k in others], default=0.0)
@@ -250,7 +250,8 @@ def carried_shapes(scene: Scene, wp: PickWaypoints, config: WorldConfig) -> list
 
 def _raised_to(X_WG: RigidTransform, z: float) -> RigidTransform:
     """X_WG moved vertically to height z (metres), orientation kept."""
-    return RigidTransform(X_WG.rotation(), np.r_[X_WG.translation()[:2], z])
+    x, y, _ = X_WG.translation()
+    return RigidTransform(X_WG.rotation(), np.array([x, y, z]))
 
 
 def _wrap(a: float) -> float:
