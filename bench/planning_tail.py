@@ -6,9 +6,10 @@
 
 Plans every problem with `bilevel` twice in one process, one after the other, with the bundled models
 and kinematics in the planning loop, default limits otherwise:
-- baseline: the search runs to its node budget (`SearchConfig(stall=None)`) and the kinematic check
-  starts every action from scratch on the world's collision checker (`FeasibilityChecker(shortcuts=False)`);
-- new: the defaults (the stall cut; the pick half of a check remembered for the other places of the
+- baseline: the search runs to its node budget (`SearchConfig(stall=None, greedy_stall=None)`) and the
+  kinematic check starts every action from scratch on the world's collision checker
+  (`FeasibilityChecker(shortcuts=False)`);
+- new: the defaults (the stall cut from 5 blocks on; the pick half of a check remembered for the other places of the
   same grasp, the carried boxes posed as stand-ins in a collision checker of their own, a place into a
   standing block rejected before IK, grasps that cannot hold a block left out before prediction).
 Prints, per number of blocks and in all: planning time per problem (median, mean, p95, max), plans
@@ -72,6 +73,7 @@ def main() -> int:
     from tamp.planning.search import all_actions
     from tamp.planning.verify import EPS_SUCCESS
     from tamp.sim.feasibility import FeasibilityChecker
+    from tamp.sim.kinematics import forget_ik_answers
 
     torch.set_num_threads(1)
     path = args.problems
@@ -82,7 +84,7 @@ def main() -> int:
     problems = read_problem_set(path)
     models = load_models(args.models)
     new_checker = FeasibilityChecker()
-    setups = {"baseline": (replace(PlanConfig(), search=replace(PlanConfig().search, stall=None)),
+    setups = {"baseline": (replace(PlanConfig(), search=replace(PlanConfig().search, stall=None, greedy_stall=None)),
                            FeasibilityChecker(world=new_checker.world, shortcuts=False)),
               "new": (PlanConfig(), new_checker)}
     world = executing_world("fast") if args.execute else None
@@ -98,6 +100,7 @@ def main() -> int:
                 models.symbolic_planner().task(problem.n)
                 warm.add(layout)
             checks = checker.num_checks
+            forget_ik_answers()  # each call starts with the IK memory a fresh process has
             t = time.perf_counter()
             result = plan("bilevel", models, problem.X_init, problem.X_goal, cfg.with_seed(problem.seed),
                           kinematics=checker)

@@ -153,7 +153,7 @@ class EvalConfig:
         out = {"fidelity": self.fidelity, "eps_m": p.verify.eps, "tau_verify_m": p.verify.tau_verify,
                "n_domains": p.level1.n_domains,
                "search_time_limit_s": p.search.time_limit, "search_max_expansions": p.search.max_expansions,
-               "search_stall": p.search.stall, "search_stall_max_objects": p.search.stall_max_objects,
+               "search_stall": p.search.stall,
                "search_confident_m": p.search.confident, "search_look_on": p.search.look_on,
                "search_release_targets": p.search.release_targets,
                "search_max_fragility": p.search.max_fragility, "search_noise_m": p.search.noise,
@@ -173,6 +173,7 @@ class EvalConfig:
             out["search_greedy_from"] = p.search.greedy_from
             out["search_greedy_h_unit_m"] = p.search.greedy_h_unit
             out["search_greedy_per_misplaced"] = p.search.greedy_per_misplaced
+            out["search_greedy_stall"] = p.search.greedy_stall
         # the loop that does not know k: the same, by the fields other than keep_plan and on_course (above)
         loop = {k: v for k, v in dataclasses.asdict(p.loop).items() if k not in ("keep_plan", "on_course")}
         if loop != {k: v for k, v in dataclasses.asdict(LoopConfig()).items() if k not in ("keep_plan", "on_course")}:

@@ -62,19 +62,21 @@ def test_flags_set_their_fields():
             "--focus-from", "3", "--level1-focus-budget", "8", "--level1-objects", "3", "--no-level1-serial",
             "--level1-confident", "0.07", "--no-level1-cut", "--no-keep-plan", "--on-course", "0.02",
             "--max-actions", "5", "--no-widen", "--max-expansions", "11", "--confident", "0.03", "--look-on", "2",
-            "--max-fragility", "0.5", "--paper-pruning", "--time-limit", "4", "--stall", "50", "--no-feasibility"]
+            "--max-fragility", "0.5", "--paper-pruning", "--time-limit", "4", "--stall", "50", "--greedy-stall", "70",
+            "--no-feasibility"]
     cfg = planner_config(parser().parse_args(args))
     assert cfg == PlanConfig(
         level1=Level1Config(n_domains=7, backend="fd", symbolic_time_limit=3.0, budget=9, focus_from=3, focus_budget=8,
                             objects=3, serial=False, confident=0.07, cut=False),
         verify=VerifyConfig(),
         search=SearchConfig(max_expansions=11, confident=0.03, look_on=2, max_fragility=0.5, release_targets=False,
-                            time_limit=4.0, stall=50),
+                            time_limit=4.0, stall=50, greedy_stall=70),
         kinematics=KinematicsConfig(feasibility=False),
         loop=LoopConfig(keep_plan=False, on_course=0.02, max_actions=5, widen=False))
-    off = planner_config(parser().parse_args(["--no-level1-objects", "--no-on-course", "--no-fragility", "--no-stall"]))
+    off = planner_config(parser().parse_args(["--no-level1-objects", "--no-on-course", "--no-fragility", "--no-stall",
+                                                   "--no-greedy-stall"]))
     assert off.level1.objects is None and off.loop.on_course is None and off.search.max_fragility is None
-    assert off.search.stall is None
+    assert off.search.stall is None and off.search.greedy_stall is None
 
 
 def test_validation_lives_with_the_fields():
@@ -101,8 +103,8 @@ def test_the_defining_settings_of_a_results_directory_are_unchanged():
                "on_course_m": 0.015, "oracle_max_plans": 20, "search_confident_m": 0.035, "search_look_on": 30,
                "search_max_expansions": 1500, "search_max_fragility": 0.3, "search_noise_m": 0.005,
                "search_release_targets": True, "search_time_limit_s": None, "search_stall": None,
-               "search_stall_max_objects": 4, "search_greedy_from": 5, "search_greedy_h_unit_m": 0.5,
-               "search_greedy_per_misplaced": 0.3,
+               "search_greedy_from": 5, "search_greedy_h_unit_m": 0.5,
+               "search_greedy_per_misplaced": 0.3, "search_greedy_stall": 400,
                "symbolic_backend": "python",
                "tau_verify_m": 0.07}
     assert EvalConfig().defining() == default

@@ -116,6 +116,21 @@ def test_a_search_on_a_plateau_stops_after_stall_expansions_and_keeps_its_closes
     assert first.closest_plan == stalled.closest_plan
     with pytest.raises(UserError, match="stall"):
         SearchConfig(stall=0)
+    with pytest.raises(UserError, match="greedy_stall"):
+        SearchConfig(greedy_stall=0)
+
+
+def test_from_greedy_from_blocks_on_greedy_stall_is_the_stall_cut():
+    """Below greedy_from blocks `stall` decides (off by default), from greedy_from on `greedy_stall` does."""
+    X4 = np.array([[0.6, 0.0, 0.025, 1, 0], [0.7, 0.1, 0.025, 1, 0], [0.8, -0.2, 0.025, 1, 0], [0.5, 0.3, 0.025, 0, 1]])
+    G = X4.copy()
+    G[0, :2] = (1.0, 0.5)  # unreachable by the stub world's actions: every search plateaus
+    below = continuous_search(StubModel(), X4, G, SearchConfig(max_expansions=300, greedy_from=5, greedy_stall=25))
+    assert below.status == "node_limit" and below.expanded == 300
+    greedy = continuous_search(StubModel(), X4, G, SearchConfig(max_expansions=300, greedy_from=4, greedy_stall=25))
+    assert greedy.status == "stalled" and greedy.expanded < 300 and "in 25 expansions" in greedy.reason
+    assert continuous_search(StubModel(), X4, G, SearchConfig(max_expansions=300, greedy_from=4, greedy_stall=None,
+                                                              stall=25)).status == "node_limit"
 
 
 def test_a_search_that_must_avoid_an_infeasible_action_finds_another_plan():

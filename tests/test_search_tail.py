@@ -49,3 +49,29 @@ def test_the_search_finds_the_plans_it_found_without_its_shortcuts():
             assert before.search.status == after.search.status == "node_limit", name
             assert stalled.search.status == "stalled" and stalled.search.expanded < after.search.expanded, name
     assert left_out > 0  # cubes grasped off their centre: never predicted
+
+
+# four 5-6 block problems of the tuning sets (seeds 4245, 4243, 5304; bundled models): plans found after 284,
+# 924 (the longest plateau of the tuning searches, 350-400 expansions) and 362 expansions, and a search that
+# finds none within its 1,500
+GREEDY_PROBLEMS = Path(__file__).parent / "data" / "tail-problems-5-6.jsonl"
+
+
+def test_from_5_blocks_on_the_greedy_stall_cut_keeps_the_plans_and_ends_the_search_that_finds_none():
+    models = load_models(pretrained_dir())
+    checker = FeasibilityChecker()
+    to_the_budget = replace(PlanConfig(), search=replace(PlanConfig().search, greedy_stall=None))
+    for problem in read_problem_set(GREEDY_PROBLEMS):
+        results = []
+        for cfg in (to_the_budget, PlanConfig()):
+            checker.reset(problem.X_init)
+            results.append(plan("bilevel", models, problem.X_init, problem.X_goal, cfg.with_seed(problem.seed),
+                                kinematics=checker))
+        before, after = results
+        assert before.plan == after.plan, problem.name
+        if before.solved:
+            assert before.search.expanded == after.search.expanded, problem.name
+        else:
+            assert before.search.status == "node_limit" and before.search.expanded == 1500, problem.name
+            assert after.search.status == "stalled" and after.search.expanded < 1000, problem.name
+    assert PlanConfig().search.greedy_stall == 400  # the cut these problems were chosen against

@@ -94,8 +94,8 @@ def add_planner_arguments(p: argparse.ArgumentParser, backends: tuple[str, ...] 
                    "so that a loop whose rounds keep failing ends in about the time of two failed searches)")
     p.add_argument("--loop-stall", type=positive_int, default=default.loop.stall, metavar="EXPANSIONS",
                    help="the closed loop (--replan; bilevel_loop) ends a round's continuous search after this many "
-                   "expansions without a state closer to the goal, instead of --stall: a round that fails still "
-                   f"has a widened search and the next round (default {default.loop.stall})")
+                   "expansions without a state closer to the goal, instead of --stall and --greedy-stall: a "
+                   f"round that fails still has a widened search and the next round (default {default.loop.stall})")
     p.add_argument("--no-widen", dest="widen", action="store_false",
                    help="the closed loop stops at a round without a plan (default: it first searches again over "
                    "all 9 n^2 actions, which can move a block out of the way, unstack, or move a block already "
@@ -144,11 +144,19 @@ def add_planner_arguments(p: argparse.ArgumentParser, backends: tuple[str, ...] 
                    "searches end and no further plan is refined once it has run this long, and the result says so "
                    "(default: off, so that --max-expansions and --stall decide, whatever the machine's load)")
     p.add_argument("--stall", type=positive_int, default=default.search.stall, metavar="EXPANSIONS",
-                   help="with up to 4 blocks, the continuous search ends after this many expansions without a state "
-                   "closer to the goal (default: off, the search runs to --max-expansions: most searches that find "
-                   "a plan plateau for a few hundred expansions, a few for more)")
+                   help="below --greedy-from blocks, the continuous search ends after this many expansions without a "
+                   "state closer to the goal (default: off, the search runs to --max-expansions: most searches that "
+                   "find a plan plateau for a few hundred expansions, a few for more)")
     p.add_argument("--no-stall", dest="stall", action="store_const", const=None,
-                   help="the continuous search runs to --max-expansions however long it stays on a plateau")
+                   help="below --greedy-from blocks, the continuous search runs to --max-expansions however long it "
+                   "stays on a plateau")
+    p.add_argument("--greedy-stall", type=positive_int, default=default.search.greedy_stall, metavar="EXPANSIONS",
+                   help="from --greedy-from blocks on, the continuous search ends after this many expansions without a "
+                   "state closer to the goal (the closed loop's rounds: --loop-stall): there a search finds its plan "
+                   f"soon after its last progress or not at all (default {default.search.greedy_stall})")
+    p.add_argument("--no-greedy-stall", dest="greedy_stall", action="store_const", const=None,
+                   help="from --greedy-from blocks on, the continuous search runs to --max-expansions however long it "
+                   "stays on a plateau")
     if feasibility:
         p.add_argument("--no-feasibility", dest="feasibility", action="store_false",
                        help="cfs and bilevel without kinematics in the planning loop (no feasibility check of "
@@ -163,6 +171,7 @@ PLANNER_FLAGS: dict[str, dict[str, str]] = {
                "cut": "level1_cut", "settle": "level1_settle"},
     "verify": {},
     "search": {"max_expansions": "max_expansions", "time_limit": "time_limit", "stall": "stall",
+               "greedy_stall": "greedy_stall",
                "greedy_from": "greedy_from", "greedy_h_unit": "greedy_h_unit",
                "greedy_per_misplaced": "greedy_per_misplaced",
                "confident": "confident", "look_on": "look_on", "max_fragility": "max_fragility",
@@ -175,7 +184,7 @@ PLANNER_FLAGS: dict[str, dict[str, str]] = {
 NOT_EXPOSED = {"level1": ("seed", "time_budget", "verify_all", "alternatives", "alternatives_total", "nonempty"),
                "verify": ("tau_verify", "eps"), "kinematics": ("max_refinements",),
                "search": ("weight", "eps", "misplaced", "resolution", "max_depth", "batched", "prune",
-                          "noise", "stall_max_objects"),
+                          "noise"),
                "loop": ("widen_expansions", "revisit", "progress")}
 
 

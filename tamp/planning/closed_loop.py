@@ -148,12 +148,13 @@ def plan_closed_loop(method: str, models: Models, X_init, X_goal,
 
 def _within(cfg: PlanConfig, expansions: int, spent: int) -> PlanConfig:
     """cfg with a continuous search of at most `expansions` nodes, and no more than the loop's search budget
-    has left after `spent`, stalling after cfg.loop.stall expansions (if set)."""
+    has left after `spent`, stalling after cfg.loop.stall expansions at any number of blocks (if set; else the
+    search's own `stall` and `greedy_stall`)."""
     allowed = max(1, min(expansions, cfg.loop.search_budget - spent))
-    stall = cfg.search.stall if cfg.loop.stall is None else cfg.loop.stall
-    if allowed == cfg.search.max_expansions and stall == cfg.search.stall:
-        return cfg
-    return replace(cfg, search=replace(cfg.search, max_expansions=allowed, stall=stall))
+    search = replace(cfg.search, max_expansions=allowed)
+    if cfg.loop.stall is not None:
+        search = replace(search, stall=cfg.loop.stall, greedy_stall=cfg.loop.stall)
+    return cfg if search == cfg.search else replace(cfg, search=search)
 
 
 def _expanded(result: PlanResult) -> int:

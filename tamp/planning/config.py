@@ -110,8 +110,9 @@ class LoopConfig:
     widen_expansions: int = 400  # node budget of the widened search (about 2-4 s at 4 blocks with kinematics)
     search_budget: int = 3000  # search expansions over all rounds: a loop whose rounds keep failing ends in about
     #   the time of two failed searches
-    stall: int | None = 300  # the stall cut of its rounds' searches (`SearchConfig.stall`, which it replaces there;
-    #   None: the search's own): a round that fails has a widened search and the next round behind it
+    stall: int | None = 300  # the stall cut of its rounds' searches at any number of blocks (`SearchConfig.stall` and
+    #   `.greedy_stall`, which it replaces there; None: the search's own): a round that fails has a widened search and
+    #   the next round behind it
     progress: float = 0.02  # metres, summed over blocks: without a plan, a step toward the closest state the round's
     #   searches expanded is taken only if that state is this much closer to the goal
     revisit: float = 0.01  # metres: back this close to an observed state, leave out the actions taken from there

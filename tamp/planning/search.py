@@ -37,12 +37,14 @@ Duplicate detection:
 positions rounded to a `resolution` grid; a state is pushed again only when reached with fewer
 actions. Limits: expansions, wall-clock time and plan depth; the result says which one ended it.
 
-Stagnation (our extension, `stall`, off unless set): in a scene of at most `stall_max_objects` blocks, a
-search whose closest expanded state (least h) has not come closer to the goal for `stall` expansions
-ends, counted in expansions so that the cut never depends on the machine's load. Searches that end
-without a plan stop improving early and spend most of their budget on a plateau; most that find one
-plateau for a few hundred expansions, but not all: the closed loop's rounds use it (`LoopConfig.stall`),
-since a round that fails has a widened search and the next round behind it (docs/beyond-the-paper.md).
+Stagnation (our extension): a search whose closest expanded state (least h) has not come closer to the goal
+for `stall` expansions ends, counted in expansions so that the cut never depends on the machine's load.
+Searches that end without a plan stop improving early and spend most of their budget on a plateau. Below
+`greedy_from` blocks, where h counts in metres, most searches that find a plan plateau for a few hundred
+expansions, but not all, so `stall` is off unless set; the closed loop's rounds use it (`LoopConfig.stall`),
+since a round that fails has a widened search and the next round behind it. From `greedy_from` blocks on,
+where h is greedier, `greedy_stall` (400) takes its place: there a search finds its plan soon after its
+last progress or not at all (docs/beyond-the-paper.md).
 """
 from __future__ import annotations
 
@@ -84,13 +86,13 @@ class SearchConfig:
     #   None: the node budget and the stall cut decide, so that results never depend on the machine's load)
     time_limit: float | None = None
     max_depth: int = 10  # longest plan considered
-    # expansions without a state closer to the goal (least h) before the search ends (None: run to the node budget;
-    #   off by default, since some searches find a plan after a plateau of 700 or more, and a failing search
-    #   to the budget now takes 2-3 s at n = 4; the closed loop's rounds use `LoopConfig.stall`)
+    # expansions without a state closer to the goal (least h) before the search ends, below greedy_from blocks (None:
+    #   run to the node budget; off by default, since some searches in metres find a plan after a plateau of 700 or
+    #   more; the closed loop's rounds use `LoopConfig.stall`)
     stall: int | None = None
-    # the stall cut applies to scenes of at most this many blocks: at 5-6, held-out searches found plans after
-    #   plateaus of 748-1,231 expansions
-    stall_max_objects: int = 4
+    # from greedy_from blocks on, the stall cut in place of `stall`: with h greedier, tuning searches that found a
+    #   plan plateaued for at most 350-400 expansions, failing ones for 1,000 (None: run to the node budget)
+    greedy_stall: int | None = 400
     confident: float = 0.035  # metres: a goal state predicted this close (worst object) ends the search
     look_on: int = 30  # expansions spent looking for a confident goal state after a less confident one
     batched: bool = True  # one predict_effect call per expansion (False: one per action, for the benchmark)
@@ -104,10 +106,10 @@ class SearchConfig:
     max_doubt: float | None = None
 
     def __post_init__(self) -> None:
-        if self.stall is not None and self.stall < 1 or self.stall_max_objects < 1:
-            raise UserError(f"the continuous search's stall must be a positive number of expansions (or None) and "
-                            f"stall_max_objects a positive number of blocks, got {self.stall} and "
-                            f"{self.stall_max_objects}")
+        for name in ("stall", "greedy_stall"):
+            if getattr(self, name) is not None and getattr(self, name) < 1:
+                raise UserError(f"the continuous search's {name} must be a positive number of expansions (or None), "
+                                f"got {getattr(self, name)}")
         if self.time_limit is not None and not self.time_limit > 0 or self.max_expansions < 1 or self.max_depth < 1:
             raise UserError(f"the continuous search needs a positive time limit, node limit and depth, got "
                             f"{self.time_limit} s, {self.max_expansions} nodes, depth {self.max_depth}")
@@ -358,7 +360,7 @@ def continuous_search(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarr
     frontier = [(config.weight * h0, h0, 0)]  # (f, h, node index)
     closest = (h0, 0)  # (h, node index) of the expanded state closest to the goal
     closer_at = 0  # expansions when the closest state last came closer
-    stall = config.stall if len(X_init) <= config.stall_max_objects else None
+    stall = config.greedy_stall if greedy else config.stall
     n_objects = len(X_init)
     every = all_actions(n_objects)
     while frontier:
@@ -368,7 +370,7 @@ def continuous_search(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarr
             return stop(SearchStatus.NODE_LIMIT, f"node limit: {out.expanded} expansions without reaching the goal "
                           f"(closest predicted state {out.best_error * 100:.1f} cm from it)")
         if stall is not None and out.expanded - closer_at >= stall:
-            return stop(SearchStatus.STALLED, f"stalled: no state closer to the goal in {config.stall} expansions "
+            return stop(SearchStatus.STALLED, f"stalled: no state closer to the goal in {stall} expansions "
                           f"({out.expanded} in all; closest predicted state {out.best_error * 100:.1f} cm from it)")
         if time.perf_counter() > deadline:
             return stop(SearchStatus.TIME_LIMIT, f"time limit: {config.time_limit:g} s ({out.expanded} expansions) "

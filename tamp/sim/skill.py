@@ -251,7 +251,7 @@ def carried_shapes(scene: Scene, wp: PickWaypoints, config: WorldConfig) -> list
 def _raised_to(X_WG: RigidTransform, z: float) -> RigidTransform:
     """X_WG moved vertically to height z (metres), orientation kept."""
     x, y, _ = X_WG.translation()
-    return RigidTransform(X_WG.rotation(), np.array([x, y, z]))
+    return RigidTransform(X_WG.rotation(), np.array([x, y, z]))  # type: ignore[arg-type]  # pydrake stubs
 
 
 def _wrap(a: float) -> float:
