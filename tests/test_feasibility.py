@@ -112,6 +112,30 @@ def test_refine_reports_the_failing_action(checker):
     assert (out.action_index, out.reason) in ((1, Infeasible.REFINE_GRASP), (1, Infeasible.REFINE_MOTION))
 
 
+def test_an_action_that_failed_to_refine_fails_again_at_once_in_the_same_scene(checker, monkeypatch):
+    """A closed loop's rounds offer the same failing first action again, each refinement of it a second of
+    motion planning: in the same scene (to 1 cm) and at the same place of a plan it fails without a motion
+    planned, after `observe` as well; another scene, another place in the plan or a `reset` plans it again."""
+    X = np.array([[0.6, 0.0, 0.025, *CUBE], [1.75, 0.0, 0.025, *CUBE]])  # the second cube out of reach
+    checker.reset(X)
+    steps = []
+    step = checker.world.step
+    monkeypatch.setattr(checker.world, "step", lambda *a, **k: steps.append(a[0]) or step(*a, **k))
+    first = checker.refine([(1, 0, 0, 0)])
+    assert (first.action_index, first.reason) == (0, Infeasible.REFINE_IK) and len(steps) == 1
+    checker.observe(checker.scene, checker.q)  # a new round in the same scene
+    again = checker.refine([(1, 0, 0, 0)])
+    assert (again.action_index, again.reason, again.message) == (0, first.reason, first.message)
+    assert len(steps) == 1  # nothing planned
+    assert checker.refine([(0, 0, 0, 0), (1, 0, 0, 0)]).action_index == 1 and len(steps) == 3  # second place
+    moved = X.copy()
+    moved[1, 1] = 0.05
+    checker.reset(moved)
+    assert checker.refine([(1, 0, 0, 0)]).action_index == 0 and len(steps) == 4
+    checker.reset(X)
+    assert checker.refine([(1, 0, 0, 0)]).action_index == 0 and len(steps) == 5
+
+
 def test_refinement_plans_each_action_in_the_predicted_scene_without_physics(checker):
     # After the first action the Dynamics Model predicts the cube out of the arm's reach: the second
     # action, which picks it, must fail its IK there, whatever the simulator would have done.

@@ -57,6 +57,7 @@ REFINE_REASONS = {"ik": Infeasible.REFINE_IK, "motion": Infeasible.REFINE_MOTION
 
 
 _MAX_PICKS = 100_000  # remembered pick halves before the memo starts again (each a few kB)
+_MAX_SCENES = 1_000  # remembered predicted scenes (each a few kB)
 
 
 @dataclass(frozen=True)
@@ -66,6 +67,12 @@ class _Pick:
     waypoints: PickWaypoints
     q_liftoff: np.ndarray
     shapes: list[Box]
+
+
+def _grid_key(scene: Scene) -> bytes:
+    """The blocks' types and positions on a 1 cm grid (`tamp.planning.search.state_key`'s grid), as bytes."""
+    positions = np.array([X_WB.translation() for X_WB in scene.X_WB])
+    return np.asarray(scene.types, dtype=np.int64).tobytes() + np.round(positions / 0.01).astype(np.int64).tobytes()
 
 
 class FeasibilityChecker:
@@ -96,6 +103,10 @@ class FeasibilityChecker:
         self.shortcuts = shortcuts
         self._carrying: dict[tuple[int, ...], MotionPlanner] = {}  # per layout (`_carrying_planner`)
         self._picks: dict[tuple[bytes, int, int], _Pick | Infeasible] = {}
+        self._scenes: dict[bytes, Scene] = {}  # predicted scenes by X's positions, with their corners (`check`)
+        # actions whose refinement failed, by (scene on a 1 cm grid, action, its place in the plan: the motion seed);
+        #   kept across `observe`, since a closed loop's rounds and their widened searches ask again (`refine`)
+        self._failed_refinements: dict[tuple[bytes, tuple[int, ...], int], tuple[Infeasible | None, str]] = {}
 
     # --- the observed scene ----------------------------------------------------------------------
     def reset(self, X_init: np.ndarray) -> Scene:
@@ -106,6 +117,8 @@ class FeasibilityChecker:
         assert scene is not None  # reset placed the blocks
         self.scene, self.q = scene, self.world.q.copy()
         self._picks.clear()
+        self._scenes.clear()
+        self._failed_refinements.clear()
         return scene
 
     def observe(self, scene: Scene, q: np.ndarray | None = None) -> None:
@@ -113,6 +126,7 @@ class FeasibilityChecker:
         self.scene = Scene(np.array(scene.types), list(scene.X_WB))
         self.q = Q_HOME.copy() if q is None else np.array(q, dtype=float)
         self._picks.clear()
+        self._scenes.clear()
 
     def predicted_scene(self, X: np.ndarray) -> Scene:
         """Positions from X, orientations carried over from the observed scene."""
@@ -143,8 +157,14 @@ class FeasibilityChecker:
         lifted block hitting a neighbour)."""
         t0 = time.perf_counter()
         X = np.asarray(X, dtype=float)
-        scene = self.predicted_scene(X)
         state = X[:, :3].tobytes()
+        scene = self._scenes.get(state) if self.shortcuts else None
+        if scene is None:  # the successors of one state are checked one after another: one scene for them all
+            scene = self.predicted_scene(X)
+            if self.shortcuts:
+                if len(self._scenes) >= _MAX_SCENES:
+                    self._scenes.clear()
+                self._scenes[state] = scene
         out = [self.check_scene(scene, PickPlace(*(int(v) for v in a)), state)
                for a in np.asarray(actions).reshape(-1, 4)]
         self.num_checks += len(out)
@@ -246,7 +266,9 @@ class FeasibilityChecker:
         previous action's retreat ends in: what happens after a release stays the prediction.
         Without it, each action is planned in the scene the previous one leaves with its released
         blocks where the gripper let them go. The simulator decides what really happens only when
-        the plan is executed."""
+        the plan is executed. An action that failed to refine fails again at once in the same scene (to
+        1 cm) at the same place of a plan, until the next `reset`: a failed motion has spent RRTConnect's
+        whole budget (about a second), and a closed loop's rounds offer the same first actions again."""
         if self.scene is None:
             raise RuntimeError("call FeasibilityChecker.reset() or observe() before refining a plan")
         plan = [PickPlace(*(int(v) for v in a)) for a in actions]
@@ -256,12 +278,20 @@ class FeasibilityChecker:
         for k, action in enumerate(plan):
             if k > 0 and trajectory is not None:
                 scene = self.predicted_scene(trajectory[k])
+            known = (_grid_key(scene), tuple(action), k)
+            if known in self._failed_refinements:
+                reason, message = self._failed_refinements[known]
+                return RefinementOutcome(k, reason, message)
             self.world.set_scene(scene, q, motion_seed=k)
             _, info = self.world.step(action, settle=False)
             failure = step_failure(info)
             if failure is not None:
-                stage, where, reason = failure
-                return RefinementOutcome(k, REFINE_REASONS[stage], f"{stage} [{where}]: {reason}")
+                stage, where, why = failure
+                outcome = RefinementOutcome(k, REFINE_REASONS[stage], f"{stage} [{where}]: {why}")
+                if len(self._failed_refinements) >= _MAX_SCENES:
+                    self._failed_refinements.clear()
+                self._failed_refinements[known] = (outcome.reason, outcome.message)
+                return outcome
             assert self.world.scene is not None  # set_scene above
             scene, q = self.world.scene, self.world.q
         return RefinementOutcome()
