@@ -174,6 +174,7 @@ class EvalConfig:
             out["search_greedy_h_unit_m"] = p.search.greedy_h_unit
             out["search_greedy_per_misplaced"] = p.search.greedy_per_misplaced
             out["search_greedy_stall"] = p.search.greedy_stall
+            out["loop_greedy_search_budget"] = p.loop.greedy_search_budget
         # the loop that does not know k: the same, by the fields other than keep_plan and on_course (above)
         loop = {k: v for k, v in dataclasses.asdict(p.loop).items() if k not in ("keep_plan", "on_course")}
         if loop != {k: v for k, v in dataclasses.asdict(LoopConfig()).items() if k not in ("keep_plan", "on_course")}:

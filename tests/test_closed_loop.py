@@ -66,6 +66,14 @@ def test_the_loop_stops_when_its_rounds_have_spent_its_search_budget(models):
     spent = sum(r.search.expanded for r in out.rounds)
     assert out.stop == "budget" and "search budget" in out.reason and spent >= 3 and len(out.executed) < 12
     assert all(r.search.expanded <= 3 for r in out.rounds)  # no round searches past what the budget had left
+    # from the search's greedy_from blocks on, greedy_search_budget is the budget instead
+    greedy = PlanConfig(search=replace(PlanConfig().search, greedy_from=len(X_INIT)),
+                        loop=LoopConfig(search_budget=1000, greedy_search_budget=3))
+    out = plan_closed_loop("cfs", models, X_INIT, A_ON_B, slipping_world(100), rounds=None, cfg=greedy)
+    assert out.stop == "budget" and all(r.search.expanded <= 3 for r in out.rounds)
+    assert LoopConfig(greedy_search_budget=3).search_budget_for(len(X_INIT), len(X_INIT) + 1) == 3000
+    with pytest.raises(UserError, match="greedy_search_budget"):
+        LoopConfig(greedy_search_budget=0)
 
 
 def test_a_round_without_a_plan_widens_the_search_to_every_action(models):

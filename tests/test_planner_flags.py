@@ -104,7 +104,7 @@ def test_the_defining_settings_of_a_results_directory_are_unchanged():
                "search_max_expansions": 1500, "search_max_fragility": 0.3, "search_noise_m": 0.005,
                "search_release_targets": True, "search_time_limit_s": None, "search_stall": None,
                "search_greedy_from": 5, "search_greedy_h_unit_m": 0.5,
-               "search_greedy_per_misplaced": 0.3, "search_greedy_stall": 400,
+               "search_greedy_per_misplaced": 0.3, "search_greedy_stall": 400, "loop_greedy_search_budget": 1500,
                "symbolic_backend": "python",
                "tau_verify_m": 0.07}
     assert EvalConfig().defining() == default
@@ -112,7 +112,7 @@ def test_the_defining_settings_of_a_results_directory_are_unchanged():
     assert kept == {**default, "keep_plan": False, "on_course_m": None}
     short = EvalConfig(planner=PlanConfig(loop=LoopConfig(max_actions=5))).defining()
     assert short["loop"] == {"max_actions": 5, "widen": True, "widen_expansions": 400, "search_budget": 3000,
-                             "stall": 300, "progress": 0.02, "revisit": 0.01}
+                             "greedy_search_budget": 1500, "stall": 300, "progress": 0.02, "revisit": 0.01}
     slow = EvalConfig(planner=PlanConfig(level1=Level1Config(symbolic_time_limit=3.0))).defining()
     assert slow == {**default, "symbolic_time_limit_s": 3.0}
     assert EvalConfig().plan_config(5, False) == PlanConfig(level1=Level1Config(seed=5),

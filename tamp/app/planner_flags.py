@@ -92,6 +92,10 @@ def add_planner_arguments(p: argparse.ArgumentParser, backends: tuple[str, ...] 
                    help="the closed loop (--replan; bilevel_loop) gives up when its rounds' continuous searches have "
                    f"spent this many expansions (default {default.loop.search_budget}: twice one search's budget, "
                    "so that a loop whose rounds keep failing ends in about the time of two failed searches)")
+    p.add_argument("--loop-greedy-budget", dest="loop_greedy_search_budget", type=positive_int,
+                   default=default.loop.greedy_search_budget, metavar="EXPANSIONS",
+                   help="from --greedy-from blocks on, --loop-search-budget is this instead (default "
+                   f"{default.loop.greedy_search_budget}: there loops that reach the goal spend at most about 600)")
     p.add_argument("--loop-stall", type=positive_int, default=default.loop.stall, metavar="EXPANSIONS",
                    help="the closed loop (--replan; bilevel_loop) ends a round's continuous search after this many "
                    "expansions without a state closer to the goal, instead of --stall and --greedy-stall: a "
@@ -178,7 +182,8 @@ PLANNER_FLAGS: dict[str, dict[str, str]] = {
                "release_targets": "release_targets", "max_doubt": "max_doubt"},
     "kinematics": {"feasibility": "feasibility"},  # `tamp evaluate` sets it per method instead
     "loop": {"keep_plan": "keep_plan", "on_course": "on_course", "max_actions": "max_actions", "widen": "widen",
-             "search_budget": "loop_search_budget", "stall": "loop_stall"},
+             "search_budget": "loop_search_budget", "greedy_search_budget": "loop_greedy_search_budget",
+             "stall": "loop_stall"},
 }
 # the fields deliberately without a flag (their defaults hold; tests and benchmarks set them in code)
 NOT_EXPOSED = {"level1": ("seed", "time_budget", "verify_all", "alternatives", "alternatives_total", "nonempty"),
@@ -199,9 +204,10 @@ def planner_config(args: argparse.Namespace) -> PlanConfig:
 # the closed loop's flags by LoopConfig field: both loops keep plans; the loop that does not know k (`tamp plan
 # --replan` without --rounds, `bilevel_loop`) alone has a budget and widens
 LOOP_FLAGS = {"keep_plan": "--no-keep-plan", "on_course": "--on-course/--no-on-course",
-              "max_actions": "--max-actions", "search_budget": "--loop-search-budget", "widen": "--no-widen",
+              "max_actions": "--max-actions", "search_budget": "--loop-search-budget",
+              "greedy_search_budget": "--loop-greedy-budget", "widen": "--no-widen",
               "stall": "--loop-stall"}
-UNTIL_GOAL_FIELDS = ("max_actions", "search_budget", "widen", "stall")
+UNTIL_GOAL_FIELDS = ("max_actions", "search_budget", "greedy_search_budget", "widen", "stall")
 
 
 def loop_flags_given(config: PlanConfig, until_goal_only: bool = False) -> list[str]:

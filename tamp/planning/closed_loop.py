@@ -98,6 +98,8 @@ def plan_closed_loop(method: str, models: Models, X_init, X_goal,
     X_goal = np.asarray(X_goal, dtype=float)
     out = ClosedLoopResult([], [], [np.asarray(X_init, dtype=float)], X_goal, cfg.verify.eps)
     until_goal = rounds is None
+    budget = cfg.loop.search_budget_for(len(X_goal), cfg.search.greedy_from)
+    cfg = replace(cfg, loop=replace(cfg.loop, search_budget=budget))  # this scene's: read below as search_budget
     r, spent = 0, 0  # spent: continuous-search expansions of every round so far
     while True:
         X = out.states[-1]

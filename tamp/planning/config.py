@@ -110,6 +110,9 @@ class LoopConfig:
     widen_expansions: int = 400  # node budget of the widened search (about 2-4 s at 4 blocks with kinematics)
     search_budget: int = 3000  # search expansions over all rounds: a loop whose rounds keep failing ends in about
     #   the time of two failed searches
+    # from search.greedy_from blocks on, the search budget in place of search_budget: there the tuning loops that
+    #   reached the goal spent at most about 600 expansions, those that spent more failed (None: search_budget)
+    greedy_search_budget: int | None = 1500
     stall: int | None = 300  # the stall cut of its rounds' searches at any number of blocks (`SearchConfig.stall` and
     #   `.greedy_stall`, which it replaces there; None: the search's own): a round that fails has a widened search and
     #   the next round behind it
@@ -124,10 +127,20 @@ class LoopConfig:
                             f"and {self.progress}")
         if self.stall is not None and self.stall < 1:
             raise UserError(f"LoopConfig.stall must be a positive number of expansions or None, got {self.stall}")
+        if self.greedy_search_budget is not None and self.greedy_search_budget < 1:
+            raise UserError(f"LoopConfig.greedy_search_budget must be a positive number of expansions or None, got "
+                            f"{self.greedy_search_budget}")
         if self.max_actions < 1 or self.widen_expansions < 1 or self.search_budget < 1:
             raise UserError(f"the closed loop needs at least 1 action and 1 expansion of its searches, got "
                             f"{self.max_actions} actions, {self.widen_expansions} expansions widened and a search "
                             f"budget of {self.search_budget}")
+
+
+    def search_budget_for(self, n_objects: int, greedy_from: int | None) -> int:
+        """The loop's search budget (expansions over all rounds) in a scene of `n_objects` blocks, the search
+        greedy from `greedy_from` blocks on (`SearchConfig.greedy_from`)."""
+        greedy = greedy_from is not None and n_objects >= greedy_from
+        return self.greedy_search_budget if greedy and self.greedy_search_budget is not None else self.search_budget
 
 
 @dataclass(frozen=True)
