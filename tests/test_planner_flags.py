@@ -104,7 +104,7 @@ def test_the_defining_settings_of_a_results_directory_are_unchanged():
                "search_max_expansions": 1500, "search_max_fragility": 0.3, "search_noise_m": 0.005,
                "search_release_targets": True, "search_time_limit_s": None, "search_stall": None,
                "search_greedy_from": 5, "search_greedy_h_unit_m": 0.5,
-               "search_greedy_per_misplaced": 0.3, "search_greedy_stall": 400, "loop_greedy_search_budget": 1500,
+               "search_greedy_per_misplaced": 0.3, "search_greedy_stall": 800, "loop_greedy_search_budget": 1500,
                "symbolic_backend": "python",
                "tau_verify_m": 0.07}
     assert EvalConfig().defining() == default

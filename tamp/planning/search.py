@@ -43,7 +43,7 @@ Searches that end without a plan stop improving early and spend most of their bu
 `greedy_from` blocks, where h counts in metres, most searches that find a plan plateau for a few hundred
 expansions, but not all, so `stall` is off unless set; the closed loop's rounds use it (`LoopConfig.stall`),
 since a round that fails has a widened search and the next round behind it. From `greedy_from` blocks on,
-where h is greedier, `greedy_stall` (400) takes its place: there a search finds its plan soon after its
+where h is greedier, `greedy_stall` (800) takes its place: there a search finds its plan soon after its
 last progress or not at all (docs/beyond-the-paper.md).
 """
 from __future__ import annotations
@@ -90,9 +90,10 @@ class SearchConfig:
     #   run to the node budget; off by default, since some searches in metres find a plan after a plateau of 700 or
     #   more; the closed loop's rounds use `LoopConfig.stall`)
     stall: int | None = None
-    # from greedy_from blocks on, the stall cut in place of `stall`: with h greedier, tuning searches that found a
-    #   plan plateaued for at most 350-400 expansions, failing ones for 1,000 (None: run to the node budget)
-    greedy_stall: int | None = 400
+    # from greedy_from blocks on, the stall cut in place of `stall`: with h greedier, searches that found a plan
+    #   plateaued for at most 400 expansions on the tuning sets and 775 held out, most failing ones for 1,000 or more
+    #   (None: run to the node budget)
+    greedy_stall: int | None = 800
     confident: float = 0.035  # metres: a goal state predicted this close (worst object) ends the search
     look_on: int = 30  # expansions spent looking for a confident goal state after a less confident one
     batched: bool = True  # one predict_effect call per expansion (False: one per action, for the benchmark)
