@@ -58,6 +58,10 @@ def main() -> int:
     from tamp.planning.methods import plan
     from tamp.planning.models import load_models
     from tamp.sim.feasibility import FeasibilityChecker
+    try:
+        from tamp.sim.kinematics import forget_ik_answers
+    except ImportError:  # a checkout from before IK answers were remembered
+        forget_ik_answers = None
 
     torch.set_num_threads(1)
     problems = {problem.name: problem for problem in read_problem_set(args.problems)}
@@ -69,6 +73,8 @@ def main() -> int:
 
         def call(problem=problem):
             checker.reset(problem.X_init)
+            if forget_ik_answers is not None:
+                forget_ik_answers()  # as a fresh process would: no IK answer remembered from the call before
             return plan("bilevel", models, problem.X_init, problem.X_goal, PlanConfig().with_seed(problem.seed),
                         kinematics=checker)
 
