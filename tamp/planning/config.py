@@ -135,7 +135,6 @@ class LoopConfig:
                             f"{self.max_actions} actions, {self.widen_expansions} expansions widened and a search "
                             f"budget of {self.search_budget}")
 
-
     def search_budget_for(self, n_objects: int, greedy_from: int | None) -> int:
         """The loop's search budget (expansions over all rounds) in a scene of `n_objects` blocks, the search
         greedy from `greedy_from` blocks on (`SearchConfig.greedy_from`)."""

@@ -27,6 +27,7 @@ from typing import Sequence
 import numpy as np
 from pydrake.math import RigidTransform
 
+from tamp.planning.search import SearchConfig, state_key
 from tamp.planning.structs import OFFSETS, Infeasible, PickPlace, RefinementOutcome
 from tamp.sim.kinematics import Q_HOME, solve_chain
 from tamp.sim.motion import MotionPlanner
@@ -70,9 +71,16 @@ class _Pick:
 
 
 def _grid_key(scene: Scene) -> bytes:
-    """The blocks' types and positions on a 1 cm grid (`tamp.planning.search.state_key`'s grid), as bytes."""
+    """The blocks' types and positions on the continuous search's duplicate-detection grid, as bytes."""
     positions = np.array([X_WB.translation() for X_WB in scene.X_WB])
-    return np.asarray(scene.types, dtype=np.int64).tobytes() + np.round(positions / 0.01).astype(np.int64).tobytes()
+    return np.asarray(scene.types, dtype=np.int64).tobytes() + state_key(positions, SearchConfig.resolution)
+
+
+def _remember(memo: dict, key, value, limit: int) -> None:
+    """memo[key] = value, the memo emptied first when it holds `limit` entries (it starts again)."""
+    if len(memo) >= limit:
+        memo.clear()
+    memo[key] = value
 
 
 class FeasibilityChecker:
@@ -162,9 +170,7 @@ class FeasibilityChecker:
         if scene is None:  # the successors of one state are checked one after another: one scene for them all
             scene = self.predicted_scene(X)
             if self.shortcuts:
-                if len(self._scenes) >= _MAX_SCENES:
-                    self._scenes.clear()
-                self._scenes[state] = scene
+                _remember(self._scenes, state, scene, _MAX_SCENES)
         out = [self.check_scene(scene, PickPlace(*(int(v) for v in a)), state)
                for a in np.asarray(actions).reshape(-1, 4)]
         self.num_checks += len(out)
@@ -228,11 +234,9 @@ class FeasibilityChecker:
         key = None if state is None or not self.shortcuts else (state, action.pick, action.grasp_offset)
         if key in self._picks:
             return self._picks[key]
-        if len(self._picks) >= _MAX_PICKS:
-            self._picks.clear()
         pick = self._check_pick(scene, action)
         if key is not None:
-            self._picks[key] = pick
+            _remember(self._picks, key, pick, _MAX_PICKS)
         return pick
 
     def _check_pick(self, scene: Scene, action: PickPlace) -> _Pick | Infeasible:
@@ -288,9 +292,7 @@ class FeasibilityChecker:
             if failure is not None:
                 stage, where, why = failure
                 outcome = RefinementOutcome(k, REFINE_REASONS[stage], f"{stage} [{where}]: {why}")
-                if len(self._failed_refinements) >= _MAX_SCENES:
-                    self._failed_refinements.clear()
-                self._failed_refinements[known] = (outcome.reason, outcome.message)
+                _remember(self._failed_refinements, known, (outcome.reason, outcome.message), _MAX_SCENES)
                 return outcome
             assert self.world.scene is not None  # set_scene above
             scene, q = self.world.scene, self.world.q
