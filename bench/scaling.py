@@ -28,7 +28,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from learned import ModelConfig, train_model  # noqa: E402
 from learned.synthetic import generate  # noqa: E402
-from learned.train import TrainConfig  # noqa: E402
+from learned.train_config import TrainConfig  # noqa: E402
 from tamp.app.collect import SceneTask, run_scene  # noqa: E402
 from tamp.sim import World, WorldConfig  # noqa: E402
 

@@ -30,7 +30,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from learned import EffectModel, ModelConfig, load_transitions, train_model  # noqa: E402
 from learned.synthetic import generate  # noqa: E402
-from learned.train import TrainConfig  # noqa: E402
+from learned.train_config import TrainConfig  # noqa: E402
 
 
 def throughput(data, config: ModelConfig, settings: TrainConfig, reps: int, max_samples: int) -> float:

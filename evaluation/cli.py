@@ -75,7 +75,7 @@ def _push_range(text: str) -> tuple[float, float]:
 
 def _eval_config(args: argparse.Namespace):
     """The EvalConfig of the flags of `_add_run_arguments` (`tamp evaluate`, `tamp refinability`)."""
-    from evaluation.run import EvalConfig
+    from evaluation.configuration import EvalConfig
     from tamp.app.faults import Faults
     from tamp.app.planner_flags import planner_config
 
@@ -129,7 +129,8 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 def cmd_refinability(args: argparse.Namespace) -> int:
     """Per learned operator: used, kinematically feasible, refined, symbolic effect realised."""
     from evaluation import refinability
-    from evaluation.run import ERROR_OUTCOME, evaluate, read_rows
+    from evaluation.row import ERROR_OUTCOME
+    from evaluation.run import evaluate, read_rows
 
     rows = read_rows(evaluate(args.models, args.problems, args.out, args.methods, _eval_config(args)))
     rows = [r for r in rows if r["outcome"] != ERROR_OUTCOME and r["method"] in args.methods]

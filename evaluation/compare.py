@@ -49,7 +49,7 @@ def compare_numbers(before: Sequence[dict], after: Sequence[dict]) -> dict[str, 
     """Per method (in the after rows' order) and n (then 'all'): the paired cells over the
     (problem, run) both sides hold for that method. A pair with an error row on either side (the
     evaluation crashed there, `tamp evaluate` says where) is counted and left out, as the report does."""
-    from .run import ERROR_OUTCOME
+    from .row import ERROR_OUTCOME
 
     old = {_key(r): r for r in before}
     matched = [(old[_key(r)], r) for r in after if _key(r) in old]

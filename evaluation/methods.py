@@ -37,6 +37,7 @@ from typing import Sequence
 from symbolic import operators_file
 from tamp.errors import UserError
 from tamp.planning.models import DOMAIN_DIR, DYNAMICS_FILE, SYMBOLIC_FILE, Models
+from tamp.planning.structs import Loop
 
 VARIANTS_DIR = "variants"
 SYMBOLIC_BACKENDS = ("python", "fd")  # in-process search, Fast Downward (tamp.planning.config.Level1Config.backend)
@@ -48,7 +49,7 @@ class Method:
     name: str
     planner: str  # a tamp.planning.methods.METHODS key
     models: str  # model set: "default" | "symbolic_sigmoid" | "dynamics_gumbel"
-    loop: str | None = None  # closed loop: "paper" (k - 1 rounds) or "goal" (until the goal); None: open loop
+    loop: Loop | None = None  # closed loop: the paper's k - 1 rounds or until the goal; None: open loop
     oracle: bool = False  # execute the ranked plans until one succeeds (the authors' measure)
     feasibility: bool = False  # kinematic check and refinement in the planning loop (tamp.sim.feasibility)
 
@@ -69,13 +70,13 @@ METHODS: dict[str, Method] = {m.name: m for m in (
     Method("cfs", "cfs", "default", feasibility=True),
     Method("bilevel", "bilevel", "default", feasibility=True),
     Method("bilevel_alg1", "bilevel_alg1", "default"),
-    Method("bilevel_replan", "bilevel", "default", loop="paper", feasibility=True),
-    Method("bilevel_loop", "bilevel", "default", loop="goal", feasibility=True),
+    Method("bilevel_replan", "bilevel", "default", loop=Loop.PAPER, feasibility=True),
+    Method("bilevel_loop", "bilevel", "default", loop=Loop.UNTIL_GOAL, feasibility=True),
     Method("symbolic_sigmoid", "deterministic", "symbolic_sigmoid"),
     Method("cfs_gumbel", "cfs", "dynamics_gumbel"),
     Method("cfs_nofeas", "cfs", "default"),
     Method("bilevel_nofeas", "bilevel", "default"),
-    Method("bilevel_replan_nofeas", "bilevel", "default", loop="paper"),
+    Method("bilevel_replan_nofeas", "bilevel", "default", loop=Loop.PAPER),
 )}
 FEASIBILITY_PAIRS = (("cfs", "cfs_nofeas"), ("bilevel", "bilevel_nofeas"), ("bilevel_replan", "bilevel_replan_nofeas"))
 DEFAULT_METHODS = ("deterministic", "probabilistic", "probabilistic_oracle", "cfs", "bilevel", "bilevel_alg1",

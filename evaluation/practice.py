@@ -224,7 +224,8 @@ def practise(models: Path, data: list[Path], out: Path, config: PracticeConfig =
              progress: bool = True) -> list[dict[str, Any]]:
     """Run `config.rounds` practice rounds and one more that measures the last models (module docstring);
     returns the learning curve, one record per round."""
-    from evaluation.run import EvalConfig, evaluate
+    from evaluation.configuration import EvalConfig
+    from evaluation.run import evaluate
     from learned import read_meta
     from tamp.planning.models import load_models
 

@@ -226,38 +226,7 @@ def reproduce(out: str | Path, scale_name: str = "quick", workers: int | None = 
         stages.finish("collect", time.perf_counter() - t, samples=collected.samples)
 
     if not stages.done("train"):
-        limit = ("no time limit" if scale.train_time_limit_s is None
-                 else f"at most {scale.train_time_limit_s} s per call")
-        epochs = (f"{scale.epochs} epochs" if scale.patience_epochs is None else
-                  f"to convergence, patience {scale.patience_epochs}, at most {scale.epochs} epochs")
-        _say(f"train: {len(scale.models)} models ({epochs} each, batch {scale.batch_size}, lr {scale.lr:g}, "
-             f"{scale.precision}, {limit}) and the Table I ablation, {workers} at a time")
-        from learned import ModelConfig
-        from learned.ablation import PAPER_ORDER, summarize_ablation, write_ablation_report
-
-        t = time.perf_counter()
-        results = []
-        with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
-            jobs = [pool.submit(_train_job, str(data), str(models), spec, scale) for spec in scale.models]
-            jobs += [pool.submit(_ablation_job, str(data), str(out / "ablation"), scale, activation, run)
-                     for run in range(scale.ablation_runs) for activation in PAPER_ORDER]
-            for job in as_completed(jobs):
-                results.append(job.result())
-                _say(f"  trained {json.dumps(results[-1])}")
-        unfinished = [r["model"] for r in results if not r.get("finished", True)]
-        if unfinished:  # a wall-clock cap must not decide a result: leave the stage open for a rerun
-            raise TrainingUnfinished(f"train: {', '.join(unfinished)} stopped at the time limit "
-                                     f"({scale.train_time_limit_s} s) before finishing; rerun the same command "
-                                     "to resume training")
-        cells = [r for r in results if r["model"].startswith("ablation/")]
-        summary = [r for r in results if r not in cells]
-        if cells:  # Table I from its cells, as `tamp ablate-activations` writes it
-            table = summarize_ablation(cells, str(data), scale.train_config(epochs=scale.ablation_epochs),
-                                       ModelConfig(n_max=max(scale.objects)))
-            write_ablation_report(table, out / "ablation")
-            summary.append({"model": "ablation",
-                            "mean_cm": {a: round(v["mean_cm"], 3) for a, v in table["activations"].items()}})
-        stages.finish("train", time.perf_counter() - t, results=summary)
+        _train_stage(data, models, out, stages, scale, workers)
 
     if not stages.done("domains"):
         from tamp.planning.domain import learn_domain
@@ -272,6 +241,42 @@ def reproduce(out: str | Path, scale_name: str = "quick", workers: int | None = 
 
     return _evaluate_stages(out, stages, scale, models, workers, backend, fidelity, protocol, runs, symbolic_backend,
                             t_all, address)
+
+
+def _train_stage(data: Path, models: Path, out: Path, stages: Stages, scale: Scale, workers: int) -> None:
+    """The train stage: every model of the scale and the Table I ablation's cells, `workers` at a time."""
+    limit = ("no time limit" if scale.train_time_limit_s is None
+             else f"at most {scale.train_time_limit_s} s per call")
+    epochs = (f"{scale.epochs} epochs" if scale.patience_epochs is None else
+              f"to convergence, patience {scale.patience_epochs}, at most {scale.epochs} epochs")
+    _say(f"train: {len(scale.models)} models ({epochs} each, batch {scale.batch_size}, lr {scale.lr:g}, "
+         f"{scale.precision}, {limit}) and the Table I ablation, {workers} at a time")
+    from learned import ModelConfig
+    from learned.ablation import PAPER_ORDER, summarize_ablation, write_ablation_report
+
+    t = time.perf_counter()
+    results = []
+    with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
+        jobs = [pool.submit(_train_job, str(data), str(models), spec, scale) for spec in scale.models]
+        jobs += [pool.submit(_ablation_job, str(data), str(out / "ablation"), scale, activation, run)
+                 for run in range(scale.ablation_runs) for activation in PAPER_ORDER]
+        for job in as_completed(jobs):
+            results.append(job.result())
+            _say(f"  trained {json.dumps(results[-1])}")
+    unfinished = [r["model"] for r in results if not r.get("finished", True)]
+    if unfinished:  # a wall-clock cap must not decide a result: leave the stage open for a rerun
+        raise TrainingUnfinished(f"train: {', '.join(unfinished)} stopped at the time limit "
+                                 f"({scale.train_time_limit_s} s) before finishing; rerun the same command "
+                                 "to resume training")
+    cells = [r for r in results if r["model"].startswith("ablation/")]
+    summary = [r for r in results if r not in cells]
+    if cells:  # Table I from its cells, as `tamp ablate-activations` writes it
+        table = summarize_ablation(cells, str(data), scale.train_config(epochs=scale.ablation_epochs),
+                                   ModelConfig(n_max=max(scale.objects)))
+        write_ablation_report(table, out / "ablation")
+        summary.append({"model": "ablation",
+                        "mean_cm": {a: round(v["mean_cm"], 3) for a, v in table["activations"].items()}})
+    stages.finish("train", time.perf_counter() - t, results=summary)
 
 
 def _evaluate_stages(out: Path, stages: Stages, scale: Scale, models: Path, workers: int, backend: str,
@@ -291,7 +296,8 @@ def _evaluate_stages(out: Path, stages: Stages, scale: Scale, models: Path, work
 
     results_dir = out / "results"
     if not stages.done("evaluate"):
-        from evaluation.run import EvalConfig, evaluate
+        from evaluation.configuration import EvalConfig
+        from evaluation.run import evaluate
         from tamp.planning.config import Level1Config, PlanConfig
         from tamp.planning.search import SearchConfig
 

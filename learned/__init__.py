@@ -8,7 +8,8 @@ from .checkpoint import load_model, save_checkpoint
 from .dataset import DatasetWriter, ShardError, TransitionDataset, Transitions, load_transitions, read_meta
 from .effects import arm_displacement, effect_targets, encode_actions, moved_picks
 from .model import ACTIVATIONS, RELATIONS, EffectModel, ModelConfig
-from .train import TrainConfig, TrainResult, evaluate, train_model
+from .train import evaluate, train_model
+from .train_config import TrainConfig, TrainResult
 
 __all__ = [
     "ACTIVATIONS", "DatasetWriter", "EffectModel", "ModelConfig", "RELATIONS", "ShardError", "TrainConfig",

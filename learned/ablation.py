@@ -28,7 +28,8 @@ from guarded import Schema, read_json
 from .checkpoint import load_model, read_checkpoint
 from .dataset import Transitions, atomic_write_bytes, load_transitions
 from .model import ACTIVATIONS, ModelConfig
-from .train import TrainConfig, evaluate, last_path, prepare, split_indices, train_model, train_options
+from .train import evaluate, last_path, prepare, split_indices, train_model
+from .train_config import TrainConfig, train_options
 
 LABELS = {"gumbel_sigmoid": "Gumbel-Sigmoid", "tanh": "Tanh", "none": "No activation",
           "sigmoid": "Sigmoid"}

@@ -30,7 +30,8 @@ from .dataset import Transitions, load_transitions
 from .ensemble import EffectEnsemble, load_dynamics, member_models, save_ensemble
 from .model import ModelConfig
 from .spread import SpreadConfig, fit_spread
-from .train import TrainConfig, last_path, split_indices, train_model
+from .train import last_path, split_indices, train_model
+from .train_config import TrainConfig
 
 DataSource = str | Path | Sequence[str | Path] | Transitions
 

@@ -33,10 +33,8 @@ import copy
 import math
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field
-from enum import Enum
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 import torch
@@ -45,208 +43,14 @@ from tqdm.auto import tqdm
 from .checkpoint import model_from_payload, read_checkpoint, save_checkpoint, update_train_state
 from .dataset import Transitions, load_transitions
 from .effects import arm_displacement, effect_targets, moved_picks
+from .losses import bit_usage_penalty, offset_loss, position_loss, transition_loss
 from .model import EffectModel, ModelConfig, with_whole_action
-
-Precision = Literal["float32", "bfloat16"]
-PAPER_BATCH, PAPER_LR = 128, 1e-4
-"""The paper's (and the bundled models') Adam batch size and learning rate."""
-
-
-class StopReason(str, Enum):
-    """Why training stopped. All but TIME_LIMIT are properties of the data and settings alone."""
-    CONVERGED = "converged"            # no validation improvement for patience_epochs
-    MAX_EPOCHS = "max_epochs"          # ``epochs`` reached
-    TARGET_REACHED = "target_reached"  # validation error <= target_val_cm
-    MAX_STEPS = "max_steps"            # ``max_steps`` optimizer steps taken
-    TIME_LIMIT = "time_limit"          # wall-clock cap: unfinished, resume to finish
-
-
-def scaled_lr(batch_size: int, base_lr: float = PAPER_LR, base_batch: int = PAPER_BATCH) -> float:
-    """Adam learning rate for ``batch_size``: ``base_lr * batch_size / base_batch`` (linear scaling).
-
-    Measured on the quick-scale data at batch 1024: linear (8e-4) matched batch 128's validation
-    error per epoch; square root (2.8e-4) and none (1e-4) fell behind (learned/README.md).
-    """
-    return base_lr * batch_size / base_batch
-
-
-def bf16_fast() -> bool:
-    """Whether this CPU multiplies bfloat16 natively (AVX512-BF16 or AMX), so autocast pays."""
-    try:
-        flags = Path("/proc/cpuinfo").read_text()
-    except OSError:
-        return False
-    return torch.backends.mkldnn.is_available() and any(f in flags for f in (" avx512_bf16", " amx_bf16"))
-
-
-@dataclass(frozen=True)
-class TrainConfig:
-    """How to train (the architecture is `ModelConfig`'s). The defaults are the paper's settings, those
-    of the bundled models: Adam at batch 128 and lr 1e-4 in float32 for a fixed number of epochs.
-    `TrainConfig.fast()` gives faster ones: batch 1024 with the learning rate scaled linearly,
-    bfloat16 autocast where the CPU has it natively, one thread, early stopping."""
-
-    epochs: int = 100  # at most
-    batch_size: int = PAPER_BATCH
-    lr: float = PAPER_LR
-    precision: Precision = "float32"
-    threads: int | None = None  # torch threads (None: leave torch's setting)
-    patience_epochs: int | None = None  # stop after this many epochs without improvement (None: never)
-    min_delta_cm: float = 0.0  # the least decrease of the validation error that counts as improvement
-    val_fraction: float = 0.1  # the seeded validation split, when no val_data is given
-    seed: int = 0
-    only_moved: bool = False  # only the transitions that moved their picked block (the Symbolic Model)
-    max_steps: int | None = None  # optimizer steps at most
-    target_val_cm: float | None = None  # stop once the validation error reaches this
-    time_limit_s: float | None = None  # wall-clock cap of one call: the run is then unfinished, resumable
-    # weight of a penalty on each learned bit (unary, and relation over pairs i != j) whose batch rate
-    # leaves [USAGE_LOW, 1 - USAGE_LOW]: a head the effect loss could leave constant stays in use (0: off)
-    bit_usage: float = 0.0
-    # weight of the offset loss (`ModelConfig.offset_decoder`, `offset_loss`): each pair's squashed offset
-    # read back from its bits, so that relations say where blocks stand; 0: off (the paper's objective)
-    offset_weight: float = 0.0
-    # the offset loss reads back only pairs whose centres lie within this distance on the table (metres;
-    # farther pairs read as "no offset"), so relations say where a neighbour stands and a block moved far
-    # from a bystander leaves their relations as they were; None: every pair (the side of every block)
-    offset_radius_m: float | None = None
-    # weight of the position loss (`ModelConfig.position_decoder`, `position_loss`): each block's place on
-    # the table read back from its unary bits, so that a unary bit says where a block stands; 0: off
-    position_weight: float = 0.0
-    # weight of the transition loss (`ModelConfig.transition_decoder`, `transition_loss`): the bits read after
-    # each step predicted from the bits before it and the action, so that operators predict their steps; 0: off
-    transition_weight: float = 0.0
-
-    def __post_init__(self) -> None:
-        if self.precision not in ("float32", "bfloat16"):
-            raise ValueError(f"precision must be float32 or bfloat16, got {self.precision!r}")
-        if self.patience_epochs is not None and self.patience_epochs < 1:
-            raise ValueError(f"patience_epochs must be >= 1, got {self.patience_epochs}")
-        if self.epochs < 1 or self.batch_size < 1 or not self.lr > 0:
-            raise ValueError(f"epochs and batch_size must be >= 1 and lr > 0, got {self.epochs}, "
-                             f"{self.batch_size}, {self.lr}")
-        if not 0.0 < self.val_fraction < 1.0:
-            raise ValueError(f"val_fraction must be in (0, 1), got {self.val_fraction}")
-        if not self.bit_usage >= 0.0:
-            raise ValueError(f"bit_usage must be >= 0, got {self.bit_usage}")
-        if not self.offset_weight >= 0.0:
-            raise ValueError(f"offset_weight must be >= 0, got {self.offset_weight}")
-        if not self.position_weight >= 0.0:
-            raise ValueError(f"position_weight must be >= 0, got {self.position_weight}")
-        if not self.transition_weight >= 0.0:
-            raise ValueError(f"transition_weight must be >= 0, got {self.transition_weight}")
-        if self.offset_radius_m is not None and not self.offset_radius_m > 0.0:
-            raise ValueError(f"offset_radius_m must be > 0, got {self.offset_radius_m}")
-
-    @classmethod
-    def fast(cls, batch_size: int = 1024, **changes: Any) -> "TrainConfig":
-        """The fast settings (learned/README.md): `lr` scaled linearly with the batch unless given,
-        bfloat16 where `bf16_fast()`, one thread, patience 100 epochs, at most 1000 epochs."""
-        settings: dict[str, Any] = {"epochs": 1000, "batch_size": batch_size, "lr": scaled_lr(batch_size),
-                                    "precision": "bfloat16" if bf16_fast() else "float32", "threads": 1,
-                                    "patience_epochs": 100}
-        settings.update(changes)
-        return cls(**settings)
-
-
-@dataclass
-class TrainResult:
-    model: EffectModel            # best model by validation error, eval mode
-    best_val_cm: float            # its mean effect error on the validation split, cm
-    best_epoch: int
-    steps: int                    # optimizer steps taken in total (including resumed ones)
-    samples_per_s: float          # training throughput of this call (forward + backward)
-    history: list[dict[str, Any]] = field(default_factory=list)
-    out_path: Path | None = None
-    stop_reason: StopReason = StopReason.MAX_EPOCHS
-    epochs_reached: int = 0       # epochs trained in total (including resumed ones)
-
-    @property
-    def finished(self) -> bool:
-        """False when a wall-clock cap stopped the run: resume it for the result."""
-        return self.stop_reason is not StopReason.TIME_LIMIT
-
-
-def train_options(train: TrainConfig, num_train: int, num_val: int, init: str | Path | None = None
-                  ) -> dict[str, Any]:
-    """The settings of `train` that change a run's result, as its checkpoints record them: a run resumes
-    only under the same ones. The defaults are left out, so that older runs stay resumable."""
-    return {**({"init": str(init)} if init is not None else {}),
-            "batch_size": train.batch_size, "lr": train.lr, "val_fraction": train.val_fraction,
-            "seed": train.seed, "num_train": num_train, "num_val": num_val,
-            **({"only_moved": True} if train.only_moved else {}),
-            **({"bit_usage": train.bit_usage} if train.bit_usage else {}),
-            **({"offset_weight": train.offset_weight} if train.offset_weight else {}),
-            **({"offset_radius_m": train.offset_radius_m} if train.offset_radius_m is not None else {}),
-            **({"position_weight": train.position_weight} if train.position_weight else {}),
-            **({"transition_weight": train.transition_weight} if train.transition_weight else {}),
-            **({"precision": train.precision} if train.precision != "float32" else {}),
-            **({"patience_epochs": train.patience_epochs, "min_delta_cm": train.min_delta_cm}
-               if train.patience_epochs is not None else {})}
-
-
-USAGE_LOW = 0.05  # `TrainConfig.bit_usage`: a bit set in under 5 % or over 95 % of a batch is penalised
-USAGE_SHARPNESS = 4.0  # the rate counts sigmoid(4 logit): close to the read bit (logit > 0), with a gradient
-
-
-def bit_usage_penalty(unary: torch.Tensor, relation: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
-    """Sum over learned bits of how far each one's rate in the batch lies outside [USAGE_LOW, 1 -
-    USAGE_LOW], in units of USAGE_LOW: 0 for bits in use, 1 for a bit that is always 0 or always 1.
-    The rate is that of the bits as read (logit > 0), made differentiable (`USAGE_SHARPNESS`), not of
-    the Gumbel samples, whose noise sets a bit now and then whatever its logit. unary (B, N, d_z) and
-    relation (B, K, N, N) are the learned logits (`EffectModel.encode_logits`), mask (B, N) the real
-    objects; the diagonal r_k(i, i) is left out."""
-    m = mask.float()
-    u = torch.sigmoid(USAGE_SHARPNESS * unary.float())
-    rates = [(u * m[..., None]).sum(dim=(0, 1)) / m.sum()]
-    N = mask.shape[1]
-    pairs = (m[:, :, None] * m[:, None, :]) * (1 - torch.eye(N, dtype=m.dtype))
-    if float(pairs.sum()) > 0:
-        r = torch.sigmoid(USAGE_SHARPNESS * relation.float())
-        rates.append((r * pairs[:, None]).sum(dim=(0, 2, 3)) / pairs.sum())
-    rate = torch.cat(rates)
-    return (torch.relu(USAGE_LOW - rate) + torch.relu(rate - 1 + USAGE_LOW)).sum() / USAGE_LOW
-
-
-def position_loss(model: EffectModel, X: torch.Tensor, mask: torch.Tensor, u: torch.Tensor) -> torch.Tensor:
-    """Mean over real objects of the squared error (summed over x, y) of the squashed place on the table
-    read back from the object's unary bits (`EffectModel.reconstruct_positions`)."""
-    err = (model.reconstruct_positions(u).float() - model.squashed_positions(X.float())).pow(2).sum(dim=-1)
-    real = mask.float()
-    return (err * real).sum() / real.sum().clamp(min=1.0)
-
-
-def offset_loss(model: EffectModel, X: torch.Tensor, mask: torch.Tensor, u: torch.Tensor,
-                r: torch.Tensor, radius_m: float | None = None) -> torch.Tensor:
-    """Mean over real pairs i != j of the squared error (summed over x, y, z) of the squashed offset
-    tanh((x_j - x_i) / 5 cm) read back from the pair's bits (`EffectModel.reconstruct_offsets`); with
-    `radius_m`, pairs farther apart than that on the table are to read as 0."""
-    N = mask.shape[1]
-    pairs = (mask[:, :, None] & mask[:, None, :] & ~torch.eye(N, dtype=torch.bool, device=mask.device)).float()
-    target = model.squashed_offsets(X.float())
-    if radius_m is not None:
-        near = model.pair_offsets(X.float())[..., :2].norm(dim=-1) < radius_m
-        target = target * near[..., None]
-    err = (model.reconstruct_offsets(u, r).float() - target).pow(2).sum(dim=-1)
-    return (err * pairs).sum() / pairs.sum().clamp(min=1.0)
-
-
-def transition_loss(model: EffectModel, X: torch.Tensor, X_next: torch.Tensor, action: torch.Tensor,
-                    mask: torch.Tensor, u: torch.Tensor, r: torch.Tensor) -> torch.Tensor:
-    """Mean binary cross-entropy, over the learned bits of real objects and pairs i != j, of the bits
-    read on X_next (their sigmoids, not samples) predicted from the bits u, r before the step and the
-    action (`EffectModel.predict_next_logits`). The gradient reaches the bits after the step too: the
-    encoder is asked for bits a step's outcome can be predicted in, beside the effect they must explain."""
-    d_z = model.config.d_z
-    next_unary, next_relation = model.unary_logits(X_next), model.relation_logits(X_next)
-    pred_unary, pred_relation = model.predict_next_logits(X, action, u, r)
-    bce = torch.nn.functional.binary_cross_entropy_with_logits
-    m = mask.float()
-    unary = bce(pred_unary.float(), torch.sigmoid(next_unary.float()), reduction="none").sum(-1)
-    N = mask.shape[1]
-    pairs = (m[:, :, None] * m[:, None, :]) * (1 - torch.eye(N, dtype=m.dtype, device=m.device))
-    relation = bce(pred_relation.float(), torch.sigmoid(next_relation.float()), reduction="none").sum(1)
-    return (unary * m).sum() / (m.sum() * d_z).clamp(min=1.0) + \
-        (relation * pairs).sum() / (pairs.sum() * next_relation.shape[1]).clamp(min=1.0)
+from .train_config import (
+    StopReason,
+    TrainConfig,
+    TrainResult,
+    train_options,
+)
 
 
 def last_path(out_path: str | Path) -> Path:
@@ -355,6 +159,23 @@ def train_model(data: "str | Path | Sequence[str | Path] | Transitions", config:
     train = train or TrainConfig()
     if train.threads:
         torch.set_num_threads(train.threads)
+    data, val_data = _datasets(data, val_data, train)
+    config, initial = _network(config, data, init)
+    _check_heads(train, config)
+    options = train_options(train, len(data), len(val_data), init)
+    tr, va = prepare(data), prepare(val_data)
+    torch.manual_seed(train.seed)
+    run = _Run(_new_model(config, tr, initial, init), train, options, out_path)
+    if resume:
+        run.resume()
+    run.model.train()
+    reason = run.epochs(tr, va, progress)
+    return run.finish(reason)
+
+
+def _datasets(data: "str | Path | Sequence[str | Path] | Transitions", val_data: Transitions | None,
+              train: TrainConfig) -> tuple[Transitions, Transitions]:
+    """The training and validation transitions (`only_moved` applied; a seeded split when no `val_data`)."""
     if not isinstance(data, Transitions):
         data = load_transitions(data)
     if train.only_moved:
@@ -368,6 +189,13 @@ def train_model(data: "str | Path | Sequence[str | Path] | Transitions", config:
         data, val_data = data.subset(train_idx), data.subset(val_idx)
     if len(val_data) == 0:
         raise ValueError("empty validation split")
+    return data, val_data
+
+
+def _network(config: ModelConfig | None, data: Transitions, init: str | Path | None
+             ) -> tuple[ModelConfig, EffectModel | None]:
+    """The network's settings and, when fine-tuning, the network it starts from (`init`): its own settings, the
+    data's object limit, and a spread head or the whole action added if `config` asks for them."""
     initial = None if init is None else model_from_payload(read_checkpoint(init), init)
     if initial is not None:
         own = {**initial.config.to_dict(), "n_max": data.n_max}
@@ -383,163 +211,201 @@ def train_model(data: "str | Path | Sequence[str | Path] | Transitions", config:
     config = config or ModelConfig(n_max=data.n_max)
     if data.n_max > config.n_max:
         raise ValueError(f"dataset n_max {data.n_max} exceeds model n_max {config.n_max}")
-    if train.offset_weight and not config.offset_decoder:
-        raise ValueError("offset_weight needs a model with offset_decoder=True (the head it trains)")
-    if train.position_weight and not config.position_decoder:
-        raise ValueError("position_weight needs a model with position_decoder=True (the head it trains)")
-    if train.transition_weight and not config.transition_decoder:
-        raise ValueError("transition_weight needs a model with transition_decoder=True (the head it trains)")
-    options = train_options(train, len(data), len(val_data), init)
-    tr, va = prepare(data), prepare(val_data)
+    return config, initial
 
-    torch.manual_seed(train.seed)
+
+def _check_heads(train: TrainConfig, config: ModelConfig) -> None:
+    """ValueError when a loss weight asks for a head the network lacks."""
+    for weight, head in (("offset_weight", "offset_decoder"),
+                         ("position_weight", "position_decoder"),
+                         ("transition_weight", "transition_decoder")):
+        if getattr(train, weight) and not getattr(config, head):
+            raise ValueError(f"{weight} needs a model with {head}=True (the head it trains)")
+
+
+def _new_model(config: ModelConfig, tr: dict[str, torch.Tensor], initial: EffectModel | None,
+               init: str | Path | None) -> EffectModel:
+    """A network of `config` normalised on the training tensors, with the weights of `initial` if given (a
+    spread head it lacks starts anew, the whole action's new inputs at zero)."""
     model = EffectModel(config)
-    stats = normalisation(tr)
-    model.set_normalisation(**stats)
-    if initial is not None:  # its weights and normalisation buffers (a spread head it lacks starts anew)
+    model.set_normalisation(**normalisation(tr))
+    if initial is not None:  # its weights and normalisation buffers
         state = initial.state_dict()
         if config.whole_action and not initial.config.whole_action:
             state = with_whole_action(state, config)
         missing, unexpected = model.load_state_dict(state, strict=False)
         if unexpected or any(not k.startswith("spread_head.") for k in missing):
             raise ValueError(f"{init}: its weights do not fit the network ({missing + unexpected})")
-    opt = torch.optim.Adam(model.parameters(), lr=train.lr)
-    epoch0, step, history = 0, 0, []
-    best: dict[str, Any] = {"val_cm": float("inf"), "epoch": -1, "state": None}
+    return model
 
-    if resume:
-        if out_path is None:
+
+class _Run:
+    """One training call: the network, its optimizer, the step and epoch counters, the history and the best
+    state by validation error, the checkpoints it writes."""
+
+    def __init__(self, model: EffectModel, train: TrainConfig, options: dict[str, Any],
+                 out_path: str | Path | None) -> None:
+        self.model, self.train, self.options, self.out_path = model, train, options, out_path
+        self.opt = torch.optim.Adam(model.parameters(), lr=train.lr)
+        self.epoch0, self.step = 0, 0
+        self.history: list[dict[str, Any]] = []
+        self.best: dict[str, Any] = {"val_cm": float("inf"), "epoch": -1, "state": None}
+        self.train_time, self.trained = 0.0, 0
+
+    def resume(self) -> None:
+        """Continue from the latest state of `out_path`, if it has one (the same settings, options and data)."""
+        if self.out_path is None:
             raise ValueError("resume=True needs out_path")
-        lp = last_path(out_path)
-        if lp.exists():
-            payload = read_checkpoint(lp)
-            st = payload.get("train")
-            if not st:
-                raise ValueError(f"{lp}: no training state to resume from")
-            # configs compared as dataclasses: a field added since the run began takes its default
-            if ModelConfig.from_dict(payload["config"]) != config or st["options"] != options:
-                raise ValueError(f"{lp}: was trained with a different config/options/data; "
-                                 f"refusing to resume ({payload['config']}, {st['options']})")
-            model = model_from_payload(payload, lp).train()
-            opt = torch.optim.Adam(model.parameters(), lr=train.lr)
-            opt.load_state_dict(st["optimizer"])
-            epoch0, step = int(st["epoch"]) + 1, int(st["step"])
-            history = [{k: v for k, v in h.items() if k != "stop_reason"} for h in st["history"]]
-            torch.set_rng_state(st["rng"])
-            best_payload = read_checkpoint(out_path)
-            best = {"val_cm": float(st["best_val_cm"]), "epoch": int(st["best_epoch"]),
-                    "state": best_payload["state_dict"]}
-    model.train()
+        lp = last_path(self.out_path)
+        if not lp.exists():
+            return
+        payload = read_checkpoint(lp)
+        st = payload.get("train")
+        if not st:
+            raise ValueError(f"{lp}: no training state to resume from")
+        # configs compared as dataclasses: a field added since the run began takes its default
+        if ModelConfig.from_dict(payload["config"]) != self.model.config or st["options"] != self.options:
+            raise ValueError(f"{lp}: was trained with a different config/options/data; "
+                             f"refusing to resume ({payload['config']}, {st['options']})")
+        self.model = model_from_payload(payload, lp).train()
+        self.opt = torch.optim.Adam(self.model.parameters(), lr=self.train.lr)
+        self.opt.load_state_dict(st["optimizer"])
+        self.epoch0, self.step = int(st["epoch"]) + 1, int(st["step"])
+        self.history = [{k: v for k, v in h.items() if k != "stop_reason"} for h in st["history"]]
+        torch.set_rng_state(st["rng"])
+        best_payload = read_checkpoint(self.out_path)
+        self.best = {"val_cm": float(st["best_val_cm"]), "epoch": int(st["best_epoch"]),
+                     "state": best_payload["state_dict"]}
 
-    N = len(data)
-    steps_per_epoch = (N + train.batch_size - 1) // train.batch_size
-    total = train.epochs * steps_per_epoch
-    if train.max_steps is not None:
-        total = min(train.max_steps, total)
-    bar = tqdm(total=total, initial=min(step, total), disable=not progress, unit="step",
-               dynamic_ncols=True)
-    scale = float(model.effect_scale)
-    plateau = _Plateau(train.min_delta_cm, history)
-    train_time, trained = 0.0, 0
-    start = time.perf_counter()
-    elapsed0 = history[-1]["elapsed_s"] if history else 0.0
-    epoch = epoch0
+    def epochs(self, tr: dict[str, torch.Tensor], va: dict[str, torch.Tensor], progress: bool) -> StopReason:
+        """Train epoch after epoch until a `StopReason`, validating after each; returns it."""
+        train, N = self.train, len(tr["X"])
+        total = train.epochs * ((N + train.batch_size - 1) // train.batch_size)
+        if train.max_steps is not None:
+            total = min(train.max_steps, total)
+        bar = tqdm(total=total, initial=min(self.step, total), disable=not progress, unit="step", dynamic_ncols=True)
+        plateau = _Plateau(train.min_delta_cm, self.history)
+        start = time.perf_counter()
+        elapsed0 = self.history[-1]["elapsed_s"] if self.history else 0.0
+        epoch = self.epoch0
+        while (reason := self.stop_reason(epoch, plateau, start)) is None:
+            run_loss, run_err, run_b, run_n = self.epoch(tr, epoch, bar)
+            val = evaluate(self.model, va)
+            self.history.append({"epoch": epoch, "step": self.step, "train_err_cm": 100 * run_err / max(run_n, 1),
+                                 "val_err_cm": val["err_cm"], "val_zero_cm": val["zero_cm"], "val_loss": val["loss"],
+                                 "elapsed_s": elapsed0 + time.perf_counter() - start})
+            plateau.update(epoch, val["err_cm"])
+            self.checkpoint(epoch, val["err_cm"])
+            bar.set_postfix(epoch=epoch, loss=f"{run_loss / max(run_b, 1):.4f}", val_cm=f"{val['err_cm']:.2f}",
+                            best_val_cm=f"{self.best['val_cm']:.2f}", zero_cm=f"{val['zero_cm']:.2f}")
+            epoch += 1
+        bar.close()
+        return reason
 
-    def stop_reason() -> StopReason | None:
+    def stop_reason(self, epoch: int, plateau: _Plateau, start: float) -> StopReason | None:
         """Why not to train epoch ``epoch``. The wall-clock cap comes last, so that it never hides another
         reason, and lets every call train an epoch, so that resuming time-limited calls always progresses."""
+        train = self.train
         patience = train.patience_epochs
         if patience is not None and plateau.epoch >= 0 and epoch - 1 - plateau.epoch >= patience:
             return StopReason.CONVERGED
-        if train.target_val_cm is not None and best["val_cm"] <= train.target_val_cm:
+        if train.target_val_cm is not None and self.best["val_cm"] <= train.target_val_cm:
             return StopReason.TARGET_REACHED
-        if train.max_steps is not None and step >= train.max_steps:
+        if train.max_steps is not None and self.step >= train.max_steps:
             return StopReason.MAX_STEPS
         if epoch >= train.epochs:
             return StopReason.MAX_EPOCHS
-        if train.time_limit_s is not None and epoch > epoch0 and time.perf_counter() - start > train.time_limit_s:
+        if train.time_limit_s is not None and epoch > self.epoch0 and \
+                time.perf_counter() - start > train.time_limit_s:
             return StopReason.TIME_LIMIT
         return None
 
-    while (reason := stop_reason()) is None:
+    def epoch(self, tr: dict[str, torch.Tensor], epoch: int, bar) -> tuple[float, float, int, int]:
+        """One epoch of steps over a seeded permutation; (summed loss, summed error in metres, samples, real
+        objects) of the samples it trained on."""
+        train, model, N = self.train, self.model, len(tr["X"])
         perm = torch.randperm(N, generator=torch.Generator().manual_seed(train.seed * 100003 + epoch))
         # One gather per epoch; the steps then slice contiguous views.
         Xe, Ae, Me, Te = (tr[k][perm] for k in ("X", "action", "mask", "target"))
         Ne = tr["X_next"][perm] if train.transition_weight else None
         run_loss, run_err = torch.zeros((), dtype=torch.float64), torch.zeros((), dtype=torch.float64)
         run_b = 0
+        scale = float(model.effect_scale)
         t0 = time.perf_counter()
         for s in range(0, N, train.batch_size):
             batch = slice(s, s + train.batch_size)
             X, A, M, T = Xe[batch], Ae[batch], Me[batch], Te[batch]
-            with torch.autocast("cpu", dtype=torch.bfloat16, enabled=train.precision == "bfloat16"):
-                u, r, unary, relation = model.encode_logits(X, M)
-                pred = model.decode(X, A, M, u, r)
-                usage = bit_usage_penalty(unary, relation, M) if train.bit_usage else None
-                offsets = offset_loss(model, X, M, u, r, train.offset_radius_m) if train.offset_weight else None
-                places = position_loss(model, X, M, u) if train.position_weight else None
-                steps = None if Ne is None else transition_loss(model, X, Ne[batch], A, M, u, r)
-            d = pred.float() - T
-            loss = (d / scale).pow(2).sum(dim=(1, 2)).mean()
-            if usage is not None:
-                loss = loss + train.bit_usage * usage
-            if offsets is not None:
-                loss = loss + train.offset_weight * offsets
-            if places is not None:
-                loss = loss + train.position_weight * places
-            if steps is not None:
-                loss = loss + train.transition_weight * steps
-            opt.zero_grad(set_to_none=True)
+            loss, d = self.loss(X, A, M, T, None if Ne is None else Ne[batch], scale)
+            self.opt.zero_grad(set_to_none=True)
             loss.backward()
-            opt.step()
-            step += 1
+            self.opt.step()
+            self.step += 1
             n = X.shape[0]
-            trained += n
+            self.trained += n
             with torch.no_grad():  # running sums stay tensors: read once per epoch
                 run_loss += loss.detach() * n
                 run_err += d.detach().norm(dim=-1).mul(M).sum()
             run_b += n
             bar.update(1)
-            if train.max_steps is not None and step >= train.max_steps:
+            if train.max_steps is not None and self.step >= train.max_steps:
                 break
-        train_time += time.perf_counter() - t0
-        run_n = int(Me[:run_b].sum())  # real objects trained on this epoch
-        val = evaluate(model, va)
-        rec = {"epoch": epoch, "step": step, "train_err_cm": 100 * float(run_err) / max(run_n, 1),
-               "val_err_cm": val["err_cm"], "val_zero_cm": val["zero_cm"], "val_loss": val["loss"],
-               "elapsed_s": elapsed0 + time.perf_counter() - start}
-        history.append(rec)
-        plateau.update(epoch, val["err_cm"])
-        if val["err_cm"] < best["val_cm"]:
-            best = {"val_cm": val["err_cm"], "epoch": epoch,
-                    "state": copy.deepcopy(model.state_dict())}
-            if out_path is not None:
-                save_checkpoint(out_path, model, {"kind": "best", "epoch": epoch, "step": step,
-                                                  "val_err_cm": val["err_cm"], "options": options})
-        if out_path is not None:
-            save_checkpoint(last_path(out_path), model, {
-                "kind": "last", "epoch": epoch, "step": step, "options": options,
-                "optimizer": opt.state_dict(), "rng": torch.get_rng_state(),
-                "best_val_cm": best["val_cm"], "best_epoch": best["epoch"], "history": history})
-        bar.set_postfix(epoch=epoch, loss=f"{float(run_loss) / max(run_b, 1):.4f}", val_cm=f"{val['err_cm']:.2f}",
-                        best_val_cm=f"{best['val_cm']:.2f}", zero_cm=f"{val['zero_cm']:.2f}")
-        epoch += 1
-    bar.close()
+        self.train_time += time.perf_counter() - t0
+        return float(run_loss), float(run_err), run_b, int(Me[:run_b].sum())
 
-    if best["state"] is None:
-        raise ValueError("no training epoch ran (epochs already reached?)")
-    epochs_reached = len(history)
-    stop = {"stop_reason": reason.value, "finished": reason is not StopReason.TIME_LIMIT,
-            "epochs_reached": epochs_reached}
-    if history:
-        history[-1]["stop_reason"] = reason.value
-    if out_path is not None:
-        update_train_state(out_path, stop)
-        if last_path(out_path).exists():
-            update_train_state(last_path(out_path), {**stop, "history": history})
-    final = EffectModel(config)
-    final.load_state_dict(best["state"])
-    return TrainResult(model=final.eval(), best_val_cm=best["val_cm"], best_epoch=best["epoch"],
-                       steps=step, samples_per_s=trained / train_time if train_time else 0.0,
-                       history=history, out_path=Path(out_path) if out_path else None,
-                       stop_reason=reason, epochs_reached=epochs_reached)
+    def loss(self, X: torch.Tensor, A: torch.Tensor, M: torch.Tensor, T: torch.Tensor, X_next: torch.Tensor | None,
+             scale: float) -> tuple[torch.Tensor, torch.Tensor]:
+        """The batch's loss (Eq. 1 in units of the effect scale, plus the weighted auxiliary losses) and the
+        effect residuals (metres)."""
+        train, model = self.train, self.model
+        with torch.autocast("cpu", dtype=torch.bfloat16, enabled=train.precision == "bfloat16"):
+            u, r, unary, relation = model.encode_logits(X, M)
+            pred = model.decode(X, A, M, u, r)
+            usage = bit_usage_penalty(unary, relation, M) if train.bit_usage else None
+            offsets = offset_loss(model, X, M, u, r, train.offset_radius_m) if train.offset_weight else None
+            places = position_loss(model, X, M, u) if train.position_weight else None
+            steps = None if X_next is None else transition_loss(model, X, X_next, A, M, u, r)
+        d = pred.float() - T
+        loss = (d / scale).pow(2).sum(dim=(1, 2)).mean()
+        if usage is not None:
+            loss = loss + train.bit_usage * usage
+        if offsets is not None:
+            loss = loss + train.offset_weight * offsets
+        if places is not None:
+            loss = loss + train.position_weight * places
+        if steps is not None:
+            loss = loss + train.transition_weight * steps
+        return loss, d
+
+    def checkpoint(self, epoch: int, val_cm: float) -> None:
+        """Keep the state if it is the best so far (written to out_path) and write the latest state."""
+        if val_cm < self.best["val_cm"]:
+            self.best = {"val_cm": val_cm, "epoch": epoch, "state": copy.deepcopy(self.model.state_dict())}
+            if self.out_path is not None:
+                save_checkpoint(self.out_path, self.model, {"kind": "best", "epoch": epoch, "step": self.step,
+                                                            "val_err_cm": val_cm, "options": self.options})
+        if self.out_path is not None:
+            save_checkpoint(last_path(self.out_path), self.model, {
+                "kind": "last", "epoch": epoch, "step": self.step, "options": self.options,
+                "optimizer": self.opt.state_dict(), "rng": torch.get_rng_state(),
+                "best_val_cm": self.best["val_cm"], "best_epoch": self.best["epoch"], "history": self.history})
+
+    def finish(self, reason: StopReason) -> TrainResult:
+        """Record why training stopped (history, both checkpoints) and return the best network."""
+        if self.best["state"] is None:
+            raise ValueError("no training epoch ran (epochs already reached?)")
+        history, out_path = self.history, self.out_path
+        epochs_reached = len(history)
+        stop = {"stop_reason": reason.value, "finished": reason is not StopReason.TIME_LIMIT,
+                "epochs_reached": epochs_reached}
+        if history:
+            history[-1]["stop_reason"] = reason.value
+        if out_path is not None:
+            update_train_state(out_path, stop)
+            if last_path(out_path).exists():
+                update_train_state(last_path(out_path), {**stop, "history": history})
+        final = EffectModel(self.model.config)
+        final.load_state_dict(self.best["state"])
+        return TrainResult(model=final.eval(), best_val_cm=self.best["val_cm"], best_epoch=self.best["epoch"],
+                           steps=self.step, samples_per_s=self.trained / self.train_time if self.train_time else 0.0,
+                           history=history, out_path=Path(out_path) if out_path else None,
+                           stop_reason=reason, epochs_reached=epochs_reached)

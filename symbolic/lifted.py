@@ -130,8 +130,16 @@ class LiftedTask:
         self.deterministic = np.array(n_effects, dtype=np.int64)[self.effect_op] == 1
         allowed = [op.arity <= n if scope == "subset" else op.arity == n for op in ops.operators]
         self.arities = sorted({op.arity for op, ok in zip(ops.operators, allowed) if ok})
-        # Operators in groups of one arity and the same tested bits (general operators test fewer),
-        # by arity; each group has its own tuples, key layout and tag.
+        group_of = self._group_operators(allowed, d, K)
+        self._tuple_table(n, d, K)
+        self._effect_rows(group_of, d)
+        self._cache: dict[int, Expansion] = {}
+
+    def _group_operators(self, allowed: list[bool], d: int, K: int) -> list[int]:
+        """Operators in groups of one arity and the same tested bits (general operators test fewer), by
+        arity; each group has its own tuples, key layout and tag. Returns each operator's group (-1: not
+        allowed in this scene)."""
+        ops = self.ops
         names: dict[tuple[int, bytes], int] = {}
         for op in sorted((op for op, ok in zip(ops.operators, allowed) if ok), key=lambda o: o.arity):
             names.setdefault((op.arity, op.known_bits().tobytes()), len(names))
@@ -150,6 +158,10 @@ class LiftedTask:
                 raise ValueError(f"operators of arity {a} ({len(keep)} precondition bits) are not supported: at "
                                  f"most arity {max_arity(d, K, given)} ({MAX_PRECONDITION_BITS} bits); learn the domain"
                                  " again with `tamp domain`, whose --max-arity keeps to that limit by default")
+        return group_of
+
+    def _tuple_table(self, n: int, d: int, K: int) -> None:
+        """The ground tuples of every group's arity, their bits' positions in the state and their keys'."""
         # Tuples of every arity in one table: their local bits' global positions, padded with n_bits
         # (a bit that is always 0), and the tuple's arity; the positions of their key bits and of
         # their fixed bits (padded alike), with the values the fixed ones must have.
@@ -192,6 +204,11 @@ class LiftedTask:
             inside = (self.positions >> 6) == w
             value = np.left_shift(np.uint64(1), (self.positions & 63).astype(np.uint64))
             self._bit_value.append(np.where(inside & (self.positions < self.n_bits), value, np.uint64(0)))
+
+    def _effect_rows(self, group_of: list[int], d: int) -> None:
+        """Every effect row's local flips, and the indexes from a tuple's key to the rows that apply (all,
+        the first per distinct flip) and to the rows that lead to it."""
+        ops = self.ops
         # Local flip positions of every effect row (padded with -1: the padding column of `positions`).
         F = max((len(e.unary_flips) + len(e.rel_flips) for op in ops.operators for e in op.effects), default=0)
         self.effect_local = np.full((len(self.effect_op), max(F, 1)), -1, dtype=np.int64)
@@ -230,7 +247,6 @@ class LiftedTask:
         self._all = _CodeIndex(list(pre_groups), list(pre_groups.values()))
         self._first = _CodeIndex(list(first_groups), list(first_groups.values()))
         self._post = _CodeIndex(list(post_groups), [list(g.values()) for g in post_groups.values()])
-        self._cache: dict[int, Expansion] = {}
 
     def restricted(self, movable: tuple[int, ...]) -> LiftedTask:
         """The task whose ground actions pick only objects in `movable`: the tuples whose first

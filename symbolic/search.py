@@ -106,36 +106,76 @@ def search_domains(task: LiftedTask, domains: DomainSet, init: int, goal: int, b
     still without one (any plan they get is longer); True ends the search there, those domains
     STOPPED (`settled_prefix` says which ranked plans that leaves in their final places).
     """
-    N, full = domains.n, domains.full
+    N = domains.n
     out = SearchOutcome([], [], [-1] * N, [PlannerStatus.TIMEOUT] * N)
     if init == goal and not nonempty:
         out.plans, out.states = [()], [(init,)]
         out.plan_of, out.status = [0] * N, [PlannerStatus.SOLVED] * N
         return out
-    distances = _Distances(task, goal)
-    active = full  # domains without a plan yet
-    masks = domains.table  # operator -> domains per effect, filled by `prepare` for each new state
-    t_back = 0.0
-    small = len(task.expand(init).successors) <= SMALL_BRANCHING
-    D = 1
-    while active:
-        t = time.perf_counter()
-        distances.grow(_radius(D), out, budget)
-        while D < distances.bound(init) < INFINITE:  # no domain has a plan shorter than the bound
-            D = distances.bound(init)
-            distances.grow(_radius(D), out, budget)
+    return _BoundedSearch(task, domains, init, goal, budget, deadline, out).run(stop)
+
+
+class _BoundedSearch:
+    """`search_domains` past its trivial case: forward searches of growing depth bound D, all domains at once,
+    pruned by the backward distances to the goal (`_Distances`)."""
+
+    def __init__(self, task: LiftedTask, domains: DomainSet, init: int, goal: int, budget: int,
+                 deadline: float | None, out: SearchOutcome) -> None:
+        self.task, self.domains, self.init, self.goal, self.budget, self.deadline, self.out = \
+            task, domains, init, goal, budget, deadline, out
+        self.distances = _Distances(task, goal)
+        self.active = domains.full  # domains without a plan yet
+        self.t_back = 0.0
+        self.small = len(task.expand(init).successors) <= SMALL_BRANCHING
+
+    def run(self, stop: Callable[[SearchOutcome, int], bool] | None) -> SearchOutcome:
+        out, distances, init = self.out, self.distances, self.init
+        D = 1
+        while self.active:
+            t = time.perf_counter()
+            distances.grow(_radius(D), out, self.budget)
+            while D < distances.bound(init) < INFINITE:  # no domain has a plan shorter than the bound
+                D = distances.bound(init)
+                distances.grow(_radius(D), out, self.budget)
+            self.t_back += time.perf_counter() - t
+            if distances.bound(init) >= INFINITE:
+                break  # the goal cannot be reached from init in any domain
+            if distances.complete or (self.small and D > 3):  # one unbounded search, not one per depth bound:
+                D = INFINITE  # every state that can reach the goal is known (only the others are pruned), or
+                #           the space is small enough to search it all for the domains still without a plan
+            cut = self.forward(D)
+            if cut is None:
+                out.timings.update(backward=self.t_back)
+                return out
+            unsolvable = self.active & ~cut
+            for k in _bits(unsolvable):
+                out.status[k] = PlannerStatus.UNSOLVABLE
+            self.active &= ~unsolvable
+            if self.active and stop is not None and stop(out, self.active.bit_count()):
+                for k in _bits(self.active):
+                    out.status[k] = PlannerStatus.STOPPED
+                out.message = f"stopped after depth bound {D}: the first ranked plans are settled"
+                self.active = 0
+                break
+            D += 1
+        for k in _bits(self.active):
+            out.status[k] = PlannerStatus.UNSOLVABLE  # the goal is unreachable from init
+        out.timings.update(backward=self.t_back)
+        return out
+
+    def forward(self, D: int) -> int | None:
+        """The forward search of depth bound D: plans found go to the outcome (their domains leave `active`);
+        returns the domains in which some state was left out for the bound (not proven unsolvable), or None
+        when the budget or the deadline ended the search (the outcome says so)."""
+        task, domains, out, distances, goal = self.task, self.domains, self.out, self.distances, self.goal
+        budget, deadline, active = self.budget, self.deadline, self.active
+        masks = domains.table  # operator -> domains per effect, filled by `prepare` for each new state
         bounds_of: dict[int, np.ndarray] = {}  # per state, its successors' bounds at this radius
-        t_back += time.perf_counter() - t
-        if distances.bound(init) >= INFINITE:
-            break  # the goal cannot be reached from init in any domain
-        if distances.complete or (small and D > 3):  # one unbounded search, not one per depth bound:
-            D = INFINITE  # every state that can reach the goal is known (only the others are pruned), or
-            #           the space is small enough to search it all for the domains still without a plan
-        # forward, depth bound D; nodes are (state, domains, parent node, ground action)
-        node_state, node_parent, node_action = [init], [-1], [-1]
+        # nodes are (state, domains, parent node, ground action)
+        node_state, node_parent, node_action = [self.init], [-1], [-1]
         layer = [(0, active)]
-        seen: dict[int, int] = {init: active}
-        cut = 0  # domains in which some state was left out for the bound (not proven unsolvable)
+        seen: dict[int, int] = {self.init: active}
+        cut = 0
         depth = -1
         while layer and depth < D - 1:
             depth += 1
@@ -150,8 +190,8 @@ def search_domains(task: LiftedTask, domains: DomainSet, init: int, goal: int, b
                                                and time.perf_counter() > deadline):
                     out.message = (f"search limit reached after {out.generated} generated states "
                                    f"({out.expanded} expansions, depth bound {D})")
-                    out.timings.update(backward=t_back)
-                    return out
+                    self.active = active
+                    return None
                 out.expanded += 1
                 s = node_state[e]
                 x = task.expand(s)
@@ -196,21 +236,8 @@ def search_domains(task: LiftedTask, domains: DomainSet, init: int, goal: int, b
                         node_action.append(ev_act[i])
                         nxt.append((len(node_state) - 1, new))
             layer = nxt
-        unsolvable = active & ~cut
-        for k in _bits(unsolvable):
-            out.status[k] = PlannerStatus.UNSOLVABLE
-        active &= ~unsolvable
-        if active and stop is not None and stop(out, active.bit_count()):
-            for k in _bits(active):
-                out.status[k] = PlannerStatus.STOPPED
-            out.message = f"stopped after depth bound {D}: the first ranked plans are settled"
-            active = 0
-            break
-        D += 1
-    for k in _bits(active):
-        out.status[k] = PlannerStatus.UNSOLVABLE  # the goal is unreachable from init
-    out.timings.update(backward=t_back)
-    return out
+        self.active = active
+        return cut
 
 
 def settled_prefix(counts: list[int], remaining: int) -> int:

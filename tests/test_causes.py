@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from evaluation.run import row_cause
+from evaluation.row import row_cause
 from tamp.planning.causes import AIMED, MISS, Cause, Failure, failure_cause
 
 

@@ -20,12 +20,15 @@ import pytest
 sys.path.insert(0, str(Path(__file__).parent))
 from planning_stubs import StubModel, two_block_domain
 
+from evaluation.configuration import EvalConfig
 from evaluation.problems import generate_problems, read_problems, write_problems
-from evaluation.run import OUTCOMES, ROW_KEYS, EvalConfig, evaluate, read_rows, row_cause, strip_timings
+from evaluation.row import ROW_KEYS, row_cause
+from evaluation.run import evaluate, read_rows, strip_timings
 from tamp.app.problem import Problem
 from tamp.planning.config import Level1Config, PlanConfig
 from tamp.planning.models import Models
 from tamp.planning.search import SearchConfig
+from tamp.planning.structs import OUTCOMES
 from tamp.planning.verify import goal_error
 
 SET = dict(ns=(2,), ks=(1, 2, 3), per_cell=1, seed=0)

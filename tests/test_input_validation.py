@@ -162,8 +162,9 @@ class _Failing(StubModel):
 
 @pytest.mark.sim
 def test_a_pair_that_fails_mid_run_is_an_error_row_and_the_run_goes_on(tmp_path):
+    from evaluation.configuration import EvalConfig
     from evaluation.report import write_report
-    from evaluation.run import EvalConfig, evaluate, read_rows
+    from evaluation.run import evaluate, read_rows
     from tamp.planning.config import PlanConfig
     from tamp.planning.search import SearchConfig
 

@@ -125,7 +125,7 @@ def test_only_moved_trains_on_the_transitions_that_moved_the_picked_block(tmp_pa
 
 def test_the_bit_usage_penalty_counts_constant_bits_and_leaves_the_given_ones_out():
     from learned import EffectModel
-    from learned.train import bit_usage_penalty
+    from learned.losses import bit_usage_penalty
 
     model = EffectModel(ModelConfig(hidden=8, layers=1, d_msg=8, d_z=2, heads=2, relations="pairwise",
                                     type_symbol=True))
@@ -208,8 +208,8 @@ def test_an_offset_head_from_relations_reads_the_relations_alone():
 def test_the_offset_radius_asks_only_neighbours_where_they_stand():
     """With a radius, a pair farther apart on the table than it is to read back as no offset, a nearer pair
     as its squashed offset, as without a radius."""
+    from learned.losses import offset_loss
     from learned.model import EffectModel
-    from learned.train import offset_loss
 
     torch.manual_seed(0)
     model = EffectModel(ModelConfig(hidden=8, d_msg=8, d_z=1, heads=2, relations="pairwise", offset_decoder=True))
@@ -247,8 +247,8 @@ def test_the_position_loss_makes_a_unary_bit_say_where_a_block_stands(tmp_path):
 def test_the_position_loss_on_x_alone_reads_back_where_a_block_stands_along_x_only():
     """`position_axes="x"`: the head reads back x alone, so a block moved along y (the axis of the skill's
     grasp and release offsets) costs the position loss nothing and one moved along x does."""
+    from learned.losses import position_loss
     from learned.model import EffectModel
-    from learned.train import position_loss
 
     torch.manual_seed(0)
     model = EffectModel(ModelConfig(hidden=8, d_msg=8, d_z=2, heads=1, position_decoder=True, position_axes="x"))
@@ -270,8 +270,8 @@ def test_the_transition_loss_asks_for_bits_a_step_can_be_predicted_in(tmp_path):
     """`transition_decoder`: a head predicts the bits after a step from the bits before and the action; the
     loss reads the bits on X_next, so its gradient reaches the encoder through them as well. Training records
     the weight, and the loss needs its head."""
+    from learned.losses import transition_loss
     from learned.model import EffectModel
-    from learned.train import transition_loss
 
     torch.manual_seed(0)
     model = EffectModel(ModelConfig(hidden=8, d_msg=8, d_z=2, heads=2, relations="pairwise", transition_decoder=True))
@@ -365,7 +365,7 @@ def test_a_time_limited_run_is_unfinished_and_resumes_to_the_one_sitting_result(
 
 
 def test_train_settings_scale_the_learning_rate_with_the_batch():
-    from learned.train import PAPER_LR, TrainConfig, scaled_lr
+    from learned.train_config import PAPER_LR, TrainConfig, scaled_lr
 
     assert scaled_lr(128) == PAPER_LR and scaled_lr(1024) == pytest.approx(8 * PAPER_LR)
     assert TrainConfig.fast(512).lr == pytest.approx(4e-4)

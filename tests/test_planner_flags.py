@@ -68,8 +68,8 @@ def test_flags_set_their_fields():
     assert cfg == PlanConfig(
         level1=Level1Config(n_domains=7, backend="fd", symbolic_time_limit=3.0, budget=9, focus_from=3, focus_budget=8,
                             objects=3, serial=False, confident=0.07, cut=False),
-        verify=VerifyConfig(),
-        search=SearchConfig(max_expansions=11, confident=0.03, look_on=2, max_fragility=0.5, release_targets=False,
+        verify=VerifyConfig(confident=0.03),
+        search=SearchConfig(max_expansions=11, look_on=2, max_fragility=0.5, release_targets=False,
                             time_limit=4.0, stall=50, greedy_stall=70),
         kinematics=KinematicsConfig(feasibility=False),
         loop=LoopConfig(keep_plan=False, on_course=0.02, max_actions=5, widen=False))
@@ -95,7 +95,7 @@ def test_the_defining_settings_of_a_results_directory_are_unchanged():
     """`EvalConfig.defining()` holds every setting rows depend on, with the keys it had with the flat PlanConfig
     (the closed loop's `keep_plan` and `on_course` are not in "loop"); the search's stall cut and its default
     time limit (none) are part of it, so a directory of rows planned without them is not resumed with them."""
-    from evaluation.run import EvalConfig
+    from evaluation.configuration import EvalConfig
 
     default = {"eps_m": 0.05, "fidelity": "fast", "keep_plan": True, "level1_budget": 100000,
                "level1_confident_m": 0.05, "level1_cut": True, "level1_focus_budget": 25000, "level1_focus_from": 5,

@@ -57,7 +57,7 @@ def test_a_verified_plan_is_cut_where_it_reaches_the_goal():
 
 def test_a_pick_that_the_next_action_repeats_is_dropped_when_the_shorter_plan_is_as_good(domain):
     from tamp.planning.level1 import Verifier
-    from tamp.planning.results import PlanResult
+    from tamp.planning.results import Clock, Level1Result
     from tamp.planning.verify import without_repicks
 
     assert without_repicks([(4, 0, 0, 1), (4, -1, 1, 0)]) == ((4, -1, 1, 0),)
@@ -66,12 +66,12 @@ def test_a_pick_that_the_next_action_repeats_is_dropped_when_the_shorter_plan_is
     # A first released beside B, then picked again and put on B: A on B in one action does the same
     twice = verify(StubModel(), X_INIT, A_ON_B, [(0, 0, 1, 1), (0, 0, 1, 0)])
     assert twice.verified and twice.error < 1e-9
-    verifier = Verifier(models(domain), X_INIT, A_ON_B, PlanConfig(), PlanResult("bilevel", None), None, [])
+    verifier = Verifier(models(domain), X_INIT, A_ON_B, Level1Config(), VerifyConfig(), Clock(), None, Level1Result())
     assert verifier._shortened(twice).actions == ((0, 0, 1, 0),)
     # a repeated pick that matters stays: B shifted twice along y (15 cm); once ends 7.5 cm off
     goal = execute(X_INIT, [(1, 0, 1, 1), (1, 0, 1, 1)])
     two = verify(StubModel(), X_INIT, goal, [(1, 0, 1, 1), (1, 0, 1, 1)])
-    shifts = Verifier(models(domain), X_INIT, goal, PlanConfig(), PlanResult("bilevel", None), None, [])
+    shifts = Verifier(models(domain), X_INIT, goal, Level1Config(), VerifyConfig(), Clock(), None, Level1Result())
     assert two.verified and shifts._shortened(two) is two
 
 
@@ -565,7 +565,8 @@ def test_from_focus_from_blocks_on_level1_plans_in_the_scene_of_the_objects_the_
     stacked[0, :3] = far[1, :3] + [0, 0, 0.05]
     X5, G5 = np.vstack([X_INIT, far]), np.vstack([X_INIT, stacked])  # block 2 onto block 3, the rest stay
     cfg = with_level1(n_domains=20, focus_from=5)
-    assert level1_scene(X5, G5, cfg) == (2, 3) and level1_scene(X5[:4], G5[:4], cfg) is None
+    assert level1_scene(X5, G5, cfg.level1, cfg.verify) == (2, 3)
+    assert level1_scene(X5[:4], G5[:4], cfg.level1, cfg.verify) is None
     sub = plan("bilevel", models(domain), X5, G5, cfg)
     assert sub.level == 1 and sub.symbolic_stats["objects"] == [2, 3]
     assert [tuple(a)[::2] for a in sub.plan] == [(2, 3)] and goal_error(execute(X5, sub.plan), G5) < 0.05
@@ -575,7 +576,7 @@ def test_from_focus_from_blocks_on_level1_plans_in_the_scene_of_the_objects_the_
     assert whole.level == 1 and whole.symbolic_stats["objects"] is None and whole.plan_scene is None
     assert whole.plan_states is not None and whole.plan_states != sub.plan_states
     both = np.vstack([A_ON_B, stacked])  # two stacks to build: four objects involved
-    assert level1_scene(X5, both, cfg) == (0, 1, 2, 3)
+    assert level1_scene(X5, both, cfg.level1, cfg.verify) == (0, 1, 2, 3)
     over = plan("bilevel", models(domain), X5, both, replace(cfg, level1=replace(cfg.level1, objects=3, serial=False)))
     assert over.level == 2 and not over.candidates and "involves 4 objects" in over.reasons[0]
     assert goal_error(execute(X5, over.plan), both) < 0.05

@@ -13,7 +13,7 @@ from planning_stubs import StubModel, world_step
 
 from tamp.errors import UserError
 from tamp.planning.search import SearchConfig, continuous_search, goal_oriented_actions
-from tamp.planning.verify import goal_error, rollout
+from tamp.planning.verify import VerifyConfig, goal_error, rollout
 
 # three blocks: a large bar 0 and small cubes 1, 2
 X = np.array([[0.55, -0.15, 0.025, 0, 1], [0.7, 0.1, 0.025, 1, 0], [0.8, -0.2, 0.025, 1, 0]])
@@ -153,7 +153,7 @@ def test_a_search_that_must_avoid_an_infeasible_action_finds_another_plan():
 
 
 def out_eps() -> float:
-    return SearchConfig().eps
+    return VerifyConfig().eps
 
 
 class BiasedModel(StubModel):
@@ -181,7 +181,7 @@ def test_a_goal_state_predicted_4_cm_off_waits_for_a_closer_one_of_the_same_leng
     assert first.plan == [(0, -1, 0, 0)]
     closer = continuous_search(model, X, G)
     assert closer.solved and closer.plan == [(0, 0, 0, 1)]
-    assert goal_error(closer.trajectory[-1], G) < SearchConfig().confident
+    assert goal_error(closer.trajectory[-1], G) < VerifyConfig().confident
 
 
 def test_a_shorter_plan_predicted_4_cm_off_beats_longer_exact_ones():
@@ -191,7 +191,7 @@ def test_a_shorter_plan_predicted_4_cm_off_beats_longer_exact_ones():
     assert out.solved and len(out.plan) == 1
     assert 0.03 < goal_error(out.trajectory[-1], G) < 0.05
     with pytest.raises(ValueError, match="confident"):
-        SearchConfig(confident=0.06)
+        VerifyConfig(confident=0.06)
 
 
 def test_paper_pruning_flag_restores_the_papers_rule():

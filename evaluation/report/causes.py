@@ -10,7 +10,7 @@ from pathlib import Path
 from tamp.planning.causes import Cause
 
 from ..format import md_table
-from ..run import row_cause
+from ..row import row_cause
 from .results import Results, Section, _skipped
 
 CAUSE_INFO = {

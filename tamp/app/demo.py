@@ -69,6 +69,7 @@ class DemoResult:
     eps: float  # metres
     replays: list[Path] = field(default_factory=list)
     loop: ClosedLoopResult | None = None  # closed loop (replan): every round and executed action
+    loop_run: ClosedLoopRun | None = None  # closed loop: the run in the world (its steps and motion)
     step_times: list[tuple[float, float]] = field(default_factory=list)  # closed loop: (refine, execute) s
     steps: list[dict] = field(default_factory=list)  # per executed step (tamp.app.steps records)
 
@@ -118,28 +119,42 @@ def run_demo(cfg: DemoConfig = DemoConfig()) -> DemoResult:
     out = DemoResult(problem, result, None, plan_cfg.verify.eps)
 
     timeline = Timeline() if cfg.replay is not None else None
-    if cfg.replan:
-        run = _closed_loop(problem, models, plan_cfg, kinematics, cfg, result, timeline, out.step_times)
-        out.loop, out.steps = run.loop, closed_loop_steps(models, run, names)
-        print_steps(out.steps, blank_line=True)
-        _print_loop_summary(out, cfg)
-        print_cause(out.outcome, dynamics_errors(models, run.loop.states, run.loop.executed, worst=True),
-                    stop_record(run.loop.stop, run.loop.rounds[-1] if run.loop.rounds else None), None,
-                    indent="  ")
-        if timeline is not None:
-            timeline.caption = [f"tamp demo --seed {cfg.seed}: {problem.n} blocks, goal from {problem.k} random "
-                                f"actions, closed loop", _verdict(out)]
-            timeline.show_goal(problem.X_goal)
-            assert cfg.replay is not None  # the timeline exists for it
-            _write_steps(timeline, out, cfg, names)
-            path = timeline.write_html(cfg.replay)
-            out.replays.append(path)
-            print(f"replay written to {path} ({path.stat().st_size / 1e6:.1f} MB): open it in a browser", flush=True)
-        if cfg.candidates:
-            _replay_candidates(out, models, cfg)
-        if cfg.trajectory is not None:
-            write_executed_trajectory(run, cfg.trajectory, _source(cfg))
-        return out
+    episode = _closed_loop_episode if cfg.replan else _open_loop_episode
+    episode(out, models, names, plan_cfg, kinematics, cfg, timeline)
+    if cfg.candidates:
+        _replay_candidates(out, models, cfg)
+    if cfg.trajectory is not None:
+        write_executed_trajectory(out.loop_run if cfg.replan else out.execution, cfg.trajectory, _source(cfg))
+    return out
+
+
+def _closed_loop_episode(out: DemoResult, models, names, plan_cfg: PlanConfig, kinematics: FeasibilityChecker | None,
+                         cfg: DemoConfig, timeline: Timeline | None) -> None:
+    """Execute, observe and plan again until the goal (`_closed_loop`), then the steps, the summary, the
+    cause of a failure and the replay."""
+    problem = out.problem
+    run = _closed_loop(problem, models, plan_cfg, kinematics, cfg, out.result, timeline, out.step_times)
+    out.loop, out.loop_run, out.steps = run.loop, run, closed_loop_steps(models, run, names)
+    print_steps(out.steps, blank_line=True)
+    _print_loop_summary(out, cfg)
+    print_cause(out.outcome, dynamics_errors(models, run.loop.states, run.loop.executed, worst=True),
+                stop_record(run.loop.stop, run.loop.rounds[-1] if run.loop.rounds else None), None,
+                indent="  ")
+    if timeline is not None:
+        timeline.caption = [f"tamp demo --seed {cfg.seed}: {problem.n} blocks, goal from {problem.k} random "
+                            f"actions, closed loop", _verdict(out)]
+        timeline.show_goal(problem.X_goal)
+        assert cfg.replay is not None  # the timeline exists for it
+        _write_steps(timeline, out, cfg, names)
+        path = timeline.write_html(cfg.replay)
+        out.replays.append(path)
+        print(f"replay written to {path} ({path.stat().st_size / 1e6:.1f} MB): open it in a browser", flush=True)
+
+
+def _open_loop_episode(out: DemoResult, models, names, plan_cfg: PlanConfig, kinematics: FeasibilityChecker | None,
+                       cfg: DemoConfig, timeline: Timeline | None) -> None:
+    """Refine and execute the one plan (if any), then the steps, the summary and the replay."""
+    problem, result = out.problem, out.result
     if result.solved:
         assert result.plan is not None  # solved
         what = "the arm under physics" if cfg.fidelity == "full" else "the fast world"
@@ -155,7 +170,6 @@ def run_demo(cfg: DemoConfig = DemoConfig()) -> DemoResult:
         world = World(WorldConfig())
         world.observer = timeline
         world.reset(X=problem.X_init)
-
     _print_summary(out, cfg)
     if timeline is not None:
         assert cfg.replay is not None  # the timeline exists for it
@@ -163,11 +177,6 @@ def run_demo(cfg: DemoConfig = DemoConfig()) -> DemoResult:
                             _verdict(out)]
         _write_steps(timeline, out, cfg, names)
         _write_replay(timeline, problem.X_goal, None if out.execution is None else result.predicted, cfg.replay, out)
-    if cfg.candidates:
-        _replay_candidates(out, models, cfg)
-    if cfg.trajectory is not None:
-        write_executed_trajectory(out.execution, cfg.trajectory, _source(cfg))
-    return out
 
 
 def _source(cfg: DemoConfig) -> str:

@@ -8,22 +8,28 @@
   verified candidate): continuous search. With our extensions (`Level1Config`, docs/beyond-the-paper.md).
 - `plan_bilevel_alg1` (``bilevel_alg1``): the paper's Algorithm 1 exactly, `bilevel` with the extensions off.
 
-The other methods and the registry are in `tamp.planning.methods`, the closed loops in
-`tamp.planning.closed_loop`, the configuration in `tamp.planning.config`.
+Each stage returns its own result (`Level1Result`, `Level2Result`, the kinematic check's record) and
+times itself on the call's `Clock`; the `PlanResult` is assembled from them at the end. The other
+methods and the registry are in `tamp.planning.methods`, the closed loops in `tamp.planning.closed_loop`,
+the configuration in `tamp.planning.config`.
 """
 from __future__ import annotations
 
+import time
 from dataclasses import replace
 from typing import AbstractSet, Sequence
+
+import numpy as np
 
 from tamp.planning.config import PlanConfig
 from tamp.planning.feasibility import Feasibility
 from tamp.planning.level1 import level1, level1_serial
 from tamp.planning.level2 import level2
 from tamp.planning.models import Models
-from tamp.planning.results import PlanResult, take_plan, timed
+from tamp.planning.results import Clock, Level2Result, PlanResult, assemble
+from tamp.planning.search import SearchConfig
 from tamp.planning.structs import KinematicFeasibility
-from tamp.planning.verify import Verification, doubt, fragility
+from tamp.planning.verify import Verification, VerifyConfig, doubt, fragility
 
 
 def plan_bilevel(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig(),
@@ -35,44 +41,48 @@ def plan_bilevel(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig(),
     predicted states and refine, else the next one is tried; Level 2 then prunes infeasible
     successors and the (state, action) pairs that failed refinement, and those of `avoid`
     ((`search.state_key`, action) pairs a closed loop came back from)."""
-    def body(result: PlanResult) -> PlanResult:
-        feas = Feasibility.of(kinematics, cfg, result, avoid)
-        chosen = level1(models, X_init, X_goal, cfg, result, feas)
-        if chosen is None and cfg.level1.serial and cfg.level1.focused(len(X_init)):
-            chosen = level1_serial(models, X_init, X_goal, cfg, result, feas)  # our extension
-        confident = cfg.level1.confident
-        if chosen is not None and confident is not None and chosen.error >= confident:
-            # our extension: verified, but predicted to miss the goal
-            result.reasons.append(f"level 1: its verified plan is predicted {chosen.error * 100:.1f} cm from the "
-                                  f"goal (over {confident * 100:g} cm); kept while level 2 searches")
-        elif chosen is not None and confident is not None and _fragile(models, X_init, X_goal, chosen, cfg):
-            result.reasons.append(f"level 1: its verified plan misses the goal in over {cfg.search.max_fragility:.0%} "
-                                  "of its perturbed rollouts; kept while level 2 searches")
-        elif chosen is not None and _doubtful(models, chosen, cfg):
-            result.reasons.append(f"level 1: a step of its verified plan may miss by over "
-                                  f"{(cfg.search.max_doubt or 0.0) * 100:g} cm (the Dynamics Model's 95 % bound); "
-                                  "kept while level 2 searches")
-        elif chosen is not None:
-            return take_plan(result, chosen.actions, 1, chosen.trajectory, X_goal)
-        result = level2(models, X_init, X_goal, cfg, result, feas)  # line 16: continuous search fallback
-        if result.solved or chosen is None:
-            return result
-        return take_plan(result, chosen.actions, 1, chosen.trajectory, X_goal)
-    return timed("bilevel", body)
+    started, clock = time.perf_counter(), Clock()
+    feas = Feasibility.of(kinematics, cfg.kinematics, clock, cfg.search.resolution, avoid)
+    first = level1(models, X_init, X_goal, cfg.level1, cfg.verify, clock, feas, cfg.search.release_targets)
+    if first.chosen is None and cfg.level1.serial and cfg.level1.focused(len(X_init)):
+        level1_serial(models, X_init, X_goal, cfg.level1, cfg.verify, clock, feas, first,  # our extension
+                      cfg.search.release_targets)
+    chosen = first.chosen
+    waits = None if chosen is None else level1_waits(models, X_init, X_goal, chosen, cfg.level1.confident,
+                                                     cfg.search, cfg.verify)
+    second: Level2Result | None = None
+    if chosen is None or waits is not None:  # line 16: continuous search fallback
+        second = level2(models.require_dynamics(), X_init, X_goal, cfg.search, cfg.verify, clock, started, feas)
+    plan: tuple[Sequence, int, np.ndarray] | None
+    if second is not None and second.plan is not None:
+        assert second.trajectory is not None  # a plan has its predicted states
+        plan = (second.plan, 2, second.trajectory)
+    else:
+        plan = None if chosen is None else (chosen.actions, 1, chosen.trajectory)
+    return assemble("bilevel", X_goal, clock, started, level1=first, level2=second,
+                    reasons=() if waits is None else (waits,), plan=plan,
+                    rejected=None if feas is None else feas.rejected,
+                    refinements=() if feas is None else feas.refinements)
 
 
-def _fragile(models: Models, X_init, X_goal, chosen: Verification, cfg: PlanConfig) -> bool:
-    """Whether more than cfg.search.max_fragility of the plan's perturbed rollouts miss the goal
-    (`verify.fragility`; our extension, the continuous search's test of a goal state)."""
-    limit = cfg.search.max_fragility
-    return limit is not None and bool(chosen.actions) and fragility(
-        models.require_dynamics(), X_init, X_goal, chosen.actions, cfg.verify.eps, cfg.search.noise) > limit
-
-
-def _doubtful(models: Models, chosen: Verification, cfg: PlanConfig) -> bool:
-    """Whether a step of the plan may miss by more than cfg.search.max_doubt (`verify.doubt`; our extension)."""
-    limit = cfg.search.max_doubt
-    return limit is not None and doubt(models.require_dynamics(), chosen.trajectory, chosen.actions) > limit
+def level1_waits(models: Models, X_init, X_goal, chosen: Verification, wait_beyond: float | None,
+                 search: SearchConfig, goal: VerifyConfig) -> str | None:
+    """Why Level 1's verified plan waits while Level 2 searches (our extensions; None: it is taken): predicted
+    `wait_beyond` metres or more from the goal (`Level1Config.confident`), fragile (`verify.fragility`,
+    the continuous search's test of a goal state; both off with `wait_beyond` None, as in the paper) or doubtful
+    (a step's 95 % bound, `verify.doubt`)."""
+    if wait_beyond is not None and chosen.error >= wait_beyond:
+        return (f"level 1: its verified plan is predicted {chosen.error * 100:.1f} cm from the goal "
+                f"(over {wait_beyond * 100:g} cm); kept while level 2 searches")
+    model = models.require_dynamics()
+    if wait_beyond is not None and search.max_fragility is not None and chosen.actions and fragility(
+            model, X_init, X_goal, chosen.actions, goal.eps, search.noise) > search.max_fragility:
+        return (f"level 1: its verified plan misses the goal in over {search.max_fragility:.0%} of its perturbed "
+                "rollouts; kept while level 2 searches")
+    if search.max_doubt is not None and doubt(model, chosen.trajectory, chosen.actions) > search.max_doubt:
+        return (f"level 1: a step of its verified plan may miss by over {search.max_doubt * 100:g} cm (the Dynamics "
+                "Model's 95 % bound); kept while level 2 searches")
+    return None
 
 
 def plan_bilevel_alg1(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig(),
@@ -91,4 +101,4 @@ def plan_bilevel_alg1(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConf
     return result
 
 
-__all__: Sequence[str] = ["plan_bilevel", "plan_bilevel_alg1"]
+__all__: Sequence[str] = ["level1_waits", "plan_bilevel", "plan_bilevel_alg1"]

@@ -29,6 +29,9 @@ from dataclasses import dataclass
 from enum import StrEnum
 from typing import TYPE_CHECKING, Sequence
 
+from tamp.planning.search import SearchStatus
+from tamp.planning.structs import LoopStop, Outcome
+
 if TYPE_CHECKING:
     from tamp.planning.results import PlanResult
 
@@ -56,7 +59,7 @@ class Failure:
     outcome: str  # tamp.planning.structs.Outcome value
     step_miss_m: Sequence[float] = ()  # per executed action: the worst block's distance from its prediction
     predicted_error_m: float | None = None  # the last plan taken: predicted distance to the goal
-    loop: str | None = None  # closed loop: `ClosedLoopResult.stop`; None: open loop
+    loop: str | None = None  # closed loop: `ClosedLoopResult.stop` (a LoopStop value); None: open loop
     search: str | None = None  # the last planning call's continuous search status (None: it did not search)
     rejected: int = 0  # kinematic rejections of the last planning call (check and refinement)
     refine_failure: dict | None = None  # the first action that could not be carried out (stage, where, reason)
@@ -82,15 +85,15 @@ def cause_of(outcome: str, step_miss_m: Sequence[float] | None, stop: dict | Non
 
 def failure_cause(f: Failure) -> tuple[Cause, str] | None:
     """The cause of a failed run and a sentence that says it; None for a success."""
-    if f.outcome == "success":
+    if f.outcome == Outcome.SUCCESS:
         return None
-    if f.loop in ("budget",):
+    if f.loop == LoopStop.BUDGET:
         return Cause.OUT_OF_ROUNDS, "the closed loop used up its action or search budget without reaching the goal"
-    if f.outcome in ("kinematic_failure", "refinement_failure") and f.refine_failure is not None:
+    if f.outcome in (Outcome.KINEMATIC_FAILURE, Outcome.REFINEMENT_FAILURE) and f.refine_failure is not None:
         r = f.refine_failure
         return Cause.EXECUTION, (f"action {r.get('action')} could not be carried out at execution "
                                  f"({r.get('stage')}{', ' + r['where'] if r.get('where') else ''})")
-    if f.outcome == "no_plan" or f.loop in ("no_plan", "empty_plan"):
+    if f.outcome == Outcome.NO_PLAN or f.loop in (LoopStop.NO_PLAN, LoopStop.EMPTY_PLAN):
         return _no_plan(f)
     misses = list(f.step_miss_m or ())
     worst = max(range(len(misses)), key=lambda i: misses[i]) if misses else None
@@ -100,22 +103,22 @@ def failure_cause(f: Failure) -> tuple[Cause, str] | None:
     if f.predicted_error_m is not None and f.predicted_error_m >= AIMED:
         return Cause.AIMED_NEAR_TOLERANCE, (f"the plan was predicted {f.predicted_error_m * 100:.1f} cm from the "
                                             f"goal; its steps landed within {MISS * 100:g} cm of their predictions")
-    if f.loop == "rounds":
+    if f.loop == LoopStop.ROUNDS:
         return Cause.OUT_OF_ROUNDS, "the closed loop used up its replanning rounds"
     return Cause.SMALL_ERRORS, f"every step landed within {MISS * 100:g} cm of its prediction; the errors added up"
 
 
 def _no_plan(f: Failure) -> tuple[Cause, str]:
     after = " (after executed actions)" if f.loop is not None and f.step_miss_m else ""
-    if f.loop == "empty_plan":
+    if f.loop == LoopStop.EMPTY_PLAN:
         return Cause.EMPTY_PLAN, "the planner returned no action while a block was off its goal" + after
-    if f.search in ("node_limit", "time_limit"):
+    if f.search in (SearchStatus.NODE_LIMIT, SearchStatus.TIME_LIMIT):
         return Cause.SEARCH_BUDGET, f"the continuous search reached its {f.search.replace('_', ' ')}{after}"
-    if f.search == "stalled":
+    if f.search == SearchStatus.STALLED:
         return Cause.SEARCH_BUDGET, f"the continuous search stopped coming closer to the goal{after}"
     if f.search is None and f.loop is None:
         return Cause.NO_SYMBOLIC_PLAN, "no symbolic plan reaches the goal's symbols"
-    if f.search == "refinement_budget" or f.rejected:
+    if f.search == SearchStatus.REFINEMENT_BUDGET or f.rejected:
         return Cause.KINEMATICS, ("every plan or successor found was rejected by the kinematic check or failed "
                                   f"refinement ({f.rejected} rejections){after}")
     return Cause.PRUNED, f"the search ran out of actions to try (pruning, plan depth){after}"

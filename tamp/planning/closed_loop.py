@@ -22,16 +22,18 @@ Two loops share one round (plan, or keep the rest of the last plan while it is o
   leaves out the actions it took from there, which would start the same cycle again in a deterministic world.
 
 Keeping a plan (`LoopConfig.keep_plan`, our extension, both loops): a round keeps the rest of the last
-plan when it refines and still ends within `search.confident` of the goal: as the plan predicted, if
+plan when it refines and still ends within `verify.confident` of the goal: as the plan predicted, if
 the observed state is where the plan predicted it (every block within `LoopConfig.on_course`), else
 rolled out from the observed state; only otherwise does it plan again, so a plan on course is not
 traded for another one. The loop that does not know k keeps a plan on course while its own prediction
 still ends within eps (the plan was taken by that prediction, and the world is doing what it said);
-when that end is over `search.confident` it plans again, and a new plan replaces the kept one only if
+when that end is over `verify.confident` it plans again, and a new plan replaces the kept one only if
 it is predicted closer to the goal.
 """
 from __future__ import annotations
 
+import itertools
+import time
 from collections import Counter
 from dataclasses import dataclass, replace
 from typing import Callable, Sequence
@@ -42,9 +44,9 @@ from tamp.planning.config import PlanConfig
 from tamp.planning.feasibility import Feasibility
 from tamp.planning.methods import KEEPING_METHODS, plan, plan_cfs
 from tamp.planning.models import Models
-from tamp.planning.results import Candidate, PlanResult, take_plan, timed
+from tamp.planning.results import Candidate, Clock, PlanResult, assemble, take_plan
 from tamp.planning.search import SearchResult, state_key
-from tamp.planning.structs import KinematicFeasibility, Outcome, PickPlace
+from tamp.planning.structs import KinematicFeasibility, LoopStop, Outcome, PickPlace
 from tamp.planning.verify import Verification, at_goal, goal_error, goal_errors, verify
 
 
@@ -56,8 +58,7 @@ class ClosedLoopResult:
     X_goal: np.ndarray
     eps: float
     reason: str = ""
-    stop: str = ""  # how the loop ended: "goal", "no_plan", "empty_plan", "rounds" (the paper's loop ran its
-    #   k - 1 rounds) or "budget" (`LoopConfig.max_actions` or `.search_budget` used up)
+    stop: LoopStop | None = None  # how the loop ended
 
     @property
     def X_final(self) -> np.ndarray:
@@ -72,6 +73,16 @@ class ClosedLoopResult:
     def success(self) -> bool:
         return self.error < self.eps
 
+    def end(self, stop: LoopStop, reason: str) -> ClosedLoopResult:
+        self.stop, self.reason = stop, reason
+        return self
+
+    def execute(self, actions: Sequence[PickPlace], step: Callable[[PickPlace], np.ndarray]) -> None:
+        """Send `actions` to the world one by one, observing the state after each."""
+        for action in actions:
+            self.executed.append(action)
+            self.states.append(np.asarray(step(action), dtype=float))
+
 
 def loop_outcome(loop: ClosedLoopResult) -> Outcome:
     """A closed loop's outcome, judged by where it ended: success, no plan (nothing executed) or wrong plan."""
@@ -80,14 +91,17 @@ def loop_outcome(loop: ClosedLoopResult) -> Outcome:
     return Outcome.NO_PLAN if not loop.executed else Outcome.WRONG_PLAN
 
 
-def plan_closed_loop(method: str, models: Models, X_init, X_goal,
-                     step: Callable[[PickPlace], np.ndarray], rounds: int | None,
+Step = Callable[[PickPlace], np.ndarray]  # executes one action in the world, returns the observed (n, 5) state
+
+
+def plan_closed_loop(method: str, models: Models, X_init, X_goal, step: Step, rounds: int | None,
                      cfg: PlanConfig = PlanConfig(),
                      on_round: Callable[[int, PlanResult], None] | None = None,
                      planner: Callable[..., PlanResult] | None = None,
                      kinematics: KinematicFeasibility | None = None) -> ClosedLoopResult:
     """Plan, execute, observe, plan again; see the module doc. `rounds`: the paper's loop with that many
-    replanning rounds (k - 1, `replan_rounds`); None: the loop that does not know k (cfg.loop).
+    replanning rounds (k - 1, `replan_rounds`: `paper_loop`); None: the loop that does not know k
+    (`loop_until_goal`, cfg.loop).
 
     `step(action)` executes one action in the real (simulated) world and returns the observed (n, 5)
     state; `on_round(r, result)` is called after each planning call, before anything is executed.
@@ -95,64 +109,95 @@ def plan_closed_loop(method: str, models: Models, X_init, X_goal,
     `kinematics` is passed to every planning call; `step` must let it observe the new scene
     (`FeasibilityChecker.observe`), since only the simulator knows the blocks' orientations.
     """
-    X_goal = np.asarray(X_goal, dtype=float)
-    out = ClosedLoopResult([], [], [np.asarray(X_init, dtype=float)], X_goal, cfg.verify.eps)
-    until_goal = rounds is None
-    budget = cfg.loop.search_budget_for(len(X_goal), cfg.search.greedy_from)
-    cfg = replace(cfg, loop=replace(cfg.loop, search_budget=budget))  # this scene's: read below as search_budget
-    r, spent = 0, 0  # spent: continuous-search expansions of every round so far
-    while True:
-        X = out.states[-1]
-        if at_goal(X, X_goal, cfg.verify.eps):
-            out.reason, out.stop = "the observed state is within eps of the goal", "goal"
-            break
-        if until_goal and len(out.executed) >= cfg.loop.max_actions:
-            out.reason, out.stop = (f"{cfg.loop.max_actions} actions sent without reaching the goal "
-                                    f"(the loop's action budget)"), "budget"
-            break
-        if until_goal and spent >= cfg.loop.search_budget:
-            out.reason, out.stop = (f"{spent} search expansions spent without reaching the goal (the loop's "
-                                    f"search budget)"), "budget"
-            break
-        avoid = revisits(out, cfg) if until_goal else frozenset()
-        round_cfg = _within(cfg, cfg.search.max_expansions, spent) if until_goal else cfg
-        result = _round(method, models, X, X_goal, out, round_cfg, planner, kinematics, avoid, until_goal)
+    if rounds is None:
+        return loop_until_goal(method, models, X_init, X_goal, step, cfg, on_round, planner, kinematics)
+    return paper_loop(method, models, X_init, X_goal, step, rounds, cfg, on_round, planner, kinematics)
+
+
+def paper_loop(method: str, models: Models, X_init, X_goal, step: Step, rounds: int, cfg: PlanConfig = PlanConfig(),
+               on_round: Callable[[int, PlanResult], None] | None = None,
+               planner: Callable[..., PlanResult] | None = None,
+               kinematics: KinematicFeasibility | None = None) -> ClosedLoopResult:
+    """The paper's replanning (`bilevel_replan`, Table IV): plan, execute the first action, observe, plan
+    again, for `rounds` replanning rounds; the last plan is executed to its end."""
+    out = ClosedLoopResult([], [], [np.asarray(X_init, dtype=float)], np.asarray(X_goal, dtype=float), cfg.verify.eps)
+    for r in range(rounds + 1):
+        if at_goal(out.X_final, out.X_goal, cfg.verify.eps):
+            return out.end(LoopStop.GOAL, "the observed state is within eps of the goal")
+        result = _round(method, models, out.X_final, out.X_goal, out, cfg, planner, kinematics)
+        ended = _planned(out, r, result, on_round)
+        if ended is not None:
+            return ended
+        assert result.plan is not None  # `_planned` ended the loop otherwise
+        if r == rounds:
+            out.execute(result.plan, step)
+            return out.end(LoopStop.ROUNDS, f"executed the plan of round {r} to its end (no replanning rounds left)")
+        out.execute(result.plan[:1], step)
+    raise AssertionError("the last round executes its plan to its end")
+
+
+def loop_until_goal(method: str, models: Models, X_init, X_goal, step: Step, cfg: PlanConfig = PlanConfig(),
+                    on_round: Callable[[int, PlanResult], None] | None = None,
+                    planner: Callable[..., PlanResult] | None = None,
+                    kinematics: KinematicFeasibility | None = None) -> ClosedLoopResult:
+    """The loop that does not know k (`bilevel_loop`): one action a round until the goal, within the action
+    and search budgets of cfg.loop; a round without a plan widens its search, else steps toward the closest
+    state its searches found; actions that led back to an observed state are left out (`revisits`)."""
+    out = ClosedLoopResult([], [], [np.asarray(X_init, dtype=float)], np.asarray(X_goal, dtype=float), cfg.verify.eps)
+    budget = cfg.loop.search_budget_for(len(out.X_goal), cfg.search.greedy_from)
+    spent = 0  # continuous-search expansions of every round so far
+    for r in itertools.count():
+        X = out.X_final
+        if at_goal(X, out.X_goal, cfg.verify.eps):
+            return out.end(LoopStop.GOAL, "the observed state is within eps of the goal")
+        if len(out.executed) >= cfg.loop.max_actions:
+            return out.end(LoopStop.BUDGET, f"{cfg.loop.max_actions} actions sent without reaching the goal "
+                                            f"(the loop's action budget)")
+        if spent >= budget:
+            return out.end(LoopStop.BUDGET, f"{spent} search expansions spent without reaching the goal (the "
+                                            f"loop's search budget)")
+        avoid = revisits(out, cfg)
+        result = _round(method, models, X, out.X_goal, out, _within(cfg, cfg.search.max_expansions, budget - spent),
+                        planner, kinematics, avoid, until_goal=True)
         spent += _expanded(result)
-        if until_goal and cfg.loop.widen and not (result.solved and result.plan):
-            if spent < cfg.loop.search_budget:
-                result = widened_search(method, models, X, X_goal, _within(cfg, cfg.loop.widen_expansions, spent),
-                                        kinematics, result, avoid)
+        if cfg.loop.widen and not (result.solved and result.plan):
+            if spent < budget:
+                result = widened_search(method, models, X, out.X_goal,
+                                        _within(cfg, cfg.loop.widen_expansions, budget - spent), kinematics, result,
+                                        avoid)
                 spent += _expanded(result)
             else:  # no budget left to widen: what the round's search found may still bring the blocks closer
-                result = toward_closest(X, X_goal, cfg, result, [result.search])
-        out.rounds.append(result)
-        if on_round is not None:
-            on_round(r, result)
-        if not result.solved:
-            out_of_budget = until_goal and spent >= cfg.loop.search_budget
-            out.reason = f"round {r}: no plan ({'; '.join(result.reasons)})" + (
-                f"; the loop's search budget ({cfg.loop.search_budget} expansions) is spent" if out_of_budget else "")
-            out.stop = "budget" if out_of_budget else "no_plan"
-            break
-        if not result.plan:
-            out.reason, out.stop = f"round {r}: the planner returned an empty plan", "empty_plan"
-            break
-        last = not until_goal and r == rounds
-        for action in (result.plan if last else result.plan[:1]):
-            out.executed.append(action)
-            out.states.append(np.asarray(step(action), dtype=float))
-        if last:
-            out.reason, out.stop = f"executed the plan of round {r} to its end (no replanning rounds left)", "rounds"
-            break
-        r += 1
-    return out
+                result = toward_closest(X, out.X_goal, cfg, result, [result.search])
+        ended = _planned(out, r, result, on_round, budget if spent >= budget else None)
+        if ended is not None:
+            return ended
+        assert result.plan is not None  # `_planned` ended the loop otherwise
+        out.execute(result.plan[:1], step)
+    raise AssertionError("unreachable")
 
 
-def _within(cfg: PlanConfig, expansions: int, spent: int) -> PlanConfig:
-    """cfg with a continuous search of at most `expansions` nodes, and no more than the loop's search budget
-    has left after `spent`, stalling after cfg.loop.stall expansions at any number of blocks (if set; else the
+def _planned(out: ClosedLoopResult, r: int, result: PlanResult, on_round: Callable[[int, PlanResult], None] | None,
+             spent_budget: int | None = None) -> ClosedLoopResult | None:
+    """Record round r's plan; the loop's end if the round found no plan or an empty one (None: go on).
+    `spent_budget`: the search budget the loop has spent, if it has."""
+    out.rounds.append(result)
+    if on_round is not None:
+        on_round(r, result)
+    if not result.solved:
+        reason = f"round {r}: no plan ({'; '.join(result.reasons)})"
+        if spent_budget is not None:
+            return out.end(LoopStop.BUDGET, reason + f"; the loop's search budget ({spent_budget} expansions) is spent")
+        return out.end(LoopStop.NO_PLAN, reason)
+    if not result.plan:
+        return out.end(LoopStop.EMPTY_PLAN, f"round {r}: the planner returned an empty plan")
+    return None
+
+
+def _within(cfg: PlanConfig, expansions: int, left: int) -> PlanConfig:
+    """cfg with a continuous search of at most `expansions` nodes, and no more than the `left` expansions of the
+    loop's search budget, stalling after cfg.loop.stall expansions at any number of blocks (if set; else the
     search's own `stall` and `greedy_stall`)."""
-    allowed = max(1, min(expansions, cfg.loop.search_budget - spent))
+    allowed = max(1, min(expansions, left))
     search = replace(cfg.search, max_expansions=allowed)
     if cfg.loop.stall is not None:
         search = replace(search, stall=cfg.loop.stall, greedy_stall=cfg.loop.stall)
@@ -188,7 +233,7 @@ def _round(method: str, models: Models, X: np.ndarray, X_goal: np.ndarray, out: 
     kept = keep_rest(models, X, X_goal, out.rounds[-1], cfg, kinematics, avoid,
                      cfg.verify.eps if until_goal else None) if keep else None
     kept_error = kept.predicted_error if kept is not None and kept.solved else None
-    marginal = until_goal and kept_error is not None and kept_error >= cfg.search.confident
+    marginal = until_goal and kept_error is not None and kept_error >= cfg.verify.confident
     if kept is not None and kept.solved and not marginal:
         return kept
     if marginal:  # a search for a plan aimed closer than one that already predicts success: no longer than a widening
@@ -199,7 +244,7 @@ def _round(method: str, models: Models, X: np.ndarray, X_goal: np.ndarray, out: 
         new_error = result.predicted_error if result.solved and result.plan else None
         if new_error is not None and new_error < kept_error:
             kept.reasons = [f"keep: the rest of the last plan ends {kept_error * 100:.1f} cm from the goal "
-                            f"(over {cfg.search.confident * 100:g} cm); a new plan aims closer"]
+                            f"(over {cfg.verify.confident * 100:g} cm); a new plan aims closer"]
         else:
             _absorb(kept, result, "planned")
             kept.search = result.search  # the round's search: its expansions count against the loop's budget
@@ -284,7 +329,7 @@ def keep_rest(models: Models, X: np.ndarray, X_goal: np.ndarray, last: PlanResul
               kinematics: KinematicFeasibility | None = None, avoid: frozenset = frozenset(),
               on_course_within: float | None = None) -> PlanResult:
     """The rest of `last` (its first action executed) as this round's plan, if it ends within
-    cfg.search.confident of X_goal as `last` predicted it, when the observed state X is within
+    cfg.verify.confident of X_goal as `last` predicted it, when the observed state X is within
     cfg.loop.on_course of that prediction (or within `on_course_within`, if given: the loop that does not
     know k keeps a plan on course while it still predicts success, cfg.verify.eps), or rolled out from X
     otherwise; and, with `kinematics` (and cfg.kinematics.feasibility), it passes the check and refines.
@@ -292,43 +337,46 @@ def keep_rest(models: Models, X: np.ndarray, X_goal: np.ndarray, last: PlanResul
     the last plan's level."""
     rest = list(last.plan or [])[1:]
     level = last.level or 2
+    started, clock = time.perf_counter(), Clock()
+    reasons: list[str] = []
 
-    def body(result: PlanResult) -> PlanResult:
-        if not rest:
-            result.reasons.append("keep: the last plan has no actions left")
-            return result
-        v: Verification | None = None
-        deviation = off_course(X, last)
-        if cfg.loop.on_course is not None and deviation <= cfg.loop.on_course:  # the plan's own prediction of the rest
-            assert last.predicted is not None  # a finite deviation needs the prediction
-            trajectory = np.concatenate([np.asarray(X, dtype=float)[None], last.predicted[2:]])
-            planned = Verification(tuple(tuple(int(a) for a in action) for action in rest), trajectory,
-                                   goal_errors(trajectory[-1], X_goal), cfg.verify.tau_verify)
-            if planned.error < (cfg.search.confident if on_course_within is None else on_course_within):
-                v, kept_by = planned, "on course"
-                why = f"on course (every block within {deviation * 100:.1f} cm of its predicted place), " \
-                      f"predicted {v.error * 100:.1f} cm from the goal"
-        if v is None:  # off course: a new rollout from the observed state
-            v = verify(models.require_dynamics(), X, X_goal, rest, cfg.verify.tau_verify)
-            if v.error >= cfg.search.confident:
-                result.reasons.append(f"keep: the rest of the last plan is predicted {v.error * 100:.1f} cm from "
-                                      f"the goal from the observed state (over {cfg.search.confident * 100:g} cm)")
-                return result
-            kept_by, why = "rollout", f"predicted {v.error * 100:.1f} cm from the goal from the observed state"
-        feas = Feasibility.of(kinematics, cfg, result, avoid)
-        if feas is not None and (feas.plan(v.trajectory, v.actions) is not None
-                                 or not feas.refine(level, v.trajectory, v.actions).success):
-            result.reasons.append("keep: the rest of the last plan is not kinematically feasible from here")
-            return result
-        states = last.plan_states
-        if states is not None:  # the same symbolic path from the next state on (the per-step view)
-            result.candidates = [Candidate(v.actions, 0, 0.0, v.error, True, states=states[1:],
-                                           objects=last.plan_scene)]
-        result.reasons.append(f"kept the rest of the last plan: {why}")
-        result.kept_by = kept_by
-        return take_plan(result, v.actions, level, v.trajectory, X_goal)
+    def without_plan(why: str, feas: Feasibility | None = None) -> PlanResult:
+        return assemble(last.method, X_goal, clock, started, reasons=[*reasons, why],
+                        rejected=None if feas is None else feas.rejected,
+                        refinements=() if feas is None else feas.refinements)
 
-    return timed(last.method, body)
+    if not rest:
+        return without_plan("keep: the last plan has no actions left")
+    v: Verification | None = None
+    deviation = off_course(X, last)
+    if cfg.loop.on_course is not None and deviation <= cfg.loop.on_course:  # the plan's own prediction of the rest
+        assert last.predicted is not None  # a finite deviation needs the prediction
+        trajectory = np.concatenate([np.asarray(X, dtype=float)[None], last.predicted[2:]])
+        planned = Verification(tuple(tuple(int(a) for a in action) for action in rest), trajectory,
+                               goal_errors(trajectory[-1], X_goal), cfg.verify.tau_verify)
+        if planned.error < (cfg.verify.confident if on_course_within is None else on_course_within):
+            v, kept_by = planned, "on course"
+            why = f"on course (every block within {deviation * 100:.1f} cm of its predicted place), " \
+                  f"predicted {v.error * 100:.1f} cm from the goal"
+    if v is None:  # off course: a new rollout from the observed state
+        v = verify(models.require_dynamics(), X, X_goal, rest, cfg.verify.tau_verify)
+        if v.error >= cfg.verify.confident:
+            return without_plan(f"keep: the rest of the last plan is predicted {v.error * 100:.1f} cm from the goal "
+                                f"from the observed state (over {cfg.verify.confident * 100:g} cm)")
+        kept_by, why = "rollout", f"predicted {v.error * 100:.1f} cm from the goal from the observed state"
+    feas = Feasibility.of(kinematics, cfg.kinematics, clock, cfg.search.resolution, avoid)
+    if feas is not None and (feas.plan(v.trajectory, v.actions) is not None
+                             or not feas.refine(level, v.trajectory, v.actions).success):
+        return without_plan("keep: the rest of the last plan is not kinematically feasible from here", feas)
+    reasons.append(f"kept the rest of the last plan: {why}")
+    result = assemble(last.method, X_goal, clock, started, reasons=reasons, plan=(v.actions, level, v.trajectory),
+                      rejected=None if feas is None else feas.rejected,
+                      refinements=() if feas is None else feas.refinements)
+    states = last.plan_states
+    if states is not None:  # the same symbolic path from the next state on (the per-step view)
+        result.candidates = [Candidate(v.actions, 0, 0.0, v.error, True, states=states[1:], objects=last.plan_scene)]
+    result.kept_by = kept_by
+    return result
 
 
 def replan_rounds(k: int | None, default: int = 4) -> int:
@@ -336,5 +384,6 @@ def replan_rounds(k: int | None, default: int = 4) -> int:
     return default if k is None else max(k - 1, 0)
 
 
-__all__: Sequence[str] = ["ClosedLoopResult", "keep_rest", "loop_outcome", "off_course", "plan_closed_loop",
+__all__: Sequence[str] = ["ClosedLoopResult", "keep_rest", "loop_outcome", "loop_until_goal", "off_course",
+                          "paper_loop", "plan_closed_loop",
                           "replan_rounds", "toward_closest", "widened_search"]

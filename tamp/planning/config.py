@@ -2,6 +2,10 @@
 
     PlanConfig(level1=Level1Config(seed=7), kinematics=KinematicsConfig(feasibility=False))
 
+Each stage receives its own part and `VerifyConfig`, what counts as the goal (the one owner of the
+tolerances every stage tests against: tau, eps, a confident goal state, a misplaced block); only the
+planners that compose the stages (`tamp.planning.bilevel`, `.methods`, `.closed_loop`) hold the whole.
+
 Each option's comment says what it does and why its default, in a line; the measurements behind the
 defaults are in docs/beyond-the-paper.md and BUILD_NOTES.md. `tamp plan`, `tamp demo` and `tamp
 evaluate` take their flags from these fields (`tamp.app.planner_flags.PLANNER_FLAGS`; a test checks
@@ -13,7 +17,7 @@ from dataclasses import dataclass, replace
 
 from tamp.errors import UserError
 from tamp.planning.search import SearchConfig
-from tamp.planning.verify import EPS_SUCCESS, TAU_VERIFY
+from tamp.planning.verify import EPS_SUCCESS, VerifyConfig
 
 SYMBOLIC_BACKENDS = ("python", "fd", "fd-naive")  # in-process search; Fast Downward, batched or one call per domain
 
@@ -80,17 +84,6 @@ class Level1Config:
 
 
 @dataclass(frozen=True)
-class VerifyConfig:
-    """When a predicted state counts as the goal: for verifying a plan, and for success."""
-
-    tau_verify: float = TAU_VERIFY  # metres: Level 1 takes a plan whose rollout ends this close (the paper's)
-    eps: float = EPS_SUCCESS  # metres: success tolerance (the search's goal test, the closed loop, evaluation)
-
-    def __post_init__(self) -> None:
-        _positive("VerifyConfig", tau_verify=self.tau_verify, eps=self.eps)
-
-
-@dataclass(frozen=True)
 class KinematicsConfig:
     """Kinematics in the planning loop (cfs, bilevel; needs a `kinematics` object passed to `plan`)."""
 
@@ -102,7 +95,7 @@ class KinematicsConfig:
 class LoopConfig:
     """The closed loops (`tamp.planning.closed_loop`): keeping a plan (both), and the loop that does not know k."""
 
-    keep_plan: bool = True  # keep the rest of the last plan while it ends within search.confident and refines
+    keep_plan: bool = True  # keep the rest of the last plan while it ends within verify.confident and refines
     on_course: float | None = 0.015  # metres: blocks this close to the plan's prediction: its own prediction
     #   decides, not a rollout that swings under mm changes (3 sigmas of the fragility test's noise; None: rollout)
     max_actions: int = 12  # actions sent before the loop gives up: k <= 5 needs 5, the rest is room to recover

@@ -5,41 +5,44 @@ checker in `tamp.sim.feasibility`), so this module imports no Drake.
 """
 from __future__ import annotations
 
-import time
 from collections import Counter
 from typing import AbstractSet, Sequence
 
 import numpy as np
 
-from tamp.planning.config import PlanConfig
-from tamp.planning.results import PlanResult
+from tamp.planning.config import KinematicsConfig
+from tamp.planning.results import Clock
 from tamp.planning.search import state_key
 from tamp.planning.structs import Infeasible, KinematicFeasibility, RefinementOutcome
 from tamp.planning.verify import Verification
 
 
 class Feasibility:
-    """The kinematic check and refinement of one planning call: results cached per (state, action),
-    rejections counted per level and reason, time and refinement budget tracked."""
+    """The kinematic check and refinement of one planning call, and its record: results cached per (state,
+    action), rejections counted per level and reason (`rejected`), every full refinement (`refinements`),
+    time on the call's clock ("feasibility", "refine") and the refinement budget.
 
-    def __init__(self, kinematics: KinematicFeasibility, cfg: PlanConfig, result: PlanResult,
+    `resolution` (metres) is the grid of the (state, action) keys, the continuous search's (`state_key`), so
+    that `avoid` and the pairs it prunes name the search's states."""
+
+    def __init__(self, kinematics: KinematicFeasibility, config: KinematicsConfig, clock: Clock, resolution: float,
                  avoid: AbstractSet[tuple[bytes, tuple]] = frozenset()) -> None:
-        self.kinematics, self.cfg, self.result = kinematics, cfg, result
-        self.resolution = cfg.search.resolution
+        self.kinematics, self.config, self.clock, self.resolution = kinematics, config, clock, resolution
         # (state key, action) known to fail: the closed loop's revisits (`avoid`), then failed refinements
         self.cache: dict[tuple[bytes, tuple], Infeasible | None] = {key: Infeasible.REVISIT for key in avoid}
         self.pruned: set[tuple[bytes, tuple]] = set(avoid)
         self.rejected: dict[int, Counter] = {1: Counter(), 2: Counter()}
-        result.rejected = self.rejected
-        result.timings.setdefault("feasibility", 0.0)
-        result.timings.setdefault("refine", 0.0)
+        self.refinements: list[dict] = []  # level, plan, outcome of each full refinement
+        for stage in ("feasibility", "refine"):
+            clock.seconds.setdefault(stage, 0.0)
 
     @classmethod
-    def of(cls, kinematics: KinematicFeasibility | None, cfg: PlanConfig, result: PlanResult,
+    def of(cls, kinematics: KinematicFeasibility | None, config: KinematicsConfig, clock: Clock, resolution: float,
            avoid: AbstractSet[tuple[bytes, tuple]] = frozenset()) -> "Feasibility | None":
         """The feasibility of a planning call, or None when it is off (no kinematics, or
-        cfg.kinematics.feasibility False)."""
-        return cls(kinematics, cfg, result, avoid) if kinematics is not None and cfg.kinematics.feasibility else None
+        config.feasibility False)."""
+        return cls(kinematics, config, clock, resolution, avoid) if kinematics is not None and config.feasibility \
+            else None
 
     def action(self, X: np.ndarray, action) -> Infeasible | None:
         """The check of one action in the predicted state X (cached)."""
@@ -48,9 +51,8 @@ class Feasibility:
         if key in self.pruned:
             return self.cache.get(key) or Infeasible.REFINE_MOTION
         if key not in self.cache:
-            t = time.perf_counter()
-            self.cache[key] = self.kinematics.check(X, np.asarray([action], dtype=np.int64))[0]
-            self.result.timings["feasibility"] += time.perf_counter() - t
+            with self.clock.stage("feasibility"):
+                self.cache[key] = self.kinematics.check(X, np.asarray([action], dtype=np.int64))[0]
         return self.cache[key]
 
     def plan(self, trajectory: np.ndarray, actions) -> Infeasible | None:
@@ -63,14 +65,13 @@ class Feasibility:
 
     @property
     def refinements_left(self) -> int:
-        return self.cfg.kinematics.max_refinements - len(self.result.refinements)
+        return self.config.max_refinements - len(self.refinements)
 
     def refine(self, level: int, trajectory: np.ndarray, actions) -> RefinementOutcome:
         """Full refinement; a failure prunes its (predicted state, action) for the rest of the call."""
-        t = time.perf_counter()
-        outcome = self.kinematics.refine([tuple(int(v) for v in a) for a in actions], trajectory)
-        self.result.timings["refine"] += time.perf_counter() - t
-        self.result.refinements.append({"level": level, "plan": [list(map(int, a)) for a in actions],
+        with self.clock.stage("refine"):
+            outcome = self.kinematics.refine([tuple(int(v) for v in a) for a in actions], trajectory)
+        self.refinements.append({"level": level, "plan": [list(map(int, a)) for a in actions],
                                         "failed_action": outcome.action_index,
                                         "reason": None if outcome.reason is None else outcome.reason.value,
                                         "message": outcome.message})

@@ -1,7 +1,7 @@
 """Level 1 of Algorithm 1 (lines 4-14) and, beside it, our extensions to it.
 
     `level1` (lines 4-14):
-      Sigma_init, Sigma_goal -> plans of N sampled domains, by frequency   lines 5-7    `level1_plans`
+      Sigma_init, Sigma_goal -> plans of N sampled domains, by frequency   lines 5-7    `symbolic_plans`
       for each plan, in decreasing order of probability                    line 9
           roll it out with the Dynamics Model: within tau of X_goal?       lines 10-11  `Verifier.check`
           the first verified plan is Level 1's                             line 12
@@ -18,38 +18,46 @@ plan cut where it reaches the goal (`cut`); kinematics (`feas`) before a verifie
 """
 from __future__ import annotations
 
-import time
 from typing import Callable, Sequence
 
 import numpy as np
 
-from tamp.planning.config import PlanConfig
+from tamp.planning.config import Level1Config
 from tamp.planning.feasibility import Feasibility, feasible_choice
 from tamp.planning.models import Models
-from tamp.planning.results import LEVEL1_STAGES, Candidate, PlanResult
+from tamp.planning.results import Candidate, Clock, Level1Result, reasons_json
 from tamp.planning.search import goal_oriented_actions, misplaced_objects
-from tamp.planning.verify import Verification, goal_error, refine_skeleton, verify, verify_many, without_repicks
+from tamp.planning.verify import (
+    Verification,
+    VerifyConfig,
+    goal_error,
+    refine_skeleton,
+    verify,
+    verify_many,
+    without_repicks,
+)
 
 
 # --- Algorithm 1, lines 4-14 -------------------------------------------------------------------
-def level1(models: Models, X_init, X_goal, cfg: PlanConfig, result: PlanResult,
-           feas: Feasibility | None) -> Verification | None:
+def level1(models: Models, X_init, X_goal, config: Level1Config, goal: VerifyConfig, clock: Clock,
+           feas: Feasibility | None, release_targets: bool = True) -> Level1Result:
     """Level 1 of Algorithm 1 (lines 4-14): Sigma_init, Sigma_goal -> plans of N sampled domains, ranked
-    by frequency -> the first plan whose Dynamics Model rollout ends within tau of X_goal.
+    by frequency -> the first plan whose Dynamics Model rollout ends within tau of X_goal (`chosen`).
 
-    The plans are verified as the search settles their place (cfg.level1.settle, module docstring).
-    Our extensions: from cfg.level1.focus_from objects on, Sigma is read on the sub-scene of the objects the
-    goal involves (`level1_scene`; none when they are more than cfg.level1.objects); and in
-    `Verifier.check`, a ranked plan is verified together with the plans through the same symbolic
-    states (`cfg.level1.alternatives`), and a verified plan must pass the kinematic check and refine (`feas`)."""
-    t = time.perf_counter()
-    objects = level1_scene(X_init, X_goal, cfg)  # our extension; None: every object, as the paper plans
-    if objects is not None and cfg.level1.objects is not None and len(objects) > cfg.level1.objects:
-        result.timings["symbols"] = time.perf_counter() - t
-        result.reasons.append(f"level 1: the goal involves {len(objects)} objects, more than the "
-                              f"{cfg.level1.objects} of the scenes it plans in (--level1-objects)")
-        return None
-    verifier = Verifier(models, X_init, X_goal, cfg, result, feas, [])
+    The plans are verified as the search settles their place (config.settle, module docstring).
+    Our extensions: from config.focus_from objects on, Sigma is read on the sub-scene of the objects the
+    goal involves (`level1_scene`, by the continuous search's pruning with `release_targets`; none when they
+    are more than config.objects); and in `Verifier.check`, a ranked plan is verified together with the plans
+    through the same symbolic states (`config.alternatives`), and a verified plan must pass the kinematic
+    check and refine (`feas`)."""
+    record = Level1Result()
+    with clock.stage("symbols"):
+        objects = level1_scene(X_init, X_goal, config, goal, release_targets)  # None: every object, as the paper
+    if objects is not None and config.objects is not None and len(objects) > config.objects:
+        record.reasons.append(f"level 1: the goal involves {len(objects)} objects, more than the "
+                              f"{config.objects} of the scenes it plans in (--level1-objects)")
+        return record
+    verifier = Verifier(models, X_init, X_goal, config, goal, clock, feas, record)
 
     def verify_settled(plans: list[Candidate]) -> bool:
         """Plans whose place in the ranking is final, as the search settles them: verified now, and the
@@ -57,18 +65,19 @@ def level1(models: Models, X_init, X_goal, cfg: PlanConfig, result: PlanResult,
         verifier.ranked += plans
         return verifier.run()
 
-    settle = verify_settled if cfg.level1.settle and not cfg.level1.verify_all else None
-    verifier.ranked = level1_plans(models, X_init, X_goal, cfg, result, objects=objects, on_settled=settle)  # 5-7
+    settle = verify_settled if config.settle and not config.verify_all else None
+    verifier.ranked = symbolic_plans(models, X_init, X_goal, config, goal, clock, record, objects=objects,
+                                     on_settled=settle)  # lines 5-7
     verifier.run()  # line 9: in decreasing order of probability, lines 10-12
     verifier.finish()
-    return verifier.chosen
+    return record
 
 
-def symbolic_problem(models: Models, X_init: np.ndarray, X_goal: np.ndarray, cfg: PlanConfig,
-                     objects: tuple[int, ...] | None = None):
+def symbolic_problem(models: Models, X_init: np.ndarray, X_goal: np.ndarray, config: Level1Config,
+                     goal: VerifyConfig, objects: tuple[int, ...] | None = None):
     """Sigma_init, Sigma_goal of the scene, or of the sub-scene of `objects` (`level1_scene`); with
-    cfg.level1.nonempty, the empty plan is ruled out when it cannot verify (X_init itself is not within tau
-    of X_goal although the symbols may agree); from cfg.level1.focus_from objects on, plans may pick up only
+    config.nonempty, the empty plan is ruled out when it cannot verify (X_init itself is not within tau
+    of X_goal although the symbols may agree); from config.focus_from objects on, plans may pick up only
     the blocks off their goal."""
     from symbolic import make_problem
 
@@ -78,56 +87,52 @@ def symbolic_problem(models: Models, X_init: np.ndarray, X_goal: np.ndarray, cfg
     ui, ri = models.symbolic.symbols(X_init[scene])
     ug, rg = models.symbolic.symbols(X_goal[scene])
     movable = None
-    if cfg.level1.focused(len(X_init)):
-        wrong = misplaced_objects(X_init, X_goal, cfg.search.misplaced, cfg.search.eps).tolist()
+    if config.focused(len(X_init)):
+        wrong = misplaced_objects(X_init, X_goal, goal.misplaced, goal.eps).tolist()
         movable = (wrong if objects is None else [objects.index(o) for o in wrong]) or None
-    nonempty = cfg.level1.nonempty and goal_error(X_init, X_goal) >= cfg.verify.tau_verify
+    nonempty = config.nonempty and goal_error(X_init, X_goal) >= goal.tau_verify
     return make_problem(ui, ri, ug, rg, nonempty=nonempty, movable=movable)
 
 
-def level1_plans(models: Models, X_init, X_goal, cfg: PlanConfig, result: PlanResult,
-                 probabilistic: bool = True, objects: tuple[int, ...] | None = None,
-                 on_settled: Callable[[list[Candidate]], bool] | None = None) -> list[Candidate]:
+def symbolic_plans(models: Models, X_init, X_goal, config: Level1Config, goal: VerifyConfig, clock: Clock,
+                   record: Level1Result, probabilistic: bool = True, objects: tuple[int, ...] | None = None,
+                   on_settled: Callable[[list[Candidate]], bool] | None = None) -> list[Candidate]:
     """Symbolic candidates, best first, their actions on the whole scene (planned in the sub-scene of
-    `objects` if given); failures go to result.reasons (prefixed 'level 1'). `on_settled` (python
-    backend): given the candidates as their place in the ranking becomes final, during the search;
-    True ends the search, and only the candidates given are returned
-    (`SymbolicPlanner.plan_probabilistic`; result.symbolic_stats["settled"]: how many, None: all)."""
-    t = time.perf_counter()
-    try:
-        planner = models.symbolic_planner(cfg.level1.backend, cfg.level1.symbolic_time_limit)
-        problem = symbolic_problem(models, X_init, X_goal, cfg, objects)
-    except ValueError as error:
-        result.reasons.append(f"level 1: {error}")
-        return []
-    finally:
-        result.timings["symbols"] = time.perf_counter() - t
-    t = time.perf_counter()
+    `objects` if given); the planner's figures go to record.symbolic_stats, failures to record.reasons
+    (prefixed 'level 1'). `on_settled` (python backend): given the candidates as their place in the ranking
+    becomes final, during the search; True ends the search, and only the candidates given are returned
+    (`SymbolicPlanner.plan_probabilistic`; symbolic_stats["settled"]: how many, None: all)."""
+    with clock.stage("symbols"):
+        try:
+            planner = models.symbolic_planner(config.backend, config.symbolic_time_limit)
+            problem = symbolic_problem(models, X_init, X_goal, config, goal, objects)
+        except ValueError as error:
+            record.reasons.append(f"level 1: {error}")
+            return []
 
     def candidate(p) -> Candidate:
         return Candidate(in_scene(p.actions, objects), p.count, p.probability, states=p.states, objects=objects)
 
     if probabilistic:
-        out = planner.plan_probabilistic(problem, n_domains=cfg.level1.n_domains, seed=cfg.level1.seed,
-                                         time_budget=cfg.level1.time_budget,
-                                         budget=cfg.level1.budget_for(len(X_init)),
-                                         on_settled=None if on_settled is None else
-                                         lambda plans: on_settled([candidate(p) for p in plans]))
-        result.timings["symbolic"] = time.perf_counter() - t - out.timings.get("elsewhere", 0.0)
-        result.symbolic_stats = {"n_domains": out.n_domains, "unique_plans": len(out.plans), "settled": out.settled,
+        with clock.stage("symbolic"):
+            out = planner.plan_probabilistic(problem, n_domains=config.n_domains, seed=config.seed,
+                                             time_budget=config.time_budget, budget=config.budget_for(len(X_init)),
+                                             on_settled=None if on_settled is None else
+                                             lambda plans: on_settled([candidate(p) for p in plans]))
+        record.symbolic_stats = {"n_domains": out.n_domains, "unique_plans": len(out.plans), "settled": out.settled,
                                  "outcomes": dict(out.statuses), "expanded": out.expanded,
                                  "generated": out.generated, "movable": problem.movable,
                                  "objects": None if objects is None else list(objects),
                                  "timings": {k: round(v, 6) for k, v in out.timings.items()}}
         if not out.plans:
-            result.reasons.append(f"level 1: no symbolic plan in any of the {out.n_domains} sampled domains "
+            record.reasons.append(f"level 1: no symbolic plan in any of the {out.n_domains} sampled domains "
                                   f"(outcomes: {dict(out.statuses)})")
         return [candidate(p) for p in out.plans]
-    out = planner.plan_deterministic(problem)
-    result.timings["symbolic"] = time.perf_counter() - t
-    result.symbolic_stats = {"outcome": out.status.value}
+    with clock.stage("symbolic"):
+        out = planner.plan_deterministic(problem)
+    record.symbolic_stats = {"outcome": out.status.value}
     if not out.solved:
-        result.reasons.append(f"level 1: no plan in the deterministic domain ({out.status.value}: {out.message})")
+        record.reasons.append(f"level 1: no plan in the deterministic domain ({out.status.value}: {out.message})")
         return []
     from symbolic import steps_to_actions
 
@@ -138,55 +143,51 @@ def level1_plans(models: Models, X_init, X_goal, cfg: PlanConfig, result: PlanRe
 
 
 class Verifier:
-    """Verification of Level 1's ranked plans (Alg. 1, lines 9-14) with our extensions, and its record.
+    """Verification of Level 1's ranked plans (Alg. 1, lines 9-14) with our extensions, into `record`.
 
     - The ranked plans' own rollouts are computed in growing chunks (1, 2, 4, ... plans), all prefixes
       of one length in one forward pass (`verify_many`): the same numbers as one plan at a time.
-    - Alternatives (cfg.level1.alternatives > 0, states known): the best plans of a beam search over the
+    - Alternatives (config.alternatives > 0, states known): the best plans of a beam search over the
       plan's skeleton (`refine_skeleton`), whose rollouts verify them; the group's verified plans are
       tried smallest predicted error first.
     - Kinematics (`feas`): a verified plan is taken only if it passes the check and refines.
     """
 
-    def __init__(self, models: Models, X_init, X_goal, cfg: PlanConfig, result: PlanResult,
-                 feas: Feasibility | None, ranked: list[Candidate]):
-        self.models, self.X_init, self.X_goal, self.cfg, self.result, self.feas, self.ranked = \
-            models, X_init, X_goal, cfg, result, feas, ranked
+    def __init__(self, models: Models, X_init, X_goal, config: Level1Config, goal: VerifyConfig, clock: Clock,
+                 feas: Feasibility | None, record: Level1Result):
+        self.models, self.X_init, self.X_goal, self.config, self.goal = models, X_init, X_goal, config, goal
+        self.clock, self.feas, self.record = clock, feas, record
+        self.ranked: list[Candidate] = []
         self.model = models.require_dynamics()
         self.checked: list[Candidate] = []  # verified so far: ranked plans and their alternatives
-        self.chosen: Verification | None = None
         self.any_verified = False
-        self.alternatives_left = cfg.level1.alternatives_total
+        self.alternatives_left = config.alternatives_total
         self._rollouts: dict[int, Verification] = {}
         self._done = 0  # ranked plans checked
-        self._seconds = 0.0  # spent in `run`
         self._ended = False  # a plan taken, or no refinement left
 
     def run(self) -> bool:
         """Check the ranked plans not checked yet, in order, until one is taken (Alg. 1, line 12) or no
         full refinement is left; True when no more need checking."""
-        t = time.perf_counter()
-        try:
-            while not self._ended and self._done < len(self.ranked):
+        while not self._ended and self._done < len(self.ranked):
+            with self.clock.stage("verify"):
                 self.check(self._done)
-                self._ended = (self.chosen is not None and not self.cfg.level1.verify_all) or \
-                    self.refinements_used_up()
-            return self._ended
-        finally:
-            self._seconds += time.perf_counter() - t
+            self._ended = (self.record.chosen is not None and not self.config.verify_all) or \
+                self.refinements_used_up()
+        return self._ended
 
     def refinements_used_up(self) -> bool:
         """True (and the reason recorded) when no plan is chosen and no full refinement is left."""
-        if self.feas is None or self.feas.refinements_left > 0 or self.chosen is not None:
+        if self.feas is None or self.feas.refinements_left > 0 or self.record.chosen is not None:
             return False
-        self.result.reasons.append(f"level 1: refinement budget ({self.cfg.kinematics.max_refinements}) used up")
+        self.record.reasons.append(f"level 1: refinement budget ({self.feas.config.max_refinements}) used up")
         return True
 
     def _rollout(self, i: int) -> Verification:
         if i not in self._rollouts:
             chunk = self.ranked[i: i + max(1, len(self._rollouts))]
             for j, v in enumerate(verify_many(self.model, self.X_init, self.X_goal, [c.actions for c in chunk],
-                                              self.cfg.verify.tau_verify)):
+                                              self.goal.tau_verify)):
                 self._rollouts[i + j] = v
         return self._rollouts[i]
 
@@ -196,14 +197,14 @@ class Verifier:
         self._done += 1
         group: list[Candidate] = [candidate]
         checks: list[Verification] = []
-        limit = min(self.cfg.level1.alternatives, self.alternatives_left)
+        limit = min(self.config.alternatives, self.alternatives_left)
         if limit > 0 and candidate.states is not None and candidate.actions:
-            planner = self.models.symbolic_planner(self.cfg.level1.backend, self.cfg.level1.symbolic_time_limit)
+            planner = self.models.symbolic_planner(self.config.backend, self.config.symbolic_time_limit)
             objects = candidate.objects
             options = [list(in_scene(step, objects)) for step in planner.skeleton_options(
                 len(self.X_init) if objects is None else len(objects), candidate.states)]
             best, own = refine_skeleton(self.model, self.X_init, self.X_goal, options, limit + 1,
-                                        self.cfg.verify.tau_verify, also=candidate.actions)
+                                        self.goal.tau_verify, also=candidate.actions)
             assert own is not None  # `also` given
             alternatives = [v for v in best if v.actions != candidate.actions][:limit]
             self.alternatives_left -= len(alternatives)
@@ -216,68 +217,63 @@ class Verifier:
             c.error, c.verified = v.error, v.verified
         self.checked += group
         verified = [v for v in checks if v.verified]
-        if self.cfg.level1.cut:
+        if self.config.cut:
             verified = [self._shortened(v) for v in verified]
         verified.sort(key=lambda v: v.error)
         self.any_verified = self.any_verified or bool(verified)
-        if self.chosen is None:
-            self.chosen = feasible_choice(verified, self.feas)
+        if self.record.chosen is None:
+            self.record.chosen = feasible_choice(verified, self.feas)
 
     def _shortened(self, v: Verification) -> Verification:
         """`v` cut where it reaches the goal, then without the picks the next action repeats if that
-        plan is predicted within search.confident of the goal or no farther than `v` (cfg.level1.cut)."""
-        v = v.cut(self.X_goal, self.cfg.search.confident)
+        plan is predicted within goal.confident of the goal or no farther than `v` (config.cut)."""
+        v = v.cut(self.X_goal, self.goal.confident)
         shorter = without_repicks(v.actions)
         if len(shorter) == len(v.actions):
             return v
-        w = verify(self.model, self.X_init, self.X_goal, shorter, self.cfg.verify.tau_verify)
-        return w if w.verified and (w.error < self.cfg.search.confident or w.error <= v.error) else v
+        w = verify(self.model, self.X_init, self.X_goal, shorter, self.goal.tau_verify)
+        return w if w.verified and (w.error < self.goal.confident or w.error <= v.error) else v
 
     def finish(self) -> None:
-        """Record the candidates (checked ones, then the rest), the verification time and, without a
-        chosen plan, why."""
-        result, feas, ranked = self.result, self.feas, self.ranked
-        result.candidates = self.checked + ranked[self._done:]
-        if ranked:
-            result.timings["verify"] = self._seconds - (
-                0.0 if feas is None else result.timings["feasibility"] + result.timings["refine"])
-        if self.chosen is not None or not ranked:
+        """Record the candidates (checked ones, then the rest) and, without a chosen plan, why."""
+        record, feas, ranked = self.record, self.feas, self.ranked
+        record.candidates = self.checked + ranked[self._done:]
+        if record.chosen is not None or not ranked:
             return
         if self.any_verified and feas is not None:
-            rejected = result.rejected_dict()
-            assert rejected is not None  # counted while feasibility is on
-            result.reasons.append(f"level 1: no verified plan was kinematically feasible "
-                                  f"(rejected: {rejected['level 1']})")
+            record.reasons.append(f"level 1: no verified plan was kinematically feasible "
+                                  f"(rejected: {reasons_json(feas.rejected[1])})")
             return
         best = min(c.error for c in self.checked if c.error is not None)
         alts = sum(c.alternative_of is not None for c in self.checked)
-        result.reasons.append(f"level 1: none of the {len(ranked)} symbolic plans verified"
+        record.reasons.append(f"level 1: none of the {len(ranked)} symbolic plans verified"
                               + (f" (nor {alts} alternatives through the same symbols)" if alts else "")
                               + f" (best predicted error {best * 100:.1f} cm, "
-                                 f"tau {self.cfg.verify.tau_verify * 100:g} cm)")
+                                f"tau {self.goal.tau_verify * 100:g} cm)")
 
 
-def verify_candidate(models: Models, X_init, X_goal, candidate: Candidate, cfg: PlanConfig) -> Verification:
+def verify_candidate(models: Models, X_init, X_goal, candidate: Candidate, goal: VerifyConfig) -> Verification:
     """Verify one candidate alone (its error and verdict recorded on it); the baselines report it."""
-    v = verify(models.require_dynamics(), X_init, X_goal, candidate.actions, cfg.verify.tau_verify)
+    v = verify(models.require_dynamics(), X_init, X_goal, candidate.actions, goal.tau_verify)
     candidate.error, candidate.verified = v.error, v.verified
     return v
 
 
 # --- our extensions: the goal's sub-scene, one block at a time ---------------------------------
-def level1_scene(X_init: np.ndarray, X_goal: np.ndarray, cfg: PlanConfig) -> tuple[int, ...] | None:
+def level1_scene(X_init: np.ndarray, X_goal: np.ndarray, config: Level1Config, goal: VerifyConfig,
+                 release_targets: bool = True) -> tuple[int, ...] | None:
     """The objects Level 1 plans over (our extension, `Level1Config.objects`); None: every object.
 
-    From cfg.level1.focus_from objects on: the objects of the continuous search's pruned actions in X_init
-    (`search.goal_oriented_actions`), i.e. the blocks off their goal and, for each, the objects it
-    would be placed on. The Symbolic Model then sees a scene of the size it was trained on, and the
-    symbols of blocks that play no part cannot make Sigma_goal unreachable; the Dynamics Model
-    verifies the plans in the whole scene. With more than cfg.level1.objects, Level 1 plans only one
-    block at a time (`level1_serial`)."""
-    if cfg.level1.objects is None or not cfg.level1.focused(len(X_init)):
+    From config.focus_from objects on: the objects of the continuous search's pruned actions in X_init
+    (`search.goal_oriented_actions`, with or without `release_targets`), i.e. the blocks off their goal
+    and, for each, the objects it would be placed on. The Symbolic Model then sees a scene of the size it
+    was trained on, and the symbols of blocks that play no part cannot make Sigma_goal unreachable; the
+    Dynamics Model verifies the plans in the whole scene. With more than config.objects, Level 1 plans
+    only one block at a time (`level1_serial`)."""
+    if config.objects is None or not config.focused(len(X_init)):
         return None
-    actions = goal_oriented_actions(np.asarray(X_init), np.asarray(X_goal), cfg.search.misplaced, cfg.verify.eps,
-                                    cfg.search.release_targets)
+    actions = goal_oriented_actions(np.asarray(X_init), np.asarray(X_goal), goal.misplaced, goal.eps,
+                                    release_targets)
     return tuple(int(o) for o in np.unique(actions[:, [0, 2]]))
 
 
@@ -288,23 +284,24 @@ def in_scene(actions, objects: tuple[int, ...] | None) -> tuple[tuple[int, int, 
     return tuple((objects[i], int(g), objects[j], int(r)) for i, g, j, r in actions)
 
 
-def level1_serial(models: Models, X_init, X_goal, cfg: PlanConfig, result: PlanResult,
-                  feas: Feasibility | None) -> Verification | None:
-    """Level 1 one misplaced block at a time (our extension, `Level1Config.serial`).
+def level1_serial(models: Models, X_init, X_goal, config: Level1Config, goal: VerifyConfig, clock: Clock,
+                  feas: Feasibility | None, record: Level1Result, release_targets: bool = True) -> None:
+    """Level 1 one misplaced block at a time (our extension, `Level1Config.serial`), into `record` (Level 1's,
+    which gave no plan): its chosen plan, the joined plan as a candidate, why not.
 
     Stage by stage, from the state the plan so far is predicted to reach: for the misplaced blocks
     left, lowest goal first (a support before what stands on it), Level 1 plans to put that block at
     its goal and leave the others where they are (its sub-scene: the block and the objects it would
-    be placed on, `level1_scene`); the first block with a plan predicted within cfg.verify.eps of that
+    be placed on, `level1_scene`); the first block with a plan predicted within goal.eps of that
     sub-goal is the stage's. The plans are joined and verified against X_goal in the whole scene,
-    then checked and refined as one. None (with the reason) when a stage places no block or the
+    then checked and refined as one. No plan (with the reason) when a stage places no block or the
     joined plan does not verify. Each stage plans in a scene of two or three objects, where the
     symbols the models learned on 2-4 blocks are reliable, however many objects the whole goal involves."""
     X_init, X_goal = np.asarray(X_init, dtype=float), np.asarray(X_goal, dtype=float)
-    left = sorted(misplaced_objects(X_init, X_goal, cfg.search.misplaced, cfg.search.eps).tolist(),
+    left = sorted(misplaced_objects(X_init, X_goal, goal.misplaced, goal.eps).tolist(),
                   key=lambda i: (X_goal[i, 2], i))
     if len(left) < 2:
-        return None  # one block: the sub-scene plan above was this plan
+        return  # one block: the sub-scene plan above was this plan
     X = X_init
     actions: list[tuple[int, int, int, int]] = []
     stages: list[int] = []  # the blocks placed, in order
@@ -312,35 +309,30 @@ def level1_serial(models: Models, X_init, X_goal, cfg: PlanConfig, result: PlanR
         for block in left:
             sub_goal = X.copy()
             sub_goal[block, :3] = X_goal[block, :3]
-            stage = PlanResult(result.method, None)
-            v = level1(models, X, sub_goal, cfg, stage, None)
-            for key in LEVEL1_STAGES:  # Level 1's time, every stage counted
-                result.timings[key] = result.timings.get(key, 0.0) + stage.timings.get(key, 0.0)
-            if v is not None and v.error < cfg.verify.eps:
+            v = level1(models, X, sub_goal, config, goal, clock, None, release_targets).chosen  # time counted
+            if v is not None and v.error < goal.eps:
                 break
         else:
-            result.reasons.append(f"level 1, one block at a time: no plan places any of blocks {left} after "
+            record.reasons.append(f"level 1, one block at a time: no plan places any of blocks {left} after "
                                   f"{len(stages)} placed ({stages})")
-            result.symbolic_stats["serial"] = {"placed": stages, "left": left}
-            return None
+            record.symbolic_stats["serial"] = {"placed": stages, "left": left}
+            return
         stages.append(block)
         left.remove(block)
         actions += v.actions
         X = v.trajectory[-1]
-    t = time.perf_counter()
-    whole = verify(models.require_dynamics(), X_init, X_goal, actions, cfg.verify.tau_verify)
-    result.timings["verify"] += time.perf_counter() - t
-    result.symbolic_stats["serial"] = {"placed": stages, "left": [], "error_m": round(whole.error, 6)}
-    result.candidates.append(Candidate(whole.actions, 0, 0.0, whole.error, whole.verified, stages=tuple(stages)))
+    with clock.stage("verify"):
+        whole = verify(models.require_dynamics(), X_init, X_goal, actions, goal.tau_verify)
+    record.symbolic_stats["serial"] = {"placed": stages, "left": [], "error_m": round(whole.error, 6)}
+    record.candidates.append(Candidate(whole.actions, 0, 0.0, whole.error, whole.verified, stages=tuple(stages)))
     if not whole.verified:
-        result.reasons.append(f"level 1, one block at a time: the joined plan is predicted {whole.error * 100:.1f} "
-                              f"cm from the goal (tau {cfg.verify.tau_verify * 100:g} cm)")
-        return None
-    chosen = feasible_choice([whole], feas)
-    if chosen is None:
-        result.reasons.append("level 1, one block at a time: the joined plan is not kinematically feasible")
-    return chosen
+        record.reasons.append(f"level 1, one block at a time: the joined plan is predicted {whole.error * 100:.1f} "
+                              f"cm from the goal (tau {goal.tau_verify * 100:g} cm)")
+        return
+    record.chosen = feasible_choice([whole], feas)
+    if record.chosen is None:
+        record.reasons.append("level 1, one block at a time: the joined plan is not kinematically feasible")
 
 
-__all__: Sequence[str] = ["Verifier", "in_scene", "level1", "level1_plans", "level1_scene", "level1_serial",
+__all__: Sequence[str] = ["Verifier", "in_scene", "level1", "level1_scene", "level1_serial", "symbolic_plans",
                           "symbolic_problem", "verify_candidate"]

@@ -18,10 +18,10 @@ from typing import AbstractSet, Callable, Sequence
 from tamp.planning.bilevel import plan_bilevel, plan_bilevel_alg1
 from tamp.planning.config import PlanConfig
 from tamp.planning.feasibility import Feasibility
-from tamp.planning.level1 import level1_plans, verify_candidate
+from tamp.planning.level1 import symbolic_plans, verify_candidate
 from tamp.planning.level2 import level2
 from tamp.planning.models import Models
-from tamp.planning.results import PlanResult, take_plan, timed
+from tamp.planning.results import Clock, Level1Result, PlanResult, assemble
 from tamp.planning.structs import KinematicFeasibility
 from tamp.planning.validate import check_problem
 from tamp.planning.verify import states_pair
@@ -30,16 +30,14 @@ from tamp.planning.verify import states_pair
 def _symbolic_only(method: str, probabilistic: bool):
     def run(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig(),
             kinematics: KinematicFeasibility | None = None) -> PlanResult:
-        def body(result: PlanResult) -> PlanResult:
-            any_plan = replace(cfg, level1=replace(cfg.level1, nonempty=False))
-            result.candidates = level1_plans(models, X_init, X_goal, any_plan, result, probabilistic)
-            if not result.candidates:
-                return result
-            t = time.perf_counter()
-            v = verify_candidate(models, X_init, X_goal, result.candidates[0], cfg)  # reported, not used
-            result.timings["verify"] = time.perf_counter() - t
-            return take_plan(result, v.actions, 1, v.trajectory, X_goal)
-        return timed(method, body)
+        started, clock, record = time.perf_counter(), Clock(), Level1Result()
+        any_plan = replace(cfg.level1, nonempty=False)
+        record.candidates = symbolic_plans(models, X_init, X_goal, any_plan, cfg.verify, clock, record, probabilistic)
+        if not record.candidates:
+            return assemble(method, X_goal, clock, started, level1=record)
+        with clock.stage("verify"):
+            v = verify_candidate(models, X_init, X_goal, record.candidates[0], cfg.verify)  # reported, not used
+        return assemble(method, X_goal, clock, started, level1=record, plan=(v.actions, 1, v.trajectory))
     run.__doc__ = f"The {method} symbolic planner alone (top plan, unverified; `kinematics` is ignored)."
     return run
 
@@ -54,10 +52,13 @@ def plan_cfs(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig(),
     """Continuous forward search alone; with `kinematics` (and cfg.kinematics.feasibility) infeasible successors
     are pruned, as are the pairs of `avoid` (see `plan_bilevel`), and the plan is refined before it is
     returned."""
-    def body(result: PlanResult) -> PlanResult:
-        feas = Feasibility.of(kinematics, cfg, result, avoid)
-        return level2(models, X_init, X_goal, cfg, result, feas)
-    return timed("cfs", body)
+    started, clock = time.perf_counter(), Clock()
+    feas = Feasibility.of(kinematics, cfg.kinematics, clock, cfg.search.resolution, avoid)
+    found = level2(models.require_dynamics(), X_init, X_goal, cfg.search, cfg.verify, clock, started, feas)
+    plan = None if found.plan is None or found.trajectory is None else (found.plan, 2, found.trajectory)
+    return assemble("cfs", X_goal, clock, started, level2=found, plan=plan,
+                    rejected=None if feas is None else feas.rejected,
+                    refinements=() if feas is None else feas.refinements)
 
 
 Planner = Callable[..., PlanResult]  # (models, X_init, X_goal, cfg, kinematics=None) -> PlanResult

@@ -1,18 +1,57 @@
-"""What a planning call returns: `PlanResult`, with Level 1's `Candidate` plans, and the helpers that fill it."""
+"""What the planner's stages return and what a planning call assembles from them.
+
+`Level1Result` (Level 1), `Level2Result` (the continuous search), the kinematic check's record
+(`tamp.planning.feasibility.Feasibility`) and the `Clock` every stage times itself with; `PlanResult`
+is built from them at the end of a planning call (`assemble`), with Level 1's `Candidate` plans.
+"""
 from __future__ import annotations
 
 import time
 from collections import Counter
+from contextlib import contextmanager
 from dataclasses import dataclass, field
-from typing import Callable, Sequence
+from typing import Callable, Iterator, Sequence
 
 import numpy as np
 
 from tamp.planning.search import SearchResult
 from tamp.planning.structs import Infeasible, PickPlace
-from tamp.planning.verify import goal_error
+from tamp.planning.verify import Verification, goal_error
 
 LEVEL1_STAGES = ("symbols", "symbolic", "verify")  # the `PlanResult.timings` keys that make up Level 1's time
+
+
+class Clock:
+    """Seconds per stage of one planning call. A stage opened inside another pauses it, so each stage's
+    time is its own (the search's without the refinements it waits for, Level 1's verification without
+    the kinematic check): no stage subtracts another's time."""
+
+    def __init__(self) -> None:
+        self.seconds: dict[str, float] = {}
+        self._open: list[list] = []  # [stage, perf_counter() since when it runs], innermost last
+
+    @contextmanager
+    def stage(self, name: str) -> Iterator[None]:
+        now = time.perf_counter()
+        if self._open:
+            self._charge(self._open[-1], now)
+        self._open.append([name, now])
+        try:
+            yield
+        finally:
+            end = time.perf_counter()
+            self._charge(self._open.pop(), end)
+            if self._open:
+                self._open[-1][1] = end
+
+    def _charge(self, running: list, now: float) -> None:
+        self.seconds[running[0]] = self.seconds.get(running[0], 0.0) + now - running[1]
+        running[1] = now
+
+    def add(self, other: dict[str, float]) -> None:
+        """Count another call's stage times in this one's."""
+        for name, seconds in other.items():
+            self.seconds[name] = self.seconds.get(name, 0.0) + seconds
 
 
 @dataclass
@@ -30,6 +69,28 @@ class Candidate:
     #   indices (`level1_scene`); None: all objects
     stages: tuple[int, ...] | None = None  # a plan joined one block at a time (`level1_serial`): the blocks
     #   its stages placed, in order (count 0: no sampled domain gave it whole)
+
+
+@dataclass
+class Level1Result:
+    """What Level 1 gives a planning call: its chosen plan (verified, and feasible when kinematics is on), the
+    candidates it ranked and verified, the symbolic planner's figures, and why it gave no plan."""
+
+    chosen: Verification | None = None
+    candidates: list[Candidate] = field(default_factory=list)
+    symbolic_stats: dict = field(default_factory=dict)  # domains, unique plans, planner outcomes
+    reasons: list[str] = field(default_factory=list)
+
+
+@dataclass
+class Level2Result:
+    """What the continuous search gives a planning call: the plan (None: none) with its predicted states,
+    the search's record (its counters summed over searches again after failed refinements), and why not."""
+
+    search: SearchResult | None = None
+    plan: list[tuple[int, int, int, int]] | None = None
+    trajectory: np.ndarray | None = None
+    reasons: list[str] = field(default_factory=list)
 
 
 @dataclass
@@ -52,7 +113,6 @@ class PlanResult:
     #   anew, judged by the plan's own prediction ("on course") or by a rollout from the observed state ("rollout")
     widened: bool = False  # closed loop: the plan of a search over every action, after the planner found none
     toward: bool = False  # closed loop, widened: no plan reaches the goal; the path to the closest state found
-    started: float = field(default_factory=time.perf_counter)  # time.perf_counter() when the planning call began
 
     @property
     def solved(self) -> bool:
@@ -103,8 +163,7 @@ class PlanResult:
         """`rejected` with string keys (JSON): {"level 1": {"no_grasp": 3, ...}, "level 2": {...}}."""
         if self.rejected is None:
             return None
-        return {f"level {lvl}": {r.value if isinstance(r, Infeasible) else str(r): int(c) for r, c in sorted(
-            counts.items(), key=lambda rc: str(rc[0]))} for lvl, counts in sorted(self.rejected.items())}
+        return {f"level {lvl}": reasons_json(counts) for lvl, counts in sorted(self.rejected.items())}
 
     def to_dict(self) -> dict:
         return {"method": self.method, "solved": self.solved, "level": self.level,
@@ -123,10 +182,35 @@ class PlanResult:
                 "kept_by": self.kept_by, "widened": self.widened, "toward": self.toward}
 
 
+def reasons_json(counts: Counter) -> dict[str, int]:
+    """Rejections counted by reason, with string keys in a fixed order (JSON, messages)."""
+    return {r.value if isinstance(r, Infeasible) else str(r): int(c)
+            for r, c in sorted(counts.items(), key=lambda rc: str(rc[0]))}
+
+
 def take_plan(result: PlanResult, actions, level: int, predicted: np.ndarray, X_goal) -> PlanResult:
     """Set `actions` as the result's plan, from `level`, with its predicted states (their last one's goal error)."""
     result.plan, result.level, result.predicted = [PickPlace(*a) for a in actions], level, predicted
     result.predicted_error = goal_error(predicted[-1], X_goal)
+    return result
+
+
+def assemble(method: str, X_goal, clock: Clock, started: float, *, level1: Level1Result | None = None,
+             level2: Level2Result | None = None, reasons: Sequence[str] = (),
+             plan: tuple[Sequence, int, np.ndarray] | None = None, rejected: dict[int, Counter] | None = None,
+             refinements: Sequence[dict] = ()) -> PlanResult:
+    """The PlanResult of a planning call begun at `started` (time.perf_counter()), from its stages' results:
+    Level 1's candidates, figures and reasons, then `reasons` (the planner's own), then Level 2's; `plan` as
+    (actions, level, predicted states), None: no plan; the kinematic check's `rejected` and `refinements`."""
+    result = PlanResult(method, None, candidates=[] if level1 is None else level1.candidates,
+                        search=None if level2 is None else level2.search, timings=dict(clock.seconds),
+                        reasons=[*([] if level1 is None else level1.reasons), *reasons,
+                                 *([] if level2 is None else level2.reasons)],
+                        symbolic_stats={} if level1 is None else level1.symbolic_stats, rejected=rejected,
+                        refinements=list(refinements))
+    if plan is not None:
+        take_plan(result, *plan, X_goal)
+    result.timings["total"] = time.perf_counter() - started
     return result
 
 
@@ -138,4 +222,5 @@ def timed(method: str, body: Callable[[PlanResult], PlanResult]) -> PlanResult:
     return result
 
 
-__all__: Sequence[str] = ["Candidate", "LEVEL1_STAGES", "PlanResult", "take_plan", "timed"]
+__all__: Sequence[str] = ["Candidate", "Clock", "LEVEL1_STAGES", "Level1Result", "Level2Result", "PlanResult",
+                          "assemble", "reasons_json", "take_plan", "timed"]

@@ -59,7 +59,7 @@ import numpy as np
 
 from tamp.errors import UserError
 from tamp.planning.structs import OFFSET_STEP, OFFSETS
-from tamp.planning.verify import EPS_SUCCESS, DynamicsModel, doubt, fragility, states_pair
+from tamp.planning.verify import EPS_SUCCESS, DynamicsModel, VerifyConfig, doubt, fragility, states_pair
 
 _PAIRS = np.array([(g, r) for g in OFFSETS for r in OFFSETS], dtype=np.int64)  # the 9 offset pairs
 # metres: where a placed block's centre ends relative to its target object's, (r - g) * OFFSET_STEP along y
@@ -68,6 +68,8 @@ _RELEASE_SHIFTS = np.array([(0.0, s * OFFSET_STEP) for s in range(-2, 3)])
 
 @dataclass(frozen=True)
 class SearchConfig:
+    """Level 2's own settings; what counts as the goal (eps, confident, misplaced) is `VerifyConfig`'s."""
+
     weight: float = 1.5  # w in f = g + w h
     # from this many blocks on, h counts in units of `greedy_h_unit` metres instead: with up to 27 successors per
     #   misplaced block, h in metres leaves the search nearly breadth-first, out of nodes before depth 4-5 (None: never)
@@ -76,8 +78,6 @@ class SearchConfig:
     # from greedy_from blocks on, h also counts this many units per block farther than `misplaced` (2-D) from its
     #   goal: each needs an action still
     greedy_per_misplaced: float = 0.3
-    eps: float = EPS_SUCCESS  # metres: goal test, every object within eps (3-D)
-    misplaced: float = EPS_SUCCESS  # metres: 2-D distance beyond which an object is misplaced
     resolution: float = 0.01  # metres: grid of the duplicate-detection key
     # The node budget decides, so a result does not depend on the machine's load: about 4 s of search at
     # n = 4 with kinematics on the 2-core development machine (2-3 ms per expansion)
@@ -94,7 +94,6 @@ class SearchConfig:
     #   plateaued for at most 400 expansions on the tuning sets and 775 held out, most failing ones for 1,000 or more
     #   (None: run to the node budget)
     greedy_stall: int | None = 800
-    confident: float = 0.035  # metres: a goal state predicted this close (worst object) ends the search
     look_on: int = 30  # expansions spent looking for a confident goal state after a less confident one
     batched: bool = True  # one predict_effect call per expansion (False: one per action, for the benchmark)
     prune: bool = True  # goal-oriented pruning (False: all 9 n^2 actions)
@@ -126,9 +125,8 @@ class SearchConfig:
         if not self.greedy_per_misplaced >= 0:
             raise UserError(f"the continuous search's greedy_per_misplaced must be 0 or more units of h, got "
                             f"{self.greedy_per_misplaced}")
-        if not 0 < self.confident <= self.eps or self.look_on < 0:
-            raise UserError(f"the continuous search needs 0 < confident <= eps and look_on >= 0, got confident "
-                            f"{self.confident} m, eps {self.eps} m, look_on {self.look_on}")
+        if self.look_on < 0:
+            raise UserError(f"the continuous search needs look_on >= 0, got {self.look_on}")
 
 
 class SearchStatus(StrEnum):
@@ -238,11 +236,11 @@ def state_key(P: np.ndarray, resolution: float) -> bytes:
     return np.round(np.asarray(P)[:, :3] / resolution).astype(np.int64).tobytes()
 
 
-def continuous_search(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarray,
-                      config: SearchConfig = SearchConfig(), feasible: FeasibilityFn | None = None,
-                      pruned: AbstractSet[tuple[bytes, tuple]] = frozenset(), started: float | None = None,
-                      graspable: np.ndarray | None = None) -> SearchResult:
-    """Weighted A* from X_init to X_goal with the Dynamics Model as the transition.
+Node = tuple[np.ndarray, int, "tuple | None", int]  # (positions (n, 3), parent index, action into it, g)
+
+
+class ContinuousSearch:
+    """Weighted A* from X_init to X_goal with the Dynamics Model as the transition; `run` returns its result.
 
     `feasible` (optional, e.g. the kinematic check of tamp.sim.feasibility) prunes successors whose action
     is infeasible in its parent's predicted state. It is called lazily, when a successor is expanded
@@ -253,193 +251,245 @@ def continuous_search(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarr
     grasp can never hold the picked block (a cube grasped off its centre): `feasible` would reject every
     one of them. `config.time_limit` counts from `started` (time.perf_counter() when the planning call
     began; default: now)."""
-    t0 = time.perf_counter()
-    deadline = float("inf") if config.time_limit is None else (t0 if started is None else started) + config.time_limit
-    X_init, X_goal = states_pair(X_init, X_goal)
-    goal = X_goal[:, :3]
-    types = X_init[:, 3:]
 
-    def full(P: np.ndarray) -> np.ndarray:
-        return np.concatenate([P, types], axis=1)
+    def __init__(self, model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarray,
+                 config: SearchConfig = SearchConfig(), goal: VerifyConfig = VerifyConfig(),
+                 feasible: FeasibilityFn | None = None, pruned: AbstractSet[tuple[bytes, tuple]] = frozenset(),
+                 started: float | None = None, graspable: np.ndarray | None = None):
+        self.t0 = time.perf_counter()
+        self.model, self.config, self.tolerance, self.feasible = model, config, goal, feasible
+        self.pruned, self.graspable = pruned, graspable
+        self.deadline = float("inf") if config.time_limit is None else \
+            (self.t0 if started is None else started) + config.time_limit
+        self.X_init, self.X_goal = states_pair(X_init, X_goal)
+        self.goal = self.X_goal[:, :3]
+        self.types = self.X_init[:, 3:]
+        self.nodes: list[Node] = [(self.X_init[:, :3].copy(), -1, None, 0)]
+        self.d0 = np.linalg.norm(self.X_init[:, :3] - self.goal, axis=1)
+        self.out = SearchResult(SearchStatus.EXHAUSTED, None, None, "", best_error=float(self.d0.max(initial=0.0)))
+        self.best_g = {self.key(self.X_init[:, :3]): 0}
+        # (doubtful, fragility, worst object's predicted error, node): the best goal state that did not end the search
+        self.candidate: tuple[bool, float, float, int] | None = None
+        self.look_until = config.max_expansions  # expansions after which the candidate is returned
+        greedy = config.greedy_from is not None and len(self.X_init) >= config.greedy_from
+        self.h_unit = config.greedy_h_unit if greedy else 1.0  # metres per unit of h
+        self.per_misplaced = config.greedy_per_misplaced if greedy else 0.0
+        self.stall = config.greedy_stall if greedy else config.stall
+        h0 = float(self.heuristic(self.X_init[None, :, :3], self.d0[None])[0])
+        self.frontier = [(config.weight * h0, h0, 0)]  # (f, h, node index)
+        self.closest = (h0, 0)  # (h, node index) of the expanded state closest to the goal
+        self.closer_at = 0  # expansions when the closest state last came closer
+        self.every = all_actions(len(self.X_init))
 
-    def key(P: np.ndarray) -> bytes:
-        return state_key(P, config.resolution)
+    # --- states, keys, paths --------------------------------------------------------------------
+    def full(self, P: np.ndarray) -> np.ndarray:
+        return np.concatenate([P, self.types], axis=1)
 
-    def infeasible(index: int) -> bool:
-        """Whether the action into node `index` fails the check in its parent's state (counted)."""
-        _, parent, action, _ = nodes[index]
-        if feasible is None or action is None:
-            return False
-        reason = feasible(full(nodes[parent][0]), action)
-        if reason is not None:
-            out.rejected[reason] += 1
-        return reason is not None
+    def key(self, P: np.ndarray) -> bytes:
+        return state_key(P, self.config.resolution)
 
-    def keys_of(Ps: np.ndarray) -> list[bytes]:
+    def keys_of(self, Ps: np.ndarray) -> list[bytes]:
         """key() of each of the (B, n, 3) states, in one vectorized rounding."""
-        grid = np.ascontiguousarray(np.round(Ps / config.resolution).astype(np.int64).reshape(len(Ps), -1))
+        grid = np.ascontiguousarray(np.round(Ps / self.config.resolution).astype(np.int64).reshape(len(Ps), -1))
         return [row.tobytes() for row in grid]
 
-    # nodes[i] = (positions (n, 3), parent index, action, g)
-    nodes: list[tuple[np.ndarray, int, tuple | None, int]] = [(X_init[:, :3].copy(), -1, None, 0)]
-    d0 = np.linalg.norm(X_init[:, :3] - goal, axis=1)
-    out = SearchResult(SearchStatus.EXHAUSTED, None, None, "", best_error=float(d0.max(initial=0.0)))
-
-    def path(index: int) -> tuple[list[tuple], list[np.ndarray]]:
+    def path(self, index: int) -> tuple[list[tuple], list[np.ndarray]]:
         """The actions and the states from X_init to node `index`."""
         plan, states = [], []
         while index >= 0:
-            P, parent, action, _ = nodes[index]
-            states.append(full(P))
+            P, parent, action, _ = self.nodes[index]
+            states.append(self.full(P))
             if action is not None:
                 plan.append(action)
             index = parent
         return plan[::-1], states[::-1]
 
-    def fragile(index: int) -> float:
-        """`verify.fragility` of the plan into goal node `index` (0 when not checked)."""
-        if config.max_fragility is None:
-            return 0.0
-        out.fragility_checks += 1
-        return fragility(model, X_init, X_goal, path(index)[0], config.eps, config.noise)
+    def heuristic(self, Ps: np.ndarray, dist: np.ndarray) -> np.ndarray:
+        """h of the (B, n, 3) states whose (B, n) distances to the goal are `dist`."""
+        h = dist.sum(axis=1) / self.h_unit
+        if self.per_misplaced:
+            off = np.linalg.norm(Ps[:, :, :2] - self.goal[None, :, :2], axis=2) > self.tolerance.misplaced
+            h = h + self.per_misplaced * off.sum(1)
+        return h
 
-    def doubtful(index: int) -> bool:
-        """Whether a step of the plan into node `index` may miss by more than config.max_doubt (`verify.doubt`)."""
-        if config.max_doubt is None:
+    # --- the checks on a node -------------------------------------------------------------------
+    def infeasible(self, index: int) -> bool:
+        """Whether the action into node `index` fails the check in its parent's state (counted)."""
+        _, parent, action, _ = self.nodes[index]
+        if self.feasible is None or action is None:
             return False
-        plan, states = path(index)
-        return doubt(model, np.stack(states), plan) > config.max_doubt
+        reason = self.feasible(self.full(self.nodes[parent][0]), action)
+        if reason is not None:
+            self.out.rejected[reason] += 1
+        return reason is not None
 
-    def finish(status: SearchStatus, reason: str, index: int | None = None) -> SearchResult:
-        out.status, out.reason, out.time = status, reason, time.perf_counter() - t0
+    def fragile(self, index: int) -> float:
+        """`verify.fragility` of the plan into goal node `index` (0 when not checked)."""
+        if self.config.max_fragility is None:
+            return 0.0
+        self.out.fragility_checks += 1
+        return fragility(self.model, self.X_init, self.X_goal, self.path(index)[0], self.tolerance.eps,
+                         self.config.noise)
+
+    def doubtful(self, index: int) -> bool:
+        """Whether a step of the plan into node `index` may miss by more than config.max_doubt (`verify.doubt`)."""
+        if self.config.max_doubt is None:
+            return False
+        plan, states = self.path(index)
+        return doubt(self.model, np.stack(states), plan) > self.config.max_doubt
+
+    # --- ending ---------------------------------------------------------------------------------
+    def finish(self, status: SearchStatus, reason: str, index: int | None = None) -> SearchResult:
+        out = self.out
+        out.status, out.reason, out.time = status, reason, time.perf_counter() - self.t0
         if index is not None:
-            plan, states = path(index)
+            plan, states = self.path(index)
             out.plan, out.trajectory = plan, np.stack(states)
-        elif closest[1] > 0:
-            plan, states = path(closest[1])
+        elif self.closest[1] > 0:
+            plan, states = self.path(self.closest[1])
             out.closest_plan, out.closest_trajectory = plan, np.stack(states)
         return out
 
-    if np.all(d0 < config.eps):
-        return finish(SearchStatus.SOLVED, "the initial state is already within eps of the goal", 0)
-    best_g = {key(X_init[:, :3]): 0}
-    # (doubtful, fragility, worst object's predicted error, node): the best goal state that did not end the search
-    candidate: tuple[bool, float, float, int] | None = None
-    look_until = config.max_expansions  # expansions after which the candidate is returned
-
-    def stop(status: SearchStatus, reason: str) -> SearchResult:
+    def stop(self, status: SearchStatus, reason: str) -> SearchResult:
         """End at a limit: the candidate goal state if there is one."""
-        if candidate is None:
-            return finish(status, reason)
-        unsure, risk, error, index = candidate
+        if self.candidate is None:
+            return self.finish(status, reason)
+        unsure, risk, error, index = self.candidate
+        cfg, expanded, actions = self.config, self.out.expanded, self.nodes[index][3]
         if unsure:
-            limit = (config.max_doubt or 0.0) * 100
-            return finish(SearchStatus.SOLVED, f"solved: {nodes[index][3]} actions, predicted {error * 100:.1f} cm "
-                          f"from the goal, a step's 95 % bound over {limit:g} cm (no goal state without one after "
-                          f"{out.expanded} expansions)", index)
-        if config.max_fragility is None:
-            return finish(SearchStatus.SOLVED, f"solved: {nodes[index][3]} actions, predicted {error * 100:.1f} cm "
-                          f"from the goal (no goal state within {config.confident * 100:g} cm after "
-                          f"{out.expanded} expansions)", index)
-        return finish(SearchStatus.SOLVED, f"solved: {nodes[index][3]} actions, predicted {error * 100:.1f} cm "
-                      f"from the goal, {risk:.0%} of perturbed rollouts off it (no goal state within "
-                      f"{config.confident * 100:g} cm with at most {config.max_fragility:.0%} after "
-                      f"{out.expanded} expansions)", index)
+            limit = (cfg.max_doubt or 0.0) * 100
+            return self.finish(SearchStatus.SOLVED, f"solved: {actions} actions, predicted {error * 100:.1f} cm "
+                               f"from the goal, a step's 95 % bound over {limit:g} cm (no goal state without one "
+                               f"after {expanded} expansions)", index)
+        confident = self.tolerance.confident * 100
+        if cfg.max_fragility is None:
+            return self.finish(SearchStatus.SOLVED, f"solved: {actions} actions, predicted {error * 100:.1f} cm "
+                               f"from the goal (no goal state within {confident:g} cm after {expanded} expansions)",
+                               index)
+        return self.finish(SearchStatus.SOLVED, f"solved: {actions} actions, predicted {error * 100:.1f} cm "
+                           f"from the goal, {risk:.0%} of perturbed rollouts off it (no goal state within "
+                           f"{confident:g} cm with at most {cfg.max_fragility:.0%} after {expanded} expansions)",
+                           index)
 
-    greedy = config.greedy_from is not None and len(X_init) >= config.greedy_from
-    h_unit = config.greedy_h_unit if greedy else 1.0  # metres per unit of h
-    per_misplaced = config.greedy_per_misplaced if greedy else 0.0
+    def limit_reached(self) -> SearchResult | None:
+        """The result when a limit ends the search before the next expansion (None: go on)."""
+        out, cfg = self.out, self.config
+        if self.candidate is not None and out.expanded >= self.look_until:
+            return self.stop(SearchStatus.SOLVED, "")
+        closest = f"closest predicted state {out.best_error * 100:.1f} cm from it"
+        if out.expanded >= cfg.max_expansions:
+            return self.stop(SearchStatus.NODE_LIMIT, f"node limit: {out.expanded} expansions without reaching the "
+                             f"goal ({closest})")
+        if self.stall is not None and out.expanded - self.closer_at >= self.stall:
+            return self.stop(SearchStatus.STALLED, f"stalled: no state closer to the goal in {self.stall} expansions "
+                             f"({out.expanded} in all; {closest})")
+        if time.perf_counter() > self.deadline:
+            return self.stop(SearchStatus.TIME_LIMIT, f"time limit: {cfg.time_limit:g} s ({out.expanded} "
+                             f"expansions) without reaching the goal ({closest})")
+        return None
 
-    def heuristic(Ps: np.ndarray, dist: np.ndarray) -> np.ndarray:
-        """h of the (B, n, 3) states whose (B, n) distances to the goal are `dist`."""
-        h = dist.sum(axis=1) / h_unit
-        if per_misplaced:
-            h = h + per_misplaced * (np.linalg.norm(Ps[:, :, :2] - goal[None, :, :2], axis=2) > config.misplaced).sum(1)
-        return h
+    # --- the search -----------------------------------------------------------------------------
+    def run(self) -> SearchResult:
+        if np.all(self.d0 < self.tolerance.eps):
+            return self.finish(SearchStatus.SOLVED, "the initial state is already within eps of the goal", 0)
+        while self.frontier:
+            ended = self.limit_reached()
+            if ended is not None:
+                return ended
+            _, h_here, index = heapq.heappop(self.frontier)
+            P, _, _, g = self.nodes[index]
+            if self.best_g.get(self.key(P), -1) < g or g >= self.config.max_depth:
+                continue  # reached again with fewer actions since it was pushed / too deep
+            if self.infeasible(index):
+                del self.best_g[self.key(P)]  # the state may still be reached by a feasible action
+                continue
+            self.out.expanded += 1
+            if h_here < self.closest[0]:
+                self.closest, self.closer_at = (h_here, index), self.out.expanded
+            solved = self.expand(index)
+            if solved is not None:
+                return solved
+        cfg, out = self.config, self.out
+        offered = "goal-oriented actions" if cfg.prune else "all actions"
+        return self.stop(SearchStatus.EXHAUSTED, f"exhausted: every state reachable within {cfg.max_depth} actions "
+                         f"({offered}, {cfg.resolution * 100:g} cm grid) expanded, {out.expanded} expansions; "
+                         f"closest predicted state {out.best_error * 100:.1f} cm from the goal")
 
-    h0 = float(heuristic(X_init[None, :, :3], d0[None])[0])
-    frontier = [(config.weight * h0, h0, 0)]  # (f, h, node index)
-    closest = (h0, 0)  # (h, node index) of the expanded state closest to the goal
-    closer_at = 0  # expansions when the closest state last came closer
-    stall = config.greedy_stall if greedy else config.stall
-    n_objects = len(X_init)
-    every = all_actions(n_objects)
-    while frontier:
-        if candidate is not None and out.expanded >= look_until:
-            return stop(SearchStatus.SOLVED, "")
-        if out.expanded >= config.max_expansions:
-            return stop(SearchStatus.NODE_LIMIT, f"node limit: {out.expanded} expansions without reaching the goal "
-                          f"(closest predicted state {out.best_error * 100:.1f} cm from it)")
-        if stall is not None and out.expanded - closer_at >= stall:
-            return stop(SearchStatus.STALLED, f"stalled: no state closer to the goal in {stall} expansions "
-                          f"({out.expanded} in all; closest predicted state {out.best_error * 100:.1f} cm from it)")
-        if time.perf_counter() > deadline:
-            return stop(SearchStatus.TIME_LIMIT, f"time limit: {config.time_limit:g} s ({out.expanded} expansions) "
-                          f"without reaching the goal (closest predicted state {out.best_error * 100:.1f} cm from it)")
-        _, h_here, index = heapq.heappop(frontier)
-        P, _, _, g = nodes[index]
-        if best_g.get(key(P), -1) < g or g >= config.max_depth:
-            continue  # reached again with fewer actions since it was pushed / too deep
-        if infeasible(index):
-            del best_g[key(P)]  # the state may still be reached by a feasible action
-            continue
-        out.expanded += 1
-        if h_here < closest[0]:
-            closest, closer_at = (h_here, index), out.expanded
-        actions = goal_oriented_actions(full(P), X_goal, config.misplaced, config.eps,
-                                        config.release_targets) if config.prune else every
-        if graspable is not None:
-            holds = graspable[actions[:, 0], actions[:, 1] + 1]
-            out.ungraspable += len(actions) - int(holds.sum())
+    def actions(self, P: np.ndarray) -> np.ndarray:
+        """The actions from positions P: goal-oriented (or all) and, with `graspable`, only grasps that hold."""
+        tol = self.tolerance
+        actions = goal_oriented_actions(self.full(P), self.X_goal, tol.misplaced, tol.eps,
+                                        self.config.release_targets) if self.config.prune else self.every
+        if self.graspable is not None:
+            holds = self.graspable[actions[:, 0], actions[:, 1] + 1]
+            self.out.ungraspable += len(actions) - int(holds.sum())
             actions = actions[holds]
+        return actions
+
+    def expand(self, index: int) -> SearchResult | None:
+        """Generate node `index`'s successors in one batched prediction; the result if one ends the search."""
+        out, cfg = self.out, self.config
+        P, _, _, g = self.nodes[index]
+        actions = self.actions(P)
         if len(actions) == 0:
-            continue
-        succ, calls = predict_positions(model, full(P), actions, config.batched)
+            return None
+        succ, calls = predict_positions(self.model, self.full(P), actions, cfg.batched)
         out.predict_calls += calls
         out.generated += len(actions)
-        dist = np.linalg.norm(succ - goal[None], axis=2)  # (B, n)
+        dist = np.linalg.norm(succ - self.goal[None], axis=2)  # (B, n)
         worst = dist.max(axis=1)
         out.best_error = min(out.best_error, float(worst.min()))
-        h = heuristic(succ, dist).tolist()
-        reached = (worst < config.eps).tolist()
-        keys = keys_of(succ)
-        here = key(P) if pruned else b""
+        h = self.heuristic(succ, dist).tolist()
+        reached = (worst < self.tolerance.eps).tolist()
+        keys = self.keys_of(succ)
+        here = self.key(P) if self.pruned else b""
         for b, action in enumerate(actions.tolist()):
             k = keys[b]
-            if best_g.get(k, config.max_depth + 1) <= g + 1:
+            if self.best_g.get(k, cfg.max_depth + 1) <= g + 1:
                 out.duplicates += 1
                 continue
-            if pruned and (here, tuple(action)) in pruned:
+            if self.pruned and (here, tuple(action)) in self.pruned:
                 out.pruned += 1
                 continue
-            nodes.append((succ[b], index, tuple(action), g + 1))
-            if reached[b] and infeasible(len(nodes) - 1):
-                nodes.pop()
+            self.nodes.append((succ[b], index, tuple(action), g + 1))
+            if reached[b] and self.infeasible(len(self.nodes) - 1):
+                self.nodes.pop()
                 continue
             if not reached[b]:
-                best_g[k] = g + 1
-                heapq.heappush(frontier, (g + 1 + config.weight * h[b], h[b], len(nodes) - 1))
+                self.best_g[k] = g + 1
+                heapq.heappush(self.frontier, (g + 1 + cfg.weight * h[b], h[b], len(self.nodes) - 1))
                 continue
-            if candidate is not None and g + 1 > nodes[candidate[3]][3]:
-                best_g[k] = g + 1
-                continue  # a goal state of a longer plan than the candidate's: more actions to go wrong
-            # a goal state (not expanded)
-            if config.look_on == 0:
-                return finish(SearchStatus.SOLVED, f"solved: {g + 1} actions after {out.expanded} expansions",
-                              len(nodes) - 1)
-            risk = fragile(len(nodes) - 1)
-            unsure = doubtful(len(nodes) - 1)
-            robust = risk <= (config.max_fragility or 0.0) and not unsure
-            if worst[b] < config.confident and robust:
-                return finish(SearchStatus.SOLVED, f"solved: {g + 1} actions after {out.expanded} expansions",
-                              len(nodes) - 1)
-            if robust:  # a fragile goal state stays open to other actions: another grasp may reach it robustly
-                best_g[k] = g + 1
-            if candidate is None:
-                look_until = min(look_until, out.expanded + config.look_on)
-            if candidate is None or (unsure, risk, float(worst[b])) < candidate[:3]:
-                candidate = (unsure, risk, float(worst[b]), len(nodes) - 1)
-    offered = "goal-oriented actions" if config.prune else "all actions"
-    return stop(SearchStatus.EXHAUSTED, f"exhausted: every state reachable within {config.max_depth} actions "
-                  f"({offered}, {config.resolution * 100:g} cm grid) expanded, {out.expanded} expansions; "
-                  f"closest predicted state {out.best_error * 100:.1f} cm from the goal")
+            solved = self.reach_goal(k, g + 1, float(worst[b]))
+            if solved is not None:
+                return solved
+        return None
+
+    def reach_goal(self, k: bytes, g: int, worst: float) -> SearchResult | None:
+        """The newest node is a goal state of `g` actions, its worst block predicted `worst` metres off: it
+        ends the search when confident and robust, else it may become the candidate (not expanded)."""
+        cfg, index = self.config, len(self.nodes) - 1
+        if self.candidate is not None and g > self.nodes[self.candidate[3]][3]:
+            self.best_g[k] = g
+            return None  # a goal state of a longer plan than the candidate's: more actions to go wrong
+        if cfg.look_on == 0:
+            return self.finish(SearchStatus.SOLVED, f"solved: {g} actions after {self.out.expanded} expansions", index)
+        risk = self.fragile(index)
+        unsure = self.doubtful(index)
+        robust = risk <= (cfg.max_fragility or 0.0) and not unsure
+        if worst < self.tolerance.confident and robust:
+            return self.finish(SearchStatus.SOLVED, f"solved: {g} actions after {self.out.expanded} expansions", index)
+        if robust:  # a fragile goal state stays open to other actions: another grasp may reach it robustly
+            self.best_g[k] = g
+        if self.candidate is None:
+            self.look_until = min(self.look_until, self.out.expanded + cfg.look_on)
+        if self.candidate is None or (unsure, risk, worst) < self.candidate[:3]:
+            self.candidate = (unsure, risk, worst, index)
+        return None
+
+
+def continuous_search(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarray,
+                      config: SearchConfig = SearchConfig(), goal: VerifyConfig = VerifyConfig(), *,
+                      feasible: FeasibilityFn | None = None, pruned: AbstractSet[tuple[bytes, tuple]] = frozenset(),
+                      started: float | None = None, graspable: np.ndarray | None = None) -> SearchResult:
+    """`ContinuousSearch(...).run()`: weighted A* from X_init to X_goal (see the class)."""
+    return ContinuousSearch(model, X_init, X_goal, config, goal, feasible, pruned, started, graspable).run()

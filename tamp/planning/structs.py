@@ -97,5 +97,22 @@ class Outcome(StrEnum):
         return cls.SUCCESS if final_error < eps else cls.WRONG_PLAN
 
 
+class Loop(StrEnum):
+    """The closed loops (`tamp.planning.closed_loop`)."""
+
+    PAPER = "paper"  # the paper's replanning: k - 1 rounds, the last plan executed to its end (Table IV)
+    UNTIL_GOAL = "goal"  # the loop that does not know k: plan again after every action until the goal
+
+
+class LoopStop(StrEnum):
+    """How a closed loop ended (`ClosedLoopResult.stop`)."""
+
+    GOAL = "goal"  # the observed state is within eps of the goal
+    NO_PLAN = "no_plan"  # a round found no plan
+    EMPTY_PLAN = "empty_plan"  # a round's plan had no action
+    ROUNDS = "rounds"  # the paper's loop ran its k - 1 rounds and executed its last plan
+    BUDGET = "budget"  # the loop that does not know k used up its actions or search expansions
+
+
 # the outcomes the statistics count (an ERROR row is listed apart)
 OUTCOMES = tuple(o.value for o in Outcome if o is not Outcome.ERROR)

@@ -16,8 +16,28 @@ from typing import Protocol, Sequence
 
 import numpy as np
 
+from tamp.errors import UserError
+
 TAU_VERIFY = 0.07  # metres (the paper's choice)
 EPS_SUCCESS = 0.05  # metres: success = every object within eps of its goal
+
+
+@dataclass(frozen=True)
+class VerifyConfig:
+    """What counts as the goal, the one owner of the tolerances every stage tests against."""
+
+    tau_verify: float = TAU_VERIFY  # metres: Level 1 takes a plan whose rollout ends this close (the paper's)
+    eps: float = EPS_SUCCESS  # metres: success, every object within eps (the search's goal test, the loops, evaluation)
+    confident: float = 0.035  # metres: a goal state predicted this close ends a search; a kept or cut plan must end so
+    misplaced: float = EPS_SUCCESS  # metres: 2-D distance beyond which a block is off its goal (it needs an action)
+
+    def __post_init__(self) -> None:
+        for name in ("tau_verify", "eps", "misplaced"):
+            if not getattr(self, name) > 0:
+                raise UserError(f"VerifyConfig.{name} must be positive, got {getattr(self, name)}")
+        if not 0 < self.confident <= self.eps:
+            raise UserError(f"VerifyConfig needs 0 < confident <= eps, got confident {self.confident} m, "
+                            f"eps {self.eps} m")
 
 
 class DynamicsModel(Protocol):

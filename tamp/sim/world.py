@@ -223,6 +223,18 @@ class World:
         if not ok:
             return self._unchanged(info, t_start)
 
+        self._release(scene, wp, qs, paths, physics, info, settle)
+        self._retreat(scene, wp, qs, paths, planner, info)
+        info.paths = paths
+        info.q_waypoints = qs
+        info.X_GC = list(wp.X_GC)
+        info.timings["total"] = time.perf_counter() - t_start
+        return self._require_scene().X(), info
+
+    def _release(self, scene: Scene, wp, qs: dict[str, np.ndarray], paths: dict[str, np.ndarray], physics,
+                 info: StepInfo, settle: bool) -> None:
+        """Carry the blocks kinematically to the place pose, release them and, with `settle`, let physics
+        decide where they rest (self.scene)."""
         # Execute: carry kinematically, release, let physics decide.
         X_WB_release = list(scene.X_WB)
         for c, X_GC in zip(wp.carried, wp.X_GC):
@@ -243,13 +255,17 @@ class World:
         else:
             self.scene = Scene(scene.types, X_WB_release)
 
+    def _retreat(self, scene: Scene, wp, qs: dict[str, np.ndarray], paths: dict[str, np.ndarray], planner,
+                 info: StepInfo) -> None:
+        """Lift the open jaws straight up from the released blocks (self.q); home when that is blocked."""
+        released = self._require_scene()
         # Retreat straight up with open jaws. The jaws opened around the released blocks, and any
         # block that moved while settling may lean on them: those are not obstacles to lifting away.
         t_motion = time.perf_counter()
         moved = [k for k in range(scene.n) if k in wp.carried
-                 or np.linalg.norm(self.scene.X_WB[k].translation()  # type: ignore[misc]  # pydrake stubs, as above
+                 or np.linalg.norm(released.X_WB[k].translation()  # type: ignore[misc]  # pydrake stubs
                                    - scene.X_WB[k].translation()) > 1e-3]
-        planner.set_block_poses(self.scene.X_WB, parked=tuple(moved))
+        planner.set_block_poses(released.X_WB, parked=tuple(moved))
         seed = self.motion_seeds.of("retreat")
         retreat = planner.plan(qs["place"], qs["retreat"], self.config.planning_time,
                                direct=self.config.direct_motions, simplify=self.config.simplify_paths, seed=seed,
@@ -260,18 +276,13 @@ class World:
         if retreat.path is not None:
             paths["retreat"] = retreat.path
             self.q = qs["retreat"]
-            self.observer.motions_executed([paths["retreat"]], self.scene.X_WB, None)
+            self.observer.motions_executed([paths["retreat"]], released.X_WB, None)
         else:
             # The blocks have moved; the arm cannot leave without disturbing them. It is taken
             # home (a reset of the arm alone) so that the next action starts collision-free.
             self.q = Q_HOME.copy()
             info.reason = f"released, but the retreat was blocked ({retreat.reason}); the arm was reset home"
         info.timings["motion"] += time.perf_counter() - t_motion
-        info.paths = paths
-        info.q_waypoints = qs
-        info.X_GC = list(wp.X_GC)
-        info.timings["total"] = time.perf_counter() - t_start
-        return self.scene.X(), info
 
     def _step_full(self, action: PickPlace) -> tuple[np.ndarray, StepInfo]:
         """Plan and predict with the fast world (which takes the step's motion seeds from the shared
