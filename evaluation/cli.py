@@ -5,7 +5,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from evaluation.methods import SYMBOLIC_BACKENDS
+from evaluation.methods import methods_help
 from tamp.app.args import (
     check_output_dir,
     check_output_file,
@@ -15,9 +15,11 @@ from tamp.app.args import (
     seed,
 )
 from tamp.app.parallel import add_arguments as add_parallel_arguments
-from tamp.app.planner_flags import add_planner_arguments
+from tamp.app.planner_flags import add_planner_arguments, backend_help
 from tamp.app.problem import PROTOCOLS
 from tamp.errors import UserError
+from tamp.planning.config import SYMBOLIC_BACKENDS
+from tamp.sim.structs import FIDELITIES
 
 
 def _name_list(text: str) -> list[str]:
@@ -92,10 +94,10 @@ def _add_run_arguments(p: argparse.ArgumentParser, models_help: str, out_help: s
     p.add_argument("--problems", type=Path, required=True, help="problem set (tamp problems --out)")
     p.add_argument("--out", type=Path, required=True, help=out_help)
     p.add_argument("--methods", type=_name_list, default=methods_default, help=methods_help)
-    p.add_argument("--fidelity", choices=("fast", "full"), default="fast",
+    p.add_argument("--fidelity", choices=FIDELITIES, default="fast",
                    help="execute in the fast world (default) or with the arm under physics")
     add_parallel_arguments(p, workers_default=1)
-    add_planner_arguments(p, backends=SYMBOLIC_BACKENDS, feasibility=False)
+    add_planner_arguments(p, feasibility=False)
     p.add_argument("--oracle-max-plans", type=positive_int, default=20,
                    help="probabilistic_oracle: ranked plans executed at most per problem (default 20)")
     p.add_argument("--noise", type=_metres_below(0.05), default=0.0, metavar="METRES",
@@ -228,13 +230,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="every method on every problem of a set: plan, refine, execute in Drake; rows + report",
         description="For each (problem, method): plan with the learned models (planning timed alone), "
         "refine the plan (IK, collision-checked motions, grasps) and execute it in the Drake world, or "
-        "plan and execute in closed loop (bilevel_replan). One JSON row per pair is appended to "
-        "OUT/rows.jsonl as it finishes; running the same command again resumes. Methods: "
-        "deterministic, probabilistic, probabilistic_oracle (the paper's measure: the sampled domains' "
-        "plans executed until one succeeds, an execution oracle), cfs, bilevel (with our Level-1 "
-        "extensions), bilevel_alg1 (the paper's Algorithm 1 exactly), bilevel_replan (default: all of "
-        "these), and symbolic_sigmoid, cfs_gumbel when DIR/variants/ holds their models. A problem set "
-        "with several runs (tamp problems --runs) is reported as mean ± std over its runs.",
+        "plan and execute in closed loop. One JSON row per pair is appended to OUT/rows.jsonl as it finishes; "
+        "running the same command again resumes. A problem set with several runs (tamp problems --runs) is "
+        "reported as mean ± std over its runs. Methods (the defaults, and the Fig. 4 variants when "
+        "DIR/variants/ holds their models): " + methods_help() + ".",
     )
     _add_run_arguments(p, "models directory: symbolic.pt, dynamics.pt, domain/ (and optionally variants/)",
                        "results directory (new, or the one to resume)", None,
@@ -314,7 +313,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--scale", choices=("quick", "paper"), default="quick", help="sizes (default quick)")
     p.add_argument("--out", type=Path, required=True, help="output directory (new, or the one to resume)")
     add_parallel_arguments(p)
-    p.add_argument("--fidelity", choices=("fast", "full"), default="fast",
+    p.add_argument("--fidelity", choices=FIDELITIES, default="fast",
                    help="execute the plans in the fast world (default) or with the arm under physics")
     p.add_argument("--protocol", choices=PROTOCOLS, default="strict",
                    help="problem sets: strict (every random action moves something, default) or paper (actions "
@@ -325,8 +324,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--models", type=models_directory, default=None,
                    help="evaluate this models directory, or a bundled set (paper: the paper's configuration), "
                         "instead of collecting and training")
-    p.add_argument("--symbolic-backend", choices=SYMBOLIC_BACKENDS, default="python",
-                   help="symbolic planner: python (in-process search, default) or fd (Fast Downward, as in the paper)")
+    p.add_argument("--symbolic-backend", choices=tuple(SYMBOLIC_BACKENDS), default="python",
+                   help=backend_help("python"))
     p.set_defaults(func=cmd_reproduce)
 
     from evaluation.practice import add_practice

@@ -8,7 +8,8 @@ from typing import Any
 from tamp.app.faults import Faults
 from tamp.app.parallel import BACKENDS
 from tamp.errors import UserError
-from tamp.planning.config import SYMBOLIC_BACKENDS, Level1Config, LoopConfig, PlanConfig
+from tamp.planning.config import Level1Config, LoopConfig, PlanConfig
+from tamp.sim.structs import fidelity_of
 
 
 @dataclass(frozen=True)
@@ -26,13 +27,9 @@ class EvalConfig:
     faults: Faults = Faults()  # closed loops: observation noise and a push (`tamp.app.faults`); none by default
 
     def __post_init__(self) -> None:
-        if self.fidelity not in ("fast", "full"):
-            raise UserError(f"--fidelity must be 'fast' or 'full', got {self.fidelity!r}")
+        fidelity_of(self.fidelity, "--fidelity")
         if self.backend not in BACKENDS:
             raise UserError(f"--backend must be one of {', '.join(BACKENDS)}, got {self.backend!r}")
-        if self.planner.level1.backend not in SYMBOLIC_BACKENDS:
-            raise UserError(f"--symbolic-backend must be one of {', '.join(SYMBOLIC_BACKENDS)}, "
-                            f"got {self.planner.level1.backend!r}")
         for name in ("oracle_max_plans", "workers"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
@@ -62,7 +59,7 @@ class EvalConfig:
                "search_max_fragility": p.search.max_fragility, "search_noise_m": p.search.noise,
                "level1_budget": p.level1.budget, "level1_time_budget_s": p.level1.time_budget,
                "level1_focus_from": p.level1.focus_from, "level1_focus_budget": p.level1.focus_budget,
-               "level1_confident_m": p.level1.confident, "level1_cut": p.level1.cut,
+               "level1_confident_m": p.level1.wait_beyond, "level1_cut": p.level1.cut,
                "level1_objects": p.level1.objects, "level1_serial": p.level1.serial,
                "keep_plan": p.loop.keep_plan, "on_course_m": p.loop.on_course,
                "symbolic_backend": p.level1.backend, "oracle_max_plans": self.oracle_max_plans}

@@ -40,7 +40,6 @@ from tamp.planning.models import DOMAIN_DIR, DYNAMICS_FILE, SYMBOLIC_FILE, Model
 from tamp.planning.structs import Loop
 
 VARIANTS_DIR = "variants"
-SYMBOLIC_BACKENDS = ("python", "fd")  # in-process search, Fast Downward (tamp.planning.config.Level1Config.backend)
 SYMBOLIC_SIGMOID, DOMAIN_SIGMOID, DYNAMICS_GUMBEL = "symbolic_sigmoid.pt", "domain_sigmoid", "dynamics_gumbel.pt"
 
 
@@ -52,6 +51,7 @@ class Method:
     loop: Loop | None = None  # closed loop: the paper's k - 1 rounds or until the goal; None: open loop
     oracle: bool = False  # execute the ranked plans until one succeeds (the authors' measure)
     feasibility: bool = False  # kinematic check and refinement in the planning loop (tamp.sim.feasibility)
+    about: str = ""  # what it is, in a line (`tamp evaluate --help`)
 
     @property
     def closed_loop(self) -> bool:
@@ -64,24 +64,38 @@ class Method:
 
 
 METHODS: dict[str, Method] = {m.name: m for m in (
-    Method("deterministic", "deterministic", "default"),
-    Method("probabilistic", "probabilistic", "default"),
-    Method("probabilistic_oracle", "probabilistic", "default", oracle=True),
-    Method("cfs", "cfs", "default", feasibility=True),
-    Method("bilevel", "bilevel", "default", feasibility=True),
-    Method("bilevel_alg1", "bilevel_alg1", "default"),
-    Method("bilevel_replan", "bilevel", "default", loop=Loop.PAPER, feasibility=True),
-    Method("bilevel_loop", "bilevel", "default", loop=Loop.UNTIL_GOAL, feasibility=True),
-    Method("symbolic_sigmoid", "deterministic", "symbolic_sigmoid"),
-    Method("cfs_gumbel", "cfs", "dynamics_gumbel"),
-    Method("cfs_nofeas", "cfs", "default"),
-    Method("bilevel_nofeas", "bilevel", "default"),
-    Method("bilevel_replan_nofeas", "bilevel", "default", loop=Loop.PAPER),
+    Method("deterministic", "deterministic", "default",
+           about="the deterministic symbolic planner's plan, unverified (the baseline)"),
+    Method("probabilistic", "probabilistic", "default",
+           about="the most frequent plan of N sampled domains, unverified"),
+    Method("probabilistic_oracle", "probabilistic", "default", oracle=True,
+           about="the paper's measure: the sampled domains' plans executed until one succeeds (an oracle)"),
+    Method("cfs", "cfs", "default", feasibility=True, about="continuous forward search alone"),
+    Method("bilevel", "bilevel", "default", feasibility=True, about="Algorithm 1 with our extensions"),
+    Method("bilevel_alg1", "bilevel_alg1", "default", about="the paper's Algorithm 1 exactly"),
+    Method("bilevel_replan", "bilevel", "default", loop=Loop.PAPER, feasibility=True,
+           about="bilevel in the paper's closed loop of k - 1 replanning rounds"),
+    Method("bilevel_loop", "bilevel", "default", loop=Loop.UNTIL_GOAL, feasibility=True,
+           about="bilevel in the closed loop that plans again after every action until the goal"),
+    Method("symbolic_sigmoid", "deterministic", "symbolic_sigmoid",
+           about="the deterministic planner with the Sigmoid Symbolic Model (Fig. 4; DIR/variants/)"),
+    Method("cfs_gumbel", "cfs", "dynamics_gumbel",
+           about="continuous search with the Gumbel-Sigmoid Dynamics Model (Fig. 4; DIR/variants/)"),
+    Method("cfs_nofeas", "cfs", "default", about="cfs without kinematics in its planning loop"),
+    Method("bilevel_nofeas", "bilevel", "default", about="bilevel without kinematics in its planning loop"),
+    Method("bilevel_replan_nofeas", "bilevel", "default", loop=Loop.PAPER,
+           about="bilevel_replan without kinematics in its planning loop"),
 )}
 FEASIBILITY_PAIRS = (("cfs", "cfs_nofeas"), ("bilevel", "bilevel_nofeas"), ("bilevel_replan", "bilevel_replan_nofeas"))
 DEFAULT_METHODS = ("deterministic", "probabilistic", "probabilistic_oracle", "cfs", "bilevel", "bilevel_alg1",
                    "bilevel_replan", "bilevel_loop")
 VARIANT_METHODS = ("symbolic_sigmoid", "cfs_gumbel")
+
+
+def methods_help() -> str:
+    """Every method in a line each, the defaults marked: `tamp evaluate --help` lists them from METHODS."""
+    return "; ".join(f"{m.name}{' (default)' if m.name in DEFAULT_METHODS else ''}: {m.about}"
+                     for m in METHODS.values())
 
 
 def required_files(models_dir: str | Path, method: str) -> list[Path]:

@@ -44,6 +44,7 @@ from typing import Any
 from guarded import Schema, read_json
 from tamp.errors import UserError
 from tamp.records import atomic_write_text
+from tamp.sim.structs import FIDELITIES, fidelity_of
 
 PRACTICE_SEED = 1_000_000  # round r's problems have seed PRACTICE_SEED + r: far from the small seeds users evaluate on
 STATE_NAME, CURVE_JSON, CURVE_MD = "practice.json", "curve.json", "curve.md"
@@ -83,8 +84,7 @@ class PracticeConfig:
             raise UserError(f"--extra-share must be in (0, 1), got {self.extra_share}")
         if not 0 <= self.seed < 2**62:
             raise UserError(f"--seed must be in [0, 2^62), got {self.seed}")
-        if self.fidelity not in ("fast", "full"):
-            raise UserError(f"--fidelity must be 'fast' or 'full', got {self.fidelity!r}")
+        fidelity_of(self.fidelity, "--fidelity")
 
     def defining(self) -> dict[str, Any]:
         """The settings a round's results depend on (all but rounds, workers and backend)."""
@@ -369,7 +369,7 @@ def add_practice(sub) -> None:
     p.add_argument("--seed", type=seed, default=PRACTICE_SEED,
                    help=f"round r's problems have seed SEED + r (default {PRACTICE_SEED}, far from the seeds "
                    "one evaluates on)")
-    p.add_argument("--fidelity", choices=("fast", "full"), default="fast",
+    p.add_argument("--fidelity", choices=FIDELITIES, default="fast",
                    help="the world plans are executed in: fast (default) or full (the arm under physics)")
     p.add_argument("--explore", type=non_negative_int, default=PracticeConfig.explore, metavar="ACTIONS",
                    help="from every state a round visited, run up to this many other goal-oriented actions beside the "

@@ -67,7 +67,7 @@ def test_flags_set_their_fields():
     cfg = planner_config(parser().parse_args(args))
     assert cfg == PlanConfig(
         level1=Level1Config(n_domains=7, backend="fd", symbolic_time_limit=3.0, budget=9, focus_from=3, focus_budget=8,
-                            objects=3, serial=False, confident=0.07, cut=False),
+                            objects=3, serial=False, wait_beyond=0.07, cut=False),
         verify=VerifyConfig(confident=0.03),
         search=SearchConfig(max_expansions=11, look_on=2, max_fragility=0.5, release_targets=False,
                             time_limit=4.0, stall=50, greedy_stall=70),

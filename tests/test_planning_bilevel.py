@@ -159,7 +159,7 @@ def test_a_verified_plan_predicted_to_miss_the_goal_waits_for_the_continuous_sea
     assert goal_error(execute(X_INIT, ours.plan), goal) < 0.05
     assert any("kept while level 2 searches" in r for r in ours.reasons)
     # the paper's rule takes the verified plan, which misses the goal; so does its Algorithm 1
-    paper = plan("bilevel", models(domain), X_INIT, goal, with_level1(n_domains=100, seed=0, confident=None))
+    paper = plan("bilevel", models(domain), X_INIT, goal, with_level1(n_domains=100, seed=0, wait_beyond=None))
     assert paper.level == 1 and paper.search is None and goal_error(execute(X_INIT, paper.plan), goal) > 0.05
     alg1 = plan("bilevel_alg1", models(domain), X_INIT, goal, with_level1(n_domains=100, seed=0))
     assert alg1.level == 1 and alg1.search is None and goal_error(execute(X_INIT, alg1.plan), goal) > 0.05
@@ -167,8 +167,8 @@ def test_a_verified_plan_predicted_to_miss_the_goal_waits_for_the_continuous_sea
     shallow = PlanConfig(level1=Level1Config(n_domains=100, seed=0), search=SearchConfig(max_depth=1))
     kept = plan("bilevel", models(domain), X_INIT, goal, shallow)
     assert kept.level == 1 and kept.plan == paper.plan and kept.search is not None and not kept.search.solved
-    with pytest.raises(UserError, match="Level1Config.confident"):
-        with_level1(confident=0.0)
+    with pytest.raises(UserError, match="Level1Config.wait_beyond"):
+        with_level1(wait_beyond=0.0)
 
 
 class _FragileStub(StubModel):
@@ -492,7 +492,7 @@ class StubKinematics:
 
 
 # both ranked plans verify (9 cm, 0 cm) and a verified plan is taken however close it is predicted
-LOOSE = PlanConfig(level1=Level1Config(n_domains=100, seed=0, confident=None, **PAPER),
+LOOSE = PlanConfig(level1=Level1Config(n_domains=100, seed=0, wait_beyond=None, **PAPER),
                    verify=VerifyConfig(tau_verify=0.1))
 
 

@@ -83,9 +83,11 @@ def section_feasibility(res: Results, figures: Path) -> Section:
         refinements = sum((r.get("feasibility") or {}).get("refinements", 0) for r in after)
         failed = sum((r.get("feasibility") or {}).get("refinement_failures", 0) for r in after)
         entry.update({"check_time_s": check, "search_time_s": search, "plan_refine_time_s": refine,
-                      "check_over_search": check / search if search else None, "rejected": dict(rejected),
+                      "check_share": check / (check + search) if check + search else None,
+                      "rejected": dict(rejected),
                       "refinements": refinements, "refinement_failures": failed})
-        crows.append([f"`{a}`", fmt_s(check), fmt_s(search), fmt_pct(100 * check / search if search else None),
+        crows.append([f"`{a}`", fmt_s(check), fmt_s(search),
+                      fmt_pct(100 * check / (check + search) if check + search else None),
                       fmt_s(refine), f"{refinements} ({failed} failed)",
                       ", ".join(f"{k} {v}" for k, v in sorted(rejected.items())) or DASH])
         data[a] = entry
@@ -94,9 +96,9 @@ def section_feasibility(res: Results, figures: Path) -> Section:
     lines += ["Planning time (s) per n, before and after:", ""]
     lines += md_table(["method", "n", "problems", "mean before", "mean after", "median before", "median after"], trows)
     lines += ["Cost and rejections (after), summed over problems: check time is the kinematic check alone "
-              "(inside the search for Level 2), search time the continuous search's (check included), "
-              "refinement the full refinements the planner ran before returning a plan.", ""]
-    lines += md_table(["method", "check (s)", "search (s)", "check / search (%)", "refinement (s)",
+              "(Level 1's plans and Level 2's successors), search time the continuous search's own (the check "
+              "not included), refinement the full refinements the planner ran before returning a plan.", ""]
+    lines += md_table(["method", "check (s)", "search (s)", "check / (check + search) (%)", "refinement (s)",
                        "refinements", "rejected (level: reason count)"], crows)
     return Section("feasibility", title, lines, data)
 

@@ -40,7 +40,7 @@ from tamp.planning.structs import TYPE_NAMES, Outcome, PickPlace
 from tamp.planning.verify import goal_error, goal_errors, rollout
 from tamp.sim.feasibility import FeasibilityChecker
 from tamp.sim.replay import Timeline
-from tamp.sim.structs import WorldConfig
+from tamp.sim.structs import WorldConfig, fidelity_of
 
 DEFAULT_REPLAY = Path("demo_replay.html")
 
@@ -95,8 +95,7 @@ def run_demo(cfg: DemoConfig = DemoConfig()) -> DemoResult:
 
     from tamp.planning.models import load_bit_names, load_models, pretrained_dir
 
-    if cfg.fidelity not in ("full", "fast"):
-        raise UserError(f"fidelity must be 'full' or 'fast', got {cfg.fidelity!r}")
+    fidelity_of(cfg.fidelity)
     if cfg.candidates < 0:
         raise UserError(f"candidates must be 0 or more, got {cfg.candidates}")
     if cfg.candidates and cfg.replay is None:

@@ -31,6 +31,7 @@ from tamp.planning.results import PlanResult
 from tamp.planning.steps import dynamics_errors
 from tamp.planning.structs import Outcome
 from tamp.planning.verify import goal_error
+from tamp.sim.structs import FIDELITIES
 
 STEPS_HELP = """\
 reading the per-step output (printed after execution; the same in OUT.steps.json and the replay's panel):
@@ -325,7 +326,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="with --replan, the paper's loop instead: this many replanning rounds (the paper gives k - 1 "
                    "for a goal of k random actions), the last plan executed to its end, and it stops when a round "
                    "finds no plan")
-    p.add_argument("--execute", choices=("none", "fast", "full"), default="fast",
+    p.add_argument("--execute", choices=("none", *FIDELITIES), default="fast",
                    help="refine and execute the plan in the fast world (default) or with the arm under "
                    "physics (full), or not at all")
     p.add_argument("--replay", type=Path, default=None, metavar="OUT.html",

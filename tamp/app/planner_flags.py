@@ -10,17 +10,14 @@ from tamp.app.args import fraction, non_negative_float, non_negative_int, object
 from tamp.planning.config import SYMBOLIC_BACKENDS, PlanConfig
 
 
-def add_planner_arguments(p: argparse.ArgumentParser, backends: tuple[str, ...] = SYMBOLIC_BACKENDS,
-                          feasibility: bool = True) -> None:
+def add_planner_arguments(p: argparse.ArgumentParser, feasibility: bool = True) -> None:
     """The planner's flags, the same for `tamp plan` and `tamp evaluate`; `planner_config` reads them.
     `feasibility`: offer --no-feasibility (evaluate chooses it per method instead)."""
     default = PlanConfig()
     p.add_argument("--n-domains", type=positive_int, default=default.level1.n_domains,
                    help=f"N sampled symbolic domains (default {default.level1.n_domains})")
-    help_backend = {"python": "python (in-process search, default)", "fd": "fd (Fast Downward, as in the paper)",
-                    "fd-naive": "fd-naive (one Fast Downward driver call per sampled domain)"}
-    p.add_argument("--symbolic-backend", dest="symbolic_backend", choices=backends, default=default.level1.backend,
-                   help="symbolic planner: " + ", ".join(help_backend[b] for b in backends))
+    p.add_argument("--symbolic-backend", dest="symbolic_backend", choices=tuple(SYMBOLIC_BACKENDS),
+                   default=default.level1.backend, help=backend_help(default.level1.backend))
     p.add_argument("--symbolic-time-limit", type=positive_float, default=default.level1.symbolic_time_limit,
                    help="wall-clock limit per symbolic planner call, s "
                    f"(default {default.level1.symbolic_time_limit:g}; "
@@ -55,10 +52,10 @@ def add_planner_arguments(p: argparse.ArgumentParser, backends: tuple[str, ...] 
                    help="with --focus-from blocks or more, when Level 1 gives no verified plan it does not plan one "
                    "misplaced block at a time (default: it does, lowest goal first, each block in the scene of the "
                    "objects it would be placed on, and verifies the joined plan in the whole scene)")
-    p.add_argument("--level1-confident", type=positive_float, default=default.level1.confident, metavar="METRES",
+    p.add_argument("--level1-confident", type=positive_float, default=default.level1.wait_beyond, metavar="METRES",
                    help="a verified Level-1 plan predicted farther than this from the goal (worst block) is kept "
                    "while the continuous search looks for a plan, and returned only if it finds none (default "
-                   f"{default.level1.confident:g} m, the success tolerance; the paper takes every plan verified "
+                   f"{default.level1.wait_beyond:g} m, the success tolerance; the paper takes every plan verified "
                    f"within tau = {default.verify.tau_verify:g} m: give that value for its rule; `bilevel_alg1` always "
                    "does)")
     p.add_argument("--no-level1-settle", dest="level1_settle", action="store_false",
@@ -167,11 +164,17 @@ def add_planner_arguments(p: argparse.ArgumentParser, backends: tuple[str, ...] 
                        "actions on the predicted states, no refinement before a plan is returned)")
 
 
+def backend_help(default: str) -> str:
+    """The help of --symbolic-backend, from the registry of symbolic planners."""
+    return "symbolic planner: " + ", ".join(f"{name} ({what}{', default' if name == default else ''})"
+                                            for name, what in SYMBOLIC_BACKENDS.items())
+
+
 # PlanConfig's fields that flags set: {part: {field: the flag's argparse dest}}; `planner_config` reads them
 PLANNER_FLAGS: dict[str, dict[str, str]] = {
     "level1": {"n_domains": "n_domains", "backend": "symbolic_backend", "symbolic_time_limit": "symbolic_time_limit",
                "budget": "level1_budget", "focus_from": "focus_from", "focus_budget": "level1_focus_budget",
-               "objects": "level1_objects", "serial": "level1_serial", "confident": "level1_confident",
+               "objects": "level1_objects", "serial": "level1_serial", "wait_beyond": "level1_confident",
                "cut": "level1_cut", "settle": "level1_settle"},
     "verify": {"confident": "confident"},
     "search": {"max_expansions": "max_expansions", "time_limit": "time_limit", "stall": "stall",

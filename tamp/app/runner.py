@@ -22,10 +22,9 @@ from typing import Callable, Sequence
 import numpy as np
 
 from tamp.app.faults import Faults, push
-from tamp.errors import UserError
 from tamp.planning.closed_loop import ClosedLoopResult, plan_closed_loop
 from tamp.planning.config import PlanConfig
-from tamp.planning.methods import KINEMATIC_METHODS
+from tamp.planning.methods import METHODS
 from tamp.planning.models import Models
 from tamp.planning.results import PlanResult
 from tamp.planning.structs import PickPlace
@@ -36,23 +35,20 @@ from tamp.sim.feasibility import FeasibilityChecker
 from tamp.sim.refine import FAILURE_STAGES, failed_at, refine
 from tamp.sim.replay import Timeline
 from tamp.sim.skill import Scene
-from tamp.sim.structs import StepInfo, StepStatus
+from tamp.sim.structs import StepInfo, StepStatus, fidelity_of
 from tamp.sim.trajectory import FailureStage, RefinedPlan, RefinementFailure, refined_action
 from tamp.sim.trajectory_file import PlanTrajectory, TrajectoryError, action_motion
-
-FIDELITIES = ("fast", "full")
 
 
 def kinematics_for(method: str, config: PlanConfig) -> FeasibilityChecker | None:
     """The kinematic feasibility checker a planning call uses: one for the methods that put
-    kinematics in the planning loop (`KINEMATIC_METHODS`) when `config.kinematics.feasibility`, else None."""
-    return FeasibilityChecker() if config.kinematics.feasibility and method in KINEMATIC_METHODS else None
+    kinematics in the planning loop (`Planner.kinematic`) when `config.kinematics.feasibility`, else None."""
+    return FeasibilityChecker() if config.kinematics.feasibility and METHODS[method].kinematic else None
 
 
 def executing_world(fidelity: str = "fast") -> World:
     """A World for executed plans: paths simplified (they are run, not just checked)."""
-    if fidelity not in FIDELITIES:
-        raise UserError(f"fidelity must be one of {', '.join(FIDELITIES)}, got {fidelity!r}")
+    fidelity_of(fidelity)
     return World(WorldConfig(fidelity=fidelity, simplify_paths=True))
 
 
@@ -81,8 +77,7 @@ def execute_plan(actions: Sequence[PickPlace | Sequence[int]], X_init: np.ndarra
                  timeline: Timeline | None = None) -> Execution:
     """Refine `actions` from X_init and execute them (see the module docstring). `world`: a `fast`
     World to refine in (default: a new one); it is left at the refined actions' outcome."""
-    if fidelity not in FIDELITIES:
-        raise UserError(f"fidelity must be one of {', '.join(FIDELITIES)}, got {fidelity!r}")
+    fidelity_of(fidelity)
     world = world or executing_world("fast")
     world.observer = timeline if fidelity == "fast" else None
     refined = refine([PickPlace(*a) for a in actions], X_init, world=world)

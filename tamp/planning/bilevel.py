@@ -48,7 +48,7 @@ def plan_bilevel(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig(),
         level1_serial(models, X_init, X_goal, cfg.level1, cfg.verify, clock, feas, first,  # our extension
                       cfg.search.release_targets)
     chosen = first.chosen
-    waits = None if chosen is None else level1_waits(models, X_init, X_goal, chosen, cfg.level1.confident,
+    waits = None if chosen is None else level1_waits(models, X_init, X_goal, chosen, cfg.level1.wait_beyond,
                                                      cfg.search, cfg.verify)
     second: Level2Result | None = None
     if chosen is None or waits is not None:  # line 16: continuous search fallback
@@ -68,7 +68,7 @@ def plan_bilevel(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig(),
 def level1_waits(models: Models, X_init, X_goal, chosen: Verification, wait_beyond: float | None,
                  search: SearchConfig, goal: VerifyConfig) -> str | None:
     """Why Level 1's verified plan waits while Level 2 searches (our extensions; None: it is taken): predicted
-    `wait_beyond` metres or more from the goal (`Level1Config.confident`), fragile (`verify.fragility`,
+    `wait_beyond` metres or more from the goal (`Level1Config.wait_beyond`), fragile (`verify.fragility`,
     the continuous search's test of a goal state; both off with `wait_beyond` None, as in the paper) or doubtful
     (a step's 95 % bound, `verify.doubt`)."""
     if wait_beyond is not None and chosen.error >= wait_beyond:
@@ -91,7 +91,7 @@ def plan_bilevel_alg1(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConf
     alternatives, any block picked) and the empty plan allowed whenever Sigma_init = Sigma_goal; its
     Level 2 returns the continuous search's first goal state, prunes actions by the paper's rule, counts h in metres
     and runs to its node budget (no stall cut)."""
-    paper = replace(cfg, level1=replace(cfg.level1, alternatives=0, nonempty=False, focus_from=None, confident=None,
+    paper = replace(cfg, level1=replace(cfg.level1, alternatives=0, nonempty=False, focus_from=None, wait_beyond=None,
                                         cut=False),
                     kinematics=replace(cfg.kinematics, feasibility=False),
                     search=replace(cfg.search, look_on=0, release_targets=False, max_fragility=None, max_doubt=None,

@@ -42,7 +42,7 @@ import numpy as np
 
 from tamp.planning.config import PlanConfig
 from tamp.planning.feasibility import Feasibility
-from tamp.planning.methods import KEEPING_METHODS, plan, plan_cfs
+from tamp.planning.methods import METHODS, plan, plan_cfs
 from tamp.planning.models import Models
 from tamp.planning.results import Candidate, Clock, PlanResult, assemble, take_plan
 from tamp.planning.search import SearchResult, state_key
@@ -229,7 +229,7 @@ def _round(method: str, models: Models, X: np.ndarray, X_goal: np.ndarray, out: 
     extra: dict = {} if kinematics is None else {"kinematics": kinematics}
     if avoid:
         extra["avoid"] = avoid
-    keep = cfg.loop.keep_plan and method in KEEPING_METHODS and bool(out.rounds)
+    keep = cfg.loop.keep_plan and METHODS[method].keeps_plans and bool(out.rounds)
     kept = keep_rest(models, X, X_goal, out.rounds[-1], cfg, kinematics, avoid,
                      cfg.verify.eps if until_goal else None) if keep else None
     kept_error = kept.predicted_error if kept is not None and kept.solved else None

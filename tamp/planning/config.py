@@ -19,7 +19,9 @@ from tamp.errors import UserError
 from tamp.planning.search import SearchConfig
 from tamp.planning.verify import EPS_SUCCESS, VerifyConfig
 
-SYMBOLIC_BACKENDS = ("python", "fd", "fd-naive")  # in-process search; Fast Downward, batched or one call per domain
+# the symbolic planners of Level 1, by name, and what each is (the flags' help is built from it)
+SYMBOLIC_BACKENDS = {"python": "in-process search, the fastest", "fd": "Fast Downward, as in the paper",
+                     "fd-naive": "one Fast Downward driver call per sampled domain"}
 
 
 def _positive(owner: str, **values: float | None) -> None:
@@ -53,13 +55,13 @@ class Level1Config:
     focus_budget: int | None = 25_000  # from focus_from objects on, `budget`'s stand-in: later plans rarely verify
     objects: int | None = 4  # from focus_from on, plan in the goal's sub-scene up to this many objects (training size)
     serial: bool = True  # from focus_from on, with no verified plan, plan one misplaced block at a time
-    confident: float | None = EPS_SUCCESS  # metres: a verified plan predicted farther waits for Level 2 (None: paper)
+    wait_beyond: float | None = EPS_SUCCESS  # metres: a verified plan predicted this far waits for Level 2 (None: off)
     cut: bool = True  # end a verified plan where it reaches the goal, drop repeated picks (False: paper)
 
     def __post_init__(self) -> None:
         if self.backend not in SYMBOLIC_BACKENDS:
             raise UserError(f"symbolic backend must be one of {', '.join(SYMBOLIC_BACKENDS)}, got {self.backend!r}")
-        _positive("Level1Config", symbolic_time_limit=self.symbolic_time_limit, confident=self.confident)
+        _positive("Level1Config", symbolic_time_limit=self.symbolic_time_limit, wait_beyond=self.wait_beyond)
         if self.n_domains < 1:
             raise UserError(f"the number of sampled domains must be at least 1, got {self.n_domains}")
         if self.focus_from is not None and self.focus_from < 1:
@@ -103,8 +105,8 @@ class LoopConfig:
     widen_expansions: int = 400  # node budget of the widened search (about 2-4 s at 4 blocks with kinematics)
     search_budget: int = 3000  # search expansions over all rounds: a loop whose rounds keep failing ends in about
     #   the time of two failed searches
-    # from search.greedy_from blocks on, the search budget in place of search_budget: there the tuning loops that
-    #   reached the goal spent at most about 600 expansions, those that spent more failed (None: search_budget)
+    # from search.greedy_from blocks on, the search budget in place of search_budget: there a loop that reaches the
+    #   goal spends far fewer expansions (docs/closing-the-loop.md; None: search_budget)
     greedy_search_budget: int | None = 1500
     stall: int | None = 300  # the stall cut of its rounds' searches at any number of blocks (`SearchConfig.stall` and
     #   `.greedy_stall`, which it replaces there; None: the search's own): a round that fails has a widened search and

@@ -12,7 +12,7 @@
 from __future__ import annotations
 
 import time
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from typing import AbstractSet, Callable, Sequence
 
 from tamp.planning.bilevel import plan_bilevel, plan_bilevel_alg1
@@ -61,14 +61,22 @@ def plan_cfs(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig(),
                     refinements=() if feas is None else feas.refinements)
 
 
-Planner = Callable[..., PlanResult]  # (models, X_init, X_goal, cfg, kinematics=None) -> PlanResult
-METHODS: dict[str, Planner] = {"bilevel": plan_bilevel, "bilevel_alg1": plan_bilevel_alg1,
-                               "probabilistic": plan_probabilistic, "deterministic": plan_deterministic,
-                               "cfs": plan_cfs}
-# the methods that put kinematics in their planning loop when given a checker (and cfg.kinematics.feasibility)
-KINEMATIC_METHODS = frozenset({"cfs", "bilevel"})
-# the methods whose closed loop keeps a plan on course (cfg.loop.keep_plan); the others replan every round
-KEEPING_METHODS = frozenset({"cfs", "bilevel"})
+@dataclass(frozen=True)
+class Planner:
+    """A planning method and what it can do."""
+
+    run: Callable[..., PlanResult]  # (models, X_init, X_goal, cfg, kinematics=None[, avoid]) -> PlanResult
+    kinematic: bool = False  # puts a kinematic checker it is given in its planning loop (cfg.kinematics.feasibility)
+    keeps_plans: bool = False  # its closed loop keeps a plan on course (cfg.loop.keep_plan); else it replans each round
+
+
+METHODS: dict[str, Planner] = {
+    "bilevel": Planner(plan_bilevel, kinematic=True, keeps_plans=True),
+    "bilevel_alg1": Planner(plan_bilevel_alg1),
+    "probabilistic": Planner(plan_probabilistic),
+    "deterministic": Planner(plan_deterministic),
+    "cfs": Planner(plan_cfs, kinematic=True, keeps_plans=True),
+}
 
 
 def plan(method: str, models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig(),
@@ -76,16 +84,16 @@ def plan(method: str, models: Models, X_init, X_goal, cfg: PlanConfig = PlanConf
          avoid: AbstractSet[tuple[bytes, tuple]] = frozenset()) -> PlanResult:
     """Run one of METHODS on (X_init, X_goal), both (n, 5) arrays. `kinematics` (e.g. a
     tamp.sim.feasibility.FeasibilityChecker that observed the scene of X_init) puts kinematic feasibility
-    into the planning loop of KINEMATIC_METHODS (unless cfg.kinematics.feasibility is False); with it, those
+    into the planning loop of the `kinematic` ones (unless cfg.kinematics.feasibility is False); with it, those
     methods also leave out the (state key, action) pairs of `avoid` (a closed loop's revisits)."""
     if method not in METHODS:
         raise ValueError(f"unknown planning method {method!r}; choose one of {', '.join(METHODS)}")
     X_init, X_goal = states_pair(X_init, X_goal)
     # an observed X_init may hold tilted blocks: checked as any scene, not as one placed upright
     check_problem(X_init, X_goal, where="plan()", n_max=getattr(models, "n_max", None), init_upright=False)
-    extra = {"avoid": avoid} if avoid and method in KINEMATIC_METHODS else {}
-    return METHODS[method](models, X_init, X_goal, cfg, kinematics=kinematics, **extra)
+    extra = {"avoid": avoid} if avoid and METHODS[method].kinematic else {}
+    return METHODS[method].run(models, X_init, X_goal, cfg, kinematics=kinematics, **extra)
 
 
-__all__: Sequence[str] = ["KEEPING_METHODS", "KINEMATIC_METHODS", "METHODS", "Planner", "plan", "plan_cfs",
+__all__: Sequence[str] = ["METHODS", "Planner", "plan", "plan_cfs",
                           "plan_deterministic", "plan_probabilistic"]

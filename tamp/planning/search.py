@@ -86,13 +86,11 @@ class SearchConfig:
     #   None: the node budget and the stall cut decide, so that results never depend on the machine's load)
     time_limit: float | None = None
     max_depth: int = 10  # longest plan considered
-    # expansions without a state closer to the goal (least h) before the search ends, below greedy_from blocks (None:
-    #   run to the node budget; off by default, since some searches in metres find a plan after a plateau of 700 or
-    #   more; the closed loop's rounds use `LoopConfig.stall`)
+    # expansions without a state closer to the goal (least h) before the search ends, below greedy_from blocks; off
+    #   (None: the node budget decides), since a search in metres may find its plan after a long plateau
     stall: int | None = None
-    # from greedy_from blocks on, the stall cut in place of `stall`: with h greedier, searches that found a plan
-    #   plateaued for at most 400 expansions on the tuning sets and 775 held out, most failing ones for 1,000 or more
-    #   (None: run to the node budget)
+    # from greedy_from blocks on, the stall cut in place of `stall`: with h greedier, a search finds its plan soon
+    #   after its last progress or not at all (docs/beyond-the-paper.md; None: the node budget decides)
     greedy_stall: int | None = 800
     look_on: int = 30  # expansions spent looking for a confident goal state after a less confident one
     batched: bool = True  # one predict_effect call per expansion (False: one per action, for the benchmark)

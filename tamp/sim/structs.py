@@ -14,6 +14,24 @@ from tamp.errors import UserError
 from tamp.planning.structs import PickPlace
 
 
+class Fidelity(StrEnum):
+    """How a World executes a step."""
+
+    FAST = "fast"  # the refinement's own world: kinematic carry, physics settles the released blocks
+    FULL = "full"  # the arm follows the timed trajectory under physics
+
+
+FIDELITIES = tuple(f.value for f in Fidelity)  # as command lines and files spell them
+
+
+def fidelity_of(value: str, what: str = "fidelity") -> Fidelity:
+    """`value` as a Fidelity; a UserError naming `what` otherwise."""
+    try:
+        return Fidelity(value)
+    except ValueError:
+        raise UserError(f"{what} must be one of {', '.join(Fidelity)}, got {value!r}") from None
+
+
 @dataclass(frozen=True)
 class WorldConfig:
     """Configuration of the block world. All lengths in metres, times in seconds."""
@@ -46,8 +64,7 @@ class WorldConfig:
     carried_inset: float = 0.003
 
     def __post_init__(self) -> None:
-        if self.fidelity not in ("fast", "full"):
-            raise UserError(f"WorldConfig.fidelity must be 'fast' or 'full', got {self.fidelity!r}")
+        fidelity_of(self.fidelity, "WorldConfig.fidelity")
         if not 0.0 <= self.carried_inset < 0.02:
             raise UserError(f"WorldConfig.carried_inset must be in [0, 0.02) metres, got {self.carried_inset}")
         for name in ("workspace_x", "workspace_y"):

@@ -40,7 +40,7 @@ from tamp.sim.execute import ExecutionResult, Executor
 from tamp.sim.observer import WorldObserver
 from tamp.sim.plants import ARM_FILE, ARM_JOINTS
 from tamp.sim.skill import Scene
-from tamp.sim.structs import WorldConfig
+from tamp.sim.structs import FIDELITIES, WorldConfig
 from tamp.sim.trajectory import A_MAX, MOTION_ORDER, RefinedAction, RefinedPlan
 from tamp.sim.trajectory_checks import MAX_ACTION_S, SEGMENT_ORDER, TOLERANCE, TrajectoryError, check
 
@@ -277,7 +277,7 @@ _ACTION = {"type": "object", "required": ["index", "action", "duration", "segmen
                           "blocks_after": {"type": "array", "items": _NUMBERS[3]}}}
 # the structure of a version-1 file (docs/trajectories.md), checked after its format, version and robot
 SCHEMA = Schema({"type": "object", "required": ["robot", "recorded_world", "scene", "actions"], "properties": {
-    "source": {"type": "string"}, "recorded_world": {"enum": ["fast", "full"]},
+    "source": {"type": "string"}, "recorded_world": {"enum": list(FIDELITIES)},
     "scene": {"type": "object", "required": ["blocks", "arm_positions"], "properties": {
         "blocks": {"type": "array", "minItems": 1, "items": {
             "type": "object", "required": ["type", "position", "quaternion_wxyz"],
