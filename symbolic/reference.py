@@ -5,7 +5,7 @@ Every ground action of the task is enumerated up front (operator, then binding i
 XOR mask per effect; each sampled domain gets a breadth-first search of its own with the goal test at
 generation (`plan_each_domain`: N domains drawn with a random stream per domain, searches reused
 between domains that agree on the operators a search touched, a shared expansion budget),
-independent of `symbolic.lifted` and `symbolic.search`: `tests/test_symbolic_search.py` checks
+independent of `symbolic.lifted` and `symbolic.search`: `tests/symbolic/test_search.py` checks
 that one shared search gives every domain this plan, and `bench/symbolic.py` measures the shared
 search against it.
 """

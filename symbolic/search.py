@@ -9,7 +9,7 @@ configurations return plans of the same length). How it computes it is shared:
   action's effect e of operator o leads to the successor in the domains `node & masks(o)[e]`, new
   only in those that have not reached the successor before. Nodes are expanded layer by layer, in
   the order each domain's own search would generate them, so every domain gets exactly its own plan
-  (`tests/test_symbolic_search.py` checks this against N separate searches).
+  (`tests/symbolic/test_search.py` checks this against N separate searches).
 - **Distance bounds.** Distances to the goal in the all-outcomes domain (any effect of any operator)
   are lower bounds in every sampled domain. They are computed backwards from the goal by regression
   (`LiftedTask.predecessors`) up to a radius; beyond it R + 1 is a bound. Searching with a depth bound

@@ -7,7 +7,8 @@ are left out). `from P import name` counts as importing P.name when that is a mo
 import ast
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+from tests.paths import ROOT
+
 PACKAGES = ("tamp", "evaluation", "symbolic", "learned", "guarded")
 
 

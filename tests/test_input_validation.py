@@ -8,19 +8,16 @@ from __future__ import annotations
 
 import json
 import shutil
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-sys.path.insert(0, str(Path(__file__).parent))
-from planning_stubs import StubModel, two_block_domain
-
 from tamp.app.cli import main
 from tamp.app.problem import Problem, random_problem
 from tamp.planning.models import Models, pretrained_dir
 from tamp.planning.validate import ARM_REACH_M, check_problem, check_scene
+from tests.planning_stubs import StubModel, two_block_domain
 
 INIT = [[0.60, 0.15, 0.025, 1, 0], [0.70, -0.10, 0.025, 0, 1]]
 GOAL = [[0.70, -0.10, 0.075, 1, 0], [0.70, -0.10, 0.025, 0, 1]]

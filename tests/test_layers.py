@@ -6,7 +6,8 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+from tests.paths import ROOT
+
 DRAKE_SIDE = ("pydrake", "ompl", "ur_analytic_ik")
 # package -> module prefixes it must never import (anywhere in a file, function-local imports included)
 FORBIDDEN = {

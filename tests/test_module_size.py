@@ -1,9 +1,9 @@
 """Code stays small enough to read in one sitting: no module of the project's packages over 500 lines, no
 function over 80 (argparse builders aside: a flag and its help are one statement each, read one at a time)."""
 import ast
-from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+from tests.paths import ROOT
+
 PACKAGES = ("tamp", "evaluation", "learned", "symbolic")
 MAX_LINES, MAX_FUNCTION_LINES = 500, 80
 PARSER_CALLS = {"add_argument", "add_parser", "add_argument_group", "add_mutually_exclusive_group", "set_defaults"}

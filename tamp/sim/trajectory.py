@@ -4,7 +4,7 @@ Every motion the skill plans is a polyline in joint space that was collision-che
 segment, so the trajectory follows exactly that polyline: each straight segment gets the
 time-optimal profile under the joint velocity and acceleration limits, starting and ending at rest
 (on a straight joint-space segment with box limits this is the trapezoid TOPPRA converges to;
-tests/test_refine.py compares the two). The result is piecewise quadratic and stored as a Drake
+tests/tamp/sim/test_refine.py compares the two). The result is piecewise quadratic and stored as a Drake
 `PiecewisePolynomial` (cubic Hermite through the phase boundaries reproduces it exactly).
 """
 from __future__ import annotations

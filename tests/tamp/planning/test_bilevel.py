@@ -2,16 +2,11 @@
 continuous search, unsolvable problems, closed-loop replanning. No Drake, no torch model."""
 from __future__ import annotations
 
-import sys
 import time
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 import pytest
-
-sys.path.insert(0, str(Path(__file__).parent))
-from planning_stubs import StubModel, two_block_domain, world_step
 
 from tamp.errors import UserError
 from tamp.planning.closed_loop import plan_closed_loop
@@ -21,6 +16,7 @@ from tamp.planning.methods import plan
 from tamp.planning.models import Models
 from tamp.planning.search import SearchConfig, continuous_search
 from tamp.planning.verify import goal_error, verify
+from tests.planning_stubs import StubModel, two_block_domain, world_step
 
 X_INIT = np.array([[0.6, 0.0, 0.025, 1, 0], [0.7, 0.1, 0.025, 1, 0]])
 A_ON_B = np.array([[0.7, 0.1, 0.075, 1, 0], [0.7, 0.1, 0.025, 1, 0]])

@@ -3,15 +3,10 @@ short, widens its search when a round finds nothing, and stops at its action bud
 the stub world (no Drake, no torch model)."""
 from __future__ import annotations
 
-import sys
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 import pytest
-
-sys.path.insert(0, str(Path(__file__).parent))
-from planning_stubs import StubModel, two_block_domain, world_step
 
 from tamp.errors import UserError
 from tamp.planning.closed_loop import plan_closed_loop
@@ -20,6 +15,7 @@ from tamp.planning.methods import plan
 from tamp.planning.models import Models
 from tamp.planning.results import PlanResult
 from tamp.planning.structs import Infeasible
+from tests.planning_stubs import StubModel, two_block_domain, world_step
 
 X_INIT = np.array([[0.6, 0.0, 0.025, 1, 0], [0.7, 0.1, 0.025, 1, 0]])
 A_ON_B = np.array([[0.7, 0.1, 0.075, 1, 0], [0.7, 0.1, 0.025, 1, 0]])

@@ -4,7 +4,6 @@ them found within its budget (the paper set's models, kinematics in the loop, fi
 from __future__ import annotations
 
 from dataclasses import replace
-from pathlib import Path
 
 import pytest
 
@@ -13,12 +12,13 @@ from tamp.planning.config import PlanConfig
 from tamp.planning.methods import plan
 from tamp.planning.models import load_models, pretrained_dir
 from tamp.sim.feasibility import FeasibilityChecker
+from tests.paths import DATA
 
 pytestmark = [pytest.mark.sim, pytest.mark.slow]
 
 # four problems of results/practice/n2-4-problems.jsonl.gz (seed 4242): Level-2 plans found after 215-340
 # expansions, and a search that finds none (the stall cut ends it after about 1,000 expansions instead of 1,500)
-PROBLEMS = Path(__file__).parent / "data" / "tail-problems.jsonl"
+PROBLEMS = DATA / "tail-problems.jsonl"
 NAMES = ("n4-k4-000", "n3-k5-001", "n2-k5-008", "n2-k3-005")
 
 
@@ -54,7 +54,7 @@ def test_the_search_finds_the_plans_it_found_without_its_shortcuts():
 # four 5-6 block problems of the tuning sets (seeds 4245, 4243, 5304; bundled models): plans found after 284,
 # 924 (the longest plateau of the tuning searches, 350-400 expansions) and 362 expansions, and a search that
 # finds none within its 1,500 (its last progress after about 100)
-GREEDY_PROBLEMS = Path(__file__).parent / "data" / "tail-problems-5-6.jsonl"
+GREEDY_PROBLEMS = DATA / "tail-problems-5-6.jsonl"
 
 
 def test_from_5_blocks_on_the_greedy_stall_cut_keeps_the_plans_and_ends_the_search_that_finds_none():

@@ -17,9 +17,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-sys.path.insert(0, str(Path(__file__).parent))
-from planning_stubs import StubModel, two_block_domain
-
 from evaluation.configuration import EvalConfig
 from evaluation.problems import generate_problems, read_problems, write_problems
 from evaluation.row import ROW_KEYS, row_cause
@@ -30,6 +27,8 @@ from tamp.planning.models import Models
 from tamp.planning.search import SearchConfig
 from tamp.planning.structs import OUTCOMES
 from tamp.planning.verify import goal_error
+from tests.paths import ROOT
+from tests.planning_stubs import StubModel, two_block_domain
 
 SET = dict(ns=(2,), ks=(1, 2, 3), per_cell=1, seed=0)
 METHODS = ("deterministic", "probabilistic", "probabilistic_oracle", "cfs", "bilevel", "bilevel_alg1",
@@ -287,12 +286,11 @@ def test_the_oracle_counts_success_iff_some_plan_reaches_the_goal(monkeypatch):
 def test_an_evaluation_killed_midway_resumes_without_redoing_or_losing_rows(serial, problems_file, tmp_path):
     (tmp_path / "models").mkdir()
     out = tmp_path / "results"
-    script = (f"import sys; sys.path.insert(0, {str(Path(__file__).parent)!r})\n"
-              "from test_evaluation_run import CONFIG, stub_models\n"
+    script = ("from tests.evaluation.test_run import CONFIG, stub_models\n"
               "from evaluation.run import evaluate\n"
               f"evaluate({str(tmp_path / 'models')!r}, {str(problems_file)!r}, {str(out)!r}, config=CONFIG, "
               "models=stub_models())\n")
-    proc = subprocess.Popen([sys.executable, "-c", script], cwd=Path(__file__).parents[1])
+    proc = subprocess.Popen([sys.executable, "-c", script], cwd=ROOT)
     rows_path = out / "rows.jsonl"
     deadline = time.monotonic() + 120
     while not (rows_path.exists() and rows_path.read_bytes().count(b"\n") >= 2):

@@ -5,11 +5,10 @@ The stages (Level 1, Level 2 and its search, the kinematic check, verification) 
 """
 import ast
 from dataclasses import fields
-from pathlib import Path
 
 from tamp.planning.config import PlanConfig
+from tests.paths import ROOT
 
-ROOT = Path(__file__).resolve().parents[1]
 STAGES = ("level1.py", "level2.py", "search.py", "feasibility.py", "verify.py")
 # LoopConfig.stall is the closed loop's own cut for its rounds' searches, in place of SearchConfig.stall
 SHARED_ON_PURPOSE = {"stall"}

@@ -1,19 +1,15 @@
 """Continuous forward search: pruning, batched vs unbatched successor prediction, limits."""
 from __future__ import annotations
 
-import sys
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-sys.path.insert(0, str(Path(__file__).parent))
-from planning_stubs import StubModel, world_step
-
 from tamp.errors import UserError
 from tamp.planning.search import SearchConfig, continuous_search, goal_oriented_actions
 from tamp.planning.verify import VerifyConfig, goal_error, rollout
+from tests.planning_stubs import StubModel, world_step
 
 # three blocks: a large bar 0 and small cubes 1, 2
 X = np.array([[0.55, -0.15, 0.025, 0, 1], [0.7, 0.1, 0.025, 1, 0], [0.8, -0.2, 0.025, 1, 0]])

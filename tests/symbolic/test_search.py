@@ -8,7 +8,7 @@ them fails `test_ranked_plans_of_the_bundled_domain_are_unchanged`; if the chang
 the closing note and rewrite the file:
 
     tamp problems --per-cell 2 --seed 1 --out /tmp/golden.jsonl
-    .venv/bin/python tests/test_symbolic_search.py --write /tmp/golden.jsonl
+    .venv/bin/python -m tests.symbolic.test_search --write /tmp/golden.jsonl
 """
 
 from __future__ import annotations
@@ -31,9 +31,9 @@ from symbolic.reference import GroundTask, bfs
 from symbolic.sampling import DomainSet, EffectSampler
 from symbolic.search import search_domains
 from symbolic.structs import SymbolicProblem
+from tests.paths import DATA, ROOT
 
-ROOT = Path(__file__).resolve().parents[1]
-GOLDEN = Path(__file__).resolve().parent / "data" / "level1_golden.json"
+GOLDEN = DATA / "level1_golden.json"
 BUNDLED_DOMAIN = ROOT / "tamp" / "pretrained" / "paper" / "domain"
 
 
@@ -229,5 +229,5 @@ def _write(problems_file: str) -> None:
 
 if __name__ == "__main__":
     if len(sys.argv) != 3 or sys.argv[1] != "--write":
-        sys.exit("usage: python tests/test_symbolic_search.py --write PROBLEMS.jsonl")
+        sys.exit("usage: python -m tests.symbolic.test_search --write PROBLEMS.jsonl")
     _write(sys.argv[2])
