@@ -4,7 +4,7 @@
 
 Random (scene, action) pairs: a random scene of 2-4 blocks, then 0-2 random actions executed in the
 `fast` world (so that stacks, shifted and turned blocks occur), then one uniformly random action of
-the 9 n^2. Each action is checked by `tamp.sim.feasibility.FeasibilityChecker` on the scene (positions
+the 9 n^2. Each action is checked by `tamp.sim.kinematic_checker.FeasibilityChecker` on the scene (positions
 from X, orientations from the observed scene, as in planning) and fully refined from the same scene
 twice: as the planners refine (`FeasibilityChecker.refine`: IK, OMPL motions, grasp, no physics) and
 as execution does (`tamp.sim.refine`: the same, with physics after release for the retreat), the
@@ -26,9 +26,9 @@ import dataclasses
 
 import numpy as np
 
-from tamp.planning.structs import PickPlace
+from tamp.planning.vocabulary import PickPlace
 from tamp.sim import World, WorldConfig
-from tamp.sim.feasibility import FeasibilityChecker
+from tamp.sim.kinematic_checker import FeasibilityChecker
 from tamp.sim.kinematics import Q_HOME
 from tamp.sim.refine import refine
 

@@ -126,8 +126,8 @@ def main() -> int:
     import torch
     torch.set_num_threads(1)
     from tamp.planning.config import Level1Config, PlanConfig
-    from tamp.planning.methods import plan
     from tamp.planning.models import load_models
+    from tamp.planning.planners import plan
     from tamp.planning.search import SearchConfig, continuous_search
 
     directory = args.models or args.synthetic

@@ -68,11 +68,11 @@ def main() -> int:
     from tamp.app.problem import read_problem_set
     from tamp.app.runner import execute_plan, executing_world
     from tamp.planning.config import PlanConfig
-    from tamp.planning.methods import plan
     from tamp.planning.models import load_models
+    from tamp.planning.planners import plan
     from tamp.planning.search import all_actions
     from tamp.planning.verify import EPS_SUCCESS
-    from tamp.sim.feasibility import FeasibilityChecker
+    from tamp.sim.kinematic_checker import FeasibilityChecker
     from tamp.sim.kinematics import forget_ik_answers
 
     torch.set_num_threads(1)

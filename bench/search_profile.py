@@ -22,13 +22,14 @@ sys.path.insert(0, str(ROOT))
 
 # (row, file of the function, its name, file whose calls of it count; None: the geometry functions below)
 PARTS = [
-    ("kinematic check", "tamp/sim/feasibility.py", "check", "tamp/planning/feasibility.py"),
-    ("- closed-form IK", "tamp/sim/kinematics.py", "solve_chain", "tamp/sim/feasibility.py"),
-    ("- attaching the carried boxes", "tamp/sim/motion.py", "attach", "tamp/sim/feasibility.py"),
-    ("- waypoint geometry (grasp, corners, stacking, box test)", "tamp/sim/", None, "tamp/sim/feasibility.py"),
-    ("- collision queries", "tamp/sim/motion.py", "is_valid", "tamp/sim/feasibility.py"),
+    ("kinematic check", "tamp/sim/kinematic_checker.py", "check", "tamp/planning/kinematic_check.py"),
+    ("- closed-form IK", "tamp/sim/kinematics.py", "solve_chain", "tamp/sim/kinematic_checker.py"),
+    ("- attaching the carried boxes", "tamp/sim/motion.py", "attach", "tamp/sim/kinematic_checker.py"),
+    ("- waypoint geometry (grasp, corners, stacking, box test)", "tamp/sim/", None, "tamp/sim/kinematic_checker.py"),
+    ("- collision queries", "tamp/sim/motion.py", "is_valid", "tamp/sim/kinematic_checker.py"),
     ("Dynamics Model, successors", "tamp/planning/search.py", "predict_positions", "tamp/planning/search.py"),
-    ("refinement of the plans found (IK, OMPL)", "tamp/sim/feasibility.py", "refine", "tamp/planning/feasibility.py"),
+    ("refinement of the plans found (IK, OMPL)", "tamp/sim/kinematic_checker.py", "refine",
+     "tamp/planning/kinematic_check.py"),
 ]
 GEOMETRY = ("approach_poses", "held_block", "pick_waypoints", "pick_place_waypoints", "_place_occupied",
             "carried_shapes", "predicted_scene")
@@ -55,9 +56,9 @@ def main() -> int:
 
     from tamp.app.problem import read_problem_set
     from tamp.planning.config import PlanConfig
-    from tamp.planning.methods import plan
     from tamp.planning.models import load_models
-    from tamp.sim.feasibility import FeasibilityChecker
+    from tamp.planning.planners import plan
+    from tamp.sim.kinematic_checker import FeasibilityChecker
     try:
         from tamp.sim.kinematics import forget_ik_answers
     except ImportError:  # a checkout from before IK answers were remembered
@@ -87,7 +88,7 @@ def main() -> int:
         call()
         wall = time.perf_counter() - t
         stats = pstats.Stats(profiler)
-        profiled = from_callers(stats, "tamp/planning/methods.py", ("plan",), "search_profile.py")
+        profiled = from_callers(stats, "tamp/planning/planners.py", ("plan",), "search_profile.py")
         values = {"planning call": wall}
         for row, file, func, caller in PARTS:
             values[row] = wall * from_callers(stats, file, (func,) if func else GEOMETRY, caller) / profiled

@@ -86,8 +86,8 @@ def main() -> None:
     from symbolic.reference import GroundTask, plan_each_domain
     from tamp.planning.config import KinematicsConfig, PlanConfig
     from tamp.planning.level1 import symbolic_problem
-    from tamp.planning.methods import plan
     from tamp.planning.models import load_models, pretrained_dir
+    from tamp.planning.planners import plan
     from tamp.planning.search import SearchConfig
 
     torch.set_num_threads(1)

@@ -19,7 +19,7 @@ from tamp.app.planner_flags import add_planner_arguments, backend_help
 from tamp.app.problem import PROTOCOLS
 from tamp.errors import UserError
 from tamp.planning.config import SYMBOLIC_BACKENDS
-from tamp.sim.structs import FIDELITIES
+from tamp.sim.world_types import FIDELITIES
 
 
 def _name_list(text: str) -> list[str]:

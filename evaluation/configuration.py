@@ -9,7 +9,7 @@ from tamp.app.faults import Faults
 from tamp.app.parallel import BACKENDS
 from tamp.errors import UserError
 from tamp.planning.config import Level1Config, LoopConfig, PlanConfig
-from tamp.sim.structs import fidelity_of
+from tamp.sim.world_types import fidelity_of
 
 
 @dataclass(frozen=True)

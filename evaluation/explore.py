@@ -67,7 +67,7 @@ class StateWorker:
 
     def run(self, task: StateTask) -> tuple[int, list[dict[str, Any]]]:
         from tamp.app.collect import STATUS_CODES
-        from tamp.sim.structs import StepStatus
+        from tamp.sim.world_types import StepStatus
 
         world = self.world
         try:

@@ -1,25 +1,13 @@
 """The methods compared by the evaluation, and the model sets they plan with.
 
-Each method is a `tamp.planning.methods` planner, a model variant and open or closed loop:
+Each method (`METHODS`, each with what it is in `Method.about`; `tamp evaluate --help` lists them) is a
+`tamp.planning.planners` planner, a model variant and open or closed loop. `probabilistic_oracle` is the
+paper's measure of the probabilistic planner, an EXECUTION ORACLE: the plans of the N sampled domains,
+most frequent first, each executed from X_init until one reaches the goal (at most
+EvalConfig.oracle_max_plans); no planner could choose this way without the simulator.
 
-    deterministic         deterministic symbolic planner (baseline), Gumbel-Sigmoid Symbolic Model
-    probabilistic         probabilistic symbolic planner, N sampled domains, top plan, unverified
-    probabilistic_oracle  the paper's measure of the probabilistic planner, an EXECUTION ORACLE: the
-                          plans of the N sampled domains, most frequent first, each executed from
-                          X_init until one reaches the goal (at most EvalConfig.oracle_max_plans);
-                          no planner could choose this way without the simulator
-    cfs                   continuous forward search with the (Sigmoid) Dynamics Model
-    bilevel               Algorithm 1 with our Level-1 extensions (look-alike alternatives, non-empty plans)
-    bilevel_alg1          the paper's Algorithm 1 exactly (both extensions off)
-    bilevel_replan        `bilevel` in the paper's closed loop, up to k - 1 replanning rounds (Table IV)
-    bilevel_loop          `bilevel` in the closed loop that does not know k: plan again after every action
-                          until the goal or the loop's action budget, widening the search when a round
-                          finds no plan (the default of `tamp plan --replan` and `tamp demo`)
-    symbolic_sigmoid      deterministic symbolic planner, Sigmoid Symbolic Model and its own domain (Fig. 4)
-    cfs_gumbel            continuous forward search, Gumbel-Sigmoid Dynamics Model (Fig. 4)
-
-`cfs`, `bilevel`, `bilevel_replan` and `bilevel_loop` plan with kinematics in the loop (tamp.sim.feasibility: actions
-checked on the predicted states, plans refined before they are returned); `cfs_nofeas`,
+`cfs`, `bilevel`, `bilevel_replan` and `bilevel_loop` plan with kinematics in the loop (tamp.sim.kinematic_checker:
+actions checked on the predicted states, plans refined before they are returned); `cfs_nofeas`,
 `bilevel_nofeas` and `bilevel_replan_nofeas` are the same planners without it (before / after on the
 same problems: `tamp evaluate --methods cfs,cfs_nofeas,...`). The symbolic baselines never use it.
 
@@ -37,7 +25,7 @@ from typing import Sequence
 from symbolic import operators_file
 from tamp.errors import UserError
 from tamp.planning.models import DOMAIN_DIR, DYNAMICS_FILE, SYMBOLIC_FILE, Models
-from tamp.planning.structs import Loop
+from tamp.planning.vocabulary import Loop
 
 VARIANTS_DIR = "variants"
 SYMBOLIC_SIGMOID, DOMAIN_SIGMOID, DYNAMICS_GUMBEL = "symbolic_sigmoid.pt", "domain_sigmoid", "dynamics_gumbel.pt"
@@ -46,11 +34,11 @@ SYMBOLIC_SIGMOID, DOMAIN_SIGMOID, DYNAMICS_GUMBEL = "symbolic_sigmoid.pt", "doma
 @dataclass(frozen=True)
 class Method:
     name: str
-    planner: str  # a tamp.planning.methods.METHODS key
+    planner: str  # a tamp.planning.planners.METHODS key
     models: str  # model set: "default" | "symbolic_sigmoid" | "dynamics_gumbel"
     loop: Loop | None = None  # closed loop: the paper's k - 1 rounds or until the goal; None: open loop
     oracle: bool = False  # execute the ranked plans until one succeeds (the authors' measure)
-    feasibility: bool = False  # kinematic check and refinement in the planning loop (tamp.sim.feasibility)
+    feasibility: bool = False  # kinematic check and refinement in the planning loop (tamp.sim.kinematic_checker)
     about: str = ""  # what it is, in a line (`tamp evaluate --help`)
 
     @property

@@ -44,7 +44,7 @@ from typing import Any
 from guarded import Schema, read_json
 from tamp.errors import UserError
 from tamp.records import atomic_write_text
-from tamp.sim.structs import FIDELITIES, fidelity_of
+from tamp.sim.world_types import FIDELITIES, fidelity_of
 
 PRACTICE_SEED = 1_000_000  # round r's problems have seed PRACTICE_SEED + r: far from the small seeds users evaluate on
 STATE_NAME, CURVE_JSON, CURVE_MD = "practice.json", "curve.json", "curve.md"

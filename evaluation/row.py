@@ -14,7 +14,7 @@ import numpy as np
 from tamp.planning.causes import cause_of
 from tamp.planning.results import LEVEL1_STAGES
 from tamp.planning.steps import symbolic_steps
-from tamp.planning.structs import Outcome
+from tamp.planning.vocabulary import Outcome
 
 ERROR_OUTCOME = Outcome.ERROR.value  # a pair that raised (see Evaluator.error_row); not one of OUTCOMES
 MAX_CANDIDATES = 20  # candidates kept per row, in the planner's order
@@ -92,7 +92,7 @@ TIMING_KEYS = ("planning_time_s", "level1_time_s", "refine_time_s", "search_time
 
 
 def row_outcome(solved: bool, refine_failure: dict | None, final_error: float, eps: float) -> Outcome:
-    """The row's Outcome (see `tamp.planning.structs.Outcome`)."""
+    """The row's Outcome (see `tamp.planning.vocabulary.Outcome`)."""
     return Outcome.of(solved, None if refine_failure is None else refine_failure["stage"], final_error, eps)
 
 

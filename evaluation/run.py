@@ -62,12 +62,12 @@ from tamp.app.problem import Problem
 from tamp.errors import UserError
 from tamp.planning.causes import stop_record
 from tamp.planning.steps import dynamics_errors
-from tamp.planning.structs import Loop, Outcome
 from tamp.planning.verify import goal_error
+from tamp.planning.vocabulary import Loop, Outcome
 from tamp.records import atomic_write_text, exclusive, package_versions
 
 if TYPE_CHECKING:
-    from tamp.sim.feasibility import FeasibilityChecker
+    from tamp.sim.kinematic_checker import FeasibilityChecker
 
 ROWS_NAME, META_NAME, LOCK_NAME, SYMBOLS_NAME = "rows.jsonl", "meta.json", ".evaluate.lock", "symbols.json"
 FORMAT = "tamp-evaluation/1"
@@ -93,7 +93,7 @@ class Evaluator:
         of problem.X_init as refinement starts it; the first scene of each layout (block types) pays
         the checker's one-off collision-model builds before any planner is timed."""
         if self._checker is None:
-            from tamp.sim.feasibility import FeasibilityChecker
+            from tamp.sim.kinematic_checker import FeasibilityChecker
 
             self._checker = FeasibilityChecker()
         checker = self._checker
@@ -173,7 +173,7 @@ class Evaluator:
         return row
 
     def _open_loop(self, problem: Problem, method: Method, models) -> dict:
-        from tamp.planning.methods import plan
+        from tamp.planning.planners import plan
 
         kinematics = self.checker(problem) if method.feasibility else None
         extra = {} if kinematics is None else {"kinematics": kinematics}
@@ -258,10 +258,10 @@ class Evaluator:
                 "transitions": transition_records(out.states, out.executed, run.infos)}
 
     def _loop_steps(self, problem: Problem, models, run, errors: Sequence[float]) -> list[dict] | None:
-        """The `steps` of a closed loop: each action sent to the world (`tamp.app.steps.loop_steps`)."""
+        """The `steps` of a closed loop: each action sent to the world (`tamp.app.step_report.loop_steps`)."""
         if not has_abstraction(models):
             return None
-        from tamp.app.steps import loop_steps
+        from tamp.app.step_report import loop_steps
 
         checker, out = self.checker(problem), []
         for s in loop_steps(run):

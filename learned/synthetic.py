@@ -18,7 +18,7 @@ from .dataset import DatasetWriter, Transitions, pack_samples
 from .effects import OFFSET_M
 
 STATUS_CODES = {"ok": 0, "ik_failure": 1, "motion_failure": 2, "nothing_grasped": 3}
-"""The world's outcome codes (tamp.sim.structs.STATUSES order); the toy rules emit 0 and 3 only."""
+"""The world's outcome codes (tamp.sim.world_types.STATUSES order); the toy rules emit 0 and 3 only."""
 HALF_XY = np.array([[0.025, 0.025], [0.025, 0.125]])
 """Footprint half extents (x, y) in metres by type index (small, large)."""
 HALF_Z = 0.025

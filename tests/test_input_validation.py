@@ -54,7 +54,7 @@ def test_impossible_scenes_are_refused_naming_the_file_field_and_row(tmp_path, c
 
 @pytest.mark.sim
 def test_the_python_api_checks_its_scenes():
-    from tamp.planning.methods import plan
+    from tamp.planning.planners import plan
     from tamp.sim.refine import refine
 
     stub = StubModel()

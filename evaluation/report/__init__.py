@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from tamp.errors import UserError
-from tamp.planning.structs import OUTCOMES
+from tamp.planning.vocabulary import OUTCOMES
 from tamp.records import atomic_write_text
 
 from .calibration import section_calibration

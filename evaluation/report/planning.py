@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from tamp.planning.structs import OUTCOMES
+from tamp.planning.vocabulary import OUTCOMES
 
 from .. import paper, plots, scaling
 from ..format import DASH, fmt_p, fmt_pct, fmt_pm, fmt_ratio, fmt_s, md_table

@@ -6,7 +6,7 @@ from pathlib import Path
 
 from guarded import LARGE, InputError, Schema, parse_json, read_json, read_jsonl
 from tamp.errors import UserError
-from tamp.planning.structs import OUTCOMES, Outcome
+from tamp.planning.vocabulary import OUTCOMES, Outcome
 
 ERROR_OUTCOME = Outcome.ERROR.value  # a (problem, method) that raised (evaluation.run): listed, left out of the tables
 STAGES = ("ik", "motion", "grasp")

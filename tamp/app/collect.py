@@ -34,7 +34,7 @@ from tamp.errors import UserError
 from tamp.inputs import SEED_LIMIT
 from tamp.planning.validate import MAX_OBJECTS
 from tamp.records import exclusive, package_versions
-from tamp.sim.structs import STATUSES, StepStatus, WorldConfig
+from tamp.sim.world_types import STATUSES, StepStatus, WorldConfig
 
 STATUS_CODES = {name: code for code, name in enumerate(STATUSES)}
 LOCK_NAME = ".collect.lock"

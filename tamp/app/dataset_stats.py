@@ -24,8 +24,8 @@ from pathlib import Path
 import numpy as np
 
 from tamp.errors import UserError
-from tamp.planning.structs import BLOCK_SIZES, LARGE, SMALL
-from tamp.sim.structs import STATUSES, StepStatus
+from tamp.planning.vocabulary import BLOCK_SIZES, LARGE, SMALL
+from tamp.sim.world_types import STATUSES, StepStatus
 
 MOVE_TOL = 0.01  # metres: an object moved if its centre moved more than this
 LEVEL_TOL = 0.01  # metres: height tolerance of a flat stack level

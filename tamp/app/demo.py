@@ -20,7 +20,7 @@ from tamp.app.plan_command import LEVELS, print_cause, print_result, write_execu
 from tamp.app.plan_file import fmt_action
 from tamp.app.problem import Problem, random_problem
 from tamp.app.runner import ClosedLoopRun, Execution, execute_plan, kinematics_for, run_closed_loop
-from tamp.app.steps import (
+from tamp.app.step_report import (
     closed_loop_steps,
     open_loop_steps,
     panel_entries,
@@ -33,14 +33,14 @@ from tamp.errors import UserError
 from tamp.planning.causes import stop_record
 from tamp.planning.closed_loop import ClosedLoopResult, loop_outcome
 from tamp.planning.config import PlanConfig
-from tamp.planning.methods import plan
+from tamp.planning.planners import plan
 from tamp.planning.results import PlanResult
 from tamp.planning.steps import dynamics_errors
-from tamp.planning.structs import TYPE_NAMES, Outcome, PickPlace
 from tamp.planning.verify import goal_error, goal_errors, rollout
-from tamp.sim.feasibility import FeasibilityChecker
+from tamp.planning.vocabulary import TYPE_NAMES, Outcome, PickPlace
+from tamp.sim.kinematic_checker import FeasibilityChecker
 from tamp.sim.replay import Timeline
-from tamp.sim.structs import WorldConfig, fidelity_of
+from tamp.sim.world_types import WorldConfig, fidelity_of
 
 DEFAULT_REPLAY = Path("demo_replay.html")
 
@@ -71,7 +71,7 @@ class DemoResult:
     loop: ClosedLoopResult | None = None  # closed loop (replan): every round and executed action
     loop_run: ClosedLoopRun | None = None  # closed loop: the run in the world (its steps and motion)
     step_times: list[tuple[float, float]] = field(default_factory=list)  # closed loop: (refine, execute) s
-    steps: list[dict] = field(default_factory=list)  # per executed step (tamp.app.steps records)
+    steps: list[dict] = field(default_factory=list)  # per executed step (tamp.app.step_report records)
 
     @property
     def outcome(self) -> Outcome:

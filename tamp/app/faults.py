@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from tamp.errors import UserError
-from tamp.planning.structs import BLOCK_SIZES
+from tamp.planning.vocabulary import BLOCK_SIZES
 
 if TYPE_CHECKING:  # the configuration loads no Drake: `tamp evaluate --help` stays fast
     from tamp.sim.skill import Scene

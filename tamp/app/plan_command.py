@@ -26,12 +26,12 @@ from tamp.errors import UserError
 from tamp.planning.causes import cause_of, stop_record
 from tamp.planning.closed_loop import loop_outcome
 from tamp.planning.config import PlanConfig
-from tamp.planning.methods import METHODS, plan
+from tamp.planning.planners import METHODS, plan
 from tamp.planning.results import PlanResult
 from tamp.planning.steps import dynamics_errors
-from tamp.planning.structs import Outcome
 from tamp.planning.verify import goal_error
-from tamp.sim.structs import FIDELITIES
+from tamp.planning.vocabulary import Outcome
+from tamp.sim.world_types import FIDELITIES
 
 STEPS_HELP = """\
 reading the per-step output (printed after execution; the same in OUT.steps.json and the replay's panel):
@@ -136,7 +136,7 @@ def print_result(result: PlanResult, tau: float, indent: str = "") -> None:
 
 def _open_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timeline, names) -> tuple[int, list[dict], Any]:
     from tamp.app.runner import execute_plan, kinematics_for
-    from tamp.app.steps import open_loop_steps
+    from tamp.app.step_report import open_loop_steps
 
     kinematics = kinematics_for(options.method, cfg)
     if kinematics is not None:
@@ -177,7 +177,7 @@ def print_cause(outcome: str, step_miss_m, stop: dict, refine_failure: dict | No
 
 
 def _print_steps(records: list[dict]) -> None:
-    from tamp.app.steps import print_steps  # it loads torch: imported when steps are printed
+    from tamp.app.step_report import print_steps  # it loads torch: imported when steps are printed
 
     print_steps(records)
 
@@ -185,7 +185,7 @@ def _print_steps(records: list[dict]) -> None:
 def _closed_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timeline,
                  names) -> tuple[int, list[dict], Any]:
     from tamp.app.runner import kinematics_for, run_closed_loop
-    from tamp.app.steps import closed_loop_steps
+    from tamp.app.step_report import closed_loop_steps
 
     def show_step(action, X, info, seconds) -> None:
         print(f"  executed {fmt_action(action)}: {info.status}{': ' + info.reason if info.reason else ''}; "
@@ -241,7 +241,7 @@ def run_plan(problem_path: Path, models_dir: Path, options: PlanOptions) -> int:
         check_output_file(options.replay, "--replay")
     steps_file = options.steps
     if steps_file is None and options.replay is not None:
-        from tamp.app.steps import steps_path
+        from tamp.app.step_report import steps_path
 
         steps_file = steps_path(options.replay)
     if options.trajectory is not None:
@@ -268,12 +268,12 @@ def run_plan(problem_path: Path, models_dir: Path, options: PlanOptions) -> int:
     runner = _closed_loop if options.replan else _open_loop
     code, records, executed = runner(problem, models, options, cfg, timeline, names)
     if steps_file is not None and records:
-        from tamp.app.steps import steps_document, write_steps
+        from tamp.app.step_report import steps_document, write_steps
 
         write_steps(steps_file, steps_document(str(problem_path), options.method, None, records, names))
         print(f"steps written to {steps_file}")
     if timeline is not None:
-        from tamp.app.steps import panel_entries
+        from tamp.app.step_report import panel_entries
 
         timeline.show_panel(panel_entries(records, timeline.t_end))
         if timeline.times:

@@ -16,8 +16,8 @@ import numpy as np
 from guarded import Schema, read_json
 from tamp.errors import UserError
 from tamp.inputs import ACTION, SCENE, blocks_out_of_range
-from tamp.planning.structs import PickPlace
 from tamp.planning.validate import check_scene
+from tamp.planning.vocabulary import PickPlace
 
 
 def fmt_action(a) -> str:

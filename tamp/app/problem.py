@@ -161,8 +161,8 @@ def random_problem(n: int, k: int, seed: int, world: "World | None" = None, name
     else RuntimeError), so k counts real steps; under `paper` the first k draws are kept whatever
     they do. `seed` also seeds the sampled symbolic domains when the problem is planned.
     """
-    from tamp.sim.structs import WorldConfig
     from tamp.sim.world import World
+    from tamp.sim.world_types import WorldConfig
 
     if n < 1 or k < 1:
         raise UserError(f"a random problem needs n >= 1 objects and k >= 1 actions, got n={n}, k={k}")

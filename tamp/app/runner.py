@@ -24,20 +24,20 @@ import numpy as np
 from tamp.app.faults import Faults, push
 from tamp.planning.closed_loop import ClosedLoopResult, plan_closed_loop
 from tamp.planning.config import PlanConfig
-from tamp.planning.methods import METHODS
 from tamp.planning.models import Models
+from tamp.planning.planners import METHODS
 from tamp.planning.results import PlanResult
-from tamp.planning.structs import PickPlace
 from tamp.planning.verify import goal_error
+from tamp.planning.vocabulary import PickPlace
 from tamp.sim import World, WorldConfig
 from tamp.sim.execute import execute
-from tamp.sim.feasibility import FeasibilityChecker
+from tamp.sim.kinematic_checker import FeasibilityChecker
 from tamp.sim.refine import FAILURE_STAGES, failed_at, refine
 from tamp.sim.replay import Timeline
 from tamp.sim.skill import Scene
-from tamp.sim.structs import StepInfo, StepStatus, fidelity_of
 from tamp.sim.trajectory import FailureStage, RefinedPlan, RefinementFailure, refined_action
 from tamp.sim.trajectory_file import PlanTrajectory, TrajectoryError, action_motion
+from tamp.sim.world_types import StepInfo, StepStatus, fidelity_of
 
 
 def kinematics_for(method: str, config: PlanConfig) -> FeasibilityChecker | None:

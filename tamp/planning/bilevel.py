@@ -10,7 +10,7 @@
 
 Each stage returns its own result (`Level1Result`, `Level2Result`, the kinematic check's record) and
 times itself on the call's `Clock`; the `PlanResult` is assembled from them at the end. The other
-methods and the registry are in `tamp.planning.methods`, the closed loops in `tamp.planning.closed_loop`,
+methods and the registry are in `tamp.planning.planners`, the closed loops in `tamp.planning.closed_loop`,
 the configuration in `tamp.planning.config`.
 """
 from __future__ import annotations
@@ -22,14 +22,14 @@ from typing import AbstractSet, Sequence
 import numpy as np
 
 from tamp.planning.config import PlanConfig
-from tamp.planning.feasibility import Feasibility
+from tamp.planning.kinematic_check import Feasibility
 from tamp.planning.level1 import level1, level1_serial
 from tamp.planning.level2 import level2
 from tamp.planning.models import Models
 from tamp.planning.results import Clock, Level2Result, PlanResult, assemble
 from tamp.planning.search import SearchConfig
-from tamp.planning.structs import KinematicFeasibility
 from tamp.planning.verify import Verification, VerifyConfig, doubt, fragility
+from tamp.planning.vocabulary import KinematicFeasibility
 
 
 def plan_bilevel(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig(),

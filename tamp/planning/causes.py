@@ -30,7 +30,7 @@ from enum import StrEnum
 from typing import TYPE_CHECKING, Sequence
 
 from tamp.planning.search import SearchStatus
-from tamp.planning.structs import LoopStop, Outcome
+from tamp.planning.vocabulary import LoopStop, Outcome
 
 if TYPE_CHECKING:
     from tamp.planning.results import PlanResult
@@ -56,7 +56,7 @@ class Cause(StrEnum):
 class Failure:
     """What a failed run ended with: the inputs of `failure_cause`, as stored in an evaluation row."""
 
-    outcome: str  # tamp.planning.structs.Outcome value
+    outcome: str  # tamp.planning.vocabulary.Outcome value
     step_miss_m: Sequence[float] = ()  # per executed action: the worst block's distance from its prediction
     predicted_error_m: float | None = None  # the last plan taken: predicted distance to the goal
     loop: str | None = None  # closed loop: `ClosedLoopResult.stop` (a LoopStop value); None: open loop

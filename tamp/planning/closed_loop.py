@@ -41,13 +41,13 @@ from typing import Callable, Sequence
 import numpy as np
 
 from tamp.planning.config import PlanConfig
-from tamp.planning.feasibility import Feasibility
-from tamp.planning.methods import METHODS, plan, plan_cfs
+from tamp.planning.kinematic_check import Feasibility
 from tamp.planning.models import Models
+from tamp.planning.planners import METHODS, plan, plan_cfs
 from tamp.planning.results import Candidate, Clock, PlanResult, assemble, take_plan
 from tamp.planning.search import SearchResult, state_key
-from tamp.planning.structs import KinematicFeasibility, LoopStop, Outcome, PickPlace
 from tamp.planning.verify import Verification, at_goal, goal_error, goal_errors, verify
+from tamp.planning.vocabulary import KinematicFeasibility, LoopStop, Outcome, PickPlace
 
 
 @dataclass

@@ -23,7 +23,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from tamp.planning.config import Level1Config
-from tamp.planning.feasibility import Feasibility, feasible_choice
+from tamp.planning.kinematic_check import Feasibility, feasible_choice
 from tamp.planning.models import Models
 from tamp.planning.results import Candidate, Clock, Level1Result, reasons_json
 from tamp.planning.search import goal_oriented_actions, misplaced_objects

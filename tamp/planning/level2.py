@@ -6,7 +6,7 @@ from typing import Sequence
 
 import numpy as np
 
-from tamp.planning.feasibility import Feasibility
+from tamp.planning.kinematic_check import Feasibility
 from tamp.planning.results import Clock, Level2Result
 from tamp.planning.search import SearchConfig, SearchStatus, continuous_search
 from tamp.planning.verify import DynamicsModel, VerifyConfig

@@ -1,7 +1,7 @@
 """What the planner's stages return and what a planning call assembles from them.
 
 `Level1Result` (Level 1), `Level2Result` (the continuous search), the kinematic check's record
-(`tamp.planning.feasibility.Feasibility`) and the `Clock` every stage times itself with; `PlanResult`
+(`tamp.planning.kinematic_check.Feasibility`) and the `Clock` every stage times itself with; `PlanResult`
 is built from them at the end of a planning call (`assemble`), with Level 1's `Candidate` plans.
 """
 from __future__ import annotations
@@ -15,8 +15,8 @@ from typing import Callable, Iterator, Sequence
 import numpy as np
 
 from tamp.planning.search import SearchResult
-from tamp.planning.structs import Infeasible, PickPlace
 from tamp.planning.verify import Verification, goal_error
+from tamp.planning.vocabulary import Infeasible, PickPlace
 
 LEVEL1_STAGES = ("symbols", "symbolic", "verify")  # the `PlanResult.timings` keys that make up Level 1's time
 

@@ -58,8 +58,8 @@ from typing import AbstractSet, Callable, Hashable
 import numpy as np
 
 from tamp.errors import UserError
-from tamp.planning.structs import OFFSET_STEP, OFFSETS
 from tamp.planning.verify import EPS_SUCCESS, DynamicsModel, VerifyConfig, doubt, fragility, states_pair
+from tamp.planning.vocabulary import OFFSET_STEP, OFFSETS
 
 _PAIRS = np.array([(g, r) for g in OFFSETS for r in OFFSETS], dtype=np.int64)  # the 9 offset pairs
 # metres: where a placed block's centre ends relative to its target object's, (r - g) * OFFSET_STEP along y
@@ -240,7 +240,7 @@ Node = tuple[np.ndarray, int, "tuple | None", int]  # (positions (n, 3), parent 
 class ContinuousSearch:
     """Weighted A* from X_init to X_goal with the Dynamics Model as the transition; `run` returns its result.
 
-    `feasible` (optional, e.g. the kinematic check of tamp.sim.feasibility) prunes successors whose action
+    `feasible` (optional, e.g. the kinematic check of tamp.sim.kinematic_checker) prunes successors whose action
     is infeasible in its parent's predicted state. It is called lazily, when a successor is expanded
     or reaches the goal, so only the edges the search actually follows are checked (a few per
     expansion instead of every generated successor). `pruned` holds (state_key(X), action) pairs left

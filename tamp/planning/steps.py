@@ -139,7 +139,7 @@ class SymbolicStep:
 
     def to_dict(self, names: BitNames) -> dict:
         """JSON-ready: raw bits, set bits by name, the changes expected and observed, the mismatches (the
-        step's index, action and Dynamics Model error sit beside it in `tamp.app.steps.step_records`)."""
+        step's index, action and Dynamics Model error sit beside it in `tamp.app.step_report.step_records`)."""
         def n(i: int) -> str:
             return _name(i, self.objects)
 

@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from tamp.errors import UserError
-from tamp.planning.structs import BLOCK_SIZES
+from tamp.planning.vocabulary import BLOCK_SIZES
 
 MAX_OBJECTS = 6  # blocks the world builds plants for
 TABLE_TOP_Z_M = 0.0  # the world frame is the table top (drake_models/table.sdf)

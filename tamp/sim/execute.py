@@ -46,8 +46,8 @@ from tamp.sim.observer import PhysicsFrame, WorldObserver
 from tamp.sim.physics import blocks_at_rest
 from tamp.sim.plants import X_FlangeTcp, add_arm_gripper_table, add_blocks
 from tamp.sim.skill import Scene
-from tamp.sim.structs import ExecutedAction, WorldConfig
 from tamp.sim.trajectory import RefinedAction, RefinedPlan
+from tamp.sim.world_types import ExecutedAction, WorldConfig
 
 KP = np.array([4000.0, 4000.0, 2000.0, 500.0, 500.0, 300.0])  # N m / rad
 KD = np.array([400.0, 400.0, 200.0, 50.0, 50.0, 30.0])  # N m s / rad

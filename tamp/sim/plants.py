@@ -28,7 +28,7 @@ from pydrake.multibody.tree import ModelInstanceIndex, QuaternionFloatingJoint, 
 from pydrake.planning import RobotDiagramBuilder, SceneGraphCollisionChecker
 from pydrake.systems.framework import Diagram, DiagramBuilder
 
-from tamp.planning.structs import LARGE, SMALL
+from tamp.planning.vocabulary import LARGE, SMALL
 
 logging.getLogger("drake").setLevel(logging.WARNING)  # keep Drake's INFO lines off the console
 

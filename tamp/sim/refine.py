@@ -14,12 +14,12 @@ from typing import Iterable
 
 import numpy as np
 
-from tamp.planning.structs import PickPlace
 from tamp.planning.validate import check_scene
+from tamp.planning.vocabulary import PickPlace
 from tamp.sim.skill import Scene
-from tamp.sim.structs import StepInfo, StepStatus, WorldConfig
 from tamp.sim.trajectory import FailureStage, RefinedPlan, RefinementFailure, concatenate, refined_action
 from tamp.sim.world import World, validate_action
+from tamp.sim.world_types import StepInfo, StepStatus, WorldConfig
 
 FAILURE_STAGES = {  # StepInfo.status of a failed action -> refinement stage
     StepStatus.IK_FAILURE: FailureStage.IK, StepStatus.MOTION_FAILURE: FailureStage.MOTION,

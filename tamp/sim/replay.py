@@ -21,7 +21,7 @@ from typing import Sequence
 import numpy as np
 from pydrake.math import RigidTransform
 
-from tamp.planning.structs import BLOCK_SIZES
+from tamp.planning.vocabulary import BLOCK_SIZES
 from tamp.records import atomic_write_text
 from tamp.sim.kinematics import V_MAX, tcp_pose
 from tamp.sim.observer import Carried, PhysicsFrame, WorldObserver

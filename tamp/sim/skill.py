@@ -15,9 +15,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from pydrake.math import RigidTransform, RotationMatrix
 
-from tamp.planning.structs import BLOCK_SIZES, LARGE, OFFSET_STEP, PickPlace
+from tamp.planning.vocabulary import BLOCK_SIZES, LARGE, OFFSET_STEP, PickPlace
 from tamp.sim.plants import X_FlangeTcp
-from tamp.sim.structs import WorldConfig
+from tamp.sim.world_types import WorldConfig
 
 _CORNER_SIGNS = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], dtype=float)
 _LEVI_CIVITA = np.zeros((3, 3, 3))

@@ -17,9 +17,9 @@ import numpy as np
 from pydrake.math import RigidTransform
 from pydrake.trajectories import PiecewisePolynomial
 
-from tamp.planning.structs import PickPlace
+from tamp.planning.vocabulary import PickPlace
 from tamp.sim.kinematics import V_MAX
-from tamp.sim.structs import StepInfo
+from tamp.sim.world_types import StepInfo
 
 if TYPE_CHECKING:
     from tamp.sim.skill import Scene

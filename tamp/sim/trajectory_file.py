@@ -34,15 +34,15 @@ from pydrake.trajectories import PiecewisePolynomial
 
 from guarded import Schema, parse_json, read_json
 from tamp.inputs import ACTION, BLOCK
-from tamp.planning.structs import TYPE_NAMES, PickPlace
+from tamp.planning.vocabulary import TYPE_NAMES, PickPlace
 from tamp.records import atomic_write_text
 from tamp.sim.execute import ExecutionResult, Executor
 from tamp.sim.observer import WorldObserver
 from tamp.sim.plants import ARM_FILE, ARM_JOINTS
 from tamp.sim.skill import Scene
-from tamp.sim.structs import FIDELITIES, WorldConfig
 from tamp.sim.trajectory import A_MAX, MOTION_ORDER, RefinedAction, RefinedPlan
 from tamp.sim.trajectory_checks import MAX_ACTION_S, SEGMENT_ORDER, TOLERANCE, TrajectoryError, check
+from tamp.sim.world_types import FIDELITIES, WorldConfig
 
 FORMAT = "tamp-trajectory"
 VERSION = 1  # bumped when a reader of the old version would misread a new file

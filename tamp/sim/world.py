@@ -20,8 +20,8 @@ import numpy as np
 from pydrake.math import RigidTransform
 
 from tamp.errors import UserError
-from tamp.planning.structs import BLOCK_SIZES, LARGE, OFFSETS, SMALL, PickPlace
 from tamp.planning.validate import MAX_OBJECTS, check_scene
+from tamp.planning.vocabulary import BLOCK_SIZES, LARGE, OFFSETS, SMALL, PickPlace
 from tamp.sim.execute import Executor
 from tamp.sim.kinematics import Q_HOME, drake_ik, solve_chain
 from tamp.sim.motion import MotionPlanner
@@ -29,8 +29,8 @@ from tamp.sim.observer import Carried, PhysicsFrame, WorldObserver
 from tamp.sim.physics import BlockPhysics
 from tamp.sim.plants import build_motion_scene, build_physics_scene
 from tamp.sim.skill import Scene, Waypoints, approach_poses, carried_shapes, held_block, pick_place_waypoints, topdown
-from tamp.sim.structs import StepInfo, StepStatus, WorldConfig
 from tamp.sim.trajectory import RefinedPlan, refined_action
+from tamp.sim.world_types import StepInfo, StepStatus, WorldConfig
 
 MOTIONS = ("approach", "descend", "liftoff", "lift", "transfer", "lower", "retreat")
 

@@ -25,8 +25,8 @@ from tamp.app.problem import Problem
 from tamp.planning.config import Level1Config, PlanConfig
 from tamp.planning.models import Models
 from tamp.planning.search import SearchConfig
-from tamp.planning.structs import OUTCOMES
 from tamp.planning.verify import goal_error
+from tamp.planning.vocabulary import OUTCOMES
 from tests.paths import ROOT
 from tests.planning_stubs import StubModel, two_block_domain
 
@@ -263,9 +263,9 @@ def test_the_oracle_counts_success_iff_some_plan_reaches_the_goal(monkeypatch):
         return {"refined": True, "refine_failure": None, "refine_time_s": [0.1], "executed_actions": 1,
                 "final_error_m": 0.0 if good else 0.3, "effect_error_m": [0.01]}
 
-    import tamp.planning.methods
+    import tamp.planning.planners
 
-    monkeypatch.setattr(tamp.planning.methods, "plan", fake_plan)
+    monkeypatch.setattr(tamp.planning.planners, "plan", fake_plan)
     monkeypatch.setattr(Evaluator, "_execute", fake_execute)
     monkeypatch.setattr(Evaluator, "warm_up", lambda self, models, problem: None)
     for cap, success, tried in ((20, True, 3), (2, False, 2)):

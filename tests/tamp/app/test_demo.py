@@ -27,7 +27,7 @@ def test_the_shipped_models_are_small_load_by_name_and_plan(name):
     from tamp.app.args import models_directory
     from tamp.app.problem import random_problem
     from tamp.planning.config import PlanConfig
-    from tamp.planning.methods import plan
+    from tamp.planning.planners import plan
 
     torch.set_num_threads(1)
     directory = models_directory(name)

@@ -8,7 +8,7 @@ from pydrake.math import RigidTransform, RotationMatrix
 
 from tamp.app.faults import Faults, _apart, footprint, push
 from tamp.errors import UserError
-from tamp.planning.structs import LARGE, SMALL
+from tamp.planning.vocabulary import LARGE, SMALL
 from tamp.sim.skill import Scene
 
 pytestmark = pytest.mark.sim

@@ -12,8 +12,8 @@ from tamp.errors import UserError
 from tamp.planning.closed_loop import plan_closed_loop
 from tamp.planning.config import KinematicsConfig, Level1Config, LoopConfig, PlanConfig, VerifyConfig
 from tamp.planning.level1 import level1_scene
-from tamp.planning.methods import plan
 from tamp.planning.models import Models
+from tamp.planning.planners import plan
 from tamp.planning.search import SearchConfig, continuous_search
 from tamp.planning.verify import goal_error, verify
 from tests.planning_stubs import StubModel, two_block_domain, world_step
@@ -339,7 +339,7 @@ def test_the_closed_loop_keeps_a_plan_on_course_and_replans_one_off_course(domai
 def test_a_kept_level1_plan_follows_its_symbolic_path(domain):
     from tamp.planning.closed_loop import keep_rest
     from tamp.planning.results import Candidate, PlanResult
-    from tamp.planning.structs import PickPlace
+    from tamp.planning.vocabulary import PickPlace
 
     goal = execute(X_INIT, [(1, 0, 1, 1), (0, 0, 1, 0)])
     actions = ((1, 0, 1, 1), (0, 0, 1, 0))
@@ -359,8 +359,8 @@ def test_a_plan_on_course_is_kept_whatever_a_swinging_rollout_of_its_rest_says(d
     own prediction, although the model, given the observed state, predicts the rest far off."""
     from tamp.planning.closed_loop import keep_rest, off_course
     from tamp.planning.results import PlanResult
-    from tamp.planning.structs import PickPlace
     from tamp.planning.verify import goal_errors
+    from tamp.planning.vocabulary import PickPlace
 
     class SwingingModel(StubModel):
         """The toy dynamics, but 20 cm off along x from any scene whose block A is off the 1 cm grid."""
@@ -461,7 +461,7 @@ def test_the_symbolic_search_returns_the_first_shortest_plan_in_ground_action_or
 
 
 class StubKinematics:
-    """The planner's view of kinematic feasibility (tamp.planning.structs.KinematicFeasibility), scripted:
+    """The planner's view of kinematic feasibility (tamp.planning.vocabulary.KinematicFeasibility), scripted:
     `infeasible` actions fail the cheap check, plans starting with `unrefinable` fail refinement."""
 
     def __init__(self, infeasible=(), unrefinable=()):
@@ -472,13 +472,13 @@ class StubKinematics:
         return np.ones((len(X), 3), dtype=bool)
 
     def check(self, X, actions):
-        from tamp.planning.structs import Infeasible
+        from tamp.planning.vocabulary import Infeasible
 
         return [Infeasible.NO_GRASP if tuple(map(int, a)) in self.infeasible else None
                 for a in np.asarray(actions).reshape(-1, 4)]
 
     def refine(self, actions, trajectory=None):
-        from tamp.planning.structs import Infeasible, RefinementOutcome
+        from tamp.planning.vocabulary import Infeasible, RefinementOutcome
 
         actions = [tuple(map(int, a)) for a in actions]
         self.refined.append(actions)
@@ -493,7 +493,7 @@ LOOSE = PlanConfig(level1=Level1Config(n_domains=100, seed=0, wait_beyond=None, 
 
 
 def test_a_refinement_failure_of_the_first_level1_candidate_returns_the_second(domain):
-    from tamp.planning.structs import Infeasible
+    from tamp.planning.vocabulary import Infeasible
 
     first = plan("bilevel", models(domain), X_INIT, A_ON_B, LOOSE)
     assert first.level == 1 and first.plan == [(0, 0, 1, 1)]  # without kinematics: the most frequent plan
@@ -511,7 +511,7 @@ def test_a_refinement_failure_of_the_first_level1_candidate_returns_the_second(d
 
 
 def test_a_level1_candidate_failing_the_check_is_not_refined_and_the_next_is_returned(domain):
-    from tamp.planning.structs import Infeasible
+    from tamp.planning.vocabulary import Infeasible
 
     kin = StubKinematics(infeasible={(0, 0, 1, 1)})
     result = plan("bilevel", models(domain), X_INIT, A_ON_B, LOOSE, kinematics=kin)

@@ -11,10 +11,10 @@ import pytest
 from tamp.errors import UserError
 from tamp.planning.closed_loop import plan_closed_loop
 from tamp.planning.config import LoopConfig, PlanConfig
-from tamp.planning.methods import plan
 from tamp.planning.models import Models
+from tamp.planning.planners import plan
 from tamp.planning.results import PlanResult
-from tamp.planning.structs import Infeasible
+from tamp.planning.vocabulary import Infeasible
 from tests.planning_stubs import StubModel, two_block_domain, world_step
 
 X_INIT = np.array([[0.6, 0.0, 0.025, 1, 0], [0.7, 0.1, 0.025, 1, 0]])
@@ -147,7 +147,7 @@ class AcceptAll:
         return [None] * len(np.asarray(actions))
 
     def refine(self, actions, trajectory):
-        from tamp.planning.structs import RefinementOutcome
+        from tamp.planning.vocabulary import RefinementOutcome
 
         return RefinementOutcome()
 

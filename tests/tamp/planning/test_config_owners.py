@@ -9,7 +9,7 @@ from dataclasses import fields
 from tamp.planning.config import PlanConfig
 from tests.paths import ROOT
 
-STAGES = ("level1.py", "level2.py", "search.py", "feasibility.py", "verify.py")
+STAGES = ("level1.py", "level2.py", "search.py", "kinematic_check.py", "verify.py")
 # LoopConfig.stall is the closed loop's own cut for its rounds' searches, in place of SearchConfig.stall
 SHARED_ON_PURPOSE = {"stall"}
 

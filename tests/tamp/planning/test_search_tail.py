@@ -9,9 +9,9 @@ import pytest
 
 from tamp.app.problem import read_problem_set
 from tamp.planning.config import PlanConfig
-from tamp.planning.methods import plan
 from tamp.planning.models import load_models, pretrained_dir
-from tamp.sim.feasibility import FeasibilityChecker
+from tamp.planning.planners import plan
+from tamp.sim.kinematic_checker import FeasibilityChecker
 from tests.paths import DATA
 
 pytestmark = [pytest.mark.sim, pytest.mark.slow]

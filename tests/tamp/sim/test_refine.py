@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 from pydrake.math import RigidTransform
 
-from tamp.planning.structs import BLOCK_SIZES, PickPlace
+from tamp.planning.vocabulary import BLOCK_SIZES, PickPlace
 from tamp.sim import World, WorldConfig
 from tamp.sim.execute import execute
 from tamp.sim.kinematics import Q_LOWER, Q_UPPER, V_MAX, tcp_pose

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from tamp.planning.structs import PickPlace
+from tamp.planning.vocabulary import PickPlace
 from tamp.sim import World, WorldConfig
 from tamp.sim.observer import WorldObserver
 from tamp.sim.replay import Timeline

@@ -191,9 +191,9 @@ def test_the_closed_loop_exports_what_it_executed_in_order(tmp_path):
     world's blocked retreat) is refused: the run is not one continuous trajectory."""
     from tamp.app.runner import ClosedLoopRun, executed_trajectory, executing_world
     from tamp.planning.closed_loop import ClosedLoopResult
-    from tamp.planning.structs import PickPlace
-    from tamp.sim.structs import StepInfo, StepStatus
+    from tamp.planning.vocabulary import PickPlace
     from tamp.sim.trajectory_file import TrajectoryError, read_trajectory, write_trajectory
+    from tamp.sim.world_types import StepInfo, StepStatus
 
     world = executing_world("fast")
     X0 = world.reset(X=X)

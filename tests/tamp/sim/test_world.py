@@ -3,8 +3,8 @@ import numpy as np
 import pytest
 
 from tamp.planning import structs
-from tamp.planning.structs import BLOCK_SIZES, PickPlace
 from tamp.planning.validate import MAX_OBJECTS, check_scene
+from tamp.planning.vocabulary import BLOCK_SIZES, PickPlace
 from tamp.sim import World, WorldConfig
 from tamp.sim.kinematics import Q_LOWER, Q_UPPER, tcp_pose
 from tamp.sim.motion import MotionPlanner

@@ -35,7 +35,7 @@ if TYPE_CHECKING:
     from tamp.app.runner import ClosedLoopRun, Execution
     from tamp.planning.models import Models
     from tamp.planning.results import PlanResult
-    from tamp.sim.structs import StepInfo
+    from tamp.sim.world_types import StepInfo
 
 
 def steps_path(replay: Path) -> Path:

@@ -7,7 +7,7 @@ import pytest
 
 from evaluation import refinability
 from learned.interpret import BitNames, interpret_symbols
-from tamp.app.steps import format_steps, step_panel_html, step_records
+from tamp.app.step_report import format_steps, step_panel_html, step_records
 from tamp.planning.models import Models, load_bit_names
 from tamp.planning.steps import symbolic_steps
 from tests.planning_stubs import StubModel, two_block_domain, world_step
@@ -83,7 +83,7 @@ def test_the_symbolic_planners_steps_are_judged_against_the_effects_their_plan_c
     """The symbolic planners take their top plan unverified; its symbolic states still reach the per-step
     view, which then expects the effect the plan counted on, not the action's most probable one."""
     from symbolic.atoms import pack_state
-    from tamp.planning.methods import plan_deterministic, plan_probabilistic
+    from tamp.planning.planners import plan_deterministic, plan_probabilistic
 
     plan = {"deterministic": plan_deterministic, "probabilistic": plan_probabilistic}[method]
     result = plan(models, X0, ON)
@@ -213,10 +213,10 @@ def test_tamp_refinability_studies_only_the_methods_asked_for(tmp_path, monkeypa
 
 def test_closed_loop_steps_name_their_round_and_how_it_got_its_plan(models):
     from tamp.app.runner import ClosedLoopRun
-    from tamp.app.steps import loop_steps
+    from tamp.app.step_report import loop_steps
     from tamp.planning.closed_loop import ClosedLoopResult
     from tamp.planning.results import PlanResult
-    from tamp.planning.structs import PickPlace
+    from tamp.planning.vocabulary import PickPlace
 
     a, b, c = PickPlace(0, 0, 1, 1), PickPlace(1, 0, 0, 0), PickPlace(0, 1, 1, 0)
     rounds = [PlanResult("bilevel", [a, b, c], level=2), PlanResult("bilevel", [b, c], level=2, kept_by="on course"),

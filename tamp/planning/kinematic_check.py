@@ -1,7 +1,7 @@
 """Kinematics in the planning loop: the check and full refinement of one planning call (`Feasibility`).
 
-The planner sees the kinematics only through `tamp.planning.structs.KinematicFeasibility` (Drake's
-checker in `tamp.sim.feasibility`), so this module imports no Drake.
+The planner sees the kinematics only through `tamp.planning.vocabulary.KinematicFeasibility` (Drake's
+checker in `tamp.sim.kinematic_checker`), so this module imports no Drake.
 """
 from __future__ import annotations
 
@@ -13,8 +13,8 @@ import numpy as np
 from tamp.planning.config import KinematicsConfig
 from tamp.planning.results import Clock
 from tamp.planning.search import state_key
-from tamp.planning.structs import Infeasible, KinematicFeasibility, RefinementOutcome
 from tamp.planning.verify import Verification
+from tamp.planning.vocabulary import Infeasible, KinematicFeasibility, RefinementOutcome
 
 
 class Feasibility:

@@ -60,7 +60,7 @@ class RefinementOutcome:
 
 
 class KinematicFeasibility(Protocol):
-    """What the planners need from the simulator side (tamp.sim.feasibility.FeasibilityChecker): a cheap
+    """What the planners need from the simulator side (tamp.sim.kinematic_checker.FeasibilityChecker): a cheap
     check of actions in a predicted scene and full refinement of a plan from the observed scene.
     The planner modules see only this protocol and so stay free of Drake."""
 

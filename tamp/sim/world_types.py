@@ -11,7 +11,7 @@ from enum import StrEnum
 import numpy as np
 
 from tamp.errors import UserError
-from tamp.planning.structs import PickPlace
+from tamp.planning.vocabulary import PickPlace
 
 
 class Fidelity(StrEnum):

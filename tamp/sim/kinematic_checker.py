@@ -15,7 +15,7 @@ No physics is simulated and no motion is planned: what happens after release sta
 Model's prediction. `FeasibilityChecker.refine` is the full refinement (IK, OMPL motions, grasps) of a
 plan, which the planners run before returning it: each action's motions are planned in the scene the
 Dynamics Model predicts before it, again without physics.
-The planners see this class only through `tamp.planning.structs.KinematicFeasibility`.
+The planners see this class only through `tamp.planning.vocabulary.KinematicFeasibility`.
 """
 from __future__ import annotations
 
@@ -28,7 +28,7 @@ import numpy as np
 from pydrake.math import RigidTransform
 
 from tamp.planning.search import SearchConfig, state_key
-from tamp.planning.structs import OFFSETS, Infeasible, PickPlace, RefinementOutcome
+from tamp.planning.vocabulary import OFFSETS, Infeasible, PickPlace, RefinementOutcome
 from tamp.sim.kinematics import Q_HOME, solve_chain
 from tamp.sim.motion import MotionPlanner
 from tamp.sim.plants import build_motion_scene
@@ -47,8 +47,8 @@ from tamp.sim.skill import (
     pick_place_waypoints,
     pick_waypoints,
 )
-from tamp.sim.structs import WorldConfig
 from tamp.sim.world import World
+from tamp.sim.world_types import WorldConfig
 
 # Collision set-up of each waypoint configuration, as `World.step` plans the motions through it.
 WITH_ALL_BLOCKS = ("pregrasp", "grasp")  # jaws open around the picked block

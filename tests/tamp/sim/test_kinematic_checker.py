@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tamp.planning.structs import Infeasible, PickPlace
-from tamp.sim.feasibility import FeasibilityChecker
+from tamp.planning.vocabulary import Infeasible, PickPlace
+from tamp.sim.kinematic_checker import FeasibilityChecker
 
 pytestmark = pytest.mark.sim  # every test here builds Drake plants
 
@@ -54,7 +54,7 @@ def test_stand_ins_collide_as_boxes_added_to_the_gripper():
     from tamp.sim.motion import MotionPlanner
     from tamp.sim.plants import build_motion_scene
     from tamp.sim.skill import carried_size
-    from tamp.sim.structs import WorldConfig
+    from tamp.sim.world_types import WorldConfig
 
     cfg = WorldConfig()
     types = np.array([0, 1])

@@ -17,14 +17,14 @@ from typing import AbstractSet, Callable, Sequence
 
 from tamp.planning.bilevel import plan_bilevel, plan_bilevel_alg1
 from tamp.planning.config import PlanConfig
-from tamp.planning.feasibility import Feasibility
+from tamp.planning.kinematic_check import Feasibility
 from tamp.planning.level1 import symbolic_plans, verify_candidate
 from tamp.planning.level2 import level2
 from tamp.planning.models import Models
 from tamp.planning.results import Clock, Level1Result, PlanResult, assemble
-from tamp.planning.structs import KinematicFeasibility
 from tamp.planning.validate import check_problem
 from tamp.planning.verify import states_pair
+from tamp.planning.vocabulary import KinematicFeasibility
 
 
 def _symbolic_only(method: str, probabilistic: bool):
@@ -83,7 +83,7 @@ def plan(method: str, models: Models, X_init, X_goal, cfg: PlanConfig = PlanConf
          kinematics: KinematicFeasibility | None = None,
          avoid: AbstractSet[tuple[bytes, tuple]] = frozenset()) -> PlanResult:
     """Run one of METHODS on (X_init, X_goal), both (n, 5) arrays. `kinematics` (e.g. a
-    tamp.sim.feasibility.FeasibilityChecker that observed the scene of X_init) puts kinematic feasibility
+    tamp.sim.kinematic_checker.FeasibilityChecker that observed the scene of X_init) puts kinematic feasibility
     into the planning loop of the `kinematic` ones (unless cfg.kinematics.feasibility is False); with it, those
     methods also leave out the (state key, action) pairs of `avoid` (a closed loop's revisits)."""
     if method not in METHODS:
