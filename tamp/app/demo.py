@@ -19,7 +19,7 @@ import numpy as np
 from tamp.app.plan_command import LEVELS, print_cause, print_result, write_executed_trajectory
 from tamp.app.plan_file import fmt_action
 from tamp.app.problem import Problem, random_problem
-from tamp.app.runner import ClosedLoopRun, Execution, execute_plan, kinematics_for, run_closed_loop
+from tamp.app.runner import ClosedLoopRun, Episode, Execution, execute_plan, kinematics_for, run_closed_loop
 from tamp.app.step_report import (
     closed_loop_steps,
     open_loop_steps,
@@ -31,7 +31,7 @@ from tamp.app.step_report import (
 )
 from tamp.errors import UserError
 from tamp.planning.causes import stop_record
-from tamp.planning.closed_loop import ClosedLoopResult, loop_outcome
+from tamp.planning.closed_loop import ClosedLoopResult
 from tamp.planning.config import PlanConfig
 from tamp.planning.planners import plan
 from tamp.planning.results import PlanResult
@@ -74,14 +74,15 @@ class DemoResult:
     steps: list[dict] = field(default_factory=list)  # per executed step (tamp.app.step_report records)
 
     @property
+    def episode(self) -> Episode:
+        return Episode(self.result, self.eps, self.execution, self.loop_run)
+
+    @property
     def outcome(self) -> Outcome:
         """As `tamp evaluate` counts it (closed loop: no plan, wrong plan or success)."""
-        if self.loop is not None:
-            return loop_outcome(self.loop)
-        if self.execution is None:
-            return Outcome.NO_PLAN
-        failure = self.execution.refined.failure
-        return Outcome.of(True, None if failure is None else failure.stage, self.execution.error, self.eps)
+        outcome = self.episode.outcome
+        assert outcome is not None  # a demo executes every plan it finds
+        return outcome
 
     @property
     def success(self) -> bool:
@@ -123,7 +124,7 @@ def run_demo(cfg: DemoConfig = DemoConfig()) -> DemoResult:
     if cfg.candidates:
         _replay_candidates(out, models, cfg)
     if cfg.trajectory is not None:
-        write_executed_trajectory(out.loop_run if cfg.replan else out.execution, cfg.trajectory, _source(cfg))
+        write_executed_trajectory(out.episode.motion, cfg.trajectory, _source(cfg))
     return out
 
 

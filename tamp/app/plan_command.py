@@ -24,7 +24,6 @@ from tamp.app.plan_file import fmt_action
 from tamp.app.planner_flags import add_planner_arguments, loop_flags_given, planner_config
 from tamp.errors import UserError
 from tamp.planning.causes import cause_of, stop_record
-from tamp.planning.closed_loop import loop_outcome
 from tamp.planning.config import PlanConfig
 from tamp.planning.planners import METHODS, plan
 from tamp.planning.results import PlanResult
@@ -132,10 +131,10 @@ def print_result(result: PlanResult, tau: float, indent: str = "") -> None:
 # The runners load the simulator (Drake): imported when a plan is run, so that `tamp --help` and
 # argument errors stay fast.
 
-# Each runner returns (exit code, per-step records, what was executed: an Execution, a ClosedLoopRun or None).
+# Each runner returns (exit code, per-step records, the Episode: None when nothing was executed).
 
 def _open_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timeline, names) -> tuple[int, list[dict], Any]:
-    from tamp.app.runner import execute_plan, kinematics_for
+    from tamp.app.runner import Episode, execute_plan, kinematics_for
     from tamp.app.step_report import open_loop_steps
 
     kinematics = kinematics_for(options.method, cfg)
@@ -163,10 +162,12 @@ def _open_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timeline,
     print(f"execution ({options.execute}): final error {ex.error * 100:.1f} cm (max over objects) -> "
           f"{'success' if ok else 'failure'} (eps {cfg.verify.eps * 100:g} cm)")
     failure = ex.refined.failure
-    outcome = Outcome.of(True, None if failure is None else failure.stage, ex.error, cfg.verify.eps)
+    episode = Episode(result, cfg.verify.eps, execution=ex)
+    outcome = episode.outcome
+    assert outcome is not None  # executed
     print_cause(outcome, dynamics_errors(models, [problem.X_init, *ex.X_after], result.plan, worst=True),
                 stop_record(None, result), None if failure is None else failure.record())
-    return (0 if ok and ex.success else 1), records, ex
+    return (0 if outcome == Outcome.SUCCESS else 1), records, episode
 
 
 def print_cause(outcome: str, step_miss_m, stop: dict, refine_failure: dict | None, indent: str = "") -> None:
@@ -184,7 +185,7 @@ def _print_steps(records: list[dict]) -> None:
 
 def _closed_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timeline,
                  names) -> tuple[int, list[dict], Any]:
-    from tamp.app.runner import kinematics_for, run_closed_loop
+    from tamp.app.runner import Episode, kinematics_for, run_closed_loop
     from tamp.app.step_report import closed_loop_steps
 
     def show_step(action, X, info, seconds) -> None:
@@ -211,9 +212,12 @@ def _closed_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timelin
     print(f"closed loop ended: {out.reason}")
     print(f"execution ({options.execute}): {len(out.executed)} action(s), final error {out.error * 100:.1f} cm "
           f"(max over objects) -> {'success' if out.success else 'failure'} (eps {cfg.verify.eps * 100:g} cm)")
-    print_cause(loop_outcome(out), dynamics_errors(models, out.states, out.executed, worst=True),
+    episode = Episode(out.rounds[0] if out.rounds else None, cfg.verify.eps, run=run)
+    outcome = episode.outcome
+    assert outcome is not None  # a closed loop's outcome is where it ended
+    print_cause(outcome, dynamics_errors(models, out.states, out.executed, worst=True),
                 stop_record(out.stop, out.rounds[-1] if out.rounds else None), None)
-    return (0 if out.success else 1), records, run
+    return (0 if outcome == Outcome.SUCCESS else 1), records, episode
 
 
 def run_plan(problem_path: Path, models_dir: Path, options: PlanOptions) -> int:
@@ -266,7 +270,7 @@ def run_plan(problem_path: Path, models_dir: Path, options: PlanOptions) -> int:
 
         timeline = Timeline()
     runner = _closed_loop if options.replan else _open_loop
-    code, records, executed = runner(problem, models, options, cfg, timeline, names)
+    code, records, episode = runner(problem, models, options, cfg, timeline, names)
     if steps_file is not None and records:
         from tamp.app.step_report import steps_document, write_steps
 
@@ -285,7 +289,7 @@ def run_plan(problem_path: Path, models_dir: Path, options: PlanOptions) -> int:
     if options.trajectory is not None:
         source = (f"tamp plan --problem {problem_path} --method {options.method} --execute {options.execute}"
                   + (" --replan" if options.replan else ""))
-        write_executed_trajectory(executed, options.trajectory, source)
+        write_executed_trajectory(None if episode is None else episode.motion, options.trajectory, source)
     return code
 
 

@@ -22,13 +22,13 @@ from typing import Callable, Sequence
 import numpy as np
 
 from tamp.app.faults import Faults, push
-from tamp.planning.closed_loop import ClosedLoopResult, plan_closed_loop
+from tamp.planning.closed_loop import ClosedLoopResult, loop_outcome, plan_closed_loop
 from tamp.planning.config import PlanConfig
 from tamp.planning.models import Models
 from tamp.planning.planners import METHODS
 from tamp.planning.results import PlanResult
 from tamp.planning.verify import goal_error
-from tamp.planning.vocabulary import PickPlace
+from tamp.planning.vocabulary import Outcome, PickPlace
 from tamp.sim import World, WorldConfig
 from tamp.sim.execute import execute
 from tamp.sim.kinematic_checker import FeasibilityChecker
@@ -138,6 +138,36 @@ class ClosedLoopRun:
                                          FAILURE_STAGES.get(info.status, FailureStage.MOTION), failed_at(info),
                                          info.reason)
         return None
+
+
+@dataclass
+class Episode:
+    """A problem's first plan and how it met the world: open loop (`execution`; None when no plan was
+    executed) or closed loop (`run`). `tamp plan` and `tamp demo` report it; its outcome is counted as
+    `tamp evaluate` counts a row's."""
+
+    first: PlanResult | None  # the first planning call (closed loop: its first round; None: no round ran)
+    eps: float  # metres: the success tolerance
+    execution: Execution | None = None
+    run: ClosedLoopRun | None = None
+
+    @property
+    def outcome(self) -> Outcome | None:
+        """Success, no plan, a kinematic or refinement failure or a wrong plan (closed loop: judged by where it
+        ended); None for a plan that was not executed (planning only, or an empty plan)."""
+        if self.run is not None:
+            return loop_outcome(self.run.loop)
+        if self.first is None or not self.first.solved:
+            return Outcome.NO_PLAN
+        if self.execution is None:
+            return None
+        failure = self.execution.refined.failure
+        return Outcome.of(True, None if failure is None else failure.stage, self.execution.error, self.eps)
+
+    @property
+    def motion(self) -> Execution | ClosedLoopRun | None:
+        """What moved the arm, for the trajectory file (`executed_trajectory`)."""
+        return self.run if self.run is not None else self.execution
 
 
 StepCallback = Callable[[PickPlace, np.ndarray, StepInfo, float], None]  # (action, X observed, info, wall s)
