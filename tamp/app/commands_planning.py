@@ -14,6 +14,8 @@ from tamp.app.args import (
     positive_int,
     seed,
 )
+from tamp.errors import UserError
+from tamp.sim.world_types import FIDELITIES
 
 
 def cmd_plan(args: argparse.Namespace) -> int:
@@ -27,13 +29,17 @@ def cmd_plan(args: argparse.Namespace) -> int:
 def cmd_demo(args: argparse.Namespace) -> int:
     """A random problem planned, refined, executed under physics, summarised and replayed."""
     from tamp.app.demo import DemoConfig, run_demo
+    from tamp.app.planner_flags import loop_flags_given, planner_config
 
     check_output_file(args.replay, "--replay")
+    planner = planner_config(args)
+    if args.open_loop and (given := loop_flags_given(planner)):
+        raise UserError(f"{given[0]} sets the closed loop; --open-loop executes one plan")
     if args.trajectory is not None:
         check_output_file(args.trajectory, "--trajectory")
     cfg = DemoConfig(seed=args.seed, objects=args.objects, actions=args.actions, models=args.models,
                      fidelity=args.fidelity, replay=args.replay, candidates=args.candidates,
-                     replan=not args.open_loop, trajectory=args.trajectory)
+                     replan=not args.open_loop, trajectory=args.trajectory, planner=planner)
     return 0 if run_demo(cfg).success else 1
 
 
@@ -61,6 +67,7 @@ def add_plan(sub) -> None:
 def add_demo(sub) -> None:
     """`tamp demo`."""
     from tamp.app.plan_command import add_trajectory_argument
+    from tamp.app.planner_flags import add_planner_arguments
 
     p = sub.add_parser(
         "demo",
@@ -71,11 +78,12 @@ def add_demo(sub) -> None:
         "that produced it, each symbolic candidate's verification error, planning, refinement and "
         "execution times, the final error and success (every block within 5 cm of its goal). By "
         "default the loop is closed: after each action the scene is observed and the plan made again "
-        "from it, until the goal is reached or 12 actions were sent (a round that finds no plan first "
-        "searches again over every action); --open-loop executes the first plan to its end. The "
+        "from it, until the goal is reached or --max-actions actions were sent (a round that finds no plan "
+        "first searches again over every action); --open-loop executes the first plan to its end. The "
         "Meshcat HTML replay shows the goal (green) and the Dynamics Model's predicted blocks after "
         "each action (orange) as translucent blocks beside the executed ones. Exit status 0 on "
-        "success, 1 if there was no plan, the plan could not be refined or it missed the goal.",
+        "success, 1 if there was no plan, the plan could not be refined or it missed the goal. The "
+        "planner takes the flags of `tamp plan` (a random problem, then the plan command's planner).",
     )
     p.add_argument("--seed", type=seed, default=0, help="seed of the problem and the planner (default 0)")
     p.add_argument("--objects", type=positive_int, default=3, help="number of blocks (default 3)")
@@ -83,7 +91,7 @@ def add_demo(sub) -> None:
                    help="k: random actions that generate the goal (default 3)")
     p.add_argument("--models", type=models_directory, default=None,
                    help=MODELS_HELP + "; default: pretrained")
-    p.add_argument("--fidelity", choices=("full", "fast"), default="full",
+    p.add_argument("--fidelity", choices=FIDELITIES, default="full",
                    help="execute with the arm under physics (full, default) or in the fast world")
     p.add_argument("--replay", type=_html_path, default=Path("demo_replay.html"), metavar="OUT.html",
                    help="replay file (default demo_replay.html)")
@@ -94,4 +102,5 @@ def add_demo(sub) -> None:
                    help="also execute the first N symbolic candidates that failed verification and write "
                    "a replay of each (OUT.candidateI.html, I their number in the candidate list)")
     add_trajectory_argument(p)
+    add_planner_arguments(p)
     p.set_defaults(func=cmd_demo)

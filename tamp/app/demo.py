@@ -59,6 +59,7 @@ class DemoConfig:
     replan: bool = True  # closed loop: execute, observe, plan again until the goal (or the action budget); False:
     #   one plan, executed open loop
     trajectory: Path | None = None  # write the executed arm motion here (docs/trajectories.md)
+    planner: PlanConfig = PlanConfig()  # the planner's settings, `tamp plan`'s (its seed is the demo's)
 
 
 @dataclass
@@ -106,7 +107,7 @@ def run_demo(cfg: DemoConfig = DemoConfig()) -> DemoResult:
     models = load_models(models_dir)
     names = load_bit_names(models_dir)
     models.require_objects(cfg.objects, f"--objects {cfg.objects}: the scene")
-    plan_cfg = PlanConfig().with_seed(cfg.seed)
+    plan_cfg = cfg.planner.with_seed(cfg.seed)
     kinematics = kinematics_for("bilevel", plan_cfg)
 
     problem = random_problem(cfg.objects, cfg.actions, cfg.seed)
