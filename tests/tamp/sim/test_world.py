@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from tamp.planning import structs
+from tamp.planning import vocabulary
 from tamp.planning.validate import MAX_OBJECTS, check_scene
 from tamp.planning.vocabulary import BLOCK_SIZES, PickPlace
 from tamp.sim import World, WorldConfig
@@ -62,7 +62,7 @@ def test_offsets_move_toward_world_y_whatever_the_sign_of_the_block_axes(yaw, bl
 
     from tamp.sim.skill import Scene, grasp_pose
 
-    t = structs.SMALL if block == "small" else structs.LARGE
+    t = vocabulary.SMALL if block == "small" else vocabulary.LARGE
     scene_ = Scene(np.array([t]), [RigidTransform(RotationMatrix.MakeZRotation(yaw), [0.6, 0.1, 0.025])])
     axis = scene_.offset_axis_xy(0)
     assert axis[1] > 0.99
@@ -77,7 +77,8 @@ def test_a_bar_across_y_offsets_toward_world_x():
     from tamp.sim.skill import Scene
 
     for yaw in (np.pi / 2, -np.pi / 2):
-        bar = Scene(np.array([structs.LARGE]), [RigidTransform(RotationMatrix.MakeZRotation(yaw), [0.6, 0.0, 0.025])])
+        X_WB = RigidTransform(RotationMatrix.MakeZRotation(yaw), [0.6, 0.0, 0.025])
+        bar = Scene(np.array([vocabulary.LARGE]), [X_WB])
         np.testing.assert_allclose(bar.offset_axis_xy(0), [1.0, 0.0], atol=1e-9)
 
 
