@@ -96,9 +96,7 @@ def plan_bilevel_alg1(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConf
                     kinematics=replace(cfg.kinematics, feasibility=False),
                     search=replace(cfg.search, look_on=0, release_targets=False, max_fragility=None, max_doubt=None,
                                    stall=None, greedy_from=None))
-    result = plan_bilevel(models, X_init, X_goal, paper)
-    result.method = "bilevel_alg1"
-    return result
+    return replace(plan_bilevel(models, X_init, X_goal, paper), method="bilevel_alg1")
 
 
 __all__: Sequence[str] = ["level1_waits", "plan_bilevel", "plan_bilevel_alg1"]

@@ -243,15 +243,11 @@ def _round(method: str, models: Models, X: np.ndarray, X_goal: np.ndarray, out: 
     if kept is not None and kept_error is not None and marginal:  # a plan aimed closer replaces it
         new_error = result.predicted_error if result.solved and result.plan else None
         if new_error is not None and new_error < kept_error:
-            kept.reasons = [f"keep: the rest of the last plan ends {kept_error * 100:.1f} cm from the goal "
-                            f"(over {cfg.verify.confident * 100:g} cm); a new plan aims closer"]
-        else:
-            _absorb(kept, result, "planned")
-            kept.search = result.search  # the round's search: its expansions count against the loop's budget
-            return kept
-    if kept is not None:
-        _absorb(result, kept)
-    return result
+            kept = replace(kept, reasons=[f"keep: the rest of the last plan ends {kept_error * 100:.1f} cm from the "
+                                          f"goal (over {cfg.verify.confident * 100:g} cm); a new plan aims closer"])
+        else:  # the round's search: its expansions count against the loop's budget
+            return replace(_absorbed(kept, result, "planned"), search=result.search)
+    return result if kept is None else _absorbed(result, kept)
 
 
 def widened_search(method: str, models: Models, X: np.ndarray, X_goal: np.ndarray, cfg: PlanConfig,
@@ -263,15 +259,14 @@ def widened_search(method: str, models: Models, X: np.ndarray, X_goal: np.ndarra
     the way, unstack one, or move a block already at its goal. The failed round's time, reasons and
     rejections are counted in the result (`PlanResult.widened`)."""
     wide = replace(cfg, search=replace(cfg.search, prune=False))  # cfg.search.max_expansions: the caller's
-    result = plan_cfs(models, X, X_goal, wide, kinematics=kinematics, avoid=avoid)
-    result.method, result.widened = method, True
-    _absorb(result, failed, "planned")
-    if failed.solved and not failed.plan:
-        result.reasons.insert(0, "the planner returned an empty plan with a block off its goal")
+    searched = plan_cfs(models, X, X_goal, wide, kinematics=kinematics, avoid=avoid)
+    result = _absorbed(replace(searched, method=method, widened=True), failed, "planned")
+    empty = ["the planner returned an empty plan with a block off its goal"] if failed.solved and not failed.plan \
+        else []
     if result.solved:
-        result.reasons.append("searched again over every action (the goal-oriented ones gave no plan)")
-        return result
-    result.reasons.append("no plan over every action either")
+        return replace(result, reasons=[*empty, *result.reasons,
+                                        "searched again over every action (the goal-oriented ones gave no plan)"])
+    result = replace(result, reasons=[*empty, *result.reasons, "no plan over every action either"])
     return toward_closest(X, X_goal, cfg, result, [failed.search, result.search])
 
 
@@ -289,10 +284,10 @@ def toward_closest(X: np.ndarray, X_goal: np.ndarray, cfg: PlanConfig, result: P
     assert closest is not None and search.closest_plan is not None  # filtered above
     if not _progress(X, closest[-1], X_goal, cfg.loop.progress):
         return result
-    result.reasons.append(f"toward the closest state found (predicted {goal_error(closest[-1], X_goal) * 100:.1f} cm "
-                          f"from the goal, from {goal_error(X, X_goal) * 100:.1f} cm)")
-    result.toward = True
-    return take_plan(result, search.closest_plan, 2, closest, X_goal)
+    toward = (f"toward the closest state found (predicted {goal_error(closest[-1], X_goal) * 100:.1f} cm from the "
+              f"goal, from {goal_error(X, X_goal) * 100:.1f} cm)")
+    return take_plan(replace(result, reasons=[*result.reasons, toward], toward=True), search.closest_plan, 2, closest,
+                     X_goal)
 
 
 def _progress(X: np.ndarray, X_then: np.ndarray, X_goal: np.ndarray, margin: float) -> bool:
@@ -300,21 +295,22 @@ def _progress(X: np.ndarray, X_then: np.ndarray, X_goal: np.ndarray, margin: flo
     return float(goal_errors(X_then, X_goal).sum()) <= float(goal_errors(X, X_goal).sum()) - margin
 
 
-def _absorb(result: PlanResult, attempt: PlanResult, stage: str = "keep") -> None:
-    """Count an earlier attempt of the round in the result that replaced it (a failed `keep_rest`, or the
-    planning call before a widened search): its time (`timings[stage]`, and in the total), reasons,
-    full refinements and kinematic rejections."""
+def _absorbed(result: PlanResult, attempt: PlanResult, stage: str = "keep") -> PlanResult:
+    """`result` with an earlier attempt of the round counted in it (a failed `keep_rest`, or the planning call
+    before a widened search): its time (`timings[stage]`, and in the total), reasons, full refinements and
+    kinematic rejections."""
+    timings = dict(result.timings)
     for key in ("total", "feasibility", "refine"):
         if key in attempt.timings:
-            result.timings[key] = result.timings.get(key, 0.0) + attempt.timings[key]
-    result.timings[stage] = result.timings.get(stage, 0.0) + attempt.timings["total"]
-    result.reasons[:0] = attempt.reasons
-    result.refinements[:0] = attempt.refinements
+            timings[key] = timings.get(key, 0.0) + attempt.timings[key]
+    timings[stage] = timings.get(stage, 0.0) + attempt.timings["total"]
+    rejected = result.rejected
     if attempt.rejected is not None:
-        rejected = result.rejected if result.rejected is not None else {1: Counter(), 2: Counter()}
+        rejected = {level: Counter(counts) for level, counts in (rejected or {1: Counter(), 2: Counter()}).items()}
         for level, counts in attempt.rejected.items():
             rejected.setdefault(level, Counter()).update(counts)
-        result.rejected = rejected
+    return replace(result, timings=timings, reasons=[*attempt.reasons, *result.reasons],
+                   refinements=[*attempt.refinements, *result.refinements], rejected=rejected)
 
 
 def off_course(X: np.ndarray, last: PlanResult) -> float:
@@ -374,9 +370,9 @@ def keep_rest(models: Models, X: np.ndarray, X_goal: np.ndarray, last: PlanResul
                       refinements=() if feas is None else feas.refinements)
     states = last.plan_states
     if states is not None:  # the same symbolic path from the next state on (the per-step view)
-        result.candidates = [Candidate(v.actions, 0, 0.0, v.error, True, states=states[1:], objects=last.plan_scene)]
-    result.kept_by = kept_by
-    return result
+        result = replace(result, candidates=[Candidate(v.actions, 0, 0.0, v.error, True, states=states[1:],
+                                                       objects=last.plan_scene)])
+    return replace(result, kept_by=kept_by)
 
 
 def replan_rounds(k: int | None, default: int = 4) -> int:

@@ -9,8 +9,8 @@ from __future__ import annotations
 import time
 from collections import Counter
 from contextlib import contextmanager
-from dataclasses import dataclass, field
-from typing import Callable, Iterator, Sequence
+from dataclasses import dataclass, field, replace
+from typing import Iterator, Sequence
 
 import numpy as np
 
@@ -93,8 +93,11 @@ class Level2Result:
     reasons: list[str] = field(default_factory=list)
 
 
-@dataclass
+@dataclass(frozen=True)
 class PlanResult:
+    """What one planning call gives (`assemble` builds it from the stages' results); a closed loop's round that
+    combines attempts builds a new one (`tamp.planning.closed_loop`)."""
+
     method: str
     plan: list[PickPlace] | None  # None: no plan
     level: int | None = None  # 1 (symbolic) or 2 (continuous search) that produced the plan
@@ -189,10 +192,9 @@ def reasons_json(counts: Counter) -> dict[str, int]:
 
 
 def take_plan(result: PlanResult, actions, level: int, predicted: np.ndarray, X_goal) -> PlanResult:
-    """Set `actions` as the result's plan, from `level`, with its predicted states (their last one's goal error)."""
-    result.plan, result.level, result.predicted = [PickPlace(*a) for a in actions], level, predicted
-    result.predicted_error = goal_error(predicted[-1], X_goal)
-    return result
+    """`result` with `actions` as its plan, from `level`, with its predicted states (their last one's goal error)."""
+    return replace(result, plan=[PickPlace(*a) for a in actions], level=level, predicted=predicted,
+                   predicted_error=goal_error(predicted[-1], X_goal))
 
 
 def assemble(method: str, X_goal, clock: Clock, started: float, *, level1: Level1Result | None = None,
@@ -209,18 +211,10 @@ def assemble(method: str, X_goal, clock: Clock, started: float, *, level1: Level
                         symbolic_stats={} if level1 is None else level1.symbolic_stats, rejected=rejected,
                         refinements=list(refinements))
     if plan is not None:
-        take_plan(result, *plan, X_goal)
+        result = take_plan(result, *plan, X_goal)
     result.timings["total"] = time.perf_counter() - started
     return result
 
 
-def timed(method: str, body: Callable[[PlanResult], PlanResult]) -> PlanResult:
-    """A new result of `method`, filled by `body`, with its total time."""
-    t = time.perf_counter()
-    result = body(PlanResult(method, None))
-    result.timings["total"] = time.perf_counter() - t
-    return result
-
-
 __all__: Sequence[str] = ["Candidate", "Clock", "LEVEL1_STAGES", "Level1Result", "Level2Result", "PlanResult",
-                          "assemble", "reasons_json", "take_plan", "timed"]
+                          "assemble", "reasons_json", "take_plan"]

@@ -253,9 +253,8 @@ def test_the_oracle_counts_success_iff_some_plan_reaches_the_goal(monkeypatch):
     executed = []
 
     def fake_plan(method, models, X_init, X_goal, cfg):
-        result = PlanResult(method, [ranked[0].actions[0]], level=1, candidates=list(ranked))
-        result.timings["total"], result.predicted_error = 0.01, 0.2
-        return result
+        return PlanResult(method, [ranked[0].actions[0]], level=1, candidates=list(ranked), timings={"total": 0.01},
+                          predicted_error=0.2)
 
     def fake_execute(self, problem, actions, models, plan_states=None, scene=None):
         executed.append(actions)

@@ -215,16 +215,16 @@ def test_a_plan_kept_near_the_tolerance_gives_way_to_one_aimed_closer(models):
     calls: list[int] = []
 
     def planner(off_m):
-        """`plan`, whose first plan predicts an end 4 cm off the goal (within eps, over search.confident), and
+        """`plan`, whose first plan predicts an end 4 cm off the goal (within eps, over verify.confident), and
         whose later plans end `off_m` off."""
         def call(method, models, X, X_goal, cfg, **kwargs):
             result = plan(method, models, X, X_goal, cfg, **kwargs)
             shift = 0.04 if not calls else off_m
             calls.append(len(result.plan))
-            result.predicted = result.predicted.copy()
-            result.predicted[-1, :, 0] += shift
-            result.predicted_error = float(np.abs(result.predicted[-1, :, :3] - X_goal[:, :3]).max()) + shift
-            return result
+            predicted = result.predicted.copy()
+            predicted[-1, :, 0] += shift
+            return replace(result, predicted=predicted,
+                           predicted_error=float(np.abs(predicted[-1, :, :3] - X_goal[:, :3]).max()) + shift)
         return call
 
     calls.clear()
