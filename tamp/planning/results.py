@@ -48,11 +48,6 @@ class Clock:
         self.seconds[running[0]] = self.seconds.get(running[0], 0.0) + now - running[1]
         running[1] = now
 
-    def add(self, other: dict[str, float]) -> None:
-        """Count another call's stage times in this one's."""
-        for name, seconds in other.items():
-            self.seconds[name] = self.seconds.get(name, 0.0) + seconds
-
 
 @dataclass
 class Candidate:
