@@ -1,15 +1,16 @@
 """Closed-loop planning: execute an action, observe the world, plan again.
 
-Two loops share one round (plan, or keep the rest of the last plan while it is on course):
+Two loops share one round (`_round`: plan, or keep the rest of the last plan while it is on course);
+`plan_closed_loop` picks one by `rounds`, and each ends with a `LoopStop`:
 
-- `plan_closed_loop(..., rounds=k - 1)`: the paper's replanning variant (`bilevel_replan`, Table IV).
+- `paper_loop` (`rounds` = k - 1): the paper's replanning variant (`bilevel_replan`, Table IV).
   Plan, execute the first action with a caller-given `step` (a World, or any simulator), observe and
   plan again, up to `rounds` replanning rounds; the last plan is executed to its end. It stops at the
   goal, and when a round finds no plan or an empty one. (The paper executes the whole plan first and
   replans only if it failed; with a deterministic simulator that differs only in plans that would
   have succeeded anyway being replaced, and it needs no rollback of the world, which a real robot
   cannot do.)
-- `plan_closed_loop(..., rounds=None)`: the loop that does not know k (`bilevel_loop`, the default of
+- `loop_until_goal` (`rounds` None): the loop that does not know k (`bilevel_loop`, the default of
   `tamp plan --replan` and `tamp demo`). Every round executes one action and observes; it goes on
   until the observed state is within eps of the goal or `LoopConfig.max_actions` actions were sent, so
   a plan that ends short of the goal is followed by another round. A round that finds no plan, or
