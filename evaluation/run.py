@@ -222,15 +222,17 @@ class Evaluator:
                 "transitions": transition_records(states, actions, ex.refined.infos)}
 
     def _closed_loop(self, problem: Problem, method: Method, models) -> dict:
-        from tamp.app.runner import run_closed_loop
+        from tamp.app.runner import run_episode
         from tamp.planning.closed_loop import replan_rounds
 
         kinematics = self.checker(problem) if method.feasibility else None
         rounds = replan_rounds(problem.k) if method.loop == Loop.PAPER else None
-        run = run_closed_loop(method.planner, models, problem.X_init, problem.X_goal, rounds,
-                              self.config.plan_config(problem.seed, method.feasibility), self.config.fidelity,
-                              world=self.world(self.config.fidelity), kinematics=kinematics,
-                              faults=self.config.faults if self.config.faults.any else None, fault_seed=problem.seed)
+        run = run_episode(method.planner, models, problem.X_init, problem.X_goal,
+                          self.config.plan_config(problem.seed, method.feasibility), self.config.fidelity,
+                          closed_loop=True, rounds=rounds, world=self.world(self.config.fidelity),
+                          kinematics=kinematics, faults=self.config.faults if self.config.faults.any else None,
+                          fault_seed=problem.seed).run
+        assert run is not None  # a closed loop
         out = run.loop
         first = out.rounds[0] if out.rounds else None
         solved = first is None or first.solved  # no round: the initial state already met the goal

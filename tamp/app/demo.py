@@ -19,7 +19,7 @@ import numpy as np
 from tamp.app.plan_command import LEVELS, print_cause, print_result, write_executed_trajectory
 from tamp.app.plan_file import fmt_action
 from tamp.app.problem import Problem, random_problem
-from tamp.app.runner import ClosedLoopRun, Episode, Execution, execute_plan, kinematics_for, run_closed_loop
+from tamp.app.runner import ClosedLoopRun, Episode, Execution, execute_plan, kinematics_for, run_episode
 from tamp.app.step_report import (
     closed_loop_steps,
     open_loop_steps,
@@ -160,7 +160,9 @@ def _open_loop_episode(out: DemoResult, models, names, plan_cfg: PlanConfig, kin
         assert result.plan is not None  # solved
         what = "the arm under physics" if cfg.fidelity == "full" else "the fast world"
         print(f"\nrefining and executing {len(result.plan)} action(s) with {what}:", flush=True)
-        out.execution = execute_plan(result.plan, problem.X_init, problem.X_goal, cfg.fidelity, timeline=timeline)
+        out.execution = run_episode("bilevel", models, problem.X_init, problem.X_goal, plan_cfg, cfg.fidelity,
+                                    first=result, timeline=timeline).execution
+        assert out.execution is not None  # a plan to execute
         _print_execution(out.execution, result.plan, result.predicted, problem.X_goal, cfg.fidelity)
         out.steps = open_loop_steps(models, result, problem.X_init, out.execution, names,
                                     timeline.action_starts if timeline is not None else ())
@@ -339,9 +341,10 @@ def _closed_loop(problem: Problem, models, plan_cfg: PlanConfig, kinematics: Fea
         print(f"  executed {fmt_action(action)}: {info.status}{why}; blocks {goal_error(X, problem.X_goal) * 100:.1f} "
               f"cm from the goal, {seconds:.1f} s", flush=True)
 
-    run = run_closed_loop("bilevel", models, problem.X_init, problem.X_goal, None, plan_cfg, cfg.fidelity,
-                          kinematics=kinematics, timeline=timeline, planner=plan_round, on_round=on_round,
-                          on_step=show_step)
+    run = run_episode("bilevel", models, problem.X_init, problem.X_goal, plan_cfg, cfg.fidelity, closed_loop=True,
+                      kinematics=kinematics, timeline=timeline, planner=plan_round, on_round=on_round,
+                      on_step=show_step).run
+    assert run is not None  # a closed loop
     step_times.extend(run.step_times)
     if timeline is not None:
         _show_loop_predictions(timeline, planned, run.action_starts)

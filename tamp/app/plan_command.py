@@ -134,7 +134,7 @@ def print_result(result: PlanResult, tau: float, indent: str = "") -> None:
 # Each runner returns (exit code, per-step records, the Episode: None when nothing was executed).
 
 def _open_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timeline, names) -> tuple[int, list[dict], Any]:
-    from tamp.app.runner import Episode, execute_plan, kinematics_for
+    from tamp.app.runner import kinematics_for, run_episode
     from tamp.app.step_report import open_loop_steps
 
     kinematics = kinematics_for(options.method, cfg)
@@ -149,7 +149,10 @@ def _open_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timeline,
         if not result.plan:
             print("empty plan: the initial state already meets the goal; nothing to execute")
         return 0, [], None
-    ex = execute_plan(result.plan, problem.X_init, problem.X_goal, options.execute, timeline=timeline)
+    episode = run_episode(options.method, models, problem.X_init, problem.X_goal, cfg, options.execute, first=result,
+                          timeline=timeline)
+    ex = episode.execution
+    assert ex is not None  # a plan to execute
     records = open_loop_steps(models, result, problem.X_init, ex, names,
                               timeline.action_starts if timeline is not None else ())
     _print_steps(records)
@@ -162,7 +165,6 @@ def _open_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timeline,
     print(f"execution ({options.execute}): final error {ex.error * 100:.1f} cm (max over objects) -> "
           f"{'success' if ok else 'failure'} (eps {cfg.verify.eps * 100:g} cm)")
     failure = ex.refined.failure
-    episode = Episode(result, cfg.verify.eps, execution=ex)
     outcome = episode.outcome
     assert outcome is not None  # executed
     print_cause(outcome, dynamics_errors(models, [problem.X_init, *ex.X_after], result.plan, worst=True),
@@ -185,7 +187,7 @@ def _print_steps(records: list[dict]) -> None:
 
 def _closed_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timeline,
                  names) -> tuple[int, list[dict], Any]:
-    from tamp.app.runner import Episode, kinematics_for, run_closed_loop
+    from tamp.app.runner import kinematics_for, run_episode
     from tamp.app.step_report import closed_loop_steps
 
     def show_step(action, X, info, seconds) -> None:
@@ -202,17 +204,17 @@ def _closed_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timelin
     else:
         print(f"closed loop (the paper's): up to {options.rounds} replanning round(s), executing in the "
               f"{options.execute} world")
-    run = run_closed_loop(options.method, models, problem.X_init, problem.X_goal, options.rounds, cfg,
-                          options.execute,
-                          kinematics=kinematics_for(options.method, cfg), timeline=timeline,
-                          on_round=show_round, on_step=show_step)
+    episode = run_episode(options.method, models, problem.X_init, problem.X_goal, cfg, options.execute,
+                          closed_loop=True, rounds=options.rounds, kinematics=kinematics_for(options.method, cfg),
+                          timeline=timeline, on_round=show_round, on_step=show_step)
+    run = episode.run
+    assert run is not None  # a closed loop
     out = run.loop
     records = closed_loop_steps(models, run, names)
     _print_steps(records)
     print(f"closed loop ended: {out.reason}")
     print(f"execution ({options.execute}): {len(out.executed)} action(s), final error {out.error * 100:.1f} cm "
           f"(max over objects) -> {'success' if out.success else 'failure'} (eps {cfg.verify.eps * 100:g} cm)")
-    episode = Episode(out.rounds[0] if out.rounds else None, cfg.verify.eps, run=run)
     outcome = episode.outcome
     assert outcome is not None  # a closed loop's outcome is where it ended
     print_cause(outcome, dynamics_errors(models, out.states, out.executed, worst=True),

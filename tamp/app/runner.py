@@ -11,7 +11,8 @@ and `tamp evaluate`:
   changes nothing and the loop goes on from the observed scene.
 
 Both take an optional `Timeline` to record a replay, and a `World` to reuse (its Drake plants are
-cached per block layout); the planners see the simulator only through `kinematics_for`.
+cached per block layout); the planners see the simulator only through `kinematics_for`. `run_episode` is
+the one entry of the three commands: a problem run either way, returned as an `Episode`.
 """
 from __future__ import annotations
 
@@ -25,7 +26,7 @@ from tamp.app.faults import Faults, push
 from tamp.planning.closed_loop import ClosedLoopResult, loop_outcome, plan_closed_loop
 from tamp.planning.config import PlanConfig
 from tamp.planning.models import Models
-from tamp.planning.planners import METHODS
+from tamp.planning.planners import METHODS, plan
 from tamp.planning.results import PlanResult
 from tamp.planning.verify import goal_error
 from tamp.planning.vocabulary import Outcome, PickPlace
@@ -231,6 +232,31 @@ def run_closed_loop(method: str, models: Models, X_init: np.ndarray, X_goal: np.
         world.observer = None
     return ClosedLoopRun(loop, infos, step_times, action_starts, scene_init, q_init, X_after, world.config.fidelity,
                          injected)
+
+
+def run_episode(method: str, models: Models, X_init: np.ndarray, X_goal: np.ndarray, config: PlanConfig,
+                fidelity: str = "fast", *, closed_loop: bool = False, rounds: int | None = None,
+                first: PlanResult | None = None, world: World | None = None,
+                kinematics: FeasibilityChecker | None = None, timeline: Timeline | None = None,
+                planner: Callable[..., PlanResult] | None = None,
+                on_round: Callable[[int, PlanResult], None] | None = None, on_step: StepCallback | None = None,
+                faults: Faults | None = None, fault_seed: int = 0) -> Episode:
+    """One problem run the one way `tamp plan`, `tamp demo` and `tamp evaluate` run it. Closed loop
+    (`run_closed_loop`; `rounds` None: until the goal, else the paper's rounds; `planner`, `on_round`,
+    `on_step`, `faults` as there), or open loop: the plan (`first`, else planned now with `kinematics`)
+    refined and executed in a World of `fidelity` (`execute_plan`; `world`: the fast world to refine in)
+    when there is one."""
+    if closed_loop:
+        run = run_closed_loop(method, models, X_init, X_goal, rounds, config, fidelity, world=world,
+                              kinematics=kinematics, timeline=timeline, planner=planner, on_round=on_round,
+                              on_step=on_step, faults=faults, fault_seed=fault_seed)
+        return Episode(run.loop.rounds[0] if run.loop.rounds else None, config.verify.eps, run=run)
+    result = first if first is not None else plan(method, models, X_init, X_goal, config, kinematics=kinematics)
+    if not result.solved:
+        return Episode(result, config.verify.eps)
+    assert result.plan is not None  # solved
+    execution = execute_plan(result.plan, X_init, X_goal, fidelity, world=world, timeline=timeline)
+    return Episode(result, config.verify.eps, execution=execution)
 
 
 def executed_trajectory(run: Execution | ClosedLoopRun, source: str = "") -> PlanTrajectory:
