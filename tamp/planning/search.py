@@ -23,7 +23,8 @@ point closest (2-D) to o_i's goal is added as a third target when it is not the 
 one, and without this target the search runs to its node budget (docs/beyond-the-paper.md).
 
 Goal test at generation: every object within `eps` (5 cm) of its goal in 3-D. A goal state whose
-worst object is predicted farther than `confident` (3.5 cm) is kept as a candidate while the search
+worst object is predicted farther than `confident` (3.5 cm; both `VerifyConfig`'s, as is `misplaced`,
+what counts as the goal for every stage) is kept as a candidate while the search
 looks on, for at most `look_on` more expansions, for one within `confident` reached with no more
 actions; then the closest candidate is returned (our extension: the Dynamics Model's plans predicted
 to end 4-5 cm from the goal failed in execution about as often as they succeeded). A goal state also
