@@ -8,9 +8,8 @@ from __future__ import annotations
 
 import time
 from collections import Counter
-from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
-from typing import Iterator, Sequence
+from typing import Sequence
 
 import numpy as np
 
@@ -30,23 +29,40 @@ class Clock:
         self.seconds: dict[str, float] = {}
         self._open: list[list] = []  # [stage, perf_counter() since when it runs], innermost last
 
-    @contextmanager
-    def stage(self, name: str) -> Iterator[None]:
+    def stage(self, name: str) -> _Stage:
+        """`with clock.stage(name):` times the block as `name`, pausing the stage it runs in."""
+        return _Stage(self, name)
+
+    def _enter(self, name: str) -> None:
         now = time.perf_counter()
         if self._open:
             self._charge(self._open[-1], now)
         self._open.append([name, now])
-        try:
-            yield
-        finally:
-            end = time.perf_counter()
-            self._charge(self._open.pop(), end)
-            if self._open:
-                self._open[-1][1] = end
+
+    def _exit(self) -> None:
+        end = time.perf_counter()
+        self._charge(self._open.pop(), end)
+        if self._open:
+            self._open[-1][1] = end
 
     def _charge(self, running: list, now: float) -> None:
         self.seconds[running[0]] = self.seconds.get(running[0], 0.0) + now - running[1]
         running[1] = now
+
+
+class _Stage:
+    """The context of one `Clock.stage` (a plain class: the kinematic check opens one per action it checks)."""
+
+    __slots__ = ("clock", "name")
+
+    def __init__(self, clock: Clock, name: str) -> None:
+        self.clock, self.name = clock, name
+
+    def __enter__(self) -> None:
+        self.clock._enter(self.name)
+
+    def __exit__(self, *exc: object) -> None:
+        self.clock._exit()
 
 
 @dataclass

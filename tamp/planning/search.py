@@ -442,21 +442,23 @@ class ContinuousSearch:
         reached = (worst < self.tolerance.eps).tolist()
         keys = self.keys_of(succ)
         here = self.key(P) if self.pruned else b""
+        nodes, best_g, pruned, frontier = self.nodes, self.best_g, self.pruned, self.frontier  # the hot loop's
+        too_deep, weight = cfg.max_depth + 1, cfg.weight
         for b, action in enumerate(actions.tolist()):
             k = keys[b]
-            if self.best_g.get(k, cfg.max_depth + 1) <= g + 1:
+            if best_g.get(k, too_deep) <= g + 1:
                 out.duplicates += 1
                 continue
-            if self.pruned and (here, tuple(action)) in self.pruned:
+            if pruned and (here, tuple(action)) in pruned:
                 out.pruned += 1
                 continue
-            self.nodes.append((succ[b], index, tuple(action), g + 1))
-            if reached[b] and self.infeasible(len(self.nodes) - 1):
-                self.nodes.pop()
+            nodes.append((succ[b], index, tuple(action), g + 1))
+            if reached[b] and self.infeasible(len(nodes) - 1):
+                nodes.pop()
                 continue
             if not reached[b]:
-                self.best_g[k] = g + 1
-                heapq.heappush(self.frontier, (g + 1 + cfg.weight * h[b], h[b], len(self.nodes) - 1))
+                best_g[k] = g + 1
+                heapq.heappush(frontier, (g + 1 + weight * h[b], h[b], len(nodes) - 1))
                 continue
             solved = self.reach_goal(k, g + 1, float(worst[b]))
             if solved is not None:
