@@ -53,12 +53,9 @@ def plan_bilevel(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig(),
     second: Level2Result | None = None
     if chosen is None or waits is not None:  # line 16: continuous search fallback
         second = level2(models.require_dynamics(), X_init, X_goal, cfg.search, cfg.verify, clock, started, feas)
-    plan: tuple[Sequence, int, np.ndarray] | None
-    if second is not None and second.plan is not None:
-        assert second.trajectory is not None  # a plan has its predicted states
-        plan = (second.plan, 2, second.trajectory)
-    else:
-        plan = None if chosen is None else (chosen.actions, 1, chosen.trajectory)
+    plan: tuple[Sequence, int, np.ndarray] | None = None if second is None else second.plan
+    if plan is None and chosen is not None:
+        plan = (chosen.actions, 1, chosen.trajectory)
     return assemble("bilevel", X_goal, clock, started, level1=first, level2=second,
                     reasons=() if waits is None else (waits,), plan=plan,
                     rejected=None if feas is None else feas.rejected,

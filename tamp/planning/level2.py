@@ -49,10 +49,7 @@ def level2(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarray, config:
                 break
             result.reasons.append(f"level 2: the plan found did not refine (action {outcome.action_index}: "
                                   f"{outcome.message}); searching again without that (state, action)")
-    if out.solved:
-        assert out.plan is not None and out.trajectory is not None  # solved: both set
-        result.plan, result.trajectory = out.plan, out.trajectory
-    else:
+    if not out.solved:
         result.reasons.append(f"level 2: {out.reason}")
     return result
 

@@ -55,8 +55,7 @@ def plan_cfs(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig(),
     started, clock = time.perf_counter(), Clock()
     feas = Feasibility.of(kinematics, cfg.kinematics, clock, cfg.search.resolution, avoid)
     found = level2(models.require_dynamics(), X_init, X_goal, cfg.search, cfg.verify, clock, started, feas)
-    plan = None if found.plan is None or found.trajectory is None else (found.plan, 2, found.trajectory)
-    return assemble("cfs", X_goal, clock, started, level2=found, plan=plan,
+    return assemble("cfs", X_goal, clock, started, level2=found, plan=found.plan,
                     rejected=None if feas is None else feas.rejected,
                     refinements=() if feas is None else feas.refinements)
 

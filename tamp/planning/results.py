@@ -95,13 +95,19 @@ class Level1Result:
 
 @dataclass
 class Level2Result:
-    """What the continuous search gives a planning call: the plan (None: none) with its predicted states,
-    the search's record (its counters summed over searches again after failed refinements), and why not."""
+    """What the continuous search gives a planning call: the search's record (its counters summed over searches
+    again after failed refinements; its plan, if solved, is Level 2's) and why it gave no plan."""
 
     search: SearchResult | None = None
-    plan: list[tuple[int, int, int, int]] | None = None
-    trajectory: np.ndarray | None = None
     reasons: list[str] = field(default_factory=list)
+
+    @property
+    def plan(self) -> tuple[list[tuple[int, int, int, int]], int, np.ndarray] | None:
+        """The plan found as `assemble` takes it: (actions, level 2, predicted states); None: none."""
+        if self.search is None or not self.search.solved:
+            return None
+        assert self.search.plan is not None and self.search.trajectory is not None  # solved: both set
+        return self.search.plan, 2, self.search.trajectory
 
 
 @dataclass(frozen=True)
