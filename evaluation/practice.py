@@ -69,14 +69,16 @@ class PracticeConfig:
     extra_share: float = 0.2  # share of each member's resample drawn from the practice data
     epochs: int = 300  # per member, at most (warm start: early stopping ends it far sooner)
     patience: int = 20  # epochs without a better validation error before a member stops
-    lr: float = 4e-4  # half the from-scratch rate of batch 1024: a fine-tune
+    lr: float = 4e-4  # below the bundled Dynamics Model's from-scratch 1e-3 (batch 512): a fine-tune
+    batch_size: int = 512  # the bundled Dynamics Model's training batch
+    precision: str = "float32"  # the bundled Dynamics Model's; bfloat16 trains faster but fine-tunes it coarser
     workers: int = 2  # evaluation workers and members trained at once
     backend: str = "local"  # "local" process pool or "ray" (the evaluation)
 
     def __post_init__(self) -> None:
         if isinstance(self.explore, bool) or not isinstance(self.explore, int) or self.explore < 0:
             raise UserError(f"--explore must be a whole number of actions, 0 or more, got {self.explore!r}")
-        for name in ("rounds", "per_cell", "members", "epochs", "patience", "workers"):
+        for name in ("rounds", "per_cell", "members", "epochs", "patience", "batch_size", "workers"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise UserError(f"--{name.replace('_', '-')} must be a positive integer, got {value!r}")
@@ -85,6 +87,8 @@ class PracticeConfig:
         if not 0 <= self.seed < 2**62:
             raise UserError(f"--seed must be in [0, 2^62), got {self.seed}")
         fidelity_of(self.fidelity, "--fidelity")
+        if self.precision not in ("float32", "bfloat16"):
+            raise UserError(f"--precision must be float32 or bfloat16, got {self.precision!r}")
 
     def defining(self) -> dict[str, Any]:
         """The settings a round's results depend on (all but rounds, workers and backend)."""
@@ -152,7 +156,8 @@ def train_round_models(base: Path, previous: Path, data: list[Path], practice: l
         return out
     staging = out.with_name(out.name + ".training")
     staging.mkdir(parents=True, exist_ok=True)
-    train = TrainConfig.fast(epochs=config.epochs, patience_epochs=config.patience, lr=config.lr)
+    train = TrainConfig.fast(batch_size=config.batch_size, epochs=config.epochs, patience_epochs=config.patience,
+                             lr=config.lr, precision=config.precision)
     ensemble = EnsembleConfig(members=config.members, extra_share=config.extra_share, workers=config.workers)
     train_ensemble([str(d) for d in data], staging / DYNAMICS_FILE, extra=[str(p) for p in practice] or None,
                    train=train, ensemble=ensemble, init=previous / DYNAMICS_FILE, progress=progress)
@@ -328,7 +333,9 @@ def cmd_practice(args: argparse.Namespace) -> int:
     check_output_dir(args.out, "--out")
     config = PracticeConfig(rounds=args.rounds, per_cell=args.per_cell, objects=tuple(args.objects),
                             seed=args.seed, fidelity=args.fidelity, explore=args.explore, members=args.members,
-                            extra_share=args.extra_share, workers=args.workers, backend=args.backend)
+                            extra_share=args.extra_share, epochs=args.epochs, patience=args.patience,
+                            batch_size=args.batch_size, precision=args.precision,
+                            workers=args.workers, backend=args.backend)
     from tamp.planning.models import pretrained_dir
 
     models = Path(args.models) if args.models else pretrained_dir()
@@ -379,6 +386,17 @@ def add_practice(sub) -> None:
     p.add_argument("--extra-share", type=fraction, default=PracticeConfig.extra_share,
                    help=f"share of each member's resample drawn from the practice data (default "
                    f"{PracticeConfig.extra_share})")
+    p.add_argument("--epochs", type=positive_int, default=PracticeConfig.epochs,
+                   help=f"at most this many epochs per member and round (default {PracticeConfig.epochs}); a warm "
+                   "start's validation error falls slowly, so this bounds a round's training time (about 12 s an "
+                   "epoch on 184,000 transitions, one core a member)")
+    p.add_argument("--patience", type=positive_int, default=PracticeConfig.patience,
+                   help=f"a member stops after this many epochs without a better validation error (default "
+                   f"{PracticeConfig.patience})")
+    p.add_argument("--batch-size", type=positive_int, default=PracticeConfig.batch_size,
+                   help=f"the members' training batch (default {PracticeConfig.batch_size})")
+    p.add_argument("--precision", choices=("float32", "bfloat16"), default=PracticeConfig.precision,
+                   help=f"the members' training precision (default {PracticeConfig.precision}, the bundled model's)")
     p.add_argument("--workers", type=positive_int, default=2,
                    help="worker processes of the evaluation, and members trained at once (default 2)")
     p.add_argument("--backend", choices=("local", "ray"), default="local",
