@@ -14,7 +14,7 @@ from tamp.planning.models import pretrained_dir
 
 pytestmark = [pytest.mark.sim, pytest.mark.slow]
 TINY = PracticeConfig(rounds=1, per_cell=1, objects=(2,), actions=(1, 2), members=2, epochs=2, patience=2,
-                      workers=1)
+                      explore=16, workers=1)
 
 
 @pytest.fixture(scope="module")
