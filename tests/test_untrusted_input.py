@@ -63,7 +63,8 @@ def test_bytes_that_are_not_utf8_in_a_problem_file(tmp_path, capsys, monkeypatch
 ])
 def test_a_damaged_gzipped_operators_file(tmp_path, capsys, monkeypatch, damage, needle):
     models = tmp_path / "models"
-    shutil.copytree(pretrained_dir(), models, ignore=shutil.ignore_patterns("paper", "pairwise", "spatial", "regions", "practised"))
+    other_sets = ("paper", "pairwise", "spatial", "regions", "practised")
+    shutil.copytree(pretrained_dir(), models, ignore=shutil.ignore_patterns(*other_sets))
     packed = models / "domain" / "operators.json.gz"  # the bundled domain is shipped gzipped
     packed.write_bytes(damage(gzip.compress(gzip.decompress(packed.read_bytes()))))
     (tmp_path / "p.json").write_text(problem_text())
