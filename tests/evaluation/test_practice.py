@@ -59,7 +59,7 @@ def test_a_rerun_resumes_and_other_settings_are_refused(practised):
     assert [p["transitions"] for p in again] == [p["transitions"] for p in curve]
     assert (out / "round-1" / "models" / "dynamics.pt").stat().st_mtime_ns == stamp  # nothing trained again
     with pytest.raises(UserError, match="other config"):
-        practise(pretrained_dir(), [data], out, PracticeConfig(**{**TINY.__dict__, "extra_share": 0.3}),
+        practise(pretrained_dir(), [data], out, PracticeConfig(**{**TINY.__dict__, "extra_share": 0.5}),
                  progress=False)
 
 
