@@ -6,7 +6,7 @@ the actions the model is optimistic about. Practice closes that loop, round afte
     round r:  problems of its own (seed PRACTICE_SEED + r, never a user's evaluation seed)
               -> the closed loop plans them with round r's models and executes them in the world
               -> every executed transition (X, a, X') written as a dataset (the format `tamp collect` writes),
-                 and from every state it visited, other actions the planner would consider run beside the plan
+                 and (with `explore`) other actions the planner would consider, run from every state it visited
               -> an ensemble Dynamics Model trained on the random data and every round's practice so far
                  (`learned.ensemble_train`: a share of each member's resample is practice), warm-started
                  from round r's, becomes round r + 1's
@@ -21,7 +21,7 @@ Layout of OUT:
     OUT/round-R/problems.jsonl   the round's problems (strict and paper protocol, names prefixed)
     OUT/round-R/eval/            `tamp evaluate` rows of the round's models on them
     OUT/round-R/data/            the round's executed transitions
-    OUT/round-R/explore/         steps beside the plans from the states the round visited (`evaluation.explore`)
+    OUT/round-R/explore/         with `explore`: steps beside the plans from the states the round visited
     OUT/round-R/models/          the round's models (round 0: a copy-free reference to --models)
     OUT/curve.json, curve.md     the learning curve, rewritten after every round
     OUT/models/                  the last round's models (`tamp plan --models OUT/models`)

@@ -24,7 +24,7 @@ def _scene_paths(html_file) -> bytes:
 def test_the_shipped_models_are_small_load_by_name_and_plan(name):
     import torch
 
-    from tamp.app.args import models_directory
+    from tamp.app.args import BUNDLED_MODELS, models_directory
     from tamp.app.problem import random_problem
     from tamp.planning.config import PlanConfig
     from tamp.planning.planners import plan
@@ -35,8 +35,7 @@ def test_the_shipped_models_are_small_load_by_name_and_plan(name):
     files = [directory / SYMBOLIC_FILE, directory / DYNAMICS_FILE, operators_file(directory / DOMAIN_DIR)]
     assert all(f.is_file() for f in files), [str(f) for f in files if not f.is_file()]
     assert (pretrained_dir() / "PROVENANCE.md").is_file()
-    subfolders = {"paper", "pairwise", "spatial", "regions", "practised"}  # the other sets
-    others = subfolders if name == "pretrained" else set()
+    others = set(BUNDLED_MODELS.values()) - {""} if name == "pretrained" else set()  # the other sets: subfolders
     own = [f for f in directory.rglob("*") if f.is_file() and not others & set(f.parts)]
     assert sum(f.stat().st_size for f in own) < 4e6  # "a few MB at most", each set
     models = load_models(directory)
