@@ -8,7 +8,6 @@
 """
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -45,8 +44,3 @@ def load_plan_file(path: str | Path) -> tuple[np.ndarray, list[PickPlace]]:
         raise UserError(f"{path}: actions[{bad}]: {actions[bad]} names a block beyond the scene's {len(X)} "
                         f"(0..{len(X) - 1})")
     return X, [PickPlace(*a) for a in actions]
-
-
-def write_plan_file(path: str | Path, X: np.ndarray, plan: list) -> None:
-    Path(path).write_text(json.dumps({"X": np.round(np.asarray(X), 5).tolist(),
-                                      "actions": [list(map(int, a)) for a in plan]}, indent=1))
