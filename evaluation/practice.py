@@ -72,6 +72,9 @@ class PracticeConfig:
     lr: float = 4e-4  # below the bundled Dynamics Model's from-scratch 1e-3 (batch 512): a fine-tune
     batch_size: int = 512  # the bundled Dynamics Model's training batch
     precision: str = "float32"  # the bundled Dynamics Model's; bfloat16 trains faster but fine-tunes it coarser
+    # the members' effect loss: "squared" (the paper's Eq. 1, the bundled model's) or "distance" (a median: a step
+    #   with two outcomes is predicted at the more frequent one, not between them; learned.TrainConfig.effect_loss)
+    effect_loss: str = "squared"
     workers: int = 2  # evaluation workers and members trained at once
     backend: str = "local"  # "local" process pool or "ray" (the evaluation)
 
@@ -89,11 +92,14 @@ class PracticeConfig:
         fidelity_of(self.fidelity, "--fidelity")
         if self.precision not in ("float32", "bfloat16"):
             raise UserError(f"--precision must be float32 or bfloat16, got {self.precision!r}")
+        if self.effect_loss not in ("squared", "distance"):
+            raise UserError(f"--effect-loss must be squared or distance, got {self.effect_loss!r}")
 
     def defining(self) -> dict[str, Any]:
-        """The settings a round's results depend on (all but rounds, workers and backend)."""
+        """The settings a round's results depend on (all but rounds, workers and backend; the effect loss only
+        when not the default, so that runs begun before it was a setting resume)."""
         return {k: v for k, v in json.loads(json.dumps(dataclasses.asdict(self))).items()
-                if k not in ("rounds", "workers", "backend")}
+                if k not in ("rounds", "workers", "backend") and not (k == "effect_loss" and v == "squared")}
 
 
 # --------------------------------------------------------------------------- one round's stages
@@ -157,7 +163,7 @@ def train_round_models(base: Path, previous: Path, data: list[Path], practice: l
     staging = out.with_name(out.name + ".training")
     staging.mkdir(parents=True, exist_ok=True)
     train = TrainConfig.fast(batch_size=config.batch_size, epochs=config.epochs, patience_epochs=config.patience,
-                             lr=config.lr, precision=config.precision)
+                             lr=config.lr, precision=config.precision, effect_loss=config.effect_loss)
     ensemble = EnsembleConfig(members=config.members, extra_share=config.extra_share, workers=config.workers)
     train_ensemble([str(d) for d in data], staging / DYNAMICS_FILE, extra=[str(p) for p in practice] or None,
                    train=train, ensemble=ensemble, init=previous / DYNAMICS_FILE, progress=progress)
@@ -334,7 +340,7 @@ def cmd_practice(args: argparse.Namespace) -> int:
     config = PracticeConfig(rounds=args.rounds, per_cell=args.per_cell, objects=tuple(args.objects),
                             seed=args.seed, fidelity=args.fidelity, explore=args.explore, members=args.members,
                             extra_share=args.extra_share, epochs=args.epochs, patience=args.patience,
-                            batch_size=args.batch_size, precision=args.precision,
+                            batch_size=args.batch_size, precision=args.precision, effect_loss=args.effect_loss,
                             workers=args.workers, backend=args.backend)
     from tamp.planning.models import pretrained_dir
 
@@ -397,6 +403,9 @@ def add_practice(sub) -> None:
                    help=f"the members' training batch (default {PracticeConfig.batch_size})")
     p.add_argument("--precision", choices=("float32", "bfloat16"), default=PracticeConfig.precision,
                    help=f"the members' training precision (default {PracticeConfig.precision}, the bundled model's)")
+    p.add_argument("--effect-loss", choices=("squared", "distance"), default=PracticeConfig.effect_loss,
+                   help=f"the members' effect loss (default {PracticeConfig.effect_loss}, the bundled model's: the "
+                   "mean of a step's outcomes; distance: a median, tamp train --effect-loss)")
     p.add_argument("--workers", type=positive_int, default=2,
                    help="worker processes of the evaluation, and members trained at once (default 2)")
     p.add_argument("--backend", choices=("local", "ray"), default="local",

@@ -2,7 +2,10 @@
 
 Loss per sample = sum over real objects of ||e_hat_i - e_i||^2 (Eq. 1), in units of the
 model's ``effect_scale`` (a single scalar, so the geometry of Eq. 1 is kept), averaged over the
-batch. Reported "effect error" is the mean over real objects of ||e_hat_i - e_i||_2 in cm; it
+batch. With ``effect_loss="distance"`` (our extension) the sum is of ||e_hat_i - e_i|| itself: the
+squared loss predicts the mean of a step's outcomes, which lies between them when a block comes to
+rest in one of two places (on a cube or beside it); the distance predicts a median, near the more
+frequent one. Reported "effect error" is the mean over real objects of ||e_hat_i - e_i||_2 in cm; it
 is the same for the arm-subtracted target and for absolute displacements (the arm term is
 known exactly). The zero-effect baseline (predict X' = X) is reported next to it.
 
@@ -51,6 +54,8 @@ from .train_config import (
     TrainResult,
     train_options,
 )
+
+DISTANCE_SMOOTHING_M = 0.001  # metres: the distance loss is sqrt(d^2 + s^2) - s, smooth within about s of 0
 
 
 def last_path(out_path: str | Path) -> Path:
@@ -365,7 +370,12 @@ class _Run:
             places = position_loss(model, X, M, u) if train.position_weight else None
             steps = None if X_next is None else transition_loss(model, X, X_next, A, M, u, r)
         d = pred.float() - T
-        loss = (d / scale).pow(2).sum(dim=(1, 2)).mean()
+        squared = (d / scale).pow(2).sum(dim=2)  # (B, n) per object, in units of the effect scale
+        if train.effect_loss == "distance":  # smoothed at DISTANCE_SMOOTHING_M so its gradient stays finite at 0
+            eps = DISTANCE_SMOOTHING_M / scale
+            loss = ((squared + eps * eps).sqrt() - eps).sum(dim=1).mean()
+        else:
+            loss = squared.sum(dim=1).mean()
         if usage is not None:
             loss = loss + train.bit_usage * usage
         if offsets is not None:

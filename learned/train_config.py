@@ -12,6 +12,7 @@ import torch
 from .model import EffectModel
 
 Precision = Literal["float32", "bfloat16"]
+EffectLoss = Literal["squared", "distance"]
 PAPER_BATCH, PAPER_LR = 128, 1e-4
 """The paper's (and the bundled models') Adam batch size and learning rate."""
 
@@ -79,10 +80,15 @@ class TrainConfig:
     # weight of the transition loss (`ModelConfig.transition_decoder`, `transition_loss`): the bits read after
     # each step predicted from the bits before it and the action, so that operators predict their steps; 0: off
     transition_weight: float = 0.0
+    # the effect loss per object: "squared" distance (the paper's Eq. 1: the mean of the outcomes) or the
+    #   "distance" itself (a median: where one outcome is the more frequent, near it, not between two outcomes)
+    effect_loss: EffectLoss = "squared"
 
     def __post_init__(self) -> None:
         if self.precision not in ("float32", "bfloat16"):
             raise ValueError(f"precision must be float32 or bfloat16, got {self.precision!r}")
+        if self.effect_loss not in ("squared", "distance"):
+            raise ValueError(f"effect_loss must be squared or distance, got {self.effect_loss!r}")
         if self.patience_epochs is not None and self.patience_epochs < 1:
             raise ValueError(f"patience_epochs must be >= 1, got {self.patience_epochs}")
         if self.epochs < 1 or self.batch_size < 1 or not self.lr > 0:
@@ -144,9 +150,10 @@ def train_options(train: TrainConfig, num_train: int, num_val: int, init: str | 
             **({"position_weight": train.position_weight} if train.position_weight else {}),
             **({"transition_weight": train.transition_weight} if train.transition_weight else {}),
             **({"precision": train.precision} if train.precision != "float32" else {}),
+            **({"effect_loss": train.effect_loss} if train.effect_loss != "squared" else {}),
             **({"patience_epochs": train.patience_epochs, "min_delta_cm": train.min_delta_cm}
                if train.patience_epochs is not None else {})}
 
 
-__all__ = ["PAPER_BATCH", "PAPER_LR", "Precision", "StopReason", "TrainConfig", "TrainResult", "bf16_fast",
+__all__ = ["PAPER_BATCH", "PAPER_LR", "EffectLoss", "Precision", "StopReason", "TrainConfig", "TrainResult", "bf16_fast",
            "scaled_lr", "train_options"]

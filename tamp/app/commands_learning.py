@@ -72,6 +72,7 @@ def cmd_train(args: argparse.Namespace) -> int:
                              bit_usage=args.bit_usage, offset_weight=args.offset_loss,
                              offset_radius_m=None if args.offset_radius_cm is None else args.offset_radius_cm / 100,
                              position_weight=args.position_loss, transition_weight=args.transition_loss,
+                             effect_loss=args.effect_loss,
                              time_limit_s=None if args.time_limit_min is None else 60 * args.time_limit_min)
     if args.ensemble is not None:
         return _train_ensemble(args, config, settings)
@@ -221,6 +222,10 @@ def add_train(sub) -> None:
     p.add_argument("--transition-loss", type=non_negative_float, default=0.0, metavar="WEIGHT",
                    help="weight of a loss that predicts the bits read after each step from the bits before it and "
                    "the action, so that the bits are ones operators can predict (default 0: the paper's loss)")
+    p.add_argument("--effect-loss", choices=("squared", "distance"), default="squared",
+                   help="the effect loss per object: squared distance (default: the paper's Eq. 1, which predicts the "
+                   "mean of a step's outcomes) or the distance itself (a median: a block that comes to rest on a cube "
+                   "or beside it is predicted where it more often rests, not between the two)")
     _add_train_arguments(p)
     p.add_argument("--time-limit-min", type=positive_float, default=None, metavar="MIN",
                    help="stop after the epoch that passes this wall time; the run is unfinished, --resume continues")

@@ -58,9 +58,17 @@ def test_a_rerun_resumes_and_other_settings_are_refused(practised):
     again = practise(pretrained_dir(), [data], out, TINY, progress=False)
     assert [p["transitions"] for p in again] == [p["transitions"] for p in curve]
     assert (out / "round-1" / "models" / "dynamics.pt").stat().st_mtime_ns == stamp  # nothing trained again
-    with pytest.raises(UserError, match="other config"):
-        practise(pretrained_dir(), [data], out, PracticeConfig(**{**TINY.__dict__, "extra_share": 0.5}),
-                 progress=False)
+    for changed in ({"extra_share": 0.5}, {"effect_loss": "distance"}):
+        with pytest.raises(UserError, match="other config"):
+            practise(pretrained_dir(), [data], out, PracticeConfig(**{**TINY.__dict__, **changed}), progress=False)
+
+
+def test_the_effect_loss_is_a_setting_only_when_not_the_papers():
+    """Runs begun before the effect loss was a setting resume: the default is left out of the state."""
+    assert "effect_loss" not in TINY.defining()
+    assert PracticeConfig(effect_loss="distance").defining()["effect_loss"] == "distance"
+    with pytest.raises(UserError, match="--effect-loss"):
+        PracticeConfig(effect_loss="huber")
 
 
 def test_practice_flags_are_checked(tmp_path, capsys):
