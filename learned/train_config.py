@@ -155,5 +155,5 @@ def train_options(train: TrainConfig, num_train: int, num_val: int, init: str | 
                if train.patience_epochs is not None else {})}
 
 
-__all__ = ["PAPER_BATCH", "PAPER_LR", "EffectLoss", "Precision", "StopReason", "TrainConfig", "TrainResult", "bf16_fast",
-           "scaled_lr", "train_options"]
+__all__ = ["PAPER_BATCH", "PAPER_LR", "EffectLoss", "Precision", "StopReason", "TrainConfig", "TrainResult",
+           "bf16_fast", "scaled_lr", "train_options"]
