@@ -362,12 +362,25 @@ def read_shard(path: str | Path, n_max: int | None = None,
     return Transitions(**{k: arrays[k] for k in KEYS})
 
 
+PATH_SETTINGS = ("simplify_paths",)
+"""World settings that shape the arm's collision-free paths, not where blocks come to rest: datasets that differ
+in them alone combine (the steps `tamp practice` records were executed with simplified paths)."""
+
+
+def _defining(key: str, value: Any) -> Any:
+    """A meta field as far as it decides whether two datasets are of one world."""
+    if key == "world_config" and isinstance(value, dict):
+        return {k: v for k, v in value.items() if k not in PATH_SETTINGS}
+    return value
+
+
 def load_transitions(source: "str | Path | Sequence[str | Path]", skip_corrupt: bool = False) -> Transitions:
     """Read and validate every shard of a dataset directory, or of several.
 
     Several directories (datasets of one world collected apart, e.g. with other ``--objects``) are
-    concatenated in the order given and padded to the largest ``n_max``; their world and outcome codes
-    must agree, and ``meta["sources"]`` lists each one's path, seed, object counts and size.
+    concatenated in the order given and padded to the largest ``n_max``; their world (but for
+    `PATH_SETTINGS`) and outcome codes must agree, and ``meta["sources"]`` lists each one's path, seed,
+    object counts and size.
     A bad shard raises ShardError (a ValueError naming the file); with ``skip_corrupt`` it is
     skipped with a warning and listed in ``.skipped`` instead.
     """
@@ -383,7 +396,7 @@ def load_transitions(source: "str | Path | Sequence[str | Path]", skip_corrupt: 
     parts = [_load_directory(d, skip_corrupt) for d in directories]
     for d, part in zip(directories[1:], parts[1:]):
         for key in ("format", "world_config", "status_codes"):
-            if part.meta.get(key) != parts[0].meta.get(key):
+            if _defining(key, part.meta.get(key)) != _defining(key, parts[0].meta.get(key)):
                 raise ValueError(f"{d}: its {key} differs from {directories[0]}'s: datasets of different "
                                  "worlds cannot be combined")
     n_max = max(p.n_max for p in parts)

@@ -183,3 +183,13 @@ def test_several_directories_must_be_distinct_and_of_one_world(tmp_path):
         load_transitions([small, other])
     with pytest.raises(ValueError, match="no dataset directory"):
         load_transitions([])
+
+
+def test_datasets_that_differ_only_in_how_paths_were_simplified_combine(tmp_path):
+    """Practice records its executed steps with simplified paths, the collection without: one world."""
+    random = write_synthetic_dataset(tmp_path / "random", 60, seed=1)
+    practice = write_synthetic_dataset(tmp_path / "practice", 40, seed=2)
+    meta = json.loads((practice / "meta.json").read_text())
+    meta["world_config"]["simplify_paths"] = True
+    (practice / "meta.json").write_text(json.dumps(meta))
+    assert len(load_transitions([random, practice])) == 100
