@@ -122,13 +122,14 @@ def make_problems(path: Path, r: int, config: PracticeConfig, progress: bool) ->
     return write_problems(path, problems)
 
 
-def write_transitions(rows_path: Path, directory: Path, seed: int) -> int:
+def write_transitions(rows_path: Path, directory: Path, seed: int, fidelity: str = "fast") -> int:
     """The executed transitions of the rows at `rows_path` as a dataset at `directory` (written once; a
-    directory left half-written by a kill is written again); returns their number."""
+    directory left half-written by a kill is written again), its world the one that executed them
+    (`fidelity`, paths simplified); returns their number."""
     from learned.dataset import DatasetWriter, load_transitions
     from tamp.app.collect import STATUS_CODES
-    from tamp.app.runner import executing_world
     from tamp.planning.validate import MAX_OBJECTS
+    from tamp.sim.world_types import WorldConfig
 
     from .run import read_rows
 
@@ -137,7 +138,7 @@ def write_transitions(rows_path: Path, directory: Path, seed: int) -> int:
         return len(load_transitions(directory))
     if directory.exists():
         shutil.rmtree(directory)
-    world = executing_world("fast").config
+    world = WorldConfig(fidelity=fidelity, simplify_paths=True)  # as tamp.app.runner.executing_world's
     steps = [t for row in read_rows(rows_path) for t in (row.get("transitions") or [])]
     if not steps:
         return 0
@@ -265,7 +266,7 @@ def practise(models: Path, data: list[Path], out: Path, config: PracticeConfig =
                                  progress=progress)
         rows = evaluate(current, problems, rd / "eval", [config.method], eval_config)
         timings["practice_s"] = time.perf_counter() - t
-        transitions = write_transitions(rows, rd / "data", config.seed + r)
+        transitions = write_transitions(rows, rd / "data", config.seed + r, config.fidelity)
         explored = 0
         if config.explore and r < config.rounds:  # the last round only measures: nothing trains on its steps
             from evaluation.explore import explore

@@ -4,7 +4,7 @@ import json
 import numpy as np
 import pytest
 
-from evaluation.practice import PracticeConfig, practise
+from evaluation.practice import PracticeConfig, practise, write_transitions
 from learned import load_transitions
 from learned.ensemble import EffectEnsemble, load_dynamics
 from learned.synthetic import write_synthetic_dataset
@@ -61,6 +61,15 @@ def test_a_rerun_resumes_and_other_settings_are_refused(practised):
     for changed in ({"extra_share": 0.5}, {"effect_loss": "distance"}):
         with pytest.raises(UserError, match="other config"):
             practise(pretrained_dir(), [data], out, PracticeConfig(**{**TINY.__dict__, **changed}), progress=False)
+
+
+def test_recorded_steps_name_the_world_that_executed_them(practised, tmp_path):
+    _, _, out, curve = practised
+    rows = out / "round-0" / "eval" / "rows.jsonl"
+    assert load_transitions(out / "round-0" / "data").meta["world_config"]["fidelity"] == "fast"
+    assert write_transitions(rows, tmp_path / "full", 7, "full") == curve[0]["transitions"]
+    meta = load_transitions(tmp_path / "full").meta
+    assert meta["world_config"]["fidelity"] == "full" and meta["world_config"]["simplify_paths"] is True
 
 
 def test_the_effect_loss_is_a_setting_only_when_not_the_papers():
