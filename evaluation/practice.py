@@ -96,10 +96,14 @@ class PracticeConfig:
             raise UserError(f"--effect-loss must be squared or distance, got {self.effect_loss!r}")
 
     def defining(self) -> dict[str, Any]:
-        """The settings a round's results depend on (all but rounds, workers and backend; the effect loss only
-        when not the default, so that runs begun before it was a setting resume)."""
+        """The settings a round's results depend on (all but rounds, workers and backend; those added since runs
+        began, `_LATER`, only when not at their default, so that such runs resume)."""
         return {k: v for k, v in json.loads(json.dumps(dataclasses.asdict(self))).items()
-                if k not in ("rounds", "workers", "backend") and not (k == "effect_loss" and v == "squared")}
+                if k not in ("rounds", "workers", "backend") and _LATER.get(k, _UNSET) != v}
+
+
+_UNSET = object()
+_LATER = {"effect_loss": "squared"}  # settings added after practice runs were made -> the value those runs had
 
 
 # --------------------------------------------------------------------------- one round's stages
@@ -122,7 +126,7 @@ def make_problems(path: Path, r: int, config: PracticeConfig, progress: bool) ->
     return write_problems(path, problems)
 
 
-def write_transitions(rows_path: Path, directory: Path, seed: int, fidelity: str = "fast") -> int:
+def write_transitions(rows_path: Path, directory: Path, seed: int, fidelity: str) -> int:
     """The executed transitions of the rows at `rows_path` as a dataset at `directory` (written once; a
     directory left half-written by a kill is written again), its world the one that executed them
     (`fidelity`, paths simplified); returns their number."""

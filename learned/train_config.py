@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from enum import Enum
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, get_args
 
 import torch
 
@@ -85,10 +85,9 @@ class TrainConfig:
     effect_loss: EffectLoss = "squared"
 
     def __post_init__(self) -> None:
-        if self.precision not in ("float32", "bfloat16"):
-            raise ValueError(f"precision must be float32 or bfloat16, got {self.precision!r}")
-        if self.effect_loss not in ("squared", "distance"):
-            raise ValueError(f"effect_loss must be squared or distance, got {self.effect_loss!r}")
+        for name, allowed in (("precision", get_args(Precision)), ("effect_loss", get_args(EffectLoss))):
+            if getattr(self, name) not in allowed:
+                raise ValueError(f"{name} must be {' or '.join(allowed)}, got {getattr(self, name)!r}")
         if self.patience_epochs is not None and self.patience_epochs < 1:
             raise ValueError(f"patience_epochs must be >= 1, got {self.patience_epochs}")
         if self.epochs < 1 or self.batch_size < 1 or not self.lr > 0:
