@@ -3,8 +3,12 @@
 The work unit is one *scene* k. Its seed is ``SeedSequence(seed, spawn_key=(k,))``; from it
 come the object count n (uniform over ``objects``), the scene (``World.reset(seed=...)``) and
 M = ``actions_per_scene`` uniformly random actions among the 9 n^2 (failing ones included),
-chained: each action starts from the previous outcome. A sample is (X, a, X', n, grasped,
-status), so a scene depends on (seed, k) alone, never on which worker ran it or what it ran before.
+chained: each action starts from the previous outcome. A sample is (X, a, X', n, grasped, status), so
+a scene depends on (seed, k) alone, never on which worker ran it or what it ran before.
+
+With ``sampling="graspable"`` each action is drawn among those whose grasp point closes the jaws on a
+block (a third of uniform actions grasp nothing and move nothing): data of where things move, to add
+to the paper's uniform data.
 
 Shard j holds scenes [j K, (j + 1) K) with K = ``scenes_per_shard`` (the last scene and shard
 are trimmed so the dataset has exactly ``samples`` samples). The layout is fixed by the
@@ -25,7 +29,7 @@ import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import Any, Literal, NamedTuple, get_args
 
 import numpy as np
 
@@ -40,6 +44,11 @@ STATUS_CODES = {name: code for code, name in enumerate(STATUSES)}
 LOCK_NAME = ".collect.lock"
 # meta.json fields that define the data: a directory is resumed only if all of them match.
 DEFINING_KEYS = ("format", "n_max", "world_config", "seed", "status_codes", "shard_size", "collection")
+Sampling = Literal["uniform", "graspable"]
+SAMPLINGS: tuple[str, ...] = get_args(Sampling)
+ACTIONS_DRAWN = {"uniform": "uniform over the 9 n^2 actions, chained from the previous outcome",
+                 "graspable": "uniform over the actions whose grasp point holds a block in the current state, "
+                              "chained from the previous outcome"}
 
 
 @dataclass(frozen=True)
@@ -52,6 +61,7 @@ class CollectConfig:
     actions_per_scene: int = 10
     scenes_per_shard: int = 20
     world: WorldConfig = field(default_factory=WorldConfig)
+    sampling: Sampling = "uniform"  # the paper's; "graspable" skips the actions that grasp nothing
 
     def __post_init__(self) -> None:
         if isinstance(self.samples, bool) or not isinstance(self.samples, int) or self.samples < 1:
@@ -71,6 +81,8 @@ class CollectConfig:
             raise UserError(f"--scenes-per-shard must be at least 1, got {self.scenes_per_shard}")
         if not 0 <= self.seed < SEED_LIMIT:
             raise UserError(f"--seed must be in [0, 2^63), got {self.seed}")
+        if self.sampling not in SAMPLINGS:
+            raise UserError(f"--sampling must be one of {', '.join(SAMPLINGS)}, got {self.sampling!r}")
 
     @property
     def n_max(self) -> int:
@@ -112,7 +124,9 @@ class CollectConfig:
                 "shards": self.n_shards, "scenes": self.n_scenes,
                 "scene_seed": "numpy SeedSequence(seed, spawn_key=(k,)) for scene k; n, the scene "
                               "seed and the actions drawn from default_rng of it",
-                "actions": "uniform over the 9 n^2 actions, chained from the previous outcome",
+                "actions": ACTIONS_DRAWN[self.sampling],
+                # only when not the paper's, so that directories collected before it resume
+                **({"sampling": self.sampling} if self.sampling != "uniform" else {}),
             },
         }
         return json.loads(json.dumps(meta))
@@ -125,6 +139,7 @@ class SceneTask(NamedTuple):
     k: int  # scene index
     objects: tuple[int, ...]
     samples: int  # actions to run in this scene (M, or fewer for the last scene)
+    sampling: Sampling = "uniform"
 
 
 @dataclass
@@ -143,13 +158,14 @@ class SceneResult:
 
 
 def run_scene(world, task: SceneTask) -> SceneResult:
-    """Random scene k and its chain of random actions; depends on (task.seed, task.k) alone."""
+    """Random scene k and its chain of random actions; depends on (task.seed, task.k, task.sampling) alone."""
     rng = np.random.default_rng(np.random.SeedSequence(task.seed, spawn_key=(task.k,)))
     n = int(task.objects[rng.integers(len(task.objects))])
     X = world.reset(n_objects=n, seed=int(rng.integers(2**63)))
-    actions = world.actions()
     Xs, As, Xn, G, S = [], [], [], [], []
     for _ in range(task.samples):
+        actions = world.graspable_actions() if task.sampling == "graspable" else world.actions()
+        actions = actions or world.actions()  # nothing graspable (rare): any action, which changes nothing
         action = actions[rng.integers(len(actions))]
         X_next, info = world.step(action)
         Xs.append(X)
@@ -326,7 +342,7 @@ def collect(out: str | Path, cfg: CollectConfig, workers: int | None = None, bac
         good, bad = prepare_directory(out, cfg, meta)
         missing = [j for j in range(cfg.n_shards) if j not in good]
         done = sum(cfg.shard_samples(j) for j in good)
-        tasks = [SceneTask(cfg.seed, k, cfg.objects, cfg.scene_samples(k)) for j in missing
+        tasks = [SceneTask(cfg.seed, k, cfg.objects, cfg.scene_samples(k), cfg.sampling) for j in missing
                  for k in cfg.shard_scenes(j)]
         report = CollectReport(out, cfg.samples, cfg.samples - done, cfg.n_shards, 0, bad, 0.0)
         if tasks:

@@ -9,6 +9,7 @@ from tamp.app.args import (
     check_output_file,
     seed,
 )
+from tamp.app.collect import SAMPLINGS
 from tamp.app.parallel import add_arguments as add_parallel_arguments
 
 
@@ -25,7 +26,8 @@ def cmd_collect(args: argparse.Namespace) -> int:
 
     check_output_dir(args.out, "--out")
     cfg = CollectConfig(samples=args.samples, objects=args.objects, seed=args.seed,
-                        actions_per_scene=args.actions_per_scene, scenes_per_shard=args.scenes_per_shard)
+                        actions_per_scene=args.actions_per_scene, scenes_per_shard=args.scenes_per_shard,
+                        sampling=args.sampling)
     report = collect(args.out, cfg, workers=args.workers, backend=args.backend, address=args.address,
                      progress=not args.quiet)
     reused = report.shards - report.shards_written
@@ -67,6 +69,10 @@ def add_collect(sub) -> None:
     p.add_argument("--seed", type=seed, default=0, help="dataset seed (default 0)")
     p.add_argument("--actions-per-scene", type=int, default=10, metavar="M",
                    help="chained random actions per scene (default 10)")
+    p.add_argument("--sampling", choices=SAMPLINGS, default="uniform",
+                   help="uniform: every action alike, as the paper collects (default); graspable: only actions "
+                        "whose grasp point holds a block, so that more of the data moves something (to add to "
+                        "uniform data with `tamp train --data A B`)")
     p.add_argument("--scenes-per-shard", type=int, default=20, metavar="K",
                    help="scenes per shard file, the unit of resumption (default 20)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")

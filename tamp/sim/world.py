@@ -28,7 +28,16 @@ from tamp.sim.motion import MotionPlanner
 from tamp.sim.observer import Carried, PhysicsFrame, WorldObserver
 from tamp.sim.physics import BlockPhysics
 from tamp.sim.plants import build_motion_scene, build_physics_scene
-from tamp.sim.skill import Scene, Waypoints, approach_poses, carried_shapes, held_block, pick_place_waypoints, topdown
+from tamp.sim.skill import (
+    Scene,
+    Waypoints,
+    approach_poses,
+    carried_shapes,
+    grasp_pose,
+    held_block,
+    pick_place_waypoints,
+    topdown,
+)
 from tamp.sim.trajectory import RefinedPlan, refined_action
 from tamp.sim.world_types import StepInfo, StepStatus, WorldConfig
 
@@ -154,6 +163,14 @@ class World:
         """All 9 n^2 pick-place actions of the current scene."""
         n = self._require_scene().n
         return [PickPlace(i, gi, j, rj) for i in range(n) for gi in OFFSETS for j in range(n) for rj in OFFSETS]
+
+    def graspable_actions(self) -> list[PickPlace]:
+        """The actions whose grasp point closes the jaws on a block in the current scene: the others end
+        with nothing grasped whatever the arm does (a geometric test, no motion planned)."""
+        scene = self._require_scene()
+        grasps = {(i, gi) for i in range(scene.n) for gi in OFFSETS  # the grasp pose ignores the place
+                  if held_block(scene, grasp_pose(scene, PickPlace(i, gi, i, 0), self.config)) >= 0}
+        return [a for a in self.actions() if (a.pick, a.grasp_offset) in grasps]
 
     @property
     def X(self) -> np.ndarray:

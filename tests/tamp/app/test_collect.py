@@ -191,6 +191,28 @@ def test_existing_directory_with_other_parameters_is_refused(reference, tmp_path
     assert "is not empty and has no meta.json" in capsys.readouterr().err
 
 
+def _moved(directory: Path) -> np.ndarray:
+    data = arrays(directory)
+    return np.abs(data["X_next"][..., :3] - data["X"][..., :3]).max(axis=(1, 2)) > 0.01
+
+
+@pytest.mark.sim
+@pytest.mark.slow
+def test_graspable_sampling_grasps_something_and_combines_with_uniform_data(reference, tmp_path, capsys):
+    out = tmp_path / "graspable"
+    assert main(collect_cli(out, "--workers", "1", "--sampling", "graspable")) == 0
+    data = load_transitions(out)
+    codes = data.meta["status_codes"]
+    assert len(data) == 58 and not np.any(data.status == codes["nothing_grasped"])
+    assert np.mean(_moved(out)) > np.mean(_moved(reference)) + 0.1
+    assert data.meta["collection"]["sampling"] == "graspable"
+    assert "sampling" not in load_transitions(reference).meta["collection"]  # the paper's, as before
+    assert len(load_transitions([reference, out])) == 116  # the same world: they train together
+    capsys.readouterr()
+    assert main(collect_cli(out, "--workers", "1")) == 2  # resuming it as uniform data is refused
+    assert "other parameters" in capsys.readouterr().err
+
+
 @pytest.mark.sim
 def test_dataset_stats_table_and_png(reference, tmp_path, capsys):
     png = tmp_path / "stats.png"
