@@ -39,6 +39,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         if given and not args.offset_loss:
             raise UserError(f"{flag} changes what --offset-loss asks: give --offset-loss too")
     asked = {k: v for k, v in (("activation", args.bottleneck), ("d_z", args.d_z), ("heads", args.heads),
+                               ("hidden", args.hidden), ("layers", args.layers),
                                ("arm_input", False if args.no_arm_input else None),
                                ("relations", args.relations),
                                ("type_symbol", True if args.type_symbol else None),
@@ -182,6 +183,10 @@ def add_train(sub) -> None:
                    help="unary symbol bits per object (default: learned.ModelConfig's; more bits, more operators)")
     p.add_argument("--heads", type=positive_int, default=None,
                    help="relation types = attention heads (default: learned.ModelConfig's)")
+    p.add_argument("--hidden", type=positive_int, default=None,
+                   help="width of every MLP's hidden layers (default: learned.ModelConfig's, 128)")
+    p.add_argument("--layers", type=positive_int, default=None,
+                   help="hidden layers per MLP (default: learned.ModelConfig's, 2)")
     p.add_argument("--relations", choices=RELATION_ENCODERS, default=None,
                    help="relation encoder: attention = the paper's q_k(x_i) . k_k(x_j) (default, or --init's); "
                    "pairwise = an MLP of x_i, x_j and their offset x_j - x_i, which can learn spatial relations "

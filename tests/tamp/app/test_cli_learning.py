@@ -229,3 +229,16 @@ def test_fine_tune_a_dynamics_model_into_the_whole_action_encoding(tiny_dataset,
                  "--out", str(ensemble), *base]) == 0
     assert load_dynamics(ensemble).config.whole_action
     capsys.readouterr()
+
+
+def test_hidden_width_and_layers_are_the_networks_and_init_keeps_its_own(tiny_dataset, tmp_path, capsys):
+    model = tmp_path / "dynamics.pt"
+    assert main(["train", "--data", str(tiny_dataset), "--hidden", "24", "--layers", "1", "--epochs", "1",
+                 "--out", str(model)]) == 0
+    config = learned.load_model(model).config  # rebuilt from its settings, its weights loaded into it
+    assert (config.hidden, config.layers) == (24, 1)
+    capsys.readouterr()
+    assert main(["train", "--data", str(tiny_dataset), "--init", str(model), "--hidden", "32", "--epochs", "1",
+                 "--out", str(tmp_path / "wider.pt")]) == 2
+    err = capsys.readouterr().err
+    assert "hidden 32 (its 24)" in err and "Traceback" not in err
