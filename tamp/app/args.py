@@ -57,7 +57,7 @@ def positive_float(text: str) -> float:
 
 # name -> folder under tamp/pretrained/
 BUNDLED_MODELS = {"pretrained": "", "paper": "paper", "pairwise": "pairwise", "spatial": "spatial",
-                  "regions": "regions", "practised": "practised"}
+                  "regions": "regions", "practised": "practised", "moved": "moved"}
 MODELS_HELP = ("a models directory (symbolic.pt, dynamics.pt, domain/), or a bundled set: pretrained (the "
                "default: symbols that say where a block stands and what stands beside it, a Dynamics Model that "
                "reads the whole action; both learned from data of today's world), paper (the paper's "
@@ -65,7 +65,9 @@ MODELS_HELP = ("a models directory (symbolic.pt, dynamics.pt, domain/), or a bun
                "that say on which side of a block another stands), regions (the default's symbols learned from "
                "earlier data, with the paper set's Dynamics Model) or practised (the default after two rounds of "
                "tamp practice: a two-member ensemble Dynamics Model that also learned from its own plans' steps, "
-               "with a 95 %% bound per step); tamp/pretrained/PROVENANCE.md")
+               "with a 95 %% bound per step) or moved (the default with a Dynamics Model fine-tuned on the steps "
+               "that moved a block: it misses stacks and leaning blocks far less often, and does not know that a "
+               "motion may be blocked); tamp/pretrained/PROVENANCE.md")
 
 
 def models_directory(text: str) -> Path:
