@@ -44,7 +44,7 @@ def line(name: str, f: dict) -> str:
             f"p95 {f['p95_s']:.2f} s")
 
 
-def main() -> int:
+def main() -> int | str:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--new", required=True, help="the models directory to measure")
     p.add_argument("--baseline", default="tamp/pretrained", help="the models to measure it against (bundled)")
@@ -77,7 +77,8 @@ def main() -> int:
         command += ["--noise", args.noise] if args.noise else []
         command += ["--push", args.push] if args.push else []
         command += ["--max-doubt", args.max_doubt] if args.max_doubt and name != "baseline" else []
-        subprocess.run(command, check=True)
+        if subprocess.run(command).returncode != 0:  # tamp evaluate has said why, in one line
+            return f"bench: the {name} evaluation stopped (its message is above); nothing compared"
         rows["baseline" if name == "baseline" else "new"] = read_rows(out / name / "rows.jsonl")
     for method in args.methods.split(","):
         base = {r["problem"]: r for r in rows["baseline"] if r["method"] == method}
