@@ -162,10 +162,12 @@ def run_scene(world, task: SceneTask) -> SceneResult:
     rng = np.random.default_rng(np.random.SeedSequence(task.seed, spawn_key=(task.k,)))
     n = int(task.objects[rng.integers(len(task.objects))])
     X = world.reset(n_objects=n, seed=int(rng.integers(2**63)))
+    every_action = world.actions()  # of n alone, so of the whole scene
     Xs, As, Xn, G, S = [], [], [], [], []
     for _ in range(task.samples):
-        actions = world.graspable_actions() if task.sampling == "graspable" else world.actions()
-        actions = actions or world.actions()  # nothing graspable (rare): any action, which changes nothing
+        actions = every_action
+        if task.sampling == "graspable":  # of the current state; if none (rare), any action, which changes nothing
+            actions = world.graspable_actions() or every_action
         action = actions[rng.integers(len(actions))]
         X_next, info = world.step(action)
         Xs.append(X)
