@@ -8,7 +8,7 @@ from typing import Any
 from tamp.app.faults import Faults
 from tamp.app.parallel import BACKENDS
 from tamp.errors import UserError
-from tamp.planning.config import Level1Config, LoopConfig, PlanConfig
+from tamp.planning.config import KinematicsConfig, Level1Config, LoopConfig, PlanConfig
 from tamp.sim.world_types import fidelity_of
 
 
@@ -67,6 +67,8 @@ class EvalConfig:
             out["symbolic_time_limit_s"] = p.level1.symbolic_time_limit
         if p.level1.settle != Level1Config.settle:
             out["level1_settle"] = p.level1.settle
+        if p.kinematics.rest_within != KinematicsConfig.rest_within:
+            out["kinematics_rest_within_m"] = p.kinematics.rest_within
         if p.search.max_doubt is not None:
             out["search_max_doubt_m"] = p.search.max_doubt
         if p.search.greedy_from is not None:

@@ -95,7 +95,7 @@ class Evaluator:
         if self._checker is None:
             from tamp.sim.kinematic_checker import FeasibilityChecker
 
-            self._checker = FeasibilityChecker()
+            self._checker = FeasibilityChecker(rest_within=self.config.planner.kinematics.rest_within)
         checker = self._checker
         scene = checker.reset(problem.X_init)
         layout = tuple(int(t) for t in scene.types)

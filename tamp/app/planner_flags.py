@@ -158,6 +158,12 @@ def add_planner_arguments(p: argparse.ArgumentParser, feasibility: bool = True) 
     p.add_argument("--no-greedy-stall", dest="greedy_stall", action="store_const", const=None,
                    help="from --greedy-from blocks on, the continuous search runs to --max-expansions however long it "
                    "stays on a plateau")
+    p.add_argument("--rest-within", type=positive_float, default=default.kinematics.rest_within, metavar="METRES",
+                   help="the kinematic checks set a predicted block this close to resting on the table or on a block "
+                   "down on it: the checks are exact to the millimetre, a predicted position is not (default "
+                   f"{default.kinematics.rest_within})")
+    p.add_argument("--no-rest-within", dest="rest_within", action="store_const", const=None,
+                   help="the kinematic checks take every predicted block where the Dynamics Model puts it")
     if feasibility:
         p.add_argument("--no-feasibility", dest="feasibility", action="store_false",
                        help="cfs and bilevel without kinematics in the planning loop (no feasibility check of "
@@ -183,7 +189,7 @@ PLANNER_FLAGS: dict[str, dict[str, str]] = {
                "greedy_per_misplaced": "greedy_per_misplaced",
                "look_on": "look_on", "max_fragility": "max_fragility",
                "release_targets": "release_targets", "max_doubt": "max_doubt"},
-    "kinematics": {"feasibility": "feasibility"},  # `tamp evaluate` sets it per method instead
+    "kinematics": {"feasibility": "feasibility", "rest_within": "rest_within"},  # evaluate: feasibility per method
     "loop": {"keep_plan": "keep_plan", "on_course": "on_course", "max_actions": "max_actions", "widen": "widen",
              "search_budget": "loop_search_budget", "greedy_search_budget": "loop_greedy_search_budget",
              "stall": "loop_stall"},

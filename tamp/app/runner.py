@@ -44,7 +44,9 @@ from tamp.sim.world_types import StepInfo, StepStatus, fidelity_of
 def kinematics_for(method: str, config: PlanConfig) -> FeasibilityChecker | None:
     """The kinematic feasibility checker a planning call uses: one for the methods that put
     kinematics in the planning loop (`Planner.kinematic`) when `config.kinematics.feasibility`, else None."""
-    return FeasibilityChecker() if config.kinematics.feasibility and METHODS[method].kinematic else None
+    if not (config.kinematics.feasibility and METHODS[method].kinematic):
+        return None
+    return FeasibilityChecker(rest_within=config.kinematics.rest_within)
 
 
 def executing_world(fidelity: str = "fast") -> World:

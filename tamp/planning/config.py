@@ -91,6 +91,9 @@ class KinematicsConfig:
 
     feasibility: bool = True  # check actions on the predicted states, refine a plan before returning it
     max_refinements: int = 4  # full refinements per planning call (Level-1 candidates and Level-2 plans): bounds time
+    # metres: a predicted block this close to resting on the table or a block is checked resting on it: the checks are
+    #   exact to the millimetre and a prediction is not (None: where the prediction puts it; docs/practice-and-doubt.md)
+    rest_within: float | None = 0.01
 
 
 @dataclass(frozen=True)

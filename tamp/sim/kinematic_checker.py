@@ -27,6 +27,7 @@ from typing import Sequence
 import numpy as np
 from pydrake.math import RigidTransform
 
+from tamp.planning.config import KinematicsConfig
 from tamp.planning.search import SearchConfig, state_key
 from tamp.planning.vocabulary import OFFSETS, Infeasible, PickPlace, RefinementOutcome
 from tamp.sim.kinematics import Q_HOME, solve_chain
@@ -90,14 +91,16 @@ class FeasibilityChecker:
     `observe(scene, q)` (an exact simulator state, e.g. in closed loop) before planning from it.
     """
 
-    def __init__(self, world: World | None = None, config: WorldConfig | None = None, shortcuts: bool = True
-                 ) -> None:
+    def __init__(self, world: World | None = None, config: WorldConfig | None = None, shortcuts: bool = True,
+                 rest_within: float | None = KinematicsConfig.rest_within) -> None:
         """`world`: a `fast` World whose Drake plants are reused (ideally with simplify_paths=True,
         the world refinement uses); by default one is made from `config`. `shortcuts`: keep the pick half
         of each check for the other places of the same grasp, pose the carried boxes as stand-ins in a
         collision checker of their own, reject a place whose box overlaps a standing block before IK, and
         tell the search which grasps can never hold a block (`graspable`) (False: every check from scratch
-        on the world's checker, the benchmark's baseline; the verdicts are the same)."""
+        on the world's checker, the benchmark's baseline; the verdicts are the same). `rest_within` (metres):
+        a predicted block this close to resting on the table or a block is checked resting on it
+        (`predicted_scene`; None: where X puts it)."""
         if world is None:
             world = World(dataclasses.replace(config or WorldConfig(), fidelity="fast", simplify_paths=True))
         if world.config.fidelity != "fast":
@@ -109,6 +112,7 @@ class FeasibilityChecker:
         self.num_checks = 0
         self.check_time_s = 0.0
         self.shortcuts = shortcuts
+        self.rest_within = rest_within
         self._carrying: dict[tuple[int, ...], MotionPlanner] = {}  # per layout (`_carrying_planner`)
         self._picks: dict[tuple[bytes, int, int], _Pick | Infeasible] = {}
         self._scenes: dict[bytes, Scene] = {}  # predicted scenes by X's positions, with their corners (`check`)
@@ -137,14 +141,16 @@ class FeasibilityChecker:
         self._scenes.clear()
 
     def predicted_scene(self, X: np.ndarray) -> Scene:
-        """Positions from X, orientations carried over from the observed scene."""
+        """Positions from X, orientations carried over from the observed scene, each block within
+        `rest_within` of its support set down on it (`Scene.settled`)."""
         if self.scene is None:
             raise RuntimeError("call FeasibilityChecker.reset() or observe() before checking actions")
         X = np.asarray(X, dtype=float)
         if len(X) != self.scene.n:
             raise ValueError(f"X has {len(X)} objects, the observed scene {self.scene.n}")
-        return Scene(self.scene.types,
-                     [RigidTransform(X_WB.rotation(), p) for X_WB, p in zip(self.scene.X_WB, X[:, :3])])
+        scene = Scene(self.scene.types,
+                      [RigidTransform(X_WB.rotation(), p) for X_WB, p in zip(self.scene.X_WB, X[:, :3])])
+        return scene if self.rest_within is None else scene.settled(self.rest_within)
 
     # --- the cheap check ---------------------------------------------------------------------------
     def graspable(self, X: np.ndarray) -> np.ndarray:

@@ -24,6 +24,8 @@ _LEVI_CIVITA = np.zeros((3, 3, 3))
 _LEVI_CIVITA[0, 1, 2] = _LEVI_CIVITA[1, 2, 0] = _LEVI_CIVITA[2, 0, 1] = 1.0
 _LEVI_CIVITA[0, 2, 1] = _LEVI_CIVITA[2, 1, 0] = _LEVI_CIVITA[1, 0, 2] = -1.0
 JAW_OPENING = 0.08  # metres between the open jaws' inner faces
+_FOOTPRINT_INSET = 0.01  # metres: a block's bottom corners moved this far inward before asking what they rest on, so
+#   that a neighbour it only touches at an edge does not count as its support
 _GRASP_TOLERANCE = 0.005  # metres: the grasp point may lie this far outside a block and still hold it
 
 
@@ -108,6 +110,36 @@ class Scene:
                     found.append(j)
                     frontier.append(j)
         return found
+
+
+    def settled(self, tolerance: float) -> "Scene":
+        """This scene with every block whose bottom lies within `tolerance` (metres) of what it would rest on (the
+        table, or the highest block under its bottom face) moved vertically onto it, lowest block first.
+
+        A predicted state places blocks a few millimetres above or into their support (a regression's mean), and
+        the skill's collision checks are exact to the millimetre: a gripper that clears a stacked block predicted
+        2 mm low strikes it in the world. A block farther off than `tolerance` (leaning, or on its way down) is
+        left where it is."""
+        poses = list(self.X_WB)
+        scene = Scene(self.types, poses)
+        for i in sorted(range(self.n), key=scene.bottom):
+            corners = scene.corners(i)
+            below = corners[np.argsort(corners[:, 2])[:4]]  # the bottom face's corners
+            centre = below.mean(axis=0)
+            inward = centre - below
+            reach = np.linalg.norm(inward, axis=1, keepdims=True)
+            probes = np.vstack([centre, below + inward * np.minimum(1.0, _FOOTPRINT_INSET / np.maximum(reach, 1e-9))])
+            support = 0.0  # the table's top
+            for j in range(self.n):
+                if j == i or scene.top(j) > scene.bottom(i) + tolerance:
+                    continue
+                top = scene.top(j)
+                if any(scene.contains(j, np.array([p[0], p[1], top - 0.005])) for p in probes):
+                    support = max(support, top)
+            gap = scene.bottom(i) - support
+            if abs(gap) <= tolerance and gap != 0.0:
+                poses[i] = RigidTransform(poses[i].rotation(), poses[i].translation() - np.array([0.0, 0.0, gap]))
+        return scene
 
 
 def topdown(p_W: np.ndarray, yaw: float) -> RigidTransform:

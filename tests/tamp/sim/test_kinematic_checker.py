@@ -193,3 +193,20 @@ def test_the_box_test_says_overlap_only_where_the_boxes_interpenetrate():
     turned = RigidTransform(RotationMatrix.MakeZRotation(np.pi / 4), [0.6 + 0.09, 0.09, 0.025])
     assert not boxes_overlap(at, cube, turned, bar)
     assert boxes_overlap(at, cube, RigidTransform(RotationMatrix.MakeZRotation(np.pi / 4), [0.63, 0.03, 0.025]), bar)
+
+
+def test_a_block_predicted_millimetres_into_its_support_is_checked_resting_on_it():
+    """A bar predicted 2.4 mm low on another bar's centre (a regression's mean): where X puts it, the jaws reach
+    the lower bar's end under it past its top face; resting on the lower bar, as the world has it, they strike it.
+    A block farther off its support (leaning, falling) and a block beside it stay where predicted."""
+    X = np.array([[0.686, 0.182, 0.025, *BAR], [0.686, 0.182, 0.0726, *BAR], [0.5, -0.2, 0.058, *CUBE],
+                  [0.5, 0.2, 0.031, *CUBE]])
+    pick_end_under_the_stack = [(0, -1, 0, 1)]
+    resting, as_predicted = FeasibilityChecker(), FeasibilityChecker(rest_within=None)
+    for checker in (resting, as_predicted):
+        checker.reset(np.array([[0.686, 0.182, 0.025, *BAR], [0.5, -0.4, 0.025, *BAR], [0.5, -0.2, 0.025, *CUBE],
+                                [0.5, 0.2, 0.025, *CUBE]]))
+    assert as_predicted.check(X, pick_end_under_the_stack) == [None]
+    assert resting.check(X, pick_end_under_the_stack) == [Infeasible.COLLISION]
+    z = [pose.translation()[2] for pose in resting.predicted_scene(X).X_WB]
+    assert z == pytest.approx([0.025, 0.075, 0.058, 0.025])
