@@ -39,12 +39,15 @@ import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from guarded import Schema, read_json
 from tamp.errors import UserError
 from tamp.records import atomic_write_text
 from tamp.sim.world_types import FIDELITIES, fidelity_of
+
+if TYPE_CHECKING:
+    from learned import TrainConfig
 
 PRACTICE_SEED = 1_000_000  # round r's problems have seed PRACTICE_SEED + r: far from the small seeds users evaluate on
 STATE_NAME, CURVE_JSON, CURVE_MD = "practice.json", "curve.json", "curve.md"
@@ -75,6 +78,9 @@ class PracticeConfig:
     # the members' effect loss: "squared" (the paper's Eq. 1, the bundled model's) or "distance" (a median: a step
     #   with two outcomes is predicted at the more frequent one, not between them; learned.TrainConfig.effect_loss)
     effect_loss: str = "squared"
+    # train the members on the transitions that moved their picked block alone (`tamp train --only-moved`), as the
+    #   default set's Dynamics Model was fine-tuned: every transition would teach it partial moves again
+    only_moved: bool = False
     workers: int = 2  # evaluation workers and members trained at once
     backend: str = "local"  # "local" process pool or "ray" (the evaluation)
 
@@ -103,7 +109,8 @@ class PracticeConfig:
 
 
 _UNSET = object()
-_LATER = {"effect_loss": "squared"}  # settings added after practice runs were made -> the value those runs had
+# settings added after practice runs were made -> the value those runs had
+_LATER = {"effect_loss": "squared", "only_moved": False}
 
 
 # --------------------------------------------------------------------------- one round's stages
@@ -159,7 +166,6 @@ def train_round_models(base: Path, previous: Path, data: list[Path], practice: l
                        config: PracticeConfig, progress: bool) -> Path:
     """Round r + 1's models at `out`: the base's Symbolic Model and domain, and an ensemble Dynamics Model
     trained on the random `data` and the `practice` datasets, warm-started from `previous`'s."""
-    from learned import TrainConfig
     from learned.ensemble_train import EnsembleConfig, cleanup_members, train_ensemble
     from tamp.planning.models import DOMAIN_DIR, DYNAMICS_FILE, SYMBOLIC_FILE, SYMBOLS_FILE
 
@@ -167,8 +173,7 @@ def train_round_models(base: Path, previous: Path, data: list[Path], practice: l
         return out
     staging = out.with_name(out.name + ".training")
     staging.mkdir(parents=True, exist_ok=True)
-    train = TrainConfig.fast(batch_size=config.batch_size, epochs=config.epochs, patience_epochs=config.patience,
-                             lr=config.lr, precision=config.precision, effect_loss=config.effect_loss)
+    train = member_training(config)
     ensemble = EnsembleConfig(members=config.members, extra_share=config.extra_share, workers=config.workers)
     train_ensemble([str(d) for d in data], staging / DYNAMICS_FILE, extra=[str(p) for p in practice] or None,
                    train=train, ensemble=ensemble, init=previous / DYNAMICS_FILE, progress=progress)
@@ -182,6 +187,15 @@ def train_round_models(base: Path, previous: Path, data: list[Path], practice: l
         shutil.rmtree(out)
     staging.rename(out)
     return out
+
+
+def member_training(config: PracticeConfig) -> TrainConfig:
+    """How each ensemble member of a round is trained (`learned.TrainConfig`)."""
+    from learned import TrainConfig
+
+    return TrainConfig.fast(batch_size=config.batch_size, epochs=config.epochs, patience_epochs=config.patience,
+                            lr=config.lr, precision=config.precision, effect_loss=config.effect_loss,
+                            only_moved=config.only_moved)
 
 
 def round_figures(rows_path: Path) -> dict[str, Any]:
@@ -346,7 +360,7 @@ def cmd_practice(args: argparse.Namespace) -> int:
                             seed=args.seed, fidelity=args.fidelity, explore=args.explore, members=args.members,
                             extra_share=args.extra_share, epochs=args.epochs, patience=args.patience,
                             batch_size=args.batch_size, precision=args.precision, effect_loss=args.effect_loss,
-                            workers=args.workers, backend=args.backend)
+                            only_moved=args.only_moved, workers=args.workers, backend=args.backend)
     from tamp.planning.models import pretrained_dir
 
     models = Path(args.models) if args.models else pretrained_dir()
@@ -411,6 +425,10 @@ def add_practice(sub) -> None:
     p.add_argument("--effect-loss", choices=("squared", "distance"), default=PracticeConfig.effect_loss,
                    help=f"the members' effect loss (default {PracticeConfig.effect_loss}, the bundled model's: the "
                    "mean of a step's outcomes; distance: a median, tamp train --effect-loss)")
+    p.add_argument("--only-moved", action="store_true",
+                   help="train the members on the transitions that moved their picked block alone, random and "
+                   "practised (tamp train --only-moved), as the default set's Dynamics Model was fine-tuned; "
+                   "without it every transition, which teaches such a model partial moves again")
     p.add_argument("--workers", type=positive_int, default=2,
                    help="worker processes of the evaluation, and members trained at once (default 2)")
     p.add_argument("--backend", choices=("local", "ray"), default="local",

@@ -85,3 +85,12 @@ def test_practice_flags_are_checked(tmp_path, capsys):
     assert "--extra-share" in capsys.readouterr().err
     assert main(["practice", "--data", str(tmp_path / "none"), "--out", str(tmp_path / "o")]) == 2
     assert not (tmp_path / "o").exists()
+
+
+def test_members_learn_from_the_moving_steps_alone_when_asked():
+    """`--only-moved` reaches each member's training, and is a setting only when on (older runs resume)."""
+    from evaluation.practice import member_training
+
+    assert "only_moved" not in TINY.defining() and member_training(TINY).only_moved is False
+    moved = PracticeConfig(only_moved=True)
+    assert moved.defining()["only_moved"] is True and member_training(moved).only_moved is True
