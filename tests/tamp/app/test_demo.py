@@ -20,7 +20,7 @@ def _scene_paths(html_file) -> bytes:
 
 
 @pytest.mark.sim
-@pytest.mark.parametrize("name", ["pretrained", "paper", "pairwise", "spatial", "regions", "practised", "moved"])
+@pytest.mark.parametrize("name", ["pretrained", "paper", "pairwise", "spatial", "regions", "random", "practised"])
 def test_the_shipped_models_are_small_load_by_name_and_plan(name):
     import torch
 
