@@ -1,14 +1,14 @@
 """Training an ensemble Dynamics Model: M members on bootstrap resamples, each with a fitted spread head.
 
 Member m (of M) is trained by `train_model` on a resample with replacement of the training split, of the
-split's size, drawn with ``default_rng([seed, m])``; with *extra* data (the robot's own executed steps,
-`tamp practice`) a share ``extra_share`` of each resample is drawn from the extra data's training split and
-the rest from the random data's, so that a few hundred planned steps weigh in beside 144,000 random ones.
-All members are validated on the same split (both sources' validation splits). Then the member's spread
-head is fitted (`learned.spread`). Members start from `init`'s weights when given (an ensemble file gives
-member m its own member m mod M; a single model gives all members its weights: the resamples and the
-seeds make them differ), and keep its object limit when it is larger than the data's (a limit raised on
-evidence, as the bundled models' was: tamp/pretrained/PROVENANCE.md).
+split's size, drawn with ``default_rng([seed, m])``; with *extra* data (the robot's own executed steps, `tamp
+practice`) a share ``extra_share`` of each resample is drawn from the extra data's training split and the rest
+from the random data's, so that a few hundred planned steps weigh in beside 144,000 random ones. All members
+are validated on the same split (both sources' validation splits). Then the member's spread head is fitted
+(`learned.spread`) on the same transitions (with ``only_moved``, the moving ones). Members start from `init`'s
+weights when given (an ensemble file gives member m its own member m mod M; a single model gives all members
+its weights: the resamples and the seeds make them differ), and keep its object limit when it is larger than
+the data's (a limit raised on evidence, as the bundled models' was: tamp/pretrained/PROVENANCE.md).
 
 Files: member m's checkpoints are ``<out>.member-m.pt`` (and its ``.last.pt``: a stopped run resumes
 where each member was), the ensemble ``<out>`` (`learned.ensemble`) once all members are done.
@@ -30,7 +30,7 @@ from .dataset import Transitions, load_transitions
 from .ensemble import EffectEnsemble, load_dynamics, member_models, save_ensemble
 from .model import ModelConfig
 from .spread import SpreadConfig, fit_spread
-from .train import last_path, split_indices, train_model
+from .train import last_path, moving_steps, split_indices, train_model
 from .train_config import TrainConfig
 
 DataSource = str | Path | Sequence[str | Path] | Transitions
@@ -145,6 +145,8 @@ def _train_member(task: tuple) -> dict[str, Any]:
         limit = member_models(start)[0].config.n_max
         if limit > result.model.config.n_max:
             result.model.config = dataclasses.replace(result.model.config, n_max=limit)
+    if train.only_moved:  # the spread of the steps it learned from: where blocks go when an action executes
+        sample, val = moving_steps(sample), moving_steps(val)
     figures = fit_spread(result.model, sample, val, ensemble.spread)
     out = {"val_err_cm": result.best_val_cm, "best_epoch": result.best_epoch, "epochs": result.epochs_reached,
            "stop_reason": result.stop_reason.value, **figures}

@@ -178,15 +178,20 @@ def train_model(data: "str | Path | Sequence[str | Path] | Transitions", config:
     return run.finish(reason)
 
 
+def moving_steps(data: Transitions) -> Transitions:
+    """The transitions that moved their picked block (`effects.moved_picks`): what `only_moved` trains on."""
+    return data.subset(np.flatnonzero(moved_picks(data.X, data.X_next, data.action)))
+
+
 def _datasets(data: "str | Path | Sequence[str | Path] | Transitions", val_data: Transitions | None,
               train: TrainConfig) -> tuple[Transitions, Transitions]:
     """The training and validation transitions (`only_moved` applied; a seeded split when no `val_data`)."""
     if not isinstance(data, Transitions):
         data = load_transitions(data)
     if train.only_moved:
-        data = data.subset(np.flatnonzero(moved_picks(data.X, data.X_next, data.action)))
+        data = moving_steps(data)
         if val_data is not None:
-            val_data = val_data.subset(np.flatnonzero(moved_picks(val_data.X, val_data.X_next, val_data.action)))
+            val_data = moving_steps(val_data)
         if len(data) == 0:
             raise ValueError("no transition moved its picked block: nothing to train on with only_moved")
     if val_data is None:

@@ -116,3 +116,25 @@ def test_a_single_model_file_loads_as_a_dynamics_model_and_a_foreign_file_is_ref
     torch.save({"format": "something-else"}, tmp_path / "bad.pt")
     with pytest.raises(ValueError, match="not an effect-model checkpoint"):
         load_dynamics(tmp_path / "bad.pt")
+
+
+def test_members_of_the_moving_steps_fit_their_spread_on_the_moving_steps(tmp_path, monkeypatch):
+    """A member trained on the transitions that moved their picked block (`only_moved`) has its bound fitted on
+    them too: fitted on every transition, the blocked motions it never learned would widen it everywhere."""
+    import learned.ensemble_train as ensemble_train
+    from learned.effects import moved_picks
+
+    fitted = []
+
+    def spy(model, train, val, config):
+        fitted.append((moved_picks(train.X, train.X_next, train.action), moved_picks(val.X, val.X_next, val.action)))
+        return fit_spread(model, train, val, config)
+
+    monkeypatch.setattr(ensemble_train, "fit_spread", spy)
+    data = generate(400, seed=0)
+    assert not moved_picks(data.X, data.X_next, data.action).all()  # blocked motions and grasps of nothing too
+    train_ensemble(data, tmp_path / "dyn.pt", config=ModelConfig(**SMALL),
+                   train=TrainConfig(epochs=1, batch_size=64, only_moved=True), ensemble=EnsembleConfig(members=1),
+                   progress=False)
+    (train_moving, val_moving), = fitted
+    assert train_moving.all() and val_moving.all() and len(train_moving) > 0
