@@ -111,7 +111,6 @@ class Scene:
                     frontier.append(j)
         return found
 
-
     def settled(self, tolerance: float) -> "Scene":
         """This scene with every block whose bottom lies within `tolerance` (metres) of what it would rest on (the
         table, or the highest block under its bottom face) moved vertically onto it, lowest block first.
