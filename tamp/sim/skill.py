@@ -128,14 +128,17 @@ class Scene:
             inward = centre - below
             reach = np.linalg.norm(inward, axis=1, keepdims=True)
             probes = np.vstack([centre, below + inward * np.minimum(1.0, _FOOTPRINT_INSET / np.maximum(reach, 1e-9))])
-            support = 0.0  # the table's top
+            bottom, support = scene.bottom(i), 0.0  # the table's top
             for j in range(self.n):
-                if j == i or scene.top(j) > scene.bottom(i) + tolerance:
-                    continue
                 top = scene.top(j)
-                if any(scene.contains(j, np.array([p[0], p[1], top - 0.005])) for p in probes):
-                    support = max(support, top)
-            gap = scene.bottom(i) - support
+                if j == i or not support < top <= bottom + tolerance:
+                    continue
+                probes[:, 2] = top - 0.005  # just inside block j's top face, under block i's bottom face
+                pose = poses[j]
+                p_B = (probes - pose.translation()) @ pose.rotation().matrix()  # in block j's frame
+                if np.any(np.all(np.abs(p_B) <= scene.size(j) / 2, axis=1)):
+                    support = top
+            gap = bottom - support
             if abs(gap) <= tolerance and gap != 0.0:
                 poses[i] = RigidTransform(poses[i].rotation(), poses[i].translation() - np.array([0.0, 0.0, gap]))
         return scene
