@@ -77,9 +77,12 @@ class EvalConfig:
             out["search_greedy_per_misplaced"] = p.search.greedy_per_misplaced
             out["search_greedy_stall"] = p.search.greedy_stall
             out["loop_greedy_search_budget"] = p.loop.greedy_search_budget
-        # the loop that does not know k: the same, by the fields other than keep_plan and on_course (above)
-        loop = {k: v for k, v in dataclasses.asdict(p.loop).items() if k not in ("keep_plan", "on_course")}
-        if loop != {k: v for k, v in dataclasses.asdict(LoopConfig()).items() if k not in ("keep_plan", "on_course")}:
+        if p.loop.commit != LoopConfig.commit:
+            out["loop_commit"] = p.loop.commit
+        # the loop that does not know k: the same, by the fields other than those recorded above
+        above = ("keep_plan", "on_course", "commit")
+        loop = {k: v for k, v in dataclasses.asdict(p.loop).items() if k not in above}
+        if loop != {k: v for k, v in dataclasses.asdict(LoopConfig()).items() if k not in above}:
             out["loop"] = loop
         if self.faults.any:
             out["faults"] = {"noise_m": self.faults.noise_m, "push_m": self.faults.push_m}

@@ -81,6 +81,11 @@ def add_planner_arguments(p: argparse.ArgumentParser, feasibility: bool = True) 
     p.add_argument("--no-on-course", dest="on_course", action="store_const", const=None,
                    help="keep the rest of the last plan only by its rollout from the observed state, however close the "
                    "blocks are to the plan's own prediction")
+    p.add_argument("--no-commit", dest="commit", action="store_false",
+                   help="the closed loop (--replan; bilevel_loop) replaces a kept plan whose end is predicted beyond "
+                   "--confident (but within the success tolerance) by any new plan predicted closer (default: only by "
+                   "one predicted within --confident; trading a plan on course for one a few millimetres closer let "
+                   "the loop wander between near-equal plans)")
     p.add_argument("--max-actions", type=positive_int, default=default.loop.max_actions,
                    help="the closed loop (--replan; bilevel_loop) gives up after sending this many actions to the "
                    f"world (default {default.loop.max_actions}: a goal of up to 5 random actions, with room to "
@@ -190,7 +195,8 @@ PLANNER_FLAGS: dict[str, dict[str, str]] = {
                "look_on": "look_on", "max_fragility": "max_fragility",
                "release_targets": "release_targets", "max_doubt": "max_doubt"},
     "kinematics": {"feasibility": "feasibility", "rest_within": "rest_within"},  # evaluate: feasibility per method
-    "loop": {"keep_plan": "keep_plan", "on_course": "on_course", "max_actions": "max_actions", "widen": "widen",
+    "loop": {"keep_plan": "keep_plan", "on_course": "on_course", "commit": "commit", "max_actions": "max_actions",
+             "widen": "widen",
              "search_budget": "loop_search_budget", "greedy_search_budget": "loop_greedy_search_budget",
              "stall": "loop_stall"},
 }
@@ -214,8 +220,8 @@ def planner_config(args: argparse.Namespace) -> PlanConfig:
 LOOP_FLAGS = {"keep_plan": "--no-keep-plan", "on_course": "--on-course/--no-on-course",
               "max_actions": "--max-actions", "search_budget": "--loop-search-budget",
               "greedy_search_budget": "--loop-greedy-budget", "widen": "--no-widen",
-              "stall": "--loop-stall"}
-UNTIL_GOAL_FIELDS = ("max_actions", "search_budget", "greedy_search_budget", "widen", "stall")
+              "stall": "--loop-stall", "commit": "--no-commit"}
+UNTIL_GOAL_FIELDS = ("commit", "max_actions", "search_budget", "greedy_search_budget", "widen", "stall")
 
 
 def loop_flags_given(config: PlanConfig, until_goal_only: bool = False) -> list[str]:

@@ -29,7 +29,9 @@ rolled out from the observed state; only otherwise does it plan again, so a plan
 traded for another one. The loop that does not know k keeps a plan on course while its own prediction
 still ends within eps (the plan was taken by that prediction, and the world is doing what it said);
 when that end is over `verify.confident` it plans again, and a new plan replaces the kept one only if
-it is predicted closer to the goal.
+it is predicted within `verify.confident` (`LoopConfig.commit`; else: if it is predicted closer): a loop
+that traded its plan for one a few millimetres closer wandered between near-equal plans, each step as
+predicted, until its actions ran out.
 """
 from __future__ import annotations
 
@@ -243,7 +245,8 @@ def _round(method: str, models: Models, X: np.ndarray, X_goal: np.ndarray, out: 
     result = (planner or plan)(method, models, X, X_goal, cfg, **extra)
     if kept is not None and kept_error is not None and marginal:  # a plan aimed closer replaces it
         new_error = result.predicted_error if result.solved and result.plan else None
-        if new_error is not None and new_error < kept_error:
+        aim = min(kept_error, cfg.verify.confident) if cfg.loop.commit else kept_error
+        if new_error is not None and new_error < aim:
             kept = replace(kept, reasons=[f"keep: the rest of the last plan ends {kept_error * 100:.1f} cm from the "
                                           f"goal (over {cfg.verify.confident * 100:g} cm); a new plan aims closer"])
         else:  # the round's search: its expansions count against the loop's budget

@@ -14,6 +14,7 @@ from tamp.planning.config import LoopConfig, PlanConfig
 from tamp.planning.models import Models
 from tamp.planning.planners import plan
 from tamp.planning.results import PlanResult
+from tamp.planning.verify import goal_error
 from tamp.planning.vocabulary import Infeasible
 from tests.planning_stubs import StubModel, two_block_domain, world_step
 
@@ -235,3 +236,26 @@ def test_a_plan_kept_near_the_tolerance_gives_way_to_one_aimed_closer(models):
     worse = plan_closed_loop("bilevel", models, X_INIT, goal, slipping_world(0), rounds=None, planner=planner(0.045))
     assert len(calls) == 2 and worse.rounds[1].kept and "planned" in worse.rounds[1].timings
     assert worse.executed == worse.rounds[0].plan  # the first plan, followed to its end
+
+
+def test_a_plan_kept_near_the_tolerance_gives_way_only_to_one_within_confident(models):
+    """A new plan a few millimetres closer but still over verify.confident does not replace the kept plan on
+    course (`LoopConfig.commit`): trading it let the loop wander between near-equal plans."""
+    goal = world_step(world_step(X_INIT, (1, 0, 1, 1)), (0, 0, 1, 0))
+    calls: list[int] = []
+
+    def planner(method, models, X, X_goal, cfg, **kwargs):  # the first plan ends 4.0 cm off, later ones 3.8 cm
+        result = plan(method, models, X, X_goal, cfg, **kwargs)
+        calls.append(len(result.plan))
+        predicted = result.predicted.copy()
+        predicted[-1, :, 0] = X_goal[:, 0] + (0.04 if len(calls) == 1 else 0.038)
+        return replace(result, predicted=predicted, predicted_error=goal_error(predicted[-1], X_goal))
+
+    kept = plan_closed_loop("bilevel", models, X_INIT, goal, slipping_world(0), rounds=None, planner=planner)
+    assert len(calls) == 2 and kept.rounds[1].kept and kept.executed == kept.rounds[0].plan
+    calls.clear()
+    wander = PlanConfig(loop=LoopConfig(commit=False))
+    traded = plan_closed_loop("bilevel", models, X_INIT, goal, slipping_world(0), rounds=None, planner=planner,
+                              cfg=wander)
+    assert not traded.rounds[1].kept
+    assert traded.rounds[1].reasons[0].startswith("keep: the rest of the last plan ends 4.0 cm")
