@@ -342,9 +342,10 @@ def _prepare(out: Path, meta: dict) -> None:
     if not isinstance(old, dict) or old.get("format") != FORMAT:
         raise UserError(f"{path} is not the meta file of a `tamp evaluate` results directory")
     META_SCHEMA.check(old, str(path))
+    now = json.loads(json.dumps(meta))  # as it would read back: tuples (a push's range) are lists there
     diffs = []
     for key in DEFINING_KEYS:
-        a, b = old.get(key), meta[key]
+        a, b = old.get(key), now[key]
         if isinstance(a, dict) and isinstance(b, dict):
             diffs += [f"{key}.{k}: {_short(a.get(k))} there, {_short(b.get(k))} now"
                       for k in sorted(set(a) | set(b)) if a.get(k) != b.get(k)]

@@ -22,6 +22,7 @@ from evaluation.problems import generate_problems, read_problems, write_problems
 from evaluation.row import ROW_KEYS, row_cause
 from evaluation.run import evaluate, read_rows, strip_timings
 from tamp.app.problem import Problem
+from tamp.errors import UserError
 from tamp.planning.config import Level1Config, PlanConfig
 from tamp.planning.models import Models
 from tamp.planning.search import SearchConfig
@@ -470,3 +471,19 @@ def test_reproduce_evaluates_given_models_under_the_paper_protocol_over_runs(mod
     rows = (out / "results" / "rows.jsonl").read_bytes()
     assert main(args) == 0 and (out / "results" / "rows.jsonl").read_bytes() == rows
     assert main(args[:-4] + ["--runs", "3", "--workers", "1"]) == 2  # other settings in the same OUT: refused
+
+
+def test_an_evaluation_with_a_push_resumes(tmp_path):
+    """The settings compared on resuming are compared as meta.json holds them: a push's (min, max) range, a tuple
+    in the configuration and a list in the file, is the same setting."""
+    from evaluation.run import FORMAT, _prepare
+
+    meta = {"format": FORMAT, "models_dir": "m", "model_files": {"dynamics.pt": "ab"}, "problems": "p",
+            "problems_sha256": "cd", "n_problems": 2, "methods": ["bilevel_loop"], "versions": {"python": "3.11"},
+            "started": "now", "runs": [],
+            "config": {"fidelity": "fast", "faults": {"noise_m": 0.005, "push_m": (0.03, 0.05)}}}
+    _prepare(tmp_path, dict(meta))
+    _prepare(tmp_path, dict(meta))  # resumed: the same settings
+    other = {**meta, "config": {"fidelity": "fast", "faults": {"noise_m": 0.005, "push_m": (0.03, 0.06)}}}
+    with pytest.raises(UserError, match="config.faults"):
+        _prepare(tmp_path, other)
