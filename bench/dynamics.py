@@ -59,8 +59,8 @@ def main() -> int | str:
     p.add_argument("--push", default=None, help="MIN,MAX metres of one push (tamp evaluate --push)")
     p.add_argument("--max-doubt", default=None, help="METRES: the new models plan with --max-doubt")
     p.add_argument("--baseline-flags", default="", metavar="FLAGS",
-                   help="planner flags of the baseline's evaluation alone, e.g. --baseline-flags=--no-commit: a planner "
-                   "option measured on the same models")
+                   help="planner flags of the baseline's evaluation alone, e.g. --baseline-flags=--no-commit: "
+                   "a planner option measured on the same models")
     p.add_argument("--name", default="new", help="the new models' results folder in OUT (several share OUT/baseline)")
     p.add_argument("--out", type=Path, default=None, help="results directory (default runs/bench-dynamics-...)")
     args = p.parse_args()

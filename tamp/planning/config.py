@@ -103,8 +103,8 @@ class LoopConfig:
     keep_plan: bool = True  # keep the rest of the last plan while it ends within verify.confident and refines
     on_course: float | None = 0.015  # metres: blocks this close to the plan's prediction: its own prediction
     #   decides, not a rollout that swings under mm changes (3 sigmas of the fragility test's noise; None: rollout)
-    # a plan on course whose end is predicted over verify.confident (but within eps) is replaced only by one predicted
-    #   within verify.confident (False: by any plan predicted closer, which let the loop wander between near-equal plans)
+    # a plan on course whose end is predicted over verify.confident (but within eps) gives way only to one predicted
+    #   within verify.confident (False: to any plan predicted closer, which let the loop wander between such plans)
     commit: bool = True
     max_actions: int = 12  # actions sent before the loop gives up: k <= 5 needs 5, the rest is room to recover
     widen: bool = True  # a round without a plan searches again over all 9 n^2 actions (make room, unstack)
