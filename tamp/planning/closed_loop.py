@@ -243,12 +243,13 @@ def _round(method: str, models: Models, X: np.ndarray, X_goal: np.ndarray, out: 
         cfg = replace(cfg, search=replace(cfg.search, max_expansions=min(cfg.search.max_expansions,
                                                                          cfg.loop.widen_expansions)))
     result = (planner or plan)(method, models, X, X_goal, cfg, **extra)
-    if kept is not None and kept_error is not None and marginal:  # a plan aimed closer replaces it
+    if kept is not None and kept_error is not None and marginal:  # a plan aimed within confident (closer) replaces it
         new_error = result.predicted_error if result.solved and result.plan else None
         aim = min(kept_error, cfg.verify.confident) if cfg.loop.commit else kept_error
         if new_error is not None and new_error < aim:
+            within = f"within {cfg.verify.confident * 100:g} cm" if cfg.loop.commit else "closer"
             kept = replace(kept, reasons=[f"keep: the rest of the last plan ends {kept_error * 100:.1f} cm from the "
-                                          f"goal (over {cfg.verify.confident * 100:g} cm); a new plan aims closer"])
+                                          f"goal (over {cfg.verify.confident * 100:g} cm); a new plan aims {within}"])
         else:  # the round's search: its expansions count against the loop's budget
             return replace(_absorbed(kept, result, "planned"), search=result.search)
     return result if kept is None else _absorbed(result, kept)
