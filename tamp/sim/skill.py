@@ -89,9 +89,14 @@ class Scene:
         flip = axis[1] < -1e-9 or (abs(axis[1]) <= 1e-9 and axis[0] < 0)
         return -axis if flip else axis
 
+    def inside(self, i: int, p_W: np.ndarray, tolerance: float = 0.0) -> np.ndarray:
+        """Which of the points p_W ((k, 3) or (3,), world frame, metres) lie in block i's box grown by `tolerance`."""
+        X_WB = self.X_WB[i]
+        p_B = (np.atleast_2d(p_W) - X_WB.translation()) @ X_WB.rotation().matrix()
+        return np.all(np.abs(p_B) <= self.size(i) / 2 + tolerance, axis=1)
+
     def contains(self, i: int, p_W: np.ndarray, tolerance: float = 0.0) -> bool:
-        p_B = self.X_WB[i].inverse() @ p_W
-        return bool(np.all(np.abs(p_B) <= self.size(i) / 2 + tolerance))
+        return bool(self.inside(i, p_W, tolerance)[0])
 
     def resting_on(self, i: int, tolerance: float = 0.01) -> list[int]:
         """Blocks whose bottom touches block i's top inside its footprint, recursively."""
@@ -134,9 +139,7 @@ class Scene:
                 if j == i or not support < top <= bottom + tolerance:
                     continue
                 probes[:, 2] = top - 0.005  # just inside block j's top face, under block i's bottom face
-                pose = poses[j]
-                p_B = (probes - pose.translation()) @ pose.rotation().matrix()  # in block j's frame
-                if np.any(np.all(np.abs(p_B) <= scene.size(j) / 2, axis=1)):
+                if scene.inside(j, probes).any():
                     support = top
             gap = bottom - support
             if abs(gap) <= tolerance and gap != 0.0:
