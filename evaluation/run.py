@@ -343,14 +343,7 @@ def _prepare(out: Path, meta: dict) -> None:
         raise UserError(f"{path} is not the meta file of a `tamp evaluate` results directory")
     META_SCHEMA.check(old, str(path))
     now = json.loads(json.dumps(meta))  # as it would read back: tuples (a push's range) are lists there
-    diffs = []
-    for key in DEFINING_KEYS:
-        a, b = old.get(key), now[key]
-        if isinstance(a, dict) and isinstance(b, dict):
-            diffs += [f"{key}.{k}: {_short(a.get(k))} there, {_short(b.get(k))} now"
-                      for k in sorted(set(a) | set(b)) if a.get(k) != b.get(k)]
-        elif a != b:
-            diffs.append(f"{key}: {_short(a)} there, {_short(b)} now")
+    diffs = [d for key in DEFINING_KEYS for d in _differences(key, old.get(key), now[key])]
     if diffs:
         raise UserError(f"{out} holds rows of other inputs ({'; '.join(diffs[:3])}); use a new --out "
                          "directory, or the same models, problem set and settings to resume")
@@ -363,6 +356,13 @@ def _prepare(out: Path, meta: dict) -> None:
     old["methods"] = [m for m in METHODS if m in set(old.get("methods", [])) | set(meta["methods"])]
     old["runs"] = old.get("runs", []) + meta["runs"]
     atomic_write_text(path, json.dumps(old, indent=2) + "\n")
+
+
+def _differences(name: str, there, now) -> list[str]:
+    """What differs between two JSON values, named down to the innermost differing setting."""
+    if isinstance(there, dict) and isinstance(now, dict):
+        return [d for k in sorted(set(there) | set(now)) for d in _differences(f"{name}.{k}", there.get(k), now.get(k))]
+    return [] if there == now else [f"{name}: {_short(there)} there, {_short(now)} now"]
 
 
 def _short(value) -> str:

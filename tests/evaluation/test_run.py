@@ -485,5 +485,5 @@ def test_an_evaluation_with_a_push_resumes(tmp_path):
     _prepare(tmp_path, dict(meta))
     _prepare(tmp_path, dict(meta))  # resumed: the same settings
     other = {**meta, "config": {"fidelity": "fast", "faults": {"noise_m": 0.005, "push_m": (0.03, 0.06)}}}
-    with pytest.raises(UserError, match="config.faults"):
+    with pytest.raises(UserError, match=r"config\.faults\.push_m: \[0\.03, 0\.05\] there, \[0\.03, 0\.06\] now"):
         _prepare(tmp_path, other)
