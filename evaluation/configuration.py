@@ -79,10 +79,8 @@ class EvalConfig:
             out["loop_greedy_search_budget"] = p.loop.greedy_search_budget
         if p.loop.commit != LoopConfig.commit:
             out["loop_commit"] = p.loop.commit
-        if p.loop.learn_misses != LoopConfig.learn_misses:
-            out["loop_learn_misses_m"] = p.loop.learn_misses
         # the loop that does not know k: the same, by the fields other than those recorded above
-        above = ("keep_plan", "on_course", "commit", "learn_misses")
+        above = ("keep_plan", "on_course", "commit")
         loop = {k: v for k, v in dataclasses.asdict(p.loop).items() if k not in above}
         if loop != {k: v for k, v in dataclasses.asdict(LoopConfig()).items() if k not in above}:
             out["loop"] = loop

@@ -86,12 +86,6 @@ def add_planner_arguments(p: argparse.ArgumentParser, feasibility: bool = True) 
                    "--confident (but within the success tolerance) by any new plan predicted closer (default: only by "
                    "one predicted within --confident; trading a plan on course for one a few millimetres closer let "
                    "the loop wander between near-equal plans)")
-    p.add_argument("--no-learn-misses", dest="learn_misses", action="store_const", const=None,
-                   default=default.loop.learn_misses,
-                   help="the closed loop (--replan; bilevel_loop) plans with the Dynamics Model as trained throughout "
-                   "(default: a step that lands 2 cm or more from the model's prediction corrects the model's "
-                   "prediction of that action, for the rest of the loop, in scenes whose other blocks are within 2 cm "
-                   "of where they were, so that a loop does not plan the same miss again and again)")
     p.add_argument("--max-actions", type=positive_int, default=default.loop.max_actions,
                    help="the closed loop (--replan; bilevel_loop) gives up after sending this many actions to the "
                    f"world (default {default.loop.max_actions}: a goal of up to 5 random actions, with room to "
@@ -202,7 +196,7 @@ PLANNER_FLAGS: dict[str, dict[str, str]] = {
                "release_targets": "release_targets", "max_doubt": "max_doubt"},
     "kinematics": {"feasibility": "feasibility", "rest_within": "rest_within"},  # evaluate: feasibility per method
     "loop": {"keep_plan": "keep_plan", "on_course": "on_course", "commit": "commit", "max_actions": "max_actions",
-             "widen": "widen", "learn_misses": "learn_misses",
+             "widen": "widen",
              "search_budget": "loop_search_budget", "greedy_search_budget": "loop_greedy_search_budget",
              "stall": "loop_stall"},
 }
@@ -226,8 +220,8 @@ def planner_config(args: argparse.Namespace) -> PlanConfig:
 LOOP_FLAGS = {"keep_plan": "--no-keep-plan", "on_course": "--on-course/--no-on-course",
               "max_actions": "--max-actions", "search_budget": "--loop-search-budget",
               "greedy_search_budget": "--loop-greedy-budget", "widen": "--no-widen",
-              "stall": "--loop-stall", "commit": "--no-commit", "learn_misses": "--no-learn-misses"}
-UNTIL_GOAL_FIELDS = ("commit", "learn_misses", "max_actions", "search_budget", "greedy_search_budget", "widen", "stall")
+              "stall": "--loop-stall", "commit": "--no-commit"}
+UNTIL_GOAL_FIELDS = ("commit", "max_actions", "search_budget", "greedy_search_budget", "widen", "stall")
 
 
 def loop_flags_given(config: PlanConfig, until_goal_only: bool = False) -> list[str]:

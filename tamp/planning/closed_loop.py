@@ -44,7 +44,6 @@ from typing import Callable, Sequence
 import numpy as np
 
 from tamp.planning.config import PlanConfig
-from tamp.planning.experience import Miss, experienced
 from tamp.planning.kinematic_check import Feasibility
 from tamp.planning.models import Models
 from tamp.planning.planners import METHODS, plan, plan_cfs
@@ -150,11 +149,8 @@ def loop_until_goal(method: str, models: Models, X_init, X_goal, step: Step, cfg
     out = ClosedLoopResult([], [], [np.asarray(X_init, dtype=float)], np.asarray(X_goal, dtype=float), cfg.verify.eps)
     budget = cfg.loop.search_budget_for(len(out.X_goal), cfg.search.greedy_from)
     spent = 0  # continuous-search expansions of every round so far
-    trained = models  # each round's Dynamics Model is the trained one corrected by the loop's misses (`learned`)
-    misses: list[Miss] = []
     for r in itertools.count():
         X = out.X_final
-        models = learned(trained, misses, cfg)
         if at_goal(X, out.X_goal, cfg.verify.eps):
             return out.end(LoopStop.GOAL, "the observed state is within eps of the goal")
         if len(out.executed) >= cfg.loop.max_actions:
@@ -180,18 +176,7 @@ def loop_until_goal(method: str, models: Models, X_init, X_goal, step: Step, cfg
             return ended
         assert result.plan is not None  # `_planned` ended the loop otherwise
         out.execute(result.plan[:1], step)
-        if cfg.loop.learn_misses is not None and trained.dynamics is not None:
-            miss = Miss.of(trained.dynamics, X, out.executed[-1], out.X_final)
-            misses += [miss] if miss.distance >= cfg.loop.learn_misses else []
     raise AssertionError("unreachable")
-
-
-def learned(models: Models, misses: Sequence[Miss], cfg: PlanConfig) -> Models:
-    """`models` with the Dynamics Model corrected by the loop's `misses`, its executed steps that landed
-    `LoopConfig.learn_misses` or farther from the trained model's prediction (`tamp.planning.experience`)."""
-    if cfg.loop.learn_misses is None or models.dynamics is None or not misses:
-        return models
-    return replace(models, dynamics=experienced(models.dynamics, misses, cfg.loop.learn_misses))
 
 
 def _planned(out: ClosedLoopResult, r: int, result: PlanResult, on_round: Callable[[int, PlanResult], None] | None,

@@ -120,13 +120,9 @@ class LoopConfig:
     progress: float = 0.02  # metres, summed over blocks: without a plan, a step toward the closest state the round's
     #   searches expanded is taken only if that state is this much closer to the goal
     revisit: float = 0.01  # metres: back this close to an observed state, leave out the actions taken from there
-    # metres: a step that lands this far from the Dynamics Model's prediction corrects its prediction of that action,
-    #   for the rest of the loop, in scenes whose other blocks are this close to where they were (`experience`; None:
-    #   the model as trained); 2 cm: the miss the step records count, above the noise of a good step
-    learn_misses: float | None = 0.02
 
     def __post_init__(self) -> None:
-        _positive("LoopConfig", on_course=self.on_course, learn_misses=self.learn_misses)
+        _positive("LoopConfig", on_course=self.on_course)
         if not self.revisit >= 0 or not self.progress >= 0:
             raise UserError(f"LoopConfig.revisit and .progress must be distances of 0 m or more, got {self.revisit} "
                             f"and {self.progress}")

@@ -115,8 +115,6 @@ def test_the_defining_settings_of_a_results_directory_are_unchanged():
                              "greedy_search_budget": 1500, "stall": 300, "progress": 0.02, "revisit": 0.01}
     wander = EvalConfig(planner=PlanConfig(loop=LoopConfig(commit=False))).defining()
     assert wander == {**default, "loop_commit": False}
-    as_trained = EvalConfig(planner=PlanConfig(loop=LoopConfig(learn_misses=None))).defining()
-    assert as_trained == {**default, "loop_learn_misses_m": None}
     slow = EvalConfig(planner=PlanConfig(level1=Level1Config(symbolic_time_limit=3.0))).defining()
     assert slow == {**default, "symbolic_time_limit_s": 3.0}
     assert EvalConfig().plan_config(5, False) == PlanConfig(level1=Level1Config(seed=5),

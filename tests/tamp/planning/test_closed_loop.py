@@ -45,8 +45,7 @@ def test_the_loop_goes_on_after_the_rounds_the_paper_would_give(models):
     # a goal of k = 1 action: the paper's loop has k - 1 = 0 rounds, one plan executed to its end
     paper = plan_closed_loop("bilevel", models, X_INIT, A_ON_B, slipping_world(2), rounds=0)
     assert not paper.success and paper.stop == "rounds" and len(paper.executed) == 1
-    as_trained = PlanConfig(loop=LoopConfig(learn_misses=None))  # the stub's slips are timed, not of the scene
-    goal = plan_closed_loop("bilevel", models, X_INIT, A_ON_B, slipping_world(2), rounds=None, cfg=as_trained)
+    goal = plan_closed_loop("bilevel", models, X_INIT, A_ON_B, slipping_world(2), rounds=None)
     assert goal.success and goal.stop == "goal" and len(goal.executed) == 3
     assert len(goal.rounds) == 3  # one action per round: a plan that ended short is followed by a round
 
