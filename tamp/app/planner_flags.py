@@ -143,7 +143,8 @@ def add_planner_arguments(p: argparse.ArgumentParser, feasibility: bool = True) 
     p.add_argument("--paper-pruning", dest="release_targets", action="store_false",
                    help="the continuous search (cfs, and bilevel's Level 2) prunes actions by the paper's rule alone: "
                    "a misplaced block goes onto the object closest to its goal or onto itself (default: also onto "
-                   "the object with an offset release point closest to its goal, when that is another object; "
+                   "the object with an offset release point closest to its goal and, for a goal above the table, onto "
+                   "the object right below it (the top of a stack), each when that is another object; "
                    "`bilevel_alg1` always uses the paper's rule)")
     p.add_argument("--time-limit", type=positive_float, default=default.search.time_limit, metavar="SECONDS",
                    help="wall-clock bound on every planning call (each round of a closed loop is one): its continuous "

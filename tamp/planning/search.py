@@ -20,7 +20,10 @@ an axis-aligned block; X holds no yaw), so the object closest to o_i's goal need
 place it on: another, one or two offsets away, may put it right there. The object with the release
 point closest (2-D) to o_i's goal is added as a third target when it is not the closest object
 (at most 27 actions per misplaced object). From 4 blocks on the closest object is often the wrong
-one, and without this target the search runs to its node budget (docs/beyond-the-paper.md).
+one, and without this target the search runs to its node budget (docs/beyond-the-paper.md). For a goal
+above the table, the object closest (3-D) to the place one block height below the goal, the one the
+block would rest on, is a target too: the top of a stack, where the object closest in 2-D may be its
+bottom (a tower of three bars was otherwise reached only by detours).
 
 Goal test at generation: every object within `eps` (5 cm) of its goal in 3-D. A goal state whose
 worst object is predicted farther than `confident` (3.5 cm; both `VerifyConfig`'s, as is `misplaced`,
@@ -60,11 +63,13 @@ import numpy as np
 
 from tamp.errors import UserError
 from tamp.planning.verify import EPS_SUCCESS, DynamicsModel, VerifyConfig, doubt, fragility, states_pair
-from tamp.planning.vocabulary import OFFSET_STEP, OFFSETS
+from tamp.planning.vocabulary import BLOCK_SIZES, OFFSET_STEP, OFFSETS
 
 _PAIRS = np.array([(g, r) for g in OFFSETS for r in OFFSETS], dtype=np.int64)  # the 9 offset pairs
 # metres: where a placed block's centre ends relative to its target object's, (r - g) * OFFSET_STEP along y
 _RELEASE_SHIFTS = np.array([(0.0, s * OFFSET_STEP) for s in range(-2, 3)])
+_BLOCK_HEIGHT, = {size[2] for size in BLOCK_SIZES.values()}  # metres: both block types are this tall
+_ON_TABLE = 0.04  # metres: a goal whose centre is lower stands on the table
 
 
 @dataclass(frozen=True)
@@ -96,7 +101,9 @@ class SearchConfig:
     look_on: int = 30  # expansions spent looking for a confident goal state after a less confident one
     batched: bool = True  # one predict_effect call per expansion (False: one per action, for the benchmark)
     prune: bool = True  # goal-oriented pruning (False: all 9 n^2 actions)
-    release_targets: bool = True  # also target the object whose release point is closest (False: the paper's rule)
+    # also target the object whose release point is closest and, for a goal above the table, the object below it
+    #   (the top of a stack; False: the paper's rule, the closest object in 2-D)
+    release_targets: bool = True
     max_fragility: float | None = 0.3  # a goal state ends the search at once only if at most this fraction of
     #   its plan's perturbed rollouts miss the goal (`verify.fragility`); else it is a candidate (None: not checked)
     noise: float = 0.005  # metres: the input perturbation of `verify.fragility`
@@ -183,8 +190,8 @@ def misplaced_objects(X: np.ndarray, X_goal: np.ndarray, misplaced: float = EPS_
 def goal_oriented_actions(X: np.ndarray, X_goal: np.ndarray, misplaced: float = EPS_SUCCESS,
                           eps: float = EPS_SUCCESS, release_targets: bool = True) -> np.ndarray:
     """The pruned action set A(X) as a (B, 4) int array (see the module docstring); targets per misplaced
-    object: the closest other object, the one with the closest release point (if `release_targets`
-    and it differs), itself."""
+    object: the closest other object, the one with the closest release point and, for a goal above the
+    table, the one below its goal (if `release_targets`, each when it differs), itself."""
     wrong = misplaced_objects(X, X_goal, misplaced, eps)
     n = len(X)
     if wrong.size == 0:
@@ -195,14 +202,26 @@ def goal_oriented_actions(X: np.ndarray, X_goal: np.ndarray, misplaced: float = 
         mine = (np.arange(len(wrong)), wrong)
         dist = np.linalg.norm(X[None, :, :2] - goals, axis=2)  # (w, n)
         dist[mine] = np.inf
-        closest = best = np.argmin(dist, axis=1)
+        closest = best = below = np.argmin(dist, axis=1)
         if release_targets:
             points = X[:, None, :2] + _RELEASE_SHIFTS[None]  # (n, 5, 2) release points of every object
             reach = np.linalg.norm(points[None] - goals[:, None], axis=3).min(axis=2)  # (w, n)
             reach[mine] = np.inf
             best = np.argmin(reach, axis=1)
-        targets = [[c, b, i] if b != c else [c, i] for c, b, i in zip(closest.tolist(), best.tolist(), wrong.tolist())]
+            below = _below_goals(X, X_goal[wrong], mine, closest)
+        targets = [list(dict.fromkeys(row)) for row in zip(closest.tolist(), best.tolist(), below.tolist(),
+                                                            wrong.tolist())]
     return np.concatenate([_actions_onto(i, row) for i, row in zip(wrong, targets)])
+
+
+def _below_goals(X: np.ndarray, goals: np.ndarray, mine: tuple, closest: np.ndarray) -> np.ndarray:
+    """Per goal position (w, 3): for a goal above the table, the object closest (3-D) to the place one block
+    height below it, which a block placed there rests on: the top of a stack, where the object closest in 2-D
+    may be the bottom (a tower's goal); for a goal on the table, `closest`."""
+    support = goals[:, None, :3] - np.array([0.0, 0.0, _BLOCK_HEIGHT])
+    dist = np.linalg.norm(X[None, :, :3] - support, axis=2)  # (w, n)
+    dist[mine] = np.inf
+    return np.where(goals[:, 2] > _ON_TABLE, np.argmin(dist, axis=1), closest)
 
 
 def _actions_onto(i: int, targets) -> np.ndarray:

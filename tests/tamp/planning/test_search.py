@@ -50,6 +50,20 @@ def test_release_point_targets_reach_a_goal_beside_another_block():
     assert continuous_search(StubModel(), Y, G, SearchConfig(release_targets=False, max_depth=1)).plan is None
 
 
+def test_a_goal_on_a_stack_offers_the_top_of_the_stack():
+    # cube 1 stands on cube 2, 5 mm off its centre; cube 0's goal is on top of them, above cube 2's centre: the
+    # object closest in 2-D is the bottom of the stack, the one a placed block rests on is its top
+    Y = np.array([[0.55, -0.15, 0.025, 1, 0], [0.705, 0.1, 0.075, 1, 0], [0.7, 0.1, 0.025, 1, 0]])
+    G = Y.copy()
+    G[0, :3] = (0.7, 0.1, 0.125)
+    assert set(goal_oriented_actions(Y, G, release_targets=False)[:, 2]) == {2, 0}  # the paper's rule
+    ours = goal_oriented_actions(Y, G)
+    assert len(ours) == 27 and set(ours[:, 2]) == {2, 1, 0}
+    # a goal on the table offers what it did: the closest object and itself
+    G[0, :3] = (0.7, 0.16, 0.025)
+    assert set(goal_oriented_actions(Y, G)[:, 2]) == {2, 0}
+
+
 @pytest.mark.parametrize("plan", [[(1, 0, 2, 0)], [(1, 0, 2, 0), (0, -1, 0, 1)],
                                   [(2, 0, 0, 1), (1, 0, 2, 0), (0, 1, 0, -1)]])
 def test_search_finds_plans_that_reach_the_goal(plan):
