@@ -22,8 +22,8 @@ point closest (2-D) to o_i's goal is added as a third target when it is not the 
 (at most 27 actions per misplaced object). From 4 blocks on the closest object is often the wrong
 one, and without this target the search runs to its node budget (docs/beyond-the-paper.md). For a goal
 above the table, the object closest (3-D) to the place one block height below the goal, the one the
-block would rest on, is a target too: the top of a stack, where the object closest in 2-D may be its
-bottom (a tower of three bars was otherwise reached only by detours).
+block would rest on, is a target too (at most 36 actions): the top of a stack, where the object
+closest in 2-D may be its bottom (a tower of three bars was otherwise reached only by detours).
 
 Goal test at generation: every object within `eps` (5 cm) of its goal in 3-D. A goal state whose
 worst object is predicted farther than `confident` (3.5 cm; both `VerifyConfig`'s, as is `misplaced`,
