@@ -49,11 +49,23 @@ def towers(source: Path, n: int, count: int) -> list[dict]:
     return made
 
 
+def heights(text: str) -> list[int]:
+    """"3,4" as tower heights, each 2-6 blocks (the models' scenes)."""
+    try:
+        values = [int(v) for v in text.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated numbers of blocks such as 3,4, got {text!r}") \
+            from None
+    if not values or any(not 2 <= v <= 6 for v in values):
+        raise argparse.ArgumentTypeError(f"tower heights must be 2 to 6 blocks, got {text!r}")
+    return values
+
+
 def main() -> int | str:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--seed", type=int, default=6303, help="seed of the strict set whose initial states are used")
     p.add_argument("--per-n", type=int, default=25, help="towers of each height")
-    p.add_argument("--objects", default="3,4", help="tower heights (numbers of blocks)")
+    p.add_argument("--objects", type=heights, default=heights("3,4"), help="tower heights (numbers of blocks)")
     p.add_argument("--methods", default="bilevel,bilevel_loop")
     p.add_argument("--models", default="tamp/pretrained")
     p.add_argument("--workers", type=int, default=2)
@@ -67,9 +79,10 @@ def main() -> int | str:
     problems = out / "problems.jsonl"
     if not problems.exists():
         source = out / "strict.jsonl"
-        subprocess.run([tamp, "problems", "--out", str(source), "--objects", args.objects, "--per-cell", "10",
-                        "--seed", str(args.seed), "--workers", str(args.workers), "--quiet"], check=True)
-        made = [t for n in map(int, args.objects.split(",")) for t in towers(source, n, args.per_n)]
+        subprocess.run([tamp, "problems", "--out", str(source), "--objects", ",".join(map(str, args.objects)),
+                        "--per-cell", "10", "--seed", str(args.seed), "--workers", str(args.workers), "--quiet"],
+                       check=True)
+        made = [t for n in args.objects for t in towers(source, n, args.per_n)]
         problems.write_text("".join(json.dumps(t) + "\n" for t in made))
     from evaluation.run import read_rows
 
