@@ -6,7 +6,7 @@ else (the steps of the next round, on new problems, land as far from its predict
 outcome of a step is, in the fast world, a function of the observed state (`bench/replay_steps.py`): the
 misses are the model's, and more steps of the kind the planner takes teach it. Each visited state X (before
 an executed action) with its problem's goal gives the goal-oriented actions of the continuous search
-(`tamp.planning.search.goal_oriented_actions`: every misplaced block onto the objects nearest its goal and
+(`tamp.planning.pruning.goal_oriented_actions`: every misplaced block onto the objects nearest its goal and
 onto itself, all offsets); up to `per_state` of them, drawn with a seed of the round, state and problem, are
 run from X in the collection's world (blocks upright and axis-aligned, as X says; a state whose blocks would
 then overlap, tilted ones, is left out). About 20 transitions per executed step, at the cost of a collected
@@ -35,7 +35,7 @@ class StateTask:
 def beside_actions(X: np.ndarray, X_goal: np.ndarray, taken: Sequence[int], per_state: int,
                    rng: np.random.Generator) -> np.ndarray:
     """Up to `per_state` goal-oriented actions from X other than the one `taken`, drawn without replacement."""
-    from tamp.planning.search import goal_oriented_actions
+    from tamp.planning.pruning import goal_oriented_actions
 
     options = [a for a in goal_oriented_actions(X, X_goal).tolist() if tuple(a) != tuple(taken)]
     if not options:

@@ -100,7 +100,7 @@ class Evaluator:
         scene = checker.reset(problem.X_init)
         layout = tuple(int(t) for t in scene.types)
         if layout not in self._warm_layouts:
-            from tamp.planning.search import all_actions
+            from tamp.planning.pruning import all_actions
 
             checker.check(problem.X_init, all_actions(problem.n))
             self._warm_layouts.add(layout)

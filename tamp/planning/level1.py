@@ -25,8 +25,8 @@ import numpy as np
 from tamp.planning.config import Level1Config
 from tamp.planning.kinematic_check import Feasibility, feasible_choice
 from tamp.planning.models import Models
+from tamp.planning.pruning import goal_oriented_actions, misplaced_objects
 from tamp.planning.results import Candidate, Clock, Level1Result, reasons_json
-from tamp.planning.search import goal_oriented_actions, misplaced_objects
 from tamp.planning.verify import (
     Verification,
     VerifyConfig,
@@ -265,7 +265,7 @@ def level1_scene(X_init: np.ndarray, X_goal: np.ndarray, config: Level1Config, g
     """The objects Level 1 plans over (our extension, `Level1Config.objects`); None: every object.
 
     From config.focus_from objects on: the objects of the continuous search's pruned actions in X_init
-    (`search.goal_oriented_actions`, with or without `release_targets`), i.e. the blocks off their goal
+    (`pruning.goal_oriented_actions`, with or without `release_targets`), i.e. the blocks off their goal
     and, for each, the objects it would be placed on. The Symbolic Model then sees a scene of the size it
     was trained on, and the symbols of blocks that play no part cannot make Sigma_goal unreachable; the
     Dynamics Model verifies the plans in the whole scene. With more than config.objects, Level 1 plans

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from tamp.errors import UserError
-from tamp.planning.search import SearchConfig, continuous_search, goal_oriented_actions
+from tamp.planning.pruning import goal_oriented_actions
+from tamp.planning.search import SearchConfig, continuous_search
 from tamp.planning.verify import VerifyConfig, goal_error, rollout
 from tests.planning_stubs import StubModel, world_step
 
