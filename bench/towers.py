@@ -28,6 +28,7 @@ from bench.dynamics import figures, line  # noqa: E402
 def towers(source: Path, n: int, count: int) -> list[dict]:
     """Up to `count` tower problems of n blocks from the initial states of `source` (a `tamp problems` file)."""
     from tamp.app.runner import execute_plan
+    from tamp.planning.vocabulary import BLOCK_HEIGHT
 
     made: list[dict] = []
     for text in source.read_text().splitlines():
@@ -38,7 +39,7 @@ def towers(source: Path, n: int, count: int) -> list[dict]:
         order = [1, 0, *range(2, n)]  # 0 on 1, 2 on 0, 3 on 2
         plan = [(order[i + 1], 0, order[i], 0) for i in range(n - 1)]
         X_goal = np.asarray(execute_plan(plan, X_init, X_init).X_final)
-        levels = sorted(np.round(X_goal[:, 2] / 0.05 - 0.5).astype(int).tolist())
+        levels = sorted(np.round(X_goal[:, 2] / BLOCK_HEIGHT - 0.5).astype(int).tolist())
         if levels != list(range(n)) or np.ptp(X_goal[:, 0]) > 0.01 or np.ptp(X_goal[:, 1]) > 0.01:
             continue  # the stack did not stand
         made.append({"name": f"tower{n}-{len(made):03d}", "X_init": problem["X_init"],

@@ -21,13 +21,12 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from tamp.errors import UserError
-from tamp.planning.vocabulary import BLOCK_SIZES
+from tamp.planning.vocabulary import BLOCK_SIZES, ON_TABLE
 
 if TYPE_CHECKING:  # the configuration loads no Drake: `tamp evaluate --help` stays fast
     from tamp.sim.skill import Scene
 
 _CLEARANCE = 0.005  # metres: a pushed block's footprint keeps this gap to every other block's
-_ON_TABLE = 0.04  # metres: a block whose centre is lower stands on the table (both types are 5 cm tall)
 
 
 @dataclass(frozen=True)
@@ -135,7 +134,7 @@ def push(scene: Scene, faults: Faults, rng: np.random.Generator, tries: int = 32
     assert faults.push_m is not None  # a push was asked for
     n = scene.n
     positions = np.array([p.translation() for p in scene.X_WB])
-    free = [i for i in range(n) if positions[i, 2] < _ON_TABLE and not any(
+    free = [i for i in range(n) if positions[i, 2] < ON_TABLE and not any(
         positions[j, 2] > positions[i, 2] + 0.02 and not _apart(footprint(scene, i), footprint(scene, j), 0.0)
         for j in range(n) if j != i)]
     for _ in range(tries):

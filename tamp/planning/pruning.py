@@ -23,13 +23,11 @@ from __future__ import annotations
 import numpy as np
 
 from tamp.planning.verify import EPS_SUCCESS
-from tamp.planning.vocabulary import BLOCK_SIZES, OFFSET_STEP, OFFSETS
+from tamp.planning.vocabulary import BLOCK_HEIGHT, OFFSET_STEP, OFFSETS, ON_TABLE
 
 _PAIRS = np.array([(g, r) for g in OFFSETS for r in OFFSETS], dtype=np.int64)  # the 9 offset pairs
 # metres: where a placed block's centre ends relative to its target object's, (r - g) * OFFSET_STEP along y
 _RELEASE_SHIFTS = np.array([(0.0, s * OFFSET_STEP) for s in range(-2, 3)])
-_BLOCK_HEIGHT, = {size[2] for size in BLOCK_SIZES.values()}  # metres: both block types are this tall
-_ON_TABLE = 0.04  # metres: a goal whose centre is lower stands on the table
 
 
 def misplaced_objects(X: np.ndarray, X_goal: np.ndarray, misplaced: float = EPS_SUCCESS,
@@ -73,10 +71,10 @@ def _below_goals(X: np.ndarray, goals: np.ndarray, mine: tuple, closest: np.ndar
     """Per goal position (w, 3): for a goal above the table, the object closest (3-D) to the place one block
     height below it, which a block placed there rests on: the top of a stack, where the object closest in 2-D
     may be the bottom (a tower's goal); for a goal on the table, `closest`."""
-    support = goals[:, None, :3] - np.array([0.0, 0.0, _BLOCK_HEIGHT])
+    support = goals[:, None, :3] - np.array([0.0, 0.0, BLOCK_HEIGHT])
     dist = np.linalg.norm(X[None, :, :3] - support, axis=2)  # (w, n)
     dist[mine] = np.inf
-    return np.where(goals[:, 2] > _ON_TABLE, np.argmin(dist, axis=1), closest)
+    return np.where(goals[:, 2] > ON_TABLE, np.argmin(dist, axis=1), closest)
 
 
 def _actions_onto(i: int, targets) -> np.ndarray:

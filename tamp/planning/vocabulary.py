@@ -16,6 +16,8 @@ SMALL, LARGE = 0, 1
 TYPE_NAMES = ("small", "large")
 # Box sizes along the block's own x, y, z (metres).
 BLOCK_SIZES = {SMALL: (0.05, 0.05, 0.05), LARGE: (0.05, 0.25, 0.05)}
+BLOCK_HEIGHT, = {size[2] for size in BLOCK_SIZES.values()}  # metres: both block types are this tall
+ON_TABLE = 0.04  # metres: a block (or goal) whose centre is lower stands on the table
 OFFSET_STEP = 0.075  # metres per unit of offset, along tamp.sim.skill.Scene.offset_axis_xy
 OFFSETS = (-1, 0, 1)
 
