@@ -106,4 +106,7 @@ def main() -> int | str:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    try:
+        sys.exit(main())
+    except KeyboardInterrupt:  # the evaluations keep their rows: the same command resumes
+        sys.exit("bench: interrupted; run the same command again to resume")

@@ -84,7 +84,9 @@ def main() -> int | str:
                         "--per-cell", "10", "--seed", str(args.seed), "--workers", str(args.workers), "--quiet"],
                        check=True)
         made = [t for n in args.objects for t in towers(source, n, args.per_n)]
-        problems.write_text("".join(json.dumps(t) + "\n" for t in made))
+        partial = problems.with_suffix(".part")  # written whole, then renamed: an interrupted run makes it again
+        partial.write_text("".join(json.dumps(t) + "\n" for t in made))
+        partial.replace(problems)
     from evaluation.run import read_rows
 
     rows = {}
@@ -109,4 +111,7 @@ def main() -> int | str:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    try:
+        sys.exit(main())
+    except KeyboardInterrupt:  # the evaluations keep their rows: the same command resumes
+        sys.exit("bench: interrupted; run the same command again to resume")
