@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 from evaluation.methods import methods_help
@@ -81,10 +82,13 @@ def _eval_config(args: argparse.Namespace):
     from tamp.app.faults import Faults
     from tamp.app.planner_flags import planner_config
 
-    return EvalConfig(planner=planner_config(args), fidelity=args.fidelity, workers=args.workers,
+    faults = Faults(noise_m=args.noise, push_m=args.push)
+    planner = planner_config(args)
+    if args.stop_margin is None and faults.noise_m > 0:  # the loop knows its observations' noise
+        planner = replace(planner, loop=replace(planner.loop, stop_margin=faults.stop_margin_m))
+    return EvalConfig(planner=planner, fidelity=args.fidelity, workers=args.workers,
                       backend=args.backend, address=args.address,
-                      oracle_max_plans=args.oracle_max_plans, progress=not args.quiet,
-                      faults=Faults(noise_m=args.noise, push_m=args.push))
+                      oracle_max_plans=args.oracle_max_plans, progress=not args.quiet, faults=faults)
 
 
 def _add_run_arguments(p: argparse.ArgumentParser, models_help: str, out_help: str, methods_default,

@@ -81,8 +81,11 @@ class EvalConfig:
             out["loop_commit"] = p.loop.commit
         # the loop that does not know k: the same, by the fields other than those recorded above
         above = ("keep_plan", "on_course", "commit")
+        later = {"stop_margin": LoopConfig.stop_margin}  # fields added since, left out at their default (older
+        #   directories stay resumable)
         loop = {k: v for k, v in dataclasses.asdict(p.loop).items() if k not in above}
-        if loop != {k: v for k, v in dataclasses.asdict(LoopConfig()).items() if k not in above}:
+        loop = {k: v for k, v in loop.items() if k not in later or v != later[k]}
+        if loop != {k: v for k, v in dataclasses.asdict(LoopConfig()).items() if k not in above and k not in later}:
             out["loop"] = loop
         if self.faults.any:
             out["faults"] = {"noise_m": self.faults.noise_m, "push_m": self.faults.push_m}

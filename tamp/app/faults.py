@@ -27,6 +27,7 @@ if TYPE_CHECKING:  # the configuration loads no Drake: `tamp evaluate --help` st
     from tamp.sim.skill import Scene
 
 _CLEARANCE = 0.005  # metres: a pushed block's footprint keeps this gap to every other block's
+STOP_MARGIN_SIGMAS = 1.0  # the closed loop's stop margin in sigmas of the observation noise, when no flag sets it
 
 
 @dataclass(frozen=True)
@@ -45,6 +46,12 @@ class Faults:
     @property
     def any(self) -> bool:
         return self.noise_m > 0 or self.push_m is not None
+
+    @property
+    def stop_margin_m(self) -> float:
+        """The closed loop's stop margin (`LoopConfig.stop_margin`, metres) for this noise: a block's observed
+        distance to its goal scatters by about one sigma around the true one."""
+        return STOP_MARGIN_SIGMAS * self.noise_m
 
     def observe(self, X: np.ndarray, rng: np.random.Generator, scene: Scene | None = None) -> np.ndarray:
         """X as the planner observes it: horizontal positions with noise. With the world's `scene`, blocks

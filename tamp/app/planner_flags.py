@@ -90,6 +90,11 @@ def add_planner_arguments(p: argparse.ArgumentParser, feasibility: bool = True) 
                    help="the closed loop (--replan; bilevel_loop) gives up after sending this many actions to the "
                    f"world (default {default.loop.max_actions}: a goal of up to 5 random actions, with room to "
                    "recover from misses)")
+    p.add_argument("--stop-margin", type=non_negative_float, default=None, metavar="METRES",
+                   help="the closed loop that does not know k (bilevel_loop) stops, and its rounds aim, this far "
+                   "inside the success tolerance, so that observations whose noise puts the blocks within it while "
+                   "they are not do not end it (default 0: exact observations; with `tamp evaluate --noise SIGMA`, "
+                   "SIGMA)")
     p.add_argument("--loop-search-budget", type=positive_int, default=default.loop.search_budget, metavar="EXPANSIONS",
                    help="the closed loop (--replan; bilevel_loop) gives up when its rounds' continuous searches have "
                    f"spent this many expansions (default {default.loop.search_budget}: twice one search's budget, "
@@ -199,8 +204,10 @@ PLANNER_FLAGS: dict[str, dict[str, str]] = {
     "loop": {"keep_plan": "keep_plan", "on_course": "on_course", "commit": "commit", "max_actions": "max_actions",
              "widen": "widen",
              "search_budget": "loop_search_budget", "greedy_search_budget": "loop_greedy_search_budget",
-             "stall": "loop_stall"},
+             "stall": "loop_stall", "stop_margin": "stop_margin"},
 }
+# flags whose None means "the default, or what the run's faults imply" (`tamp evaluate --noise` sets the stop margin)
+AUTO_FLAGS = ("stop_margin",)
 # the fields deliberately without a flag (their defaults hold; tests and benchmarks set them in code)
 NOT_EXPOSED = {"level1": ("seed", "time_budget", "verify_all", "alternatives", "alternatives_total", "nonempty"),
                "verify": ("tau_verify", "eps", "misplaced"), "kinematics": ("max_refinements",),
@@ -212,7 +219,8 @@ def planner_config(args: argparse.Namespace) -> PlanConfig:
     """The PlanConfig of the flags of `add_planner_arguments` (seed 0: callers set the problem's)."""
     default = PlanConfig()
     return PlanConfig(**{part: dataclasses.replace(getattr(default, part), **{
-        name: getattr(args, dest) for name, dest in flags.items() if hasattr(args, dest)})
+        name: getattr(args, dest) for name, dest in flags.items()
+        if hasattr(args, dest) and not (dest in AUTO_FLAGS and getattr(args, dest) is None)})
         for part, flags in PLANNER_FLAGS.items()})
 
 
@@ -221,8 +229,8 @@ def planner_config(args: argparse.Namespace) -> PlanConfig:
 LOOP_FLAGS = {"keep_plan": "--no-keep-plan", "on_course": "--on-course/--no-on-course",
               "max_actions": "--max-actions", "search_budget": "--loop-search-budget",
               "greedy_search_budget": "--loop-greedy-budget", "widen": "--no-widen",
-              "stall": "--loop-stall", "commit": "--no-commit"}
-UNTIL_GOAL_FIELDS = ("commit", "max_actions", "search_budget", "greedy_search_budget", "widen", "stall")
+              "stall": "--loop-stall", "commit": "--no-commit", "stop_margin": "--stop-margin"}
+UNTIL_GOAL_FIELDS = ("commit", "max_actions", "search_budget", "greedy_search_budget", "widen", "stall", "stop_margin")
 
 
 def loop_flags_given(config: PlanConfig, until_goal_only: bool = False) -> list[str]:

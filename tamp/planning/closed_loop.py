@@ -147,12 +147,14 @@ def loop_until_goal(method: str, models: Models, X_init, X_goal, step: Step, cfg
     and search budgets of cfg.loop; a round without a plan widens its search, else steps toward the closest
     state its searches found; actions that led back to an observed state are left out (`revisits`)."""
     out = ClosedLoopResult([], [], [np.asarray(X_init, dtype=float)], np.asarray(X_goal, dtype=float), cfg.verify.eps)
+    cfg = aimed_inside(cfg)
     budget = cfg.loop.search_budget_for(len(out.X_goal), cfg.search.greedy_from)
     spent = 0  # continuous-search expansions of every round so far
     for r in itertools.count():
         X = out.X_final
         if at_goal(X, out.X_goal, cfg.verify.eps):
-            return out.end(LoopStop.GOAL, "the observed state is within eps of the goal")
+            within = "within eps" if cfg.loop.stop_margin == 0 else f"{cfg.loop.stop_margin * 100:g} cm inside eps"
+            return out.end(LoopStop.GOAL, f"the observed state is {within} of the goal")
         if len(out.executed) >= cfg.loop.max_actions:
             return out.end(LoopStop.BUDGET, f"{cfg.loop.max_actions} actions sent without reaching the goal "
                                             f"(the loop's action budget)")
@@ -177,6 +179,19 @@ def loop_until_goal(method: str, models: Models, X_init, X_goal, step: Step, cfg
         assert result.plan is not None  # `_planned` ended the loop otherwise
         out.execute(result.plan[:1], step)
     raise AssertionError("unreachable")
+
+
+def aimed_inside(cfg: PlanConfig) -> PlanConfig:
+    """cfg whose goal tolerances (eps, misplaced, confident) lie `LoopConfig.stop_margin` inside the user's: the
+    loop that does not know k stops, and its rounds plan, as if eps were that much smaller, so that an observation
+    whose noise puts the blocks within eps does not end the loop while they are not (the outcome is judged on
+    the world at the user's eps)."""
+    margin = cfg.loop.stop_margin
+    if margin == 0:
+        return cfg
+    v = cfg.verify
+    eps = v.eps - margin
+    return replace(cfg, verify=replace(v, eps=eps, misplaced=v.misplaced - margin, confident=min(v.confident, eps)))
 
 
 def _planned(out: ClosedLoopResult, r: int, result: PlanResult, on_round: Callable[[int, PlanResult], None] | None,

@@ -120,12 +120,14 @@ class LoopConfig:
     progress: float = 0.02  # metres, summed over blocks: without a plan, a step toward the closest state the round's
     #   searches expanded is taken only if that state is this much closer to the goal
     revisit: float = 0.01  # metres: back this close to an observed state, leave out the actions taken from there
+    stop_margin: float = 0.0  # metres: the loop that does not know k stops, and its rounds aim, this far inside eps,
+    #   so that noisy observations do not end it short of the goal (0: exact observations; `--noise` sets its sigma)
 
     def __post_init__(self) -> None:
         _positive("LoopConfig", on_course=self.on_course)
-        if not self.revisit >= 0 or not self.progress >= 0:
-            raise UserError(f"LoopConfig.revisit and .progress must be distances of 0 m or more, got {self.revisit} "
-                            f"and {self.progress}")
+        if not self.revisit >= 0 or not self.progress >= 0 or not self.stop_margin >= 0:
+            raise UserError(f"LoopConfig.revisit, .progress and .stop_margin must be distances of 0 m or more, got "
+                            f"{self.revisit}, {self.progress} and {self.stop_margin}")
         if self.stall is not None and self.stall < 1:
             raise UserError(f"LoopConfig.stall must be a positive number of expansions or None, got {self.stall}")
         if self.greedy_search_budget is not None and self.greedy_search_budget < 1:
@@ -152,6 +154,11 @@ class PlanConfig:
     search: SearchConfig = SearchConfig()  # Level 2, the continuous search (`tamp.planning.search`)
     kinematics: KinematicsConfig = KinematicsConfig()
     loop: LoopConfig = LoopConfig()
+
+    def __post_init__(self) -> None:
+        if not self.loop.stop_margin < min(self.verify.eps, self.verify.misplaced):
+            raise UserError(f"the closed loop's stop margin ({self.loop.stop_margin} m) must be below the success "
+                            f"tolerance eps ({self.verify.eps} m)")
 
     def with_seed(self, seed: int) -> PlanConfig:
         """This configuration with Level 1's domains sampled from `seed` (callers give the problem's)."""
