@@ -84,11 +84,19 @@ def _eval_config(args: argparse.Namespace):
 
     faults = Faults(noise_m=args.noise, push_m=args.push)
     planner = planner_config(args)
-    if args.stop_margin is None and faults.noise_m > 0:  # the loop knows its observations' noise
-        planner = replace(planner, loop=replace(planner.loop, stop_margin=faults.stop_margin_m))
+    if args.stop_margin is None and faults.noise_m > 0 and _runs_until_goal(args.methods):
+        planner = replace(planner, loop=replace(planner.loop, stop_margin=faults.stop_margin_m))  # knows its noise
     return EvalConfig(planner=planner, fidelity=args.fidelity, workers=args.workers,
                       backend=args.backend, address=args.address,
                       oracle_max_plans=args.oracle_max_plans, progress=not args.quiet, faults=faults)
+
+
+def _runs_until_goal(methods: list[str] | None) -> bool:
+    """Whether `methods` (None: every one available) include the loop that runs until the goal (bilevel_loop)."""
+    from evaluation.methods import METHODS
+    from tamp.planning.vocabulary import Loop
+
+    return methods is None or any(m in METHODS and METHODS[m].loop == Loop.UNTIL_GOAL for m in methods)
 
 
 def _add_run_arguments(p: argparse.ArgumentParser, models_help: str, out_help: str, methods_default,

@@ -91,6 +91,7 @@ def test_tamp_plan_refuses_loop_flags_without_their_loop(tmp_path, capsys, monke
     ("bilevel,cfs", ["--noise", "0.01"], "--noise/--push acts on closed loops"),
     ("bilevel", ["--push", "0.03,0.05"], "--noise/--push acts on closed loops"),
     ("bilevel_replan", ["--max-actions", "3"], "--max-actions sets the loop that runs until the goal (bilevel_loop)"),
+    ("bilevel_replan", ["--noise", "0.005", "--stop-margin", "0.01"], "--stop-margin sets the loop that runs until"),
     ("cfs", ["--oracle-max-plans", "5"], "--oracle-max-plans sets probabilistic_oracle"),
 ])
 def test_tamp_evaluate_refuses_flags_no_method_applies(tmp_path, capsys, methods, flags, needle):

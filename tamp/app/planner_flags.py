@@ -91,10 +91,11 @@ def add_planner_arguments(p: argparse.ArgumentParser, feasibility: bool = True) 
                    f"world (default {default.loop.max_actions}: a goal of up to 5 random actions, with room to "
                    "recover from misses)")
     p.add_argument("--stop-margin", type=non_negative_float, default=None, metavar="METRES",
-                   help="the closed loop that does not know k (bilevel_loop) stops, and its rounds aim, this far "
-                   "inside the success tolerance, so that observations whose noise puts the blocks within it while "
-                   "they are not do not end it (default 0: exact observations; with `tamp evaluate --noise SIGMA`, "
-                   "SIGMA)")
+                   help="the closed loop that does not know k (bilevel_loop) stops only this far inside the success "
+                   "tolerance; within the tolerance but short of that it takes one more step only if a plan is "
+                   "predicted within --confident, so that noisy observations that put the blocks within the "
+                   "tolerance while they are not do not end it (default 0: exact observations; with `tamp evaluate "
+                   "--noise SIGMA`, SIGMA)")
     p.add_argument("--loop-search-budget", type=positive_int, default=default.loop.search_budget, metavar="EXPANSIONS",
                    help="the closed loop (--replan; bilevel_loop) gives up when its rounds' continuous searches have "
                    f"spent this many expansions (default {default.loop.search_budget}: twice one search's budget, "

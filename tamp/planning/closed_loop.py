@@ -147,12 +147,12 @@ def loop_until_goal(method: str, models: Models, X_init, X_goal, step: Step, cfg
     and search budgets of cfg.loop; a round without a plan widens its search, else steps toward the closest
     state its searches found; actions that led back to an observed state are left out (`revisits`)."""
     out = ClosedLoopResult([], [], [np.asarray(X_init, dtype=float)], np.asarray(X_goal, dtype=float), cfg.verify.eps)
-    cfg = aimed_inside(cfg)
+    inside = aimed_inside(cfg)
     budget = cfg.loop.search_budget_for(len(out.X_goal), cfg.search.greedy_from)
     spent = 0  # continuous-search expansions of every round so far
     for r in itertools.count():
         X = out.X_final
-        if at_goal(X, out.X_goal, cfg.verify.eps):
+        if at_goal(X, out.X_goal, inside.verify.eps):
             within = "within eps" if cfg.loop.stop_margin == 0 else f"{cfg.loop.stop_margin * 100:g} cm inside eps"
             return out.end(LoopStop.GOAL, f"the observed state is {within} of the goal")
         if len(out.executed) >= cfg.loop.max_actions:
@@ -162,6 +162,19 @@ def loop_until_goal(method: str, models: Models, X_init, X_goal, step: Step, cfg
             return out.end(LoopStop.BUDGET, f"{spent} search expansions spent without reaching the goal (the "
                                             f"loop's search budget)")
         avoid = revisits(out, cfg)
+        if at_goal(X, out.X_goal, cfg.verify.eps):  # within eps, not within the stop margin: one clearly closer step
+            result = _round(method, models, X, out.X_goal, out, _within(inside, cfg.loop.widen_expansions,
+                                                                        budget - spent), planner, kinematics, avoid,
+                            until_goal=True)
+            spent += _expanded(result)
+            if not _clearly_closer(result, X, out.X_goal, inside):
+                out.rounds.append(result)
+                return out.end(LoopStop.GOAL, f"the observed state is within eps of the goal, and no plan is "
+                                              f"predicted {cfg.loop.stop_margin * 100:g} cm closer within "
+                                              f"{inside.verify.confident * 100:g} cm")
+            _planned(out, r, result, on_round)  # records the round (a solved one with a plan ends nothing)
+            out.execute(result.plan[:1], step)
+            continue
         result = _round(method, models, X, out.X_goal, out, _within(cfg, cfg.search.max_expansions, budget - spent),
                         planner, kinematics, avoid, until_goal=True)
         spent += _expanded(result)
@@ -181,11 +194,20 @@ def loop_until_goal(method: str, models: Models, X_init, X_goal, step: Step, cfg
     raise AssertionError("unreachable")
 
 
+def _clearly_closer(result: PlanResult, X: np.ndarray, X_goal: np.ndarray, inside: PlanConfig) -> bool:
+    """Whether a round's plan is predicted to end within `inside.verify.confident` of the goal and at least the stop
+    margin closer than the observed X (a step from within eps must be worth its risk)."""
+    if not (result.solved and result.plan) or result.predicted_error is None:
+        return False
+    return result.predicted_error < min(inside.verify.confident, goal_error(X, X_goal) - inside.loop.stop_margin)
+
+
 def aimed_inside(cfg: PlanConfig) -> PlanConfig:
     """cfg whose goal tolerances (eps, misplaced, confident) lie `LoopConfig.stop_margin` inside the user's: the
-    loop that does not know k stops, and its rounds plan, as if eps were that much smaller, so that an observation
-    whose noise puts the blocks within eps does not end the loop while they are not (the outcome is judged on
-    the world at the user's eps)."""
+    loop that does not know k stops there, and from a state within eps but not within that it takes one step more
+    only if a plan aimed there is predicted clearly closer (`_clearly_closer`), so that an observation whose noise
+    puts the blocks within eps does not end the loop while they are not (the outcome is judged on the world at
+    the user's eps)."""
     margin = cfg.loop.stop_margin
     if margin == 0:
         return cfg

@@ -120,8 +120,8 @@ class LoopConfig:
     progress: float = 0.02  # metres, summed over blocks: without a plan, a step toward the closest state the round's
     #   searches expanded is taken only if that state is this much closer to the goal
     revisit: float = 0.01  # metres: back this close to an observed state, leave out the actions taken from there
-    stop_margin: float = 0.0  # metres: the loop that does not know k stops, and its rounds aim, this far inside eps,
-    #   so that noisy observations do not end it short of the goal (0: exact observations; `--noise` sets its sigma)
+    stop_margin: float = 0.0  # metres: the loop that does not know k stops this far inside eps; short of that but
+    #   within eps it steps only on a plan predicted within confident (0: exact observations; `--noise` sets sigma)
 
     def __post_init__(self) -> None:
         _positive("LoopConfig", on_course=self.on_course)

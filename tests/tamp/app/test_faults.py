@@ -85,3 +85,19 @@ def test_noise_never_puts_touching_blocks_into_each_other():
 def test_bad_faults_are_user_errors(kwargs, words):
     with pytest.raises(UserError, match=words):
         Faults(**kwargs)
+
+
+@pytest.mark.parametrize("flags, margin", [
+    (["--noise", "0.005"], 0.005),  # the loop knows its observations' noise
+    (["--noise", "0.005", "--stop-margin", "0"], 0.0),  # a margin given wins
+    (["--stop-margin", "0.01"], 0.01),
+    ([], 0.0),  # exact observations
+    (["--noise", "0.005", "--methods", "bilevel_replan"], 0.0),  # no loop that runs until the goal
+])
+def test_tamp_evaluate_sets_the_loop_stop_margin_from_the_noise(flags, margin):
+    from evaluation.cli import _eval_config
+    from tamp.app.cli import build_parser
+
+    args = build_parser().parse_args(["evaluate", "--models", "pretrained", "--problems", "p.jsonl", "--out", "o",
+                                      *flags])
+    assert _eval_config(args).planner.loop.stop_margin == margin

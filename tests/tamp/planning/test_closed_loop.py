@@ -126,6 +126,39 @@ def test_the_loop_says_why_it_stopped_when_no_action_is_left(models):
     assert "no plan over every action either" in out.reason
 
 
+def test_with_a_stop_margin_the_loop_does_not_stop_on_an_observation_just_inside_eps(models):
+    # the first placement lands A 4.5 cm off along x: within eps (5 cm), not within eps less a 1 cm margin
+    def near_miss(action):
+        X = world_step(near_miss.X, action)
+        if not near_miss.sent:
+            X[0, 0] += 0.045
+        near_miss.sent.append(tuple(action))
+        near_miss.X = X
+        return X
+
+    def run(margin: float, planner=None):
+        near_miss.X, near_miss.sent = X_INIT, []
+        return plan_closed_loop("bilevel", models, X_INIT, A_ON_B, near_miss, rounds=None, planner=planner,
+                                cfg=PlanConfig(loop=LoopConfig(stop_margin=margin)))
+
+    exact = run(0.0)
+    assert exact.stop == "goal" and len(exact.executed) == 1 and 0.04 < goal_error(exact.X_final, A_ON_B) < 0.05
+    careful = run(0.01)
+    assert careful.stop == "goal" and len(careful.executed) == 2 and goal_error(careful.X_final, A_ON_B) < 0.04
+    assert "1 cm inside eps" in careful.reason and careful.eps == 0.05  # the outcome is judged at the user's eps
+
+    def doubtful(*args, **kwargs):  # every plan predicted to end 4 cm from the goal: not clearly closer
+        result = plan(*args, **kwargs)
+        return replace(result, predicted_error=0.04) if result.plan else result
+
+    risky = run(0.01, doubtful)
+    assert risky.stop == "goal" and len(risky.executed) == 1 and "no plan is predicted 1 cm closer" in risky.reason
+    with pytest.raises(UserError, match="stop margin"):
+        PlanConfig(loop=LoopConfig(stop_margin=0.05))
+    with pytest.raises(UserError, match="stop_margin"):
+        LoopConfig(stop_margin=-0.01)
+
+
 def test_loop_config_is_checked():
     with pytest.raises(UserError, match="at least 1 action"):
         LoopConfig(max_actions=0)
