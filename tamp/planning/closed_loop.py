@@ -21,6 +21,9 @@ Two loops share one round (`_round`: plan, or keep the rest of the last plan whi
   `LoopConfig.progress` closer (the world may do better than the model predicts, and the next round
   plans from there). Back at a state it observed before (`revisits`), it
   leaves out the actions it took from there, which would start the same cycle again in a deterministic world.
+  With noisy observations (`LoopConfig.stop_margin`, set from `tamp evaluate --noise`) it stops only that far
+  inside eps; within eps but short of that, it takes a step only on a plan predicted within
+  `verify.confident` (`aimed_inside`, `_clearly_closer`), and otherwise stops at what it observes.
 
 Keeping a plan (`LoopConfig.keep_plan`, our extension, both loops): a round keeps the rest of the last
 plan when it refines and still ends within `verify.confident` of the goal: as the plan predicted, if
