@@ -96,7 +96,7 @@ NOISY_REVISIT = 3 * 2 ** 0.5 * 0.005  # metres: three sigmas of the difference o
     (["--noise", "0.005", "--stop-margin", "0"], 0.0, NOISY_REVISIT),  # a margin given wins
     (["--stop-margin", "0.01"], 0.01, LoopConfig().revisit),
     ([], 0.0, LoopConfig().revisit),  # exact observations
-    (["--noise", "0.005", "--methods", "bilevel_replan"], 0.0, LoopConfig().revisit),  # no loop that runs until the goal
+    (["--noise", "0.005", "--methods", "bilevel_replan"], 0.0, LoopConfig().revisit),  # no loop running to the goal
 ])
 def test_tamp_evaluate_tells_the_loop_the_noise(flags, margin, revisit):
     from evaluation.cli import _eval_config
