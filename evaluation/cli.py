@@ -84,8 +84,8 @@ def _eval_config(args: argparse.Namespace):
 
     faults = Faults(noise_m=args.noise, push_m=args.push)
     planner = planner_config(args)
-    if _runs_until_goal(args.methods):  # the loop that runs until the goal knows its observations' noise
-        planner = replace(planner, loop=faults.known_to(planner.loop, stop_margin_given=args.stop_margin is not None))
+    if args.stop_margin is None and _runs_until_goal(args.methods):  # the loop knows its observations' noise
+        planner = replace(planner, loop=faults.known_to(planner.loop))
     return EvalConfig(planner=planner, fidelity=args.fidelity, workers=args.workers,
                       backend=args.backend, address=args.address,
                       oracle_max_plans=args.oracle_max_plans, progress=not args.quiet, faults=faults)

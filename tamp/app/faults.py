@@ -30,8 +30,6 @@ if TYPE_CHECKING:  # the configuration loads no Drake: `tamp evaluate --help` st
 
 _CLEARANCE = 0.005  # metres: a pushed block's footprint keeps this gap to every other block's
 STOP_MARGIN_SIGMAS = 1.0  # the closed loop's stop margin in sigmas of the observation noise, when no flag sets it
-REVISIT_SIGMAS = 3.0  # two observations of one scene are one state for the loop's revisits within this many sigmas
-#   of their difference (sqrt(2) sigma per coordinate)
 
 
 @dataclass(frozen=True)
@@ -51,16 +49,10 @@ class Faults:
     def any(self) -> bool:
         return self.noise_m > 0 or self.push_m is not None
 
-    def known_to(self, loop: LoopConfig, stop_margin_given: bool = False) -> LoopConfig:
+    def known_to(self, loop: LoopConfig) -> LoopConfig:
         """`loop` as a closed loop that knows this noise: it stops `STOP_MARGIN_SIGMAS` sigma inside eps (a block's
-        observed distance to its goal scatters by about one sigma around the true one), unless a margin was given,
-        and two observations whose difference the noise explains are one state for its revisits (else a block
-        that did not move looks moved, and the loop repeats an action that keeps failing)."""
-        if self.noise_m <= 0:
-            return loop
-        margin = loop.stop_margin if stop_margin_given else STOP_MARGIN_SIGMAS * self.noise_m
-        revisit = max(loop.revisit, REVISIT_SIGMAS * np.sqrt(2.0) * self.noise_m)
-        return replace(loop, stop_margin=margin, revisit=revisit)
+        observed distance to its goal scatters by about one sigma around the true one)."""
+        return replace(loop, stop_margin=STOP_MARGIN_SIGMAS * self.noise_m) if self.noise_m > 0 else loop
 
     def observe(self, X: np.ndarray, rng: np.random.Generator, scene: Scene | None = None) -> np.ndarray:
         """X as the planner observes it: horizontal positions with noise. With the world's `scene`, blocks

@@ -23,7 +23,7 @@ Two loops share one round (`_round`: plan, or keep the rest of the last plan whi
   leaves out the actions it took from there, which would start the same cycle again in a deterministic world.
   With noisy observations (`LoopConfig.stop_margin`, set from `tamp evaluate --noise`) it stops only that far
   inside eps; within eps but short of that, it takes a step only on a plan predicted within
-  `verify.confident` (`aimed_inside`, `_clearly_closer`), and otherwise stops at what it observes.
+  `verify.confident` (`aimed_inside`, `_closer_than`), and otherwise stops at what it observes.
 
 Keeping a plan (`LoopConfig.keep_plan`, our extension, both loops): a round keeps the rest of the last
 plan when it refines and still ends within `verify.confident` of the goal: as the plan predicted, if
@@ -170,12 +170,15 @@ def loop_until_goal(method: str, models: Models, X_init, X_goal, step: Step, cfg
                                                                         budget - spent), planner, kinematics, avoid,
                             until_goal=True)
             spent += _expanded(result)
-            if not _clearly_closer(result, X, out.X_goal, inside):
-                out.rounds.append(result)
-                return out.end(LoopStop.GOAL, f"the observed state is within eps of the goal, and no plan is "
-                                              f"predicted {cfg.loop.stop_margin * 100:g} cm closer within "
-                                              f"{inside.verify.confident * 100:g} cm")
-            _planned(out, r, result, on_round)  # records the round (a solved one with a plan ends nothing)
+            out.rounds.append(result)
+            if on_round is not None:
+                on_round(r, result)
+            bar = _closer_than(X, out.X_goal, inside)
+            if not (result.solved and result.plan and result.predicted_error is not None
+                    and result.predicted_error < bar):
+                return out.end(LoopStop.GOAL, f"the observed state is within eps of the goal "
+                                              f"({goal_error(X, out.X_goal) * 100:.1f} cm), and no plan is predicted "
+                                              f"closer than {bar * 100:.1f} cm")
             out.execute(result.plan[:1], step)
             continue
         result = _round(method, models, X, out.X_goal, out, _within(cfg, cfg.search.max_expansions, budget - spent),
@@ -197,18 +200,17 @@ def loop_until_goal(method: str, models: Models, X_init, X_goal, step: Step, cfg
     raise AssertionError("unreachable")
 
 
-def _clearly_closer(result: PlanResult, X: np.ndarray, X_goal: np.ndarray, inside: PlanConfig) -> bool:
-    """Whether a round's plan is predicted to end within `inside.verify.confident` of the goal and at least the stop
-    margin closer than the observed X (a step from within eps must be worth its risk)."""
-    if not (result.solved and result.plan) or result.predicted_error is None:
-        return False
-    return result.predicted_error < min(inside.verify.confident, goal_error(X, X_goal) - inside.loop.stop_margin)
+def _closer_than(X: np.ndarray, X_goal: np.ndarray, inside: PlanConfig) -> float:
+    """Metres: how close to the goal a plan from X, observed within eps but short of the stop margin, must be
+    predicted to end for the loop to take a step: within `verify.confident` and the stop margin closer than X (a
+    step from within eps must be worth its risk)."""
+    return min(inside.verify.confident, goal_error(X, X_goal) - inside.loop.stop_margin)
 
 
 def aimed_inside(cfg: PlanConfig) -> PlanConfig:
     """cfg whose goal tolerances (eps, misplaced, confident) lie `LoopConfig.stop_margin` inside the user's: the
     loop that does not know k stops there, and from a state within eps but not within that it takes one step more
-    only if a plan aimed there is predicted clearly closer (`_clearly_closer`), so that an observation whose noise
+    only if a plan aimed there is predicted clearly closer (`_closer_than`), so that an observation whose noise
     puts the blocks within eps does not end the loop while they are not (the outcome is judged on the world at
     the user's eps)."""
     margin = cfg.loop.stop_margin

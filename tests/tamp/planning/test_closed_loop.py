@@ -152,7 +152,8 @@ def test_with_a_stop_margin_the_loop_does_not_stop_on_an_observation_just_inside
         return replace(result, predicted_error=0.04) if result.plan else result
 
     risky = run(0.01, doubtful)
-    assert risky.stop == "goal" and len(risky.executed) == 1 and "no plan is predicted 1 cm closer" in risky.reason
+    assert risky.stop == "goal" and len(risky.executed) == 1
+    assert "no plan is predicted closer than 3.5 cm" in risky.reason
     with pytest.raises(UserError, match="stop margin"):
         PlanConfig(loop=LoopConfig(stop_margin=0.05))
     with pytest.raises(UserError, match="stop_margin"):
