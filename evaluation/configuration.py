@@ -11,6 +11,11 @@ from tamp.errors import UserError
 from tamp.planning.config import KinematicsConfig, Level1Config, LoopConfig, PlanConfig
 from tamp.sim.world_types import fidelity_of
 
+# The loop settings a results directory without a "loop" entry was made with (the defaults when such directories
+# were made): any other setting is written out, so that no directory is resumed with settings it was not made with.
+IMPLICIT_LOOP = {"max_actions": 12, "widen": True, "widen_expansions": 400, "search_budget": 3000,
+                 "greedy_search_budget": 1500, "stall": 300, "progress": 0.02, "revisit": 0.01}
+
 
 @dataclass(frozen=True)
 class EvalConfig:
@@ -85,7 +90,7 @@ class EvalConfig:
         #   directories stay resumable)
         loop = {k: v for k, v in dataclasses.asdict(p.loop).items() if k not in above}
         loop = {k: v for k, v in loop.items() if k not in later or v != later[k]}
-        if loop != {k: v for k, v in dataclasses.asdict(LoopConfig()).items() if k not in above and k not in later}:
+        if loop != IMPLICIT_LOOP:
             out["loop"] = loop
         if self.faults.any:
             out["faults"] = {"noise_m": self.faults.noise_m, "push_m": self.faults.push_m}
@@ -96,4 +101,4 @@ class EvalConfig:
         return dataclasses.replace(p, kinematics=dataclasses.replace(p.kinematics, feasibility=feasibility))
 
 
-__all__ = ["EvalConfig"]
+__all__ = ["EvalConfig", "IMPLICIT_LOOP"]

@@ -98,7 +98,7 @@ def test_the_defining_settings_of_a_results_directory_are_unchanged():
     """`EvalConfig.defining()` holds every setting rows depend on, with the keys it had with the flat PlanConfig
     (the closed loop's `keep_plan` and `on_course` are not in "loop"); the search's stall cut and its default
     time limit (none) are part of it, so a directory of rows planned without them is not resumed with them."""
-    from evaluation.configuration import EvalConfig
+    from evaluation.configuration import IMPLICIT_LOOP, EvalConfig
 
     default = {"eps_m": 0.05, "fidelity": "fast", "keep_plan": True, "level1_budget": 100000,
                "level1_confident_m": 0.05, "level1_cut": True, "level1_focus_budget": 25000, "level1_focus_from": 5,
@@ -109,8 +109,13 @@ def test_the_defining_settings_of_a_results_directory_are_unchanged():
                "search_greedy_from": 5, "search_greedy_h_unit_m": 0.5,
                "search_greedy_per_misplaced": 0.3, "search_greedy_stall": 800, "loop_greedy_search_budget": 1500,
                "symbolic_backend": "python",
-               "tau_verify_m": 0.07}
+               "tau_verify_m": 0.07,
+               "loop": {"max_actions": 20, "widen": True, "widen_expansions": 400, "search_budget": 3000,
+                        "greedy_search_budget": 1500, "stall": 300, "progress": 0.02, "revisit": 0.01}}
     assert EvalConfig().defining() == default
+    # a directory made with the loop's settings of before (no "loop" entry) is not resumed with today's
+    made_before = EvalConfig(planner=PlanConfig(loop=LoopConfig(**IMPLICIT_LOOP))).defining()
+    assert "loop" not in made_before and made_before != default
     kept = EvalConfig(planner=PlanConfig(loop=LoopConfig(keep_plan=False, on_course=None))).defining()
     assert kept == {**default, "keep_plan": False, "on_course_m": None}
     short = EvalConfig(planner=PlanConfig(loop=LoopConfig(max_actions=5))).defining()
