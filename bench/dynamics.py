@@ -21,6 +21,7 @@ import statistics
 import subprocess
 import sys
 from pathlib import Path
+from typing import Callable
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
@@ -44,6 +45,23 @@ def line(name: str, f: dict) -> str:
             f"{s.get('miss_ge_2cm_pct', float('nan')):.1f} %, >= 5 cm {s.get('miss_ge_5cm_pct', float('nan')):.1f} %"
             f"{bound}; planning median {1e3 * f['median_s']:.0f} ms, mean {1e3 * f['mean_s']:.0f} ms, "
             f"p95 {f['p95_s']:.2f} s")
+
+
+def print_pair(a: dict, b: dict, extra: str = "") -> None:
+    """The baseline's figures, the new ones, and new / baseline (`extra`: said after the success change)."""
+    print(line("baseline", a))
+    print(line("new", b))
+    print(f"  new / baseline: success {b['success'] - a['success']:+.1f} points{extra}; planning median "
+          f"x{b['median_s'] / a['median_s']:.2f}, mean x{b['mean_s'] / a['mean_s']:.2f}")
+
+
+def run(main: Callable[[], int | str]) -> None:
+    """Exit with main()'s status; Ctrl-C ends in one line (the evaluations keep their rows: the same command
+    resumes)."""
+    try:
+        sys.exit(main())
+    except KeyboardInterrupt:
+        sys.exit("bench: interrupted; run the same command again to resume")
 
 
 def main() -> int | str:
@@ -94,19 +112,13 @@ def main() -> int | str:
         gained = [k for k in both if new[k]["success"] and not base[k]["success"]]
         lost = [k for k in both if base[k]["success"] and not new[k]["success"]]
         print(f"{method} ({len(both)} problems, seed {args.seed}, objects {args.objects}{faults}):")
-        print(line("baseline", a))
-        print(line("new", b))
         sa, sb = a["steps"], b["steps"]
-        print(f"  new / baseline: success {b['success'] - a['success']:+.1f} points (+{len(gained)} -{len(lost)}); "
-              f">= 2 cm {sb.get('miss_ge_2cm_pct', 0) - sa.get('miss_ge_2cm_pct', 0):+.1f} points; planning median "
-              f"x{b['median_s'] / a['median_s']:.2f}, mean x{b['mean_s'] / a['mean_s']:.2f}")
+        print_pair(a, b, f" (+{len(gained)} -{len(lost)}); >= 2 cm "
+                         f"{sb.get('miss_ge_2cm_pct', 0) - sa.get('miss_ge_2cm_pct', 0):+.1f} points")
         if lost:
             print(f"  lost: {', '.join(lost)}")
     return 0
 
 
 if __name__ == "__main__":
-    try:
-        sys.exit(main())
-    except KeyboardInterrupt:  # the evaluations keep their rows: the same command resumes
-        sys.exit("bench: interrupted; run the same command again to resume")
+    run(main)

@@ -22,7 +22,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from bench.dynamics import figures, line  # noqa: E402
+from bench.dynamics import figures, print_pair, run  # noqa: E402
 
 
 def towers(source: Path, n: int, count: int) -> list[dict]:
@@ -103,15 +103,9 @@ def main() -> int | str:
         a, b = figures(base), figures(new)
         flags = args.baseline_flags or "the defaults"
         print(f"{method} ({len(new)} tower problems from seed {args.seed}; baseline: {flags}):")
-        print(line("baseline", a))
-        print(line("new", b))
-        print(f"  new / baseline: success {b['success'] - a['success']:+.1f} points; planning median "
-              f"x{b['median_s'] / a['median_s']:.2f}, mean x{b['mean_s'] / a['mean_s']:.2f}")
+        print_pair(a, b)
     return 0
 
 
 if __name__ == "__main__":
-    try:
-        sys.exit(main())
-    except KeyboardInterrupt:  # the evaluations keep their rows: the same command resumes
-        sys.exit("bench: interrupted; run the same command again to resume")
+    run(main)
