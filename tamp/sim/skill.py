@@ -26,6 +26,7 @@ _LEVI_CIVITA[0, 2, 1] = _LEVI_CIVITA[2, 1, 0] = _LEVI_CIVITA[1, 0, 2] = -1.0
 JAW_OPENING = 0.08  # metres between the open jaws' inner faces
 _FOOTPRINT_INSET = 0.01  # metres: a block's bottom corners moved this far inward before asking what they rest on, so
 #   that a neighbour it only touches at an edge does not count as its support
+_LYING = np.sqrt(0.5)  # a block axis whose projection on the table is this long lies within 45 degrees of it
 _GRASP_TOLERANCE = 0.005  # metres: the grasp point may lie this far outside a block and still hold it
 
 
@@ -68,10 +69,17 @@ class Scene:
         return float(self.corners(i)[:, 2].min())
 
     def yaw(self, i: int) -> float:
-        """Heading of block i's y axis projected on the table, minus 90 degrees (0 for an
-        axis-aligned block)."""
-        y = self.X_WB[i].rotation().matrix()[:, 1]
-        return float(np.arctan2(y[1], y[0]) - np.pi / 2)
+        """Heading of the jaws over block i (radians, 0 for an axis-aligned block): its y axis projected on
+        the table, minus 90 degrees. A block tipped so that its y axis stands more than 45 degrees from the
+        table has another axis lying on it, whose heading is taken instead (x as it is, z in y's place):
+        the projection of a standing axis is a heading of a few millimetres, which turned the jaws across
+        a tipped cube's corners."""
+        x, y, z = (axis[:2] for axis in self.X_WB[i].rotation().matrix().T)
+        if np.linalg.norm(y) >= _LYING:
+            return float(np.arctan2(y[1], y[0]) - np.pi / 2)
+        if np.linalg.norm(x) >= np.linalg.norm(z):
+            return float(np.arctan2(x[1], x[0]))
+        return float(np.arctan2(z[1], z[0]) - np.pi / 2)
 
     def offset_axis_xy(self, i: int) -> np.ndarray:
         """Unit vector on the table along which grasp and release offsets of block i move.
@@ -80,11 +88,13 @@ class Scene:
         jaw heading turns by 180 degrees) and the state X holds no yaw, so the axis is chosen from
         what X says: the long axis of a bar, for a cube the horizontal block axis nearest world
         +y, always signed toward world +y (toward +x when it lies across y). For an axis-aligned
-        block it is world +y, as in the paper's world.
+        block it is world +y, as in the paper's world. Only the block's axes that lie within 45
+        degrees of the table count (a bar standing on its end offers its short axes).
         """
         R = self.X_WB[i].rotation().matrix()
-        axes = [R[:2, 1]] if self.types[i] == LARGE else [R[:2, 0], R[:2, 1]]
-        axes = [a / np.linalg.norm(a) for a in axes if np.linalg.norm(a) > 1e-6] or [np.array([0.0, 1.0])]
+        long_lies = np.linalg.norm(R[:2, 1]) >= _LYING
+        axes = [R[:2, 1]] if self.types[i] == LARGE and long_lies else [R[:2, k] for k in range(3)]
+        axes = [a / np.linalg.norm(a) for a in axes if np.linalg.norm(a) >= _LYING] or [np.array([0.0, 1.0])]
         axis = max(axes, key=lambda a: abs(a[1]))
         flip = axis[1] < -1e-9 or (abs(axis[1]) <= 1e-9 and axis[0] < 0)
         return -axis if flip else axis

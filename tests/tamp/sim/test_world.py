@@ -82,6 +82,40 @@ def test_a_bar_across_y_offsets_toward_world_x():
         np.testing.assert_allclose(bar.offset_axis_xy(0), [1.0, 0.0], atol=1e-9)
 
 
+@pytest.mark.parametrize("block", ["small", "large"])
+def test_a_tipped_block_is_gripped_across_the_faces_that_stand(block):
+    """A block tipped onto its side (its y axis standing) is gripped and offset along an axis that lies on the
+    table: not along the few-millimetre projection of the standing one, which turned the jaws across a cube's
+    corners so that the descent collided."""
+    from pydrake.math import RigidTransform, RollPitchYaw
+
+    from tamp.sim.skill import Scene
+
+    t = vocabulary.SMALL if block == "small" else vocabulary.LARGE
+    for roll, heading in ((-np.pi / 2, 0.3), (np.pi / 2 - 1e-3, -0.2)):
+        pose = RigidTransform(RollPitchYaw(roll, 0.0, heading), [0.6, 0.1, 0.025])
+        tipped = Scene(np.array([t]), [pose])
+        jaws = tipped.yaw(0)
+        assert abs(np.sin(2 * (jaws - heading))) < 1e-6  # the jaws square to the faces (a quarter turn either way)
+        axis = tipped.offset_axis_xy(0)
+        assert np.linalg.norm(axis) == pytest.approx(1.0)
+        assert abs(np.sin(2 * (np.arctan2(axis[1], axis[0]) - heading))) < 1e-6  # along a face normal
+
+
+def test_a_cube_tipped_on_its_side_is_picked(world):
+    from pydrake.math import RigidTransform, RollPitchYaw
+
+    from tamp.sim.kinematics import Q_HOME
+    from tamp.sim.skill import Scene
+
+    world.reset(X=scene(((0.45, -0.08, 0.025), SMALL), ((0.7, 0.2, 0.025), LARGE)))
+    tipped = RigidTransform(RollPitchYaw(-np.pi / 2, 0.0, 0.007), [0.452, -0.083, 0.025])
+    world.set_scene(Scene(np.array([vocabulary.SMALL, vocabulary.LARGE]), [tipped, world.scene.X_WB[1]]), Q_HOME)
+    X1, info = world.step(PickPlace(0, 0, 0, 1))
+    assert info.status == "ok" and info.grasped == 0, info.reason
+    assert X1[0, 1] == pytest.approx(-0.083 + 0.075, abs=0.01)
+
+
 def test_grasp_beside_a_cube_grasps_nothing(world):
     X0 = world.reset(X=scene(((0.6, 0.1, 0.025), SMALL), ((0.7, -0.15, 0.025), LARGE)))
     X1, info = world.step(PickPlace(0, 1, 1, 0))
