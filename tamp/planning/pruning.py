@@ -14,9 +14,11 @@ place it on: another, one or two offsets away, may put it right there. The objec
 point closest (2-D) to o_i's goal is added as a third target when it is not the closest object
 (at most 27 actions per misplaced object). From 4 blocks on the closest object is often the wrong
 one, and without this target the search runs to its node budget (docs/beyond-the-paper.md). For a goal
-above the table, the object closest (3-D) to the place one block height below the goal, the one the
-block would rest on, is a target too (at most 36 actions): the top of a stack, where the object
-closest in 2-D may be its bottom (a tower of three bars was otherwise reached only by detours).
+above the table, the object the block would rest on is a target too (at most 36 actions): of the objects
+at the level one block height below the goal, the one with the release point closest to it (the top of a
+stack, where the object closest in 2-D may be its bottom: a tower of three bars was otherwise reached only
+by detours; or a bar beside the goal's column, on whose end the block rests); with no object at that level
+(a leaning block's goal), the object closest (3-D) to the place one block height below the goal.
 """
 from __future__ import annotations
 
@@ -28,6 +30,7 @@ from tamp.planning.vocabulary import BLOCK_HEIGHT, OFFSET_STEP, OFFSETS, ON_TABL
 _PAIRS = np.array([(g, r) for g in OFFSETS for r in OFFSETS], dtype=np.int64)  # the 9 offset pairs
 # metres: where a placed block's centre ends relative to its target object's, (r - g) * OFFSET_STEP along y
 _RELEASE_SHIFTS = np.array([(0.0, s * OFFSET_STEP) for s in range(-2, 3)])
+_LEVEL = BLOCK_HEIGHT / 2  # metres: an object whose centre is this close to a height stands at that level of a stack
 
 
 def misplaced_objects(X: np.ndarray, X_goal: np.ndarray, misplaced: float = EPS_SUCCESS,
@@ -61,20 +64,24 @@ def goal_oriented_actions(X: np.ndarray, X_goal: np.ndarray, misplaced: float = 
             reach = np.linalg.norm(points[None] - goals[:, None], axis=3).min(axis=2)  # (w, n)
             reach[mine] = np.inf
             best = np.argmin(reach, axis=1)
-            below = _below_goals(X, X_goal[wrong], mine, closest)
+            below = _below_goals(X, X_goal[wrong], mine, closest, reach)
         targets = [list(dict.fromkeys(row)) for row in zip(closest.tolist(), best.tolist(), below.tolist(),
                                                             wrong.tolist())]
     return np.concatenate([_actions_onto(i, row) for i, row in zip(wrong, targets)])
 
 
-def _below_goals(X: np.ndarray, goals: np.ndarray, mine: tuple, closest: np.ndarray) -> np.ndarray:
-    """Per goal position (w, 3): for a goal above the table, the object closest (3-D) to the place one block
-    height below it, which a block placed there rests on: the top of a stack, where the object closest in 2-D
-    may be the bottom (a tower's goal); for a goal on the table, `closest`."""
+def _below_goals(X: np.ndarray, goals: np.ndarray, mine: tuple, closest: np.ndarray, reach: np.ndarray) -> np.ndarray:
+    """Per goal position (w, 3): for a goal above the table, the object a block placed there rests on: of the
+    objects at the level one block height below it, the one whose release point (`reach`, (w, n) metres) is
+    closest; with none at that level, the object closest (3-D) to the place one block height below it; for a
+    goal on the table, `closest`."""
     support = goals[:, None, :3] - np.array([0.0, 0.0, BLOCK_HEIGHT])
     dist = np.linalg.norm(X[None, :, :3] - support, axis=2)  # (w, n)
     dist[mine] = np.inf
-    return np.where(goals[:, 2] > ON_TABLE, np.argmin(dist, axis=1), closest)
+    level = np.abs(X[None, :, 2] - support[:, :, 2]) < _LEVEL  # (w, n): the objects at the height it rests on
+    level[mine] = False
+    on_level = np.where(level.any(axis=1), np.argmin(np.where(level, reach, np.inf), axis=1), np.argmin(dist, axis=1))
+    return np.where(goals[:, 2] > ON_TABLE, on_level, closest)
 
 
 def _actions_onto(i: int, targets) -> np.ndarray:

@@ -65,6 +65,18 @@ def test_a_goal_on_a_stack_offers_the_top_of_the_stack():
     assert set(goal_oriented_actions(Y, G)[:, 2]) == {2, 0}
 
 
+def test_a_goal_on_the_end_of_a_raised_bar_offers_that_bar():
+    # bar 2 lies on bar 1, 7.5 cm along it; bar 0's goal is on bar 2's end, right above bar 1's centre: the object
+    # closest in 2-D and the one closest to the place below the goal is bar 1, 5 cm lower, which the goal does not
+    # rest on; the bar at the level below the goal, whose release point +1 is the goal, is offered too
+    Y = np.array([[0.61, -0.12, 0.025, 0, 1], [0.776, 0.189, 0.025, 0, 1], [0.776, 0.114, 0.075, 0, 1]])
+    G = Y.copy()
+    G[0, :3] = (0.776, 0.189, 0.125)
+    ours = goal_oriented_actions(Y, G)
+    assert set(ours[:, 2]) == {1, 2, 0}
+    assert (0, 0, 2, 1) in {tuple(a) for a in ours.tolist()}
+
+
 @pytest.mark.parametrize("plan", [[(1, 0, 2, 0)], [(1, 0, 2, 0), (0, -1, 0, 1)],
                                   [(2, 0, 0, 1), (1, 0, 2, 0), (0, 1, 0, -1)]])
 def test_search_finds_plans_that_reach_the_goal(plan):
