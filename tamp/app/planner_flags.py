@@ -150,8 +150,8 @@ def add_planner_arguments(p: argparse.ArgumentParser, feasibility: bool = True) 
                    help="the continuous search (cfs, and bilevel's Level 2) prunes actions by the paper's rule alone: "
                    "a misplaced block goes onto the object closest to its goal or onto itself (default: also onto "
                    "the object with an offset release point closest to its goal and, for a goal above the table, onto "
-                   "the object right below it (the top of a stack), each when that is another object; "
-                   "`bilevel_alg1` always uses the paper's rule)")
+                   "the object it would rest on (the top of a stack, or a raised bar on whose end it rests), each "
+                   "when that is another object; `bilevel_alg1` always uses the paper's rule)")
     p.add_argument("--time-limit", type=positive_float, default=default.search.time_limit, metavar="SECONDS",
                    help="wall-clock bound on every planning call (each round of a closed loop is one): its continuous "
                    "searches end and no further plan is refined once it has run this long, and the result says so "
