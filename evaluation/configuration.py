@@ -86,9 +86,12 @@ class EvalConfig:
             out["loop_commit"] = p.loop.commit
         # the loop that does not know k: the same, by the fields other than those recorded above
         above = ("keep_plan", "on_course", "commit")
-        later = {"stop_margin": LoopConfig.stop_margin}  # fields added since, left out at their default (older
-        #   directories stay resumable)
+        # fields added since, left out at the value that plans as the loop did before them (older directories stay
+        #   resumable; a directory made before the loop remembered misses is not resumed with it)
+        later = {"stop_margin": LoopConfig.stop_margin, "remember": None}
         loop = {k: v for k, v in dataclasses.asdict(p.loop).items() if k not in above}
+        if p.loop.remember is None:
+            del loop["remember_alike"]
         loop = {k: v for k, v in loop.items() if k not in later or v != later[k]}
         if loop != IMPLICIT_LOOP:
             out["loop"] = loop

@@ -64,7 +64,8 @@ class Row:
     effect_error_m: list[float | None] | None
     step_miss_m: list[float | None] | None  # the same with the worst block: how far it landed from its prediction
     # how the run ended: the closed loop's `LoopStop` (None: open loop), the last planning call's search status,
-    #   kinematic rejections and predicted error (`tamp.planning.causes.stop_record`); faults injected
+    #   kinematic rejections and predicted error (`tamp.planning.causes.stop_record`); faults injected; the misses
+    #   the loop that does not know k remembered (`remembered`, `tamp.planning.experience`)
     stop: dict | None
     cause: list[str] | None  # [cause, sentence] of a failed row (`row_cause`, recomputed from these fields)
     # per step executed or attempted, the step through the learned abstraction (`tamp.planning.steps`): operator,
@@ -189,6 +190,17 @@ def prediction_records(models, states: Sequence[np.ndarray], actions) -> list[di
     return [p.record() for p in step_predictions(models.dynamics, states, actions)]
 
 
+def expected_misses(records: list[dict] | None, loop) -> list[dict] | None:
+    """A closed loop's `predictions` with, per executed step, how far the block missed most landed from where the
+    loop expected it (`expected_miss_m`: the Dynamics Model with the misses the loop trusted then,
+    `tamp.planning.experience`), when the loop kept its experience."""
+    if records is None or not loop.expected:
+        return records
+    observed = [np.asarray(X, dtype=float)[:, :3] for X in loop.states[1:]]
+    return [{**r, "expected_miss_m": round(float(np.linalg.norm(X - e, axis=1).max(initial=0.0)), 6)}
+            for r, X, e in zip(records, observed, loop.expected)]
+
+
 def transition_records(states: Sequence[np.ndarray], actions, infos) -> list[dict]:
     """A row's `transitions`: per executed action (X, a, X', grasped, status), positions to 0.01 mm."""
     out = []
@@ -217,6 +229,7 @@ def failure_record(failure) -> dict | None:
 
 
 __all__ = ["ERROR_OUTCOME", "MAX_CANDIDATES", "ROW_KEYS", "Row", "TIMING_KEYS", "as_lists", "candidate_records",
+           "expected_misses",
            "failure_record", "feasibility_fields", "has_abstraction", "level1_stages", "level1_time",
            "prediction_records", "round_m", "rounded_all", "row_cause", "row_outcome", "search_expanded",
            "step_records", "transition_records"]

@@ -40,6 +40,7 @@ from evaluation.row import (
     Row,
     as_lists,
     candidate_records,
+    expected_misses,
     failure_record,
     feasibility_fields,
     has_abstraction,
@@ -254,9 +255,10 @@ class Evaluator:
                 "rounds": max(len(out.rounds) - 1, 0), "effect_error_m": rounded_all(errors),
                 "step_miss_m": rounded_all(dynamics_errors(models, out.states, out.executed, worst=True)),
                 "stop": {**stop_record(out.stop, out.rounds[-1] if out.rounds else None),
-                         **({"faults": run.faults} if run.faults else {})},
+                         **({"faults": run.faults} if run.faults else {}),
+                         **({"remembered": len(out.experience.trusted)} if out.experience is not None else {})},
                 "steps": self._loop_steps(problem, models, run, errors or []),
-                "predictions": prediction_records(models, out.states, out.executed),
+                "predictions": expected_misses(prediction_records(models, out.states, out.executed), out),
                 "transitions": transition_records(out.states, out.executed, run.infos)}
 
     def _loop_steps(self, problem: Problem, models, run, errors: Sequence[float]) -> list[dict] | None:

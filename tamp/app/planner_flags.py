@@ -96,6 +96,14 @@ def add_planner_arguments(p: argparse.ArgumentParser, feasibility: bool = True) 
                    "predicted within --confident, so that noisy observations that put the blocks within the "
                    "tolerance while they are not do not end it (default 0: exact observations; with `tamp evaluate "
                    "--noise SIGMA`, SIGMA)")
+    p.add_argument("--remember", type=positive_float, default=default.loop.remember, metavar="METRES",
+                   help="the closed loop that does not know k (bilevel_loop) remembers an action that lands this far "
+                   "from the Dynamics Model's prediction; once the world has done it twice alike, the loop predicts "
+                   "it as the world did it from states whose other blocks lie this close, until the world does "
+                   f"otherwise there (default {default.loop.remember:g} m: the loop stops trying a move the world "
+                   "keeps undoing, such as a cube on the low end of a tilted bar)")
+    p.add_argument("--no-remember", dest="remember", action="store_const", const=None,
+                   help="the closed loop plans every round with the Dynamics Model alone, whatever it has seen")
     p.add_argument("--loop-search-budget", type=positive_int, default=default.loop.search_budget, metavar="EXPANSIONS",
                    help="the closed loop (--replan; bilevel_loop) gives up when its rounds' continuous searches have "
                    f"spent this many expansions (default {default.loop.search_budget}: twice one search's budget, "
@@ -205,7 +213,7 @@ PLANNER_FLAGS: dict[str, dict[str, str]] = {
     "loop": {"keep_plan": "keep_plan", "on_course": "on_course", "commit": "commit", "max_actions": "max_actions",
              "widen": "widen",
              "search_budget": "loop_search_budget", "greedy_search_budget": "loop_greedy_search_budget",
-             "stall": "loop_stall", "stop_margin": "stop_margin"},
+             "stall": "loop_stall", "stop_margin": "stop_margin", "remember": "remember"},
 }
 # flags whose None means "the default, or what the run's faults imply" (`tamp evaluate --noise` sets the stop margin)
 AUTO_FLAGS = ("stop_margin",)
@@ -213,7 +221,7 @@ AUTO_FLAGS = ("stop_margin",)
 NOT_EXPOSED = {"level1": ("seed", "time_budget", "verify_all", "alternatives", "alternatives_total", "nonempty"),
                "verify": ("tau_verify", "eps", "misplaced"), "kinematics": ("max_refinements",),
                "search": ("weight", "resolution", "max_depth", "batched", "prune", "noise"),
-               "loop": ("widen_expansions", "revisit", "progress")}
+               "loop": ("widen_expansions", "revisit", "progress", "remember_alike")}
 
 
 def planner_config(args: argparse.Namespace) -> PlanConfig:
@@ -230,8 +238,10 @@ def planner_config(args: argparse.Namespace) -> PlanConfig:
 LOOP_FLAGS = {"keep_plan": "--no-keep-plan", "on_course": "--on-course/--no-on-course",
               "max_actions": "--max-actions", "search_budget": "--loop-search-budget",
               "greedy_search_budget": "--loop-greedy-budget", "widen": "--no-widen",
-              "stall": "--loop-stall", "commit": "--no-commit", "stop_margin": "--stop-margin"}
-UNTIL_GOAL_FIELDS = ("commit", "max_actions", "search_budget", "greedy_search_budget", "widen", "stall", "stop_margin")
+              "stall": "--loop-stall", "commit": "--no-commit", "stop_margin": "--stop-margin",
+              "remember": "--remember/--no-remember"}
+UNTIL_GOAL_FIELDS = ("commit", "max_actions", "search_budget", "greedy_search_budget", "widen", "stall", "stop_margin",
+                     "remember")
 
 
 def loop_flags_given(config: PlanConfig, until_goal_only: bool = False) -> list[str]:

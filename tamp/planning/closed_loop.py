@@ -41,12 +41,13 @@ from __future__ import annotations
 import itertools
 import time
 from collections import Counter
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Callable, Sequence
 
 import numpy as np
 
 from tamp.planning.config import PlanConfig
+from tamp.planning.experience import Experience, remembers
 from tamp.planning.kinematic_check import Feasibility
 from tamp.planning.models import Models
 from tamp.planning.planners import METHODS, plan, plan_cfs
@@ -65,6 +66,9 @@ class ClosedLoopResult:
     eps: float
     reason: str = ""
     stop: LoopStop | None = None  # how the loop ended
+    experience: Experience | None = None  # the misses the loop that does not know k remembers (`LoopConfig.remember`)
+    expected: list[np.ndarray] = field(default_factory=list)  # with experience: the (n, 3) positions, metres, the
+    #   loop expected after each executed action (the Dynamics Model with the misses it trusted then)
 
     @property
     def X_final(self) -> np.ndarray:
@@ -149,10 +153,14 @@ def loop_until_goal(method: str, models: Models, X_init, X_goal, step: Step, cfg
     """The loop that does not know k (`bilevel_loop`): one action a round until the goal, within the action
     and search budgets of cfg.loop; a round without a plan widens its search, else steps toward the closest
     state its searches found; actions that led back to an observed state are left out (`revisits`)."""
-    out = ClosedLoopResult([], [], [np.asarray(X_init, dtype=float)], np.asarray(X_goal, dtype=float), cfg.verify.eps)
+    out = ClosedLoopResult([], [], [np.asarray(X_init, dtype=float)], np.asarray(X_goal, dtype=float), cfg.verify.eps,
+                           experience=None if cfg.loop.remember is None else Experience(cfg.loop.remember,
+                                                                                        cfg.loop.remember_alike))
+    plain = models
     inside = aimed_inside(cfg)
     budget = cfg.loop.search_budget_for(len(out.X_goal), cfg.search.greedy_from)
     spent = 0  # continuous-search expansions of every round so far
+    remembered: list[str] = []  # the miss the last executed action added to the loop's experience, said once
     for r in itertools.count():
         X = out.X_final
         if at_goal(X, out.X_goal, inside.verify.eps):
@@ -165,11 +173,13 @@ def loop_until_goal(method: str, models: Models, X_init, X_goal, step: Step, cfg
             return out.end(LoopStop.BUDGET, f"{spent} search expansions spent without reaching the goal (the "
                                             f"loop's search budget)")
         avoid = revisits(out, cfg)
+        models = experienced(plain, out.experience)
         if at_goal(X, out.X_goal, cfg.verify.eps):  # within eps, not within the stop margin: one clearly closer step
             result = _round(method, models, X, out.X_goal, out, _within(inside, cfg.loop.widen_expansions,
                                                                         budget - spent), planner, kinematics, avoid,
                             until_goal=True)
             spent += _expanded(result)
+            result = _with_reasons(result, remembered)
             out.rounds.append(result)
             if on_round is not None:
                 on_round(r, result)
@@ -179,7 +189,7 @@ def loop_until_goal(method: str, models: Models, X_init, X_goal, step: Step, cfg
                 return out.end(LoopStop.GOAL, f"the observed state is within eps of the goal "
                                               f"({goal_error(X, out.X_goal) * 100:.1f} cm), and no plan is predicted "
                                               f"closer than {bar * 100:.1f} cm")
-            out.execute(result.plan[:1], step)
+            remembered = _execute_one(out, result.plan[0], step, plain)
             continue
         result = _round(method, models, X, out.X_goal, out, _within(cfg, cfg.search.max_expansions, budget - spent),
                         planner, kinematics, avoid, until_goal=True)
@@ -192,12 +202,37 @@ def loop_until_goal(method: str, models: Models, X_init, X_goal, step: Step, cfg
                 spent += _expanded(result)
             else:  # no budget left to widen: what the round's search found may still bring the blocks closer
                 result = toward_closest(X, out.X_goal, cfg, result, [result.search])
-        ended = _planned(out, r, result, on_round, budget if spent >= budget else None)
+        ended = _planned(out, r, _with_reasons(result, remembered), on_round, budget if spent >= budget else None)
         if ended is not None:
             return ended
         assert result.plan is not None  # `_planned` ended the loop otherwise
-        out.execute(result.plan[:1], step)
+        remembered = _execute_one(out, result.plan[0], step, plain)
     raise AssertionError("unreachable")
+
+
+def experienced(models: Models, experience: Experience | None) -> Models:
+    """`models` whose Dynamics Model predicts what the world did where the loop missed before (`experience`)."""
+    if experience is None or not experience.trusted or models.dynamics is None:
+        return models
+    return replace(models, dynamics=experience.over(models.dynamics))
+
+
+def _execute_one(out: ClosedLoopResult, action: PickPlace, step: Step, models: Models) -> list[str]:
+    """Send one action to the world and observe; remember it if the Dynamics Model (of `models`, with the loop's
+    experience) missed it. The sentence that says so for the next round's reasons (none: not missed)."""
+    if out.experience is None or models.dynamics is None:
+        out.execute([action], step)
+        return []
+    X = out.states[-1]
+    model = out.experience.over(models.dynamics)
+    out.expected.append(X[:, :3] + model.predict_effect(X, np.asarray([tuple(action)], dtype=np.int64))[0])
+    out.execute([action], step)
+    miss = out.experience.remember(models.dynamics, out.states[-2], action, out.states[-1])
+    return [miss.describe()] if out.experience.trusts(miss) and miss is not None else []
+
+
+def _with_reasons(result: PlanResult, first: list[str]) -> PlanResult:
+    return replace(result, reasons=[*first, *result.reasons]) if first else result
 
 
 def _closer_than(X: np.ndarray, X_goal: np.ndarray, inside: PlanConfig) -> float:
@@ -392,9 +427,12 @@ def keep_rest(models: Models, X: np.ndarray, X_goal: np.ndarray, last: PlanResul
         return without_plan("keep: the last plan has no actions left")
     v: Verification | None = None
     deviation = off_course(X, last)
-    if cfg.loop.on_course is not None and deviation <= cfg.loop.on_course:  # the plan's own prediction of the rest
+    on_course = cfg.loop.on_course is not None and deviation <= cfg.loop.on_course
+    if on_course:  # the plan's own prediction of the rest, unless the loop has since seen one of its steps missed
         assert last.predicted is not None  # a finite deviation needs the prediction
         trajectory = np.concatenate([np.asarray(X, dtype=float)[None], last.predicted[2:]])
+        on_course = not remembers(models.dynamics, trajectory[:-1], rest)
+    if on_course:
         planned = Verification(tuple(tuple(int(a) for a in action) for action in rest), trajectory,
                                goal_errors(trajectory[-1], X_goal), cfg.verify.tau_verify)
         if planned.error < (cfg.verify.confident if on_course_within is None else on_course_within):

@@ -120,11 +120,15 @@ class LoopConfig:
     progress: float = 0.02  # metres, summed over blocks: without a plan, a step toward the closest state the round's
     #   searches expanded is taken only if that state is this much closer to the goal
     revisit: float = 0.01  # metres: back this close to an observed state, leave out the actions taken from there
+    # metres: an action that lands this far from its prediction, alike `remember_alike` times, is predicted for the
+    #   rest of the loop as the world did it, from states whose deciding blocks lie this close (`experience`; None: off)
+    remember: float | None = 0.02
+    remember_alike: int = 2  # 1 trusted a single outcome, which the world does not always repeat (a tilted bar)
     stop_margin: float = 0.0  # metres: the loop that does not know k stops this far inside eps; short of that but
     #   within eps it steps only on a plan predicted within confident (0: exact observations; `--noise` sets sigma)
 
     def __post_init__(self) -> None:
-        _positive("LoopConfig", on_course=self.on_course)
+        _positive("LoopConfig", on_course=self.on_course, remember=self.remember)
         if not self.revisit >= 0 or not self.progress >= 0 or not self.stop_margin >= 0:
             raise UserError(f"LoopConfig.revisit, .progress and .stop_margin must be distances of 0 m or more, got "
                             f"{self.revisit}, {self.progress} and {self.stop_margin}")
@@ -133,6 +137,8 @@ class LoopConfig:
         if self.greedy_search_budget is not None and self.greedy_search_budget < 1:
             raise UserError(f"LoopConfig.greedy_search_budget must be a positive number of expansions or None, got "
                             f"{self.greedy_search_budget}")
+        if self.remember_alike < 1:
+            raise UserError(f"LoopConfig.remember_alike must be 1 or more, got {self.remember_alike}")
         if self.max_actions < 1 or self.widen_expansions < 1 or self.search_budget < 1:
             raise UserError(f"the closed loop needs at least 1 action and 1 expansion of its searches, got "
                             f"{self.max_actions} actions, {self.widen_expansions} expansions widened and a search "

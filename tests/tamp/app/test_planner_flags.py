@@ -111,16 +111,20 @@ def test_the_defining_settings_of_a_results_directory_are_unchanged():
                "symbolic_backend": "python",
                "tau_verify_m": 0.07,
                "loop": {"max_actions": 20, "widen": True, "widen_expansions": 400, "search_budget": 3000,
-                        "greedy_search_budget": 1500, "stall": 300, "progress": 0.02, "revisit": 0.01}}
+                        "greedy_search_budget": 1500, "stall": 300, "progress": 0.02, "revisit": 0.01,
+                        "remember": 0.02, "remember_alike": 2}}
     assert EvalConfig().defining() == default
+    # a directory made before the loop remembered its misses plans as with --no-remember
+    forgetful = EvalConfig(planner=PlanConfig(loop=LoopConfig(remember=None))).defining()
+    assert forgetful == {**default, "loop": {k: v for k, v in default["loop"].items()
+                                             if k not in ("remember", "remember_alike")}}
     # a directory made with the loop's settings of before (no "loop" entry) is not resumed with today's
-    made_before = EvalConfig(planner=PlanConfig(loop=LoopConfig(**IMPLICIT_LOOP))).defining()
+    made_before = EvalConfig(planner=PlanConfig(loop=LoopConfig(**IMPLICIT_LOOP, remember=None))).defining()
     assert "loop" not in made_before and made_before != default
     kept = EvalConfig(planner=PlanConfig(loop=LoopConfig(keep_plan=False, on_course=None))).defining()
     assert kept == {**default, "keep_plan": False, "on_course_m": None}
     short = EvalConfig(planner=PlanConfig(loop=LoopConfig(max_actions=5))).defining()
-    assert short["loop"] == {"max_actions": 5, "widen": True, "widen_expansions": 400, "search_budget": 3000,
-                             "greedy_search_budget": 1500, "stall": 300, "progress": 0.02, "revisit": 0.01}
+    assert short["loop"] == {**default["loop"], "max_actions": 5}
     wander = EvalConfig(planner=PlanConfig(loop=LoopConfig(commit=False))).defining()
     assert wander == {**default, "loop_commit": False}
     slow = EvalConfig(planner=PlanConfig(level1=Level1Config(symbolic_time_limit=3.0))).defining()
