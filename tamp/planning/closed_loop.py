@@ -21,6 +21,8 @@ Two loops share one round (`_round`: plan, or keep the rest of the last plan whi
   `LoopConfig.progress` closer (the world may do better than the model predicts, and the next round
   plans from there). Back at a state it observed before (`revisits`), it
   leaves out the actions it took from there, which would start the same cycle again in a deterministic world.
+  An action that misses what the loop expected twice alike is from then on predicted as the world did it
+  (`LoopConfig.remember`, `tamp.planning.experience`), so the loop stops trying a move the world keeps undoing.
   With noisy observations (`LoopConfig.stop_margin`, set from `tamp evaluate --noise`) it stops only that far
   inside eps; within eps but short of that, it takes a step only on a plan predicted within
   `verify.confident` (`aimed_inside`, `_closer_than`), and otherwise stops at what it observes.
@@ -156,7 +158,6 @@ def loop_until_goal(method: str, models: Models, X_init, X_goal, step: Step, cfg
     out = ClosedLoopResult([], [], [np.asarray(X_init, dtype=float)], np.asarray(X_goal, dtype=float), cfg.verify.eps,
                            experience=None if cfg.loop.remember is None else Experience(cfg.loop.remember,
                                                                                         cfg.loop.remember_alike))
-    plain = models
     inside = aimed_inside(cfg)
     budget = cfg.loop.search_budget_for(len(out.X_goal), cfg.search.greedy_from)
     spent = 0  # continuous-search expansions of every round so far
@@ -173,9 +174,9 @@ def loop_until_goal(method: str, models: Models, X_init, X_goal, step: Step, cfg
             return out.end(LoopStop.BUDGET, f"{spent} search expansions spent without reaching the goal (the "
                                             f"loop's search budget)")
         avoid = revisits(out, cfg)
-        models = experienced(plain, out.experience)
+        seen = experienced(models, out.experience)  # the Dynamics Model with the misses the loop trusts
         if at_goal(X, out.X_goal, cfg.verify.eps):  # within eps, not within the stop margin: one clearly closer step
-            result = _round(method, models, X, out.X_goal, out, _within(inside, cfg.loop.widen_expansions,
+            result = _round(method, seen, X, out.X_goal, out, _within(inside, cfg.loop.widen_expansions,
                                                                         budget - spent), planner, kinematics, avoid,
                             until_goal=True)
             spent += _expanded(result)
@@ -189,14 +190,14 @@ def loop_until_goal(method: str, models: Models, X_init, X_goal, step: Step, cfg
                 return out.end(LoopStop.GOAL, f"the observed state is within eps of the goal "
                                               f"({goal_error(X, out.X_goal) * 100:.1f} cm), and no plan is predicted "
                                               f"closer than {bar * 100:.1f} cm")
-            remembered = _execute_one(out, result.plan[0], step, plain)
+            remembered = _execute_one(out, result.plan[0], step, models)
             continue
-        result = _round(method, models, X, out.X_goal, out, _within(cfg, cfg.search.max_expansions, budget - spent),
+        result = _round(method, seen, X, out.X_goal, out, _within(cfg, cfg.search.max_expansions, budget - spent),
                         planner, kinematics, avoid, until_goal=True)
         spent += _expanded(result)
         if cfg.loop.widen and not (result.solved and result.plan):
             if spent < budget:
-                result = widened_search(method, models, X, out.X_goal,
+                result = widened_search(method, seen, X, out.X_goal,
                                         _within(cfg, cfg.loop.widen_expansions, budget - spent), kinematics, result,
                                         avoid)
                 spent += _expanded(result)
@@ -206,7 +207,7 @@ def loop_until_goal(method: str, models: Models, X_init, X_goal, step: Step, cfg
         if ended is not None:
             return ended
         assert result.plan is not None  # `_planned` ended the loop otherwise
-        remembered = _execute_one(out, result.plan[0], step, plain)
+        remembered = _execute_one(out, result.plan[0], step, models)
     raise AssertionError("unreachable")
 
 
