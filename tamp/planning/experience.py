@@ -1,14 +1,17 @@
 """What the world did in this loop: the Dynamics Model corrected where the loop meets a miss again.
 
 The loop that does not know k executes one action a round and observes the result. When an action lands
-`LoopConfig.remember` metres or more from the prediction, the loop remembers the observed transition. For the
-rest of the loop, whenever a planning call asks the model about the same action from a state in which the
-blocks that decide its outcome lie within that distance of where they were (every block but the picked one,
-when it is carried to another block; all of them for a shift along itself), the prediction is what the world
-did: every block displaced as it was, a carried block brought to where it landed. A cube placed on the low end
-of a tilted bar slides off to the same spot every time; without this the planner, seeing the same optimistic
-prediction from wherever the cube lay, tried it again and again until its actions ran out (`revisits` does not
-see such repeats: the cube starts elsewhere each time).
+`LoopConfig.remember` metres or more from the prediction, the loop records the observed transition. Once the
+world has done the same action alike `LoopConfig.remember_alike` times (2), the loop trusts the miss: whenever a
+planning call asks the model about that action from a state in which the blocks that decide its outcome lie
+within that distance of where they were (every block but the picked one, when it is carried to another block;
+all of them for a shift along itself), the prediction is what the world did: every block displaced as it was, a
+carried block brought to where it landed. When the world does otherwise there, the miss was scatter (the
+picked block's yaw, which the state does not hold, can decide a placement) and is trusted no longer.
+
+A cube placed on the low end of a tilted bar slides off to the same spot every time; without this the planner,
+seeing the same optimistic prediction from wherever the cube lay, tried it again and again until its actions ran
+out (`revisits` does not see such repeats: the cube starts elsewhere each time).
 
 This is data aggregation at the scale of one episode (`tamp practice` aggregates executed transitions between
 rounds of training): a nearest-neighbour model of the world's misses in front of the learned one, with no
