@@ -112,8 +112,9 @@ def print_result(result: PlanResult, tau: float, indent: str = "") -> None:
         print(f"{p}  continuous search: {s.reason}; {s.generated} successors in {s.predict_calls} model calls")
     for k, a in enumerate(result.plan or []):
         print(f"{p}  action {k}: {fmt_action(a)}")
-    for reason in result.reasons if not result.solved else [r for r in result.reasons if r.startswith("kept")]:
-        print(f"{p}  {reason}")  # why no plan, or why the last plan was kept (on course, or its rollout)
+    shown = ("kept", "remembered")  # why the last plan was kept (on course, or its rollout); a miss the loop trusts
+    for reason in result.reasons if not result.solved else [r for r in result.reasons if r.startswith(shown)]:
+        print(f"{p}  {reason}")  # and why no plan
     rejected = result.rejected_dict()
     if rejected is not None:
         for level, counts in rejected.items():

@@ -16,12 +16,12 @@ from guarded import Schema, read_json
 from tamp.errors import UserError
 from tamp.inputs import ACTION, SCENE, blocks_out_of_range
 from tamp.planning.validate import check_scene
-from tamp.planning.vocabulary import PickPlace
+from tamp.planning.vocabulary import PickPlace, action_words
 
 
 def fmt_action(a) -> str:
     """An action as `tamp plan`, `tamp demo` and the per-step view print it."""
-    return f"pick {a[0]} at {a[1]:+d}, place on {a[2]} at {a[3]:+d}"
+    return action_words(a)
 
 
 PLAN = Schema({"type": "object", "required": ["actions"], "additionalProperties": False,

@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from tamp.planning.verify import DynamicsModel, predict_many
+from tamp.planning.vocabulary import action_words
 
 
 @dataclass(frozen=True)
@@ -36,8 +37,8 @@ class Miss:
     missed_m: float     # metres: how far the block missed most landed from the prediction
 
     def describe(self) -> str:
-        return (f"remembered: action {self.action} landed {self.missed_m * 100:.1f} cm from its prediction, as it "
-                f"did before; from states like that one it is predicted as the world did it")
+        return (f"remembered: {action_words(self.action)} landed {self.missed_m * 100:.1f} cm from its prediction, "
+                f"as it did before; from states like that one it is predicted as the world did it")
 
     @property
     def carried(self) -> bool:

@@ -35,6 +35,11 @@ class PickPlace(NamedTuple):
     release_offset: int
 
 
+def action_words(a) -> str:
+    """A pick-place as the commands print it: "pick 0 at +0, place on 1 at -1"."""
+    return f"pick {a[0]} at {a[1]:+d}, place on {a[2]} at {a[3]:+d}"
+
+
 class Infeasible(StrEnum):
     """Why an action was found infeasible: by the cheap check on a predicted scene (the first three)
     or by full refinement (IK, motion planning, grasp, from tamp.sim.refine)."""
