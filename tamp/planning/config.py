@@ -123,7 +123,7 @@ class LoopConfig:
     # metres: an action that lands this far from its prediction, alike `remember_alike` times, is predicted for the
     #   rest of the loop as the world did it, from states whose deciding blocks lie this close (`experience`; None: off)
     remember: float | None = 0.02
-    remember_alike: int = 2  # 1 trusted a single outcome, which the world does not always repeat (a tilted bar)
+    remember_alike: int = 2  # misses alike before one is trusted: one outcome may be scatter (a yaw X does not hold)
     stop_margin: float = 0.0  # metres: the loop that does not know k stops this far inside eps; short of that but
     #   within eps it steps only on a plan predicted within confident (0: exact observations; `--noise` sets sigma)
 

@@ -88,7 +88,9 @@ def test_validation_lives_with_the_fields():
                        (lambda: Level1Config(budget=0), "Level1Config.budget"),
                        (lambda: VerifyConfig(eps=0.0), "VerifyConfig.eps"),
                        (lambda: VerifyConfig(tau_verify=-1.0), "VerifyConfig.tau_verify"),
-                       (lambda: LoopConfig(on_course=0.0), "LoopConfig.on_course")):
+                       (lambda: LoopConfig(on_course=0.0), "LoopConfig.on_course"),
+                       (lambda: LoopConfig(remember=0.0), "LoopConfig.remember"),
+                       (lambda: LoopConfig(remember_alike=0), "LoopConfig.remember_alike")):
         with pytest.raises(UserError, match=field):
             bad()
     assert PlanConfig().with_seed(7).level1 == Level1Config(seed=7)
