@@ -225,10 +225,9 @@ def _execute_one(out: ClosedLoopResult, action: PickPlace, step: Step, models: M
         out.execute([action], step)
         return []
     X = out.states[-1]
-    model = out.experience.over(models.dynamics)
-    out.expected.append(X[:, :3] + model.predict_effect(X, np.asarray([tuple(action)], dtype=np.int64))[0])
+    out.expected.append(out.experience.expect(models.dynamics, X, action))
     out.execute([action], step)
-    miss = out.experience.remember(models.dynamics, out.states[-2], action, out.states[-1])
+    miss = out.experience.remember(models.dynamics, X, action, out.states[-1], expected=out.expected[-1])
     return [miss.describe()] if out.experience.trusts(miss) and miss is not None else []
 
 

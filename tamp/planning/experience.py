@@ -84,12 +84,19 @@ class Experience:
     misses: list[Miss] = field(default_factory=list)
     trusted: list[Miss] = field(default_factory=list)
 
-    def remember(self, model: DynamicsModel, X: np.ndarray, action, X_next: np.ndarray) -> Miss | None:
-        """Record the executed (X, action, X_next) if the plain `model` with the trusted misses missed it by `within`
-        or more, and trust it if the world did it `alike` times; the Miss, or None."""
+    def expect(self, model: DynamicsModel, X: np.ndarray, action) -> np.ndarray:
+        """(n, 3) metres: where the plain `model` with the trusted misses puts the blocks after `action` from X."""
+        X = np.asarray(X, dtype=float)
+        a = np.asarray([tuple(int(v) for v in action)], dtype=np.int64)
+        return X[:, :3] + self.corrected(X[None], a, model.predict_effect(X, a))[0]
+
+    def remember(self, model: DynamicsModel, X: np.ndarray, action, X_next: np.ndarray,
+                 expected: np.ndarray | None = None) -> Miss | None:
+        """Record the executed (X, action, X_next) if it landed `within` or more from `expected` (default: `expect`
+        of the plain `model`), and trust it if the world did it `alike` times; the Miss, or None."""
         X, X_next = np.asarray(X, dtype=float), np.asarray(X_next, dtype=float)
         a = np.asarray([tuple(int(v) for v in action)], dtype=np.int64)
-        predicted = X[:, :3] + self.corrected(X[None], a, model.predict_effect(X, a))[0]
+        predicted = self.expect(model, X, action) if expected is None else expected
         missed = float(np.linalg.norm(X_next[:, :3] - predicted, axis=1).max(initial=0.0))
         if missed < self.within:
             return None
