@@ -15,6 +15,7 @@ from tamp.app.args import (
     positive_int,
     seed,
 )
+from tamp.app.faults import add_fault_arguments, faults_of
 from tamp.app.parallel import add_arguments as add_parallel_arguments
 from tamp.app.planner_flags import add_planner_arguments, backend_help
 from tamp.app.problem import PROTOCOLS
@@ -52,37 +53,12 @@ def _write_report(directory: Path, ablation: Path | None = None) -> Path:
     return write_report(directory, ablation=ablation)
 
 
-def _metres_below(limit: float):
-    def parse(text: str) -> float:
-        try:
-            value = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected a distance in metres, got {text!r}") from None
-        if not 0 <= value < limit:
-            raise argparse.ArgumentTypeError(f"expected 0 <= metres < {limit:g}, got {text}")
-        return value
-    return parse
-
-
-def _push_range(text: str) -> tuple[float, float]:
-    """MIN,MAX metres of `--push` (a single value: exactly that far)."""
-    parts = text.split(",")
-    try:
-        low, high = (float(parts[0]), float(parts[-1])) if len(parts) <= 2 else (None, None)
-    except ValueError:
-        low = high = None
-    if low is None or high is None or not 0 < low <= high < 0.3:
-        raise argparse.ArgumentTypeError(f"expected MIN,MAX metres with 0 < MIN <= MAX < 0.3, got {text!r}")
-    return low, high
-
-
 def _eval_config(args: argparse.Namespace):
     """The EvalConfig of the flags of `_add_run_arguments` (`tamp evaluate`, `tamp refinability`)."""
     from evaluation.configuration import EvalConfig
-    from tamp.app.faults import Faults
     from tamp.app.planner_flags import planner_config
 
-    faults = Faults(noise_m=args.noise, push_m=args.push)
+    faults = faults_of(args)
     planner = planner_config(args)
     if args.stop_margin is None and _runs_until_goal(args.methods):  # the loop knows its observations' noise
         planner = replace(planner, loop=faults.known_to(planner.loop))
@@ -112,12 +88,7 @@ def _add_run_arguments(p: argparse.ArgumentParser, models_help: str, out_help: s
     add_planner_arguments(p, feasibility=False)
     p.add_argument("--oracle-max-plans", type=positive_int, default=20,
                    help="probabilistic_oracle: ranked plans executed at most per problem (default 20)")
-    p.add_argument("--noise", type=_metres_below(0.05), default=0.0, metavar="METRES",
-                   help="closed loops: Gaussian noise of this standard deviation on every x and y the planner "
-                   "observes, as a camera's would (default 0; the world itself is not moved)")
-    p.add_argument("--push", type=_push_range, default=None, metavar="MIN,MAX",
-                   help="closed loops: once per problem, after the first action, push one free block MIN-MAX "
-                   "metres in a random horizontal direction (e.g. 0.03,0.05), as a person or a slip would")
+    add_fault_arguments(p, "closed loops")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
 
 

@@ -16,6 +16,7 @@ that runs until the goal is told the noise (`Faults.known_to`), as a cell's cali
 """
 from __future__ import annotations
 
+import argparse
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
@@ -49,6 +50,14 @@ class Faults:
     def any(self) -> bool:
         return self.noise_m > 0 or self.push_m is not None
 
+    def describe(self) -> str:
+        """The faults in words, as a run will inject them."""
+        said = [] if self.noise_m == 0 else [f"observations with {self.noise_m * 1000:g} mm noise"]
+        if self.push_m is not None:
+            low, high = (f"{v * 100:g}" for v in self.push_m)
+            said.append(f"one free block pushed {low if low == high else low + '-' + high} cm after the first action")
+        return "; ".join(said) or "none"
+
     def known_to(self, loop: LoopConfig) -> LoopConfig:
         """`loop` as a closed loop that knows this noise: it stops `STOP_MARGIN_SIGMAS` sigma inside eps (a block's
         observed distance to its goal scatters by about one sigma around the true one)."""
@@ -63,6 +72,46 @@ class Faults:
         seen[:, :2] += rng.normal(0.0, self.noise_m, size=(len(X), 2))
         return seen if scene is None else keep_apart(seen, scene)
 
+
+
+def _noise(text: str) -> float:
+    """METRES of `--noise`: 0 <= sigma < 5 cm."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a distance in metres, got {text!r}") from None
+    if not 0 <= value < 0.05:
+        raise argparse.ArgumentTypeError(f"expected 0 <= metres < 0.05, got {text}")
+    return value
+
+
+def _push_range(text: str) -> tuple[float, float]:
+    """MIN,MAX metres of `--push` (a single value: exactly that far)."""
+    parts = text.split(",")
+    try:
+        low, high = (float(parts[0]), float(parts[-1])) if len(parts) <= 2 else (None, None)
+    except ValueError:
+        low = high = None
+    if low is None or high is None or not 0 < low <= high < 0.3:
+        raise argparse.ArgumentTypeError(f"expected MIN,MAX metres with 0 < MIN <= MAX < 0.3, got {text!r}")
+    return low, high
+
+
+def add_fault_arguments(p: argparse.ArgumentParser, which: str) -> None:
+    """`--noise` and `--push` (`tamp evaluate`, `tamp plan --replan`); `which`: the loops they disturb, in words."""
+    p.add_argument("--noise", type=_noise, default=0.0, metavar="METRES",
+                   help=f"{which}: Gaussian noise of this standard deviation on every x and y the planner "
+                   "observes, as a camera's would (default 0; the world itself is not moved; the loop that runs "
+                   "until the goal stops that far inside eps unless --stop-margin says otherwise)")
+    p.add_argument("--push", type=_push_range, default=None, metavar="MIN,MAX",
+                   help=f"{which}: once per problem, after the first action, push one free block MIN-MAX "
+                   "metres in a random horizontal direction (e.g. 0.03,0.05), as a person or a slip would; both "
+                   "faults are drawn from the problem's seed, so a run is repeatable")
+
+
+def faults_of(args: argparse.Namespace) -> Faults:
+    """The Faults of `add_fault_arguments`' flags."""
+    return Faults(noise_m=args.noise, push_m=args.push)
 
 def keep_apart(seen: np.ndarray, scene: Scene, passes: int = 10) -> np.ndarray:
     """The noisy observation `seen` (n, 5) with every two blocks at the same height whose footprints the

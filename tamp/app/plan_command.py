@@ -9,7 +9,7 @@ by action in a World of that fidelity and plans again from each observed state u
 from __future__ import annotations
 
 import argparse
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -20,6 +20,7 @@ from tamp.app.args import (
     models_directory,
     non_negative_int,
 )
+from tamp.app.faults import Faults, add_fault_arguments, faults_of
 from tamp.app.plan_file import fmt_action
 from tamp.app.planner_flags import add_planner_arguments, loop_flags_given, planner_config
 from tamp.errors import UserError
@@ -69,6 +70,7 @@ class PlanOptions:
     planner: PlanConfig = PlanConfig()  # its seed is replaced by the problem's
     steps: Path | None = None  # per-step JSON (default: beside the replay, if any)
     trajectory: Path | None = None  # the executed joint trajectory (docs/trajectories.md)
+    faults: Faults = Faults()  # with replan: observation noise and a push, drawn from the problem's seed
 
 
 def _ms(t: float) -> str:
@@ -191,9 +193,12 @@ def _closed_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timelin
     from tamp.app.runner import kinematics_for, run_episode
     from tamp.app.step_report import closed_loop_steps
 
+    faults = options.faults if options.faults.any else None
+    seen = "" if faults is None or faults.noise_m == 0 else " (observed)"
+
     def show_step(action, X, info, seconds) -> None:
         print(f"  executed {fmt_action(action)}: {info.status}{': ' + info.reason if info.reason else ''}; "
-              f"now {goal_error(X, problem.X_goal) * 100:.1f} cm from the goal")
+              f"now {goal_error(X, problem.X_goal) * 100:.1f} cm from the goal{seen}")
 
     def show_round(r: int, result: PlanResult) -> None:
         print(f"round {r}:")
@@ -205,19 +210,26 @@ def _closed_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timelin
     else:
         print(f"closed loop (the paper's): up to {options.rounds} replanning round(s), executing in the "
               f"{options.execute} world")
+    if faults is not None:
+        print(f"faults (drawn from the problem's seed, as `tamp evaluate` draws them): {faults.describe()}")
     episode = run_episode(options.method, models, problem.X_init, problem.X_goal, cfg, options.execute,
                           closed_loop=True, rounds=options.rounds, kinematics=kinematics_for(options.method, cfg),
-                          timeline=timeline, on_round=show_round, on_step=show_step)
+                          timeline=timeline, on_round=show_round, on_step=show_step, faults=faults,
+                          fault_seed=problem.seed)
     run = episode.run
     assert run is not None  # a closed loop
     out = run.loop
     records = closed_loop_steps(models, run, names)
     _print_steps(records)
     print(f"closed loop ended: {out.reason}")
-    print(f"execution ({options.execute}): {len(out.executed)} action(s), final error {out.error * 100:.1f} cm "
-          f"(max over objects) -> {'success' if out.success else 'failure'} (eps {cfg.verify.eps * 100:g} cm)")
+    if run.faults:
+        print(f"faults injected: {'; '.join(run.faults)}")
     outcome = episode.outcome
     assert outcome is not None  # a closed loop's outcome is where it ended
+    observed = f", observed {out.error * 100:.1f} cm" if seen else ""
+    print(f"execution ({options.execute}): {len(out.executed)} action(s), final error {run.error * 100:.1f} cm "
+          f"(max over objects{observed}) -> {'success' if outcome == Outcome.SUCCESS else 'failure'} "
+          f"(eps {cfg.verify.eps * 100:g} cm)")
     print_cause(outcome, dynamics_errors(models, out.states, out.executed, worst=True),
                 stop_record(out.stop, out.rounds[-1] if out.rounds else None), None)
     return (0 if outcome == Outcome.SUCCESS else 1), records, episode
@@ -240,6 +252,8 @@ def run_plan(problem_path: Path, models_dir: Path, options: PlanOptions) -> int:
         raise UserError(f"{given[0]} sets the closed loop; give it with --replan")
     if options.rounds is not None and (given := loop_flags_given(options.planner, until_goal_only=True)):
         raise UserError(f"{given[0]} sets the loop that runs until the goal; the paper's loop of --rounds has none")
+    if options.faults.any and not options.replan:
+        raise UserError("--noise and --push disturb the closed loop; give them with --replan")
     if options.replan and options.execute == "none":
         raise UserError("--replan executes actions and observes the world; it needs --execute fast or full")
     if options.replay is not None and options.execute == "none":
@@ -343,6 +357,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--steps", type=Path, default=None, metavar="OUT.json",
                    help="write the per-step record as JSON (default: beside the replay, if any)")
     add_trajectory_argument(p)
+    add_fault_arguments(p, "with --replan")
     add_planner_arguments(p)
 
 
@@ -361,7 +376,10 @@ def options_from_args(args: argparse.Namespace) -> PlanOptions:
         raise UserError(f"the replay is an HTML file; give a path ending in .html, got {args.replay}")
     if args.steps is not None and args.steps.suffix.lower() != ".json":
         raise UserError(f"the steps file is JSON; give a path ending in .json, got {args.steps}")
-    return PlanOptions(args.method, args.execute, args.replan, args.rounds, args.replay, planner_config(args),
-                       args.steps, args.trajectory)
+    faults, planner = faults_of(args), planner_config(args)
+    if args.replan and args.rounds is None and args.stop_margin is None:  # the loop knows its observations' noise
+        planner = replace(planner, loop=faults.known_to(planner.loop))
+    return PlanOptions(args.method, args.execute, args.replan, args.rounds, args.replay, planner, args.steps,
+                       args.trajectory, faults)
 
 

@@ -158,8 +158,8 @@ class Episode:
     def outcome(self) -> Outcome | None:
         """Success, no plan, a kinematic or refinement failure or a wrong plan (closed loop: judged by where it
         ended); None for a plan that was not executed (planning only, or an empty plan)."""
-        if self.run is not None:
-            return loop_outcome(self.run.loop)
+        if self.run is not None:  # where the world ended (with observation noise the loop saw it otherwise)
+            return loop_outcome(self.run.loop, self.run.error)
         if self.first is None or not self.first.solved:
             return Outcome.NO_PLAN
         if self.execution is None:

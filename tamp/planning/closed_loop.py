@@ -96,9 +96,11 @@ class ClosedLoopResult:
             self.states.append(np.asarray(step(action), dtype=float))
 
 
-def loop_outcome(loop: ClosedLoopResult) -> Outcome:
-    """A closed loop's outcome, judged by where it ended: success, no plan (nothing executed) or wrong plan."""
-    if loop.success:
+def loop_outcome(loop: ClosedLoopResult, error: float | None = None) -> Outcome:
+    """A closed loop's outcome, judged by where it ended: success, no plan (nothing executed) or wrong plan.
+    `error` (metres): the world's final distance to the goal, when the loop observed the world with noise
+    (default: the observed one, `loop.error`)."""
+    if (loop.error if error is None else error) < loop.eps:
         return Outcome.SUCCESS
     return Outcome.NO_PLAN if not loop.executed else Outcome.WRONG_PLAN
 

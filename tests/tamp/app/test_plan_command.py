@@ -204,6 +204,34 @@ def test_cli_replans_in_a_world(models_dir, tmp_path, capsys):
     assert code == (0 if "-> success" in out else 1)
 
 
+@pytest.mark.sim
+def test_cli_replans_under_the_faults_tamp_evaluate_injects(models_dir, tmp_path, capsys):
+    """`tamp plan --replan --noise --push` runs the loop `tamp evaluate` runs on the problem, the faults drawn from
+    its seed alike, and judges it by where the world ended, not by the noisy observation."""
+    from evaluation.run import read_rows
+
+    path = _problem_reachable_by_the_model(models_dir, tmp_path)
+    assert main(["plan", "--problem", str(path), "--models", str(models_dir), "--noise", "0.005"]) == 2
+    assert "--noise and --push disturb the closed loop; give them with --replan" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as refused:
+        main(["plan", "--problem", str(path), "--replan", "--push", "0.05,0.03"])
+    assert refused.value.code == 2 and "expected MIN,MAX metres" in capsys.readouterr().err
+    faults = ["--noise", "0.005", "--push", "0.03,0.05"]
+    code = main(["plan", "--problem", str(path), "--models", str(models_dir), "--replan", *faults])
+    out = capsys.readouterr().out
+    injected = re.search(r"faults injected: (.*)", out)
+    final = re.search(r"final error ([\d.]+) cm \(max over objects, observed [\d.]+ cm\) -> (\w+)", out)
+    assert injected is not None and "pushed" in injected.group(1) and final is not None
+    problems = tmp_path / "set.jsonl"
+    problems.write_text(json.dumps({**load_problem(path).to_dict(), "name": "p0"}) + "\n")
+    assert main(["evaluate", "--models", str(models_dir), "--problems", str(problems), "--out", str(tmp_path / "ev"),
+                 "--methods", "bilevel_loop", *faults, "--quiet", "--no-report"]) == 0
+    (row,) = read_rows(tmp_path / "ev" / "rows.jsonl")
+    assert row["stop"]["faults"] == injected.group(1).split("; ")
+    assert float(final.group(1)) == pytest.approx(row["final_error_m"] * 100, abs=0.051)
+    assert final.group(2) == ("success" if row["success"] else "failure") and code == (0 if row["success"] else 1)
+
+
 @pytest.mark.slow
 def test_tamp_pddl_exports_the_bundled_domain_and_a_problem_that_an_independent_parser_reads(tmp_path, capsys):
     import pddl
