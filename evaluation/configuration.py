@@ -76,6 +76,8 @@ class EvalConfig:
             out["kinematics_rest_within_m"] = p.kinematics.rest_within
         if p.search.max_doubt is not None:
             out["search_max_doubt_m"] = p.search.max_doubt
+        if p.search.resolution != 0.01:  # the grid of every directory made before it was a setting
+            out["search_resolution_m"] = p.search.resolution
         if p.search.greedy_from is not None:
             out["search_greedy_from"] = p.search.greedy_from
             out["search_greedy_h_unit_m"] = p.search.greedy_h_unit

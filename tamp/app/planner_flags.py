@@ -154,6 +154,10 @@ def add_planner_arguments(p: argparse.ArgumentParser, feasibility: bool = True) 
                    metavar="UNITS", help="from --greedy-from blocks on, the distance to the goal also counts this many "
                    "units per block still off its goal: each needs an action (default "
                    f"{default.search.greedy_per_misplaced})")
+    p.add_argument("--resolution", type=positive_float, default=default.search.resolution, metavar="METRES",
+                   help="the continuous search treats states whose blocks lie in the same cells of a grid this fine as "
+                   f"one (default {default.search.resolution:g}: the Dynamics Model is good to about a centimetre, so "
+                   "finer cells spend the node budget on near-copies of one scene; bilevel_alg1 keeps 0.01)")
     p.add_argument("--paper-pruning", dest="release_targets", action="store_false",
                    help="the continuous search (cfs, and bilevel's Level 2) prunes actions by the paper's rule alone: "
                    "a misplaced block goes onto the object closest to its goal or onto itself (default: also onto "
@@ -208,7 +212,7 @@ PLANNER_FLAGS: dict[str, dict[str, str]] = {
                "greedy_from": "greedy_from", "greedy_h_unit": "greedy_h_unit",
                "greedy_per_misplaced": "greedy_per_misplaced",
                "look_on": "look_on", "max_fragility": "max_fragility",
-               "release_targets": "release_targets", "max_doubt": "max_doubt"},
+               "release_targets": "release_targets", "max_doubt": "max_doubt", "resolution": "resolution"},
     "kinematics": {"feasibility": "feasibility", "rest_within": "rest_within"},  # evaluate: feasibility per method
     "loop": {"keep_plan": "keep_plan", "on_course": "on_course", "commit": "commit", "max_actions": "max_actions",
              "widen": "widen",
@@ -220,7 +224,7 @@ AUTO_FLAGS = ("stop_margin",)
 # the fields deliberately without a flag (their defaults hold; tests and benchmarks set them in code)
 NOT_EXPOSED = {"level1": ("seed", "time_budget", "verify_all", "alternatives", "alternatives_total", "nonempty"),
                "verify": ("tau_verify", "eps", "misplaced"), "kinematics": ("max_refinements",),
-               "search": ("weight", "resolution", "max_depth", "batched", "prune", "noise"),
+               "search": ("weight", "max_depth", "batched", "prune", "noise"),
                "loop": ("widen_expansions", "revisit", "progress", "remember_alike")}
 
 

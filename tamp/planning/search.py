@@ -62,7 +62,9 @@ class SearchConfig:
     # from greedy_from blocks on, h also counts this many units per block farther than `misplaced` (2-D) from its
     #   goal: each needs an action still
     greedy_per_misplaced: float = 0.3
-    resolution: float = 0.01  # metres: grid of the duplicate-detection key
+    # metres: grid of the duplicate-detection key; states within one cell are one state to the search (the Dynamics
+    #   Model is good to about a centimetre, the goal's tolerance is 5 cm), so its node budget reaches more scenes
+    resolution: float = 0.02
     # The node budget decides, so a result does not depend on the machine's load: about 4 s of search at
     # n = 4 with kinematics on the 2-core development machine (2-3 ms per expansion)
     max_expansions: int = 1500
@@ -111,6 +113,9 @@ class SearchConfig:
                             f"{self.greedy_per_misplaced}")
         if self.look_on < 0:
             raise UserError(f"the continuous search needs look_on >= 0, got {self.look_on}")
+        if not 0 < self.resolution <= 0.05:
+            raise UserError(f"the continuous search's duplicate grid must be more than 0 and at most 5 cm, got "
+                            f"{self.resolution} m")
 
 
 class SearchStatus(StrEnum):

@@ -116,8 +116,8 @@ class FeasibilityChecker:
         self._carrying: dict[tuple[int, ...], MotionPlanner] = {}  # per layout (`_carrying_planner`)
         self._picks: dict[tuple[bytes, int, int], _Pick | Infeasible] = {}
         self._scenes: dict[bytes, Scene] = {}  # predicted scenes by X's positions, with their corners (`check`)
-        # actions whose refinement failed, by (scene on a 1 cm grid, action, its place in the plan: the motion seed);
-        #   kept across `observe`, since a closed loop's rounds and their widened searches ask again (`refine`)
+        # actions whose refinement failed, by (scene on the search's default grid, action, its place in the plan: the
+        #   motion seed); kept across `observe`, since a closed loop's rounds and their widened searches ask again
         self._failed_refinements: dict[tuple[bytes, tuple[int, ...], int], tuple[Infeasible | None, str]] = {}
 
     # --- the observed scene ----------------------------------------------------------------------
@@ -277,8 +277,9 @@ class FeasibilityChecker:
         Without it, each action is planned in the scene the previous one leaves with its released
         blocks where the gripper let them go. The simulator decides what really happens only when
         the plan is executed. An action that failed to refine fails again at once in the same scene (to
-        1 cm) at the same place of a plan, until the next `reset`: a failed motion has spent RRTConnect's
-        whole budget (about a second), and a closed loop's rounds offer the same first actions again."""
+        the continuous search's default grid, 2 cm) at the same place of a plan, until the next `reset`: a
+        failed motion has spent RRTConnect's whole budget (about a second), and a closed loop's rounds
+        offer the same first actions again."""
         if self.scene is None:
             raise RuntimeError("call FeasibilityChecker.reset() or observe() before refining a plan")
         plan = [PickPlace(*(int(v) for v in a)) for a in actions]

@@ -90,7 +90,8 @@ def test_validation_lives_with_the_fields():
                        (lambda: VerifyConfig(tau_verify=-1.0), "VerifyConfig.tau_verify"),
                        (lambda: LoopConfig(on_course=0.0), "LoopConfig.on_course"),
                        (lambda: LoopConfig(remember=0.0), "LoopConfig.remember"),
-                       (lambda: LoopConfig(remember_alike=0), "LoopConfig.remember_alike")):
+                       (lambda: LoopConfig(remember_alike=0), "LoopConfig.remember_alike"),
+                       (lambda: SearchConfig(resolution=0.0), "duplicate grid")):
         with pytest.raises(UserError, match=field):
             bad()
     assert PlanConfig().with_seed(7).level1 == Level1Config(seed=7)
@@ -110,7 +111,7 @@ def test_the_defining_settings_of_a_results_directory_are_unchanged():
                "search_release_targets": True, "search_time_limit_s": None, "search_stall": None,
                "search_greedy_from": 5, "search_greedy_h_unit_m": 0.5,
                "search_greedy_per_misplaced": 0.3, "search_greedy_stall": 800, "loop_greedy_search_budget": 1500,
-               "symbolic_backend": "python",
+               "symbolic_backend": "python", "search_resolution_m": 0.02,
                "tau_verify_m": 0.07,
                "loop": {"max_actions": 20, "widen": True, "widen_expansions": 400, "search_budget": 3000,
                         "greedy_search_budget": 1500, "stall": 300, "progress": 0.02, "revisit": 0.01,
@@ -129,6 +130,9 @@ def test_the_defining_settings_of_a_results_directory_are_unchanged():
     assert short["loop"] == {**default["loop"], "max_actions": 5}
     wander = EvalConfig(planner=PlanConfig(loop=LoopConfig(commit=False))).defining()
     assert wander == {**default, "loop_commit": False}
+    # a directory made on the 1 cm duplicate grid of before has no "search_resolution_m"
+    fine = EvalConfig(planner=PlanConfig(search=SearchConfig(resolution=0.01))).defining()
+    assert fine == {k: v for k, v in default.items() if k != "search_resolution_m"}
     slow = EvalConfig(planner=PlanConfig(level1=Level1Config(symbolic_time_limit=3.0))).defining()
     assert slow == {**default, "symbolic_time_limit_s": 3.0}
     assert EvalConfig().plan_config(5, False) == PlanConfig(level1=Level1Config(seed=5),

@@ -17,7 +17,9 @@ from tests.paths import DATA
 pytestmark = [pytest.mark.sim, pytest.mark.slow]
 
 # four problems of results/practice/n2-4-problems.jsonl.gz (seed 4242): Level-2 plans found after 215-340
-# expansions, and a search that finds none (the stall cut ends it after about 1,000 expansions instead of 1,500)
+# expansions, and a search that finds none (the stall cut ends it after about 1,000 expansions instead of 1,500), on
+# the 1 cm duplicate grid they were chosen with
+FINE = replace(PlanConfig(), search=replace(PlanConfig().search, resolution=0.01))
 PROBLEMS = DATA / "tail-problems.jsonl"
 NAMES = ("n4-k4-000", "n3-k5-001", "n2-k5-008", "n2-k3-005")
 
@@ -26,9 +28,8 @@ def test_the_search_finds_the_plans_it_found_without_its_shortcuts():
     problems = {p.name: p for p in read_problem_set(PROBLEMS)}
     models = load_models(pretrained_dir() / "paper")
     new = FeasibilityChecker()
-    stalling = replace(PlanConfig(), search=replace(PlanConfig().search, stall=700))
-    setups = ((PlanConfig(), FeasibilityChecker(world=new.world, shortcuts=False)), (PlanConfig(), new),
-              (stalling, new))
+    stalling = replace(FINE, search=replace(FINE.search, stall=700))
+    setups = ((FINE, FeasibilityChecker(world=new.world, shortcuts=False)), (FINE, new), (stalling, new))
     left_out = 0
     for name in NAMES:
         problem = problems[name]
