@@ -86,6 +86,13 @@ def non_negative_float(text: str) -> float:
     return _number(text, float, lambda v: math.isfinite(v) and v >= 0, "a finite number >= 0")
 
 
+def metres_below(limit: float):
+    """argparse type: a distance in metres, 0 <= d < `limit`."""
+    def parse(text: str) -> float:
+        return _number(text, float, lambda v: 0 <= v < limit, f"a distance in metres, 0 <= d < {limit:g}")
+    return parse
+
+
 def fraction(text: str) -> float:
     """argparse type: a number in [0, 1)."""
     try:

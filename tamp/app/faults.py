@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from tamp.app.args import metres_below
 from tamp.errors import UserError
 from tamp.planning.config import LoopConfig
 from tamp.planning.vocabulary import BLOCK_SIZES, ON_TABLE
@@ -74,17 +75,6 @@ class Faults:
 
 
 
-def _noise(text: str) -> float:
-    """METRES of `--noise`: 0 <= sigma < 5 cm."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a distance in metres, got {text!r}") from None
-    if not 0 <= value < 0.05:
-        raise argparse.ArgumentTypeError(f"expected 0 <= metres < 0.05, got {text}")
-    return value
-
-
 def _push_range(text: str) -> tuple[float, float]:
     """MIN,MAX metres of `--push` (a single value: exactly that far)."""
     parts = text.split(",")
@@ -99,7 +89,7 @@ def _push_range(text: str) -> tuple[float, float]:
 
 def add_fault_arguments(p: argparse.ArgumentParser, which: str) -> None:
     """`--noise` and `--push` (`tamp evaluate`, `tamp plan --replan`); `which`: the loops they disturb, in words."""
-    p.add_argument("--noise", type=_noise, default=0.0, metavar="METRES",
+    p.add_argument("--noise", type=metres_below(0.05), default=0.0, metavar="METRES",
                    help=f"{which}: Gaussian noise of this standard deviation on every x and y the planner "
                    "observes, as a camera's would (default 0; the world itself is not moved; the loop that runs "
                    "until the goal stops that far inside eps unless --stop-margin says otherwise)")
