@@ -51,9 +51,13 @@ class Faults:
     def any(self) -> bool:
         return self.noise_m > 0 or self.push_m is not None
 
+    @property
+    def noise_words(self) -> str:
+        return f"observations with {self.noise_m * 1000:g} mm noise"
+
     def describe(self) -> str:
         """The faults in words, as a run will inject them."""
-        said = [] if self.noise_m == 0 else [f"observations with {self.noise_m * 1000:g} mm noise"]
+        said = [] if self.noise_m == 0 else [self.noise_words]
         if self.push_m is not None:
             low, high = (f"{v * 100:g}" for v in self.push_m)
             said.append(f"one free block pushed {low if low == high else low + '-' + high} cm after the first action")
@@ -72,7 +76,6 @@ class Faults:
         seen = np.array(X, dtype=float)
         seen[:, :2] += rng.normal(0.0, self.noise_m, size=(len(X), 2))
         return seen if scene is None else keep_apart(seen, scene)
-
 
 
 def _push_range(text: str) -> tuple[float, float]:
@@ -102,6 +105,7 @@ def add_fault_arguments(p: argparse.ArgumentParser, which: str) -> None:
 def faults_of(args: argparse.Namespace) -> Faults:
     """The Faults of `add_fault_arguments`' flags."""
     return Faults(noise_m=args.noise, push_m=args.push)
+
 
 def keep_apart(seen: np.ndarray, scene: Scene, passes: int = 10) -> np.ndarray:
     """The noisy observation `seen` (n, 5) with every two blocks at the same height whose footprints the

@@ -225,7 +225,7 @@ def run_closed_loop(method: str, models: Models, X_init: np.ndarray, X_goal: np.
         return X
 
     if faults is not None and faults.noise_m > 0:
-        injected.append(f"observations with {faults.noise_m * 1000:g} mm noise")
+        injected.append(faults.noise_words)
     try:
         seen = X0 if faults is None else faults.observe(X0, rng, world.scene)
         loop = plan_closed_loop(method, models, seen, X_goal, step, rounds, config, on_round=on_round,
