@@ -45,6 +45,17 @@ def _add_plugin_commands(sub) -> None:
         ep.load()(sub)
 
 
+def _interrupted(error: BaseException) -> bool:
+    """Whether `error` was raised because of a KeyboardInterrupt (its cause or context, at any depth)."""
+    seen: set[int] = set()
+    while error is not None and id(error) not in seen:
+        if isinstance(error, KeyboardInterrupt):
+            return True
+        seen.add(id(error))
+        error = error.__cause__ or error.__context__  # type: ignore[assignment]
+    return False
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run one command; returns the exit code (2 for a user error, with a one-line message; any other
     exception propagates with its traceback)."""
@@ -53,10 +64,14 @@ def main(argv: list[str] | None = None) -> int:
     try:
         code = args.func(args)
     except Exception as error:
-        if not is_user_error(error):
+        if _interrupted(error):  # Ctrl-C inside an import that wraps it (pydrake: ImportError "initialization failed")
+            print(f"tamp {args.command}: interrupted", file=sys.stderr)
+            code = 130
+        elif not is_user_error(error):
             raise  # a bug: the traceback says where
-        print(f"tamp {args.command}: error: {error}", file=sys.stderr)
-        code = 2
+        else:
+            print(f"tamp {args.command}: error: {error}", file=sys.stderr)
+            code = 2
     except KeyboardInterrupt:
         print(f"tamp {args.command}: interrupted", file=sys.stderr)
         code = 130

@@ -270,3 +270,24 @@ def test_cli_writes_the_executed_trajectory(models_dir, tmp_path, capsys):
         assert ("--replan" in plan.source) == bool(loop)
         assert len(plan.actions) == int(written.group(1)) >= 1
         out.unlink()
+
+
+def test_ctrl_c_inside_an_import_that_wraps_it_is_an_interruption(monkeypatch, tmp_path, capsys):
+    """pydrake turns a Ctrl-C during its first import into ImportError("initialization failed") raised from the
+    KeyboardInterrupt: `tamp` says it was interrupted (exit 130), not a traceback."""
+    import tamp.app.plan_command as plan_command
+
+    def interrupted_import(*args, **kwargs):
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as ctrl_c:
+            raise ImportError("initialization failed") from ctrl_c
+
+    monkeypatch.setattr(plan_command, "run_plan", interrupted_import)
+    path = tmp_path / "p.json"
+    save_problem(path, Problem(np.array(X, float), np.array(GOAL, float), k=2))
+    assert main(["plan", "--problem", str(path)]) == 130
+    assert capsys.readouterr().err.strip() == "tamp plan: interrupted"
+    monkeypatch.setattr(plan_command, "run_plan", lambda *a, **k: (_ for _ in ()).throw(ImportError("no module")))
+    with pytest.raises(ImportError, match="no module"):  # an import that fails by itself is still a bug to show
+        main(["plan", "--problem", str(path)])
