@@ -70,7 +70,7 @@ class Feasibility:
     def refine(self, level: int, trajectory: np.ndarray, actions) -> RefinementOutcome:
         """Full refinement; a failure prunes its (predicted state, action) for the rest of the call."""
         with self.clock.stage("refine"):
-            outcome = self.kinematics.refine([tuple(int(v) for v in a) for a in actions], trajectory)
+            outcome = self.kinematics.refine([tuple(int(v) for v in a) for a in actions], trajectory, self.resolution)
         self.refinements.append({"level": level, "plan": [list(map(int, a)) for a in actions],
                                         "failed_action": outcome.action_index,
                                         "reason": None if outcome.reason is None else outcome.reason.value,

@@ -78,9 +78,11 @@ class KinematicFeasibility(Protocol):
         """(n, 3) bool per block of X and grasp offset (-1, 0, +1): False where `check` says NO_GRASP for every
         action of that pick and grasp, whatever the scene (the search leaves them out before predicting them)."""
 
-    def refine(self, actions: Sequence[Sequence[int]], trajectory: np.ndarray | None = None) -> RefinementOutcome:
+    def refine(self, actions: Sequence[Sequence[int]], trajectory: np.ndarray | None = None,
+               grid_m: float = ...) -> RefinementOutcome:
         """Fully refine the plan (IK, OMPL motions, grasps) from the observed scene, each action in
-        the scene `trajectory` (the predicted states along the plan) gives before it; no physics."""
+        the scene `trajectory` (the predicted states along the plan) gives before it; no physics. A failure
+        is remembered for scenes the same on a `grid_m` grid (metres; the search's)."""
 
 
 class Outcome(StrEnum):

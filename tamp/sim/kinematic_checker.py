@@ -71,10 +71,10 @@ class _Pick:
     shapes: list[Box]
 
 
-def _grid_key(scene: Scene) -> bytes:
-    """The blocks' types and positions on the continuous search's duplicate-detection grid, as bytes."""
+def _grid_key(scene: Scene, grid_m: float) -> bytes:
+    """The blocks' types and positions on a `grid_m` grid (the search's duplicate-detection grid), as bytes."""
     positions = np.array([X_WB.translation() for X_WB in scene.X_WB])
-    return np.asarray(scene.types, dtype=np.int64).tobytes() + state_key(positions, SearchConfig.resolution)
+    return np.asarray(scene.types, dtype=np.int64).tobytes() + state_key(positions, grid_m)
 
 
 def _remember(memo: dict, key, value, limit: int) -> None:
@@ -116,7 +116,7 @@ class FeasibilityChecker:
         self._carrying: dict[tuple[int, ...], MotionPlanner] = {}  # per layout (`_carrying_planner`)
         self._picks: dict[tuple[bytes, int, int], _Pick | Infeasible] = {}
         self._scenes: dict[bytes, Scene] = {}  # predicted scenes by X's positions, with their corners (`check`)
-        # actions whose refinement failed, by (scene on the search's default grid, action, its place in the plan: the
+        # actions whose refinement failed, by (scene on the search's grid, action, its place in the plan: the
         #   motion seed); kept across `observe`, since a closed loop's rounds and their widened searches ask again
         self._failed_refinements: dict[tuple[bytes, tuple[int, ...], int], tuple[Infeasible | None, str]] = {}
 
@@ -266,7 +266,8 @@ class FeasibilityChecker:
         return _Pick(wp, qs["liftoff"], shapes)
 
     # --- full refinement ---------------------------------------------------------------------------
-    def refine(self, actions: Sequence[Sequence[int]], trajectory: np.ndarray | None = None) -> RefinementOutcome:
+    def refine(self, actions: Sequence[Sequence[int]], trajectory: np.ndarray | None = None,
+               grid_m: float = SearchConfig.resolution) -> RefinementOutcome:
         """Full refinement of a plan: IK, OMPL motions (the skill's, with the carried blocks attached)
         and grasps, action by action, without physics.
 
@@ -277,7 +278,7 @@ class FeasibilityChecker:
         Without it, each action is planned in the scene the previous one leaves with its released
         blocks where the gripper let them go. The simulator decides what really happens only when
         the plan is executed. An action that failed to refine fails again at once in the same scene (to
-        the continuous search's default grid, 2 cm) at the same place of a plan, until the next `reset`: a
+        the `grid_m` grid, metres: the continuous search's) at the same place of a plan, until the next `reset`: a
         failed motion has spent RRTConnect's whole budget (about a second), and a closed loop's rounds
         offer the same first actions again."""
         if self.scene is None:
@@ -289,7 +290,7 @@ class FeasibilityChecker:
         for k, action in enumerate(plan):
             if k > 0 and trajectory is not None:
                 scene = self.predicted_scene(trajectory[k])
-            known = (_grid_key(scene), tuple(action), k)
+            known = (_grid_key(scene, grid_m), tuple(action), k)
             if known in self._failed_refinements:
                 reason, message = self._failed_refinements[known]
                 return RefinementOutcome(k, reason, message)

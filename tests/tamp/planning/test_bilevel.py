@@ -477,7 +477,7 @@ class StubKinematics:
         return [Infeasible.NO_GRASP if tuple(map(int, a)) in self.infeasible else None
                 for a in np.asarray(actions).reshape(-1, 4)]
 
-    def refine(self, actions, trajectory=None):
+    def refine(self, actions, trajectory=None, grid_m=0.03):
         from tamp.planning.vocabulary import Infeasible, RefinementOutcome
 
         actions = [tuple(map(int, a)) for a in actions]

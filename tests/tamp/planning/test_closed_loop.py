@@ -118,7 +118,7 @@ class RejectGoalMoves:
     def check(self, X, actions):
         return [Infeasible.COLLISION if a[0] != a[2] else None for a in np.asarray(actions)]
 
-    def refine(self, actions, trajectory):
+    def refine(self, actions, trajectory, grid_m):
         raise AssertionError("nothing to refine: no plan passes the check")
 
 
@@ -184,7 +184,7 @@ class AcceptAll:
     def check(self, X, actions):
         return [None] * len(np.asarray(actions))
 
-    def refine(self, actions, trajectory):
+    def refine(self, actions, trajectory, grid_m):
         from tamp.planning.vocabulary import RefinementOutcome
 
         return RefinementOutcome()

@@ -114,7 +114,7 @@ def test_refine_reports_the_failing_action(checker):
 
 def test_an_action_that_failed_to_refine_fails_again_at_once_in_the_same_scene(checker, monkeypatch):
     """A closed loop's rounds offer the same failing first action again, each refinement of it a second of
-    motion planning: in the same scene (to 1 cm) and at the same place of a plan it fails without a motion
+    motion planning: in the same scene (on the search's grid) and at the same place of a plan it fails without a motion
     planned, after `observe` as well; another scene, another place in the plan or a `reset` plans it again."""
     X = np.array([[0.6, 0.0, 0.025, *CUBE], [1.75, 0.0, 0.025, *CUBE]])  # the second cube out of reach
     checker.reset(X)
@@ -134,6 +134,21 @@ def test_an_action_that_failed_to_refine_fails_again_at_once_in_the_same_scene(c
     assert checker.refine([(1, 0, 0, 0)]).action_index == 0 and len(steps) == 4
     checker.reset(X)
     assert checker.refine([(1, 0, 0, 0)]).action_index == 0 and len(steps) == 5
+
+
+def test_the_memo_of_failed_refinements_counts_scenes_on_the_grid_it_is_given(checker, monkeypatch):
+    """The memo's scenes are the planner's states: a scene 1.5 cm away is the same on a 4 cm grid, another on 1 cm."""
+    X = np.array([[0.6, 0.0, 0.025, *CUBE], [1.75, 0.0, 0.025, *CUBE]])  # the second cube out of reach
+    checker.reset(X)
+    steps = []
+    step = checker.world.step
+    monkeypatch.setattr(checker.world, "step", lambda *a, **k: steps.append(a[0]) or step(*a, **k))
+    assert checker.refine([(1, 0, 0, 0)], grid_m=0.04).reason == Infeasible.REFINE_IK and len(steps) == 1
+    near = X.copy()
+    near[1, 1] = 0.015
+    checker.observe(checker.predicted_scene(near), checker.q)
+    assert checker.refine([(1, 0, 0, 0)], grid_m=0.04).reason == Infeasible.REFINE_IK and len(steps) == 1
+    assert checker.refine([(1, 0, 0, 0)], grid_m=0.01).reason == Infeasible.REFINE_IK and len(steps) == 2
 
 
 def test_refinement_plans_each_action_in_the_predicted_scene_without_physics(checker):
