@@ -12,7 +12,7 @@ inputs, so the report recomputes the causes from the rows). In order of preceden
 - ``pruned``: no plan: the search expanded every state its actions reach (goal-oriented pruning,
   plan depth) without a goal state.
 - ``kinematics``: no plan: the plans and successors found were rejected by the kinematic check or
-  failed refinement.
+  failed refinement, or the search reached goal states only by actions the check rejects.
 - ``no_symbolic_plan``: no plan from a symbolic planner alone (no learned operator sequence reaches
   the goal's symbols in the domains it planned in).
 - ``empty_plan``: the planner returned no action while a block was off its goal.
@@ -62,15 +62,18 @@ class Failure:
     loop: str | None = None  # closed loop: `ClosedLoopResult.stop` (a LoopStop value); None: open loop
     search: str | None = None  # the last planning call's continuous search status (None: it did not search)
     rejected: int = 0  # kinematic rejections of the last planning call (check and refinement)
+    goals_rejected: int = 0  # goal states its search reached only by actions the kinematic check rejected
     refine_failure: dict | None = None  # the first action that could not be carried out (stage, where, reason)
 
 
 def stop_record(loop: str | None, last: PlanResult | None) -> dict:
     """How a run ended, as a row stores it (`stop`): the closed loop's stop (None: open loop) and the last
-    planning call's search status, kinematic rejections and predicted error."""
+    planning call's search status, kinematic rejections, goal states its search reached only by rejected
+    actions, and predicted error."""
     rejected = sum(sum(c.values()) for c in last.rejected.values()) if last is not None and last.rejected else 0
-    return {"loop": loop, "search": None if last is None or last.search is None else str(last.search.status),
-            "rejected": int(rejected),
+    search = None if last is None else last.search
+    return {"loop": loop, "search": None if search is None else str(search.status),
+            "rejected": int(rejected), "goals_rejected": 0 if search is None else int(search.goals_rejected),
             "predicted_error_m": None if last is None or last.predicted_error is None else
             round(float(last.predicted_error), 6)}
 
@@ -80,7 +83,8 @@ def cause_of(outcome: str, step_miss_m: Sequence[float] | None, stop: dict | Non
     """`failure_cause` of what a row stores: its outcome, step misses, `stop_record` and refinement failure."""
     stop = stop or {}
     return failure_cause(Failure(outcome, step_miss_m or (), stop.get("predicted_error_m"), stop.get("loop"),
-                                 stop.get("search"), stop.get("rejected") or 0, refine_failure))
+                                 stop.get("search"), stop.get("rejected") or 0, stop.get("goals_rejected") or 0,
+                                 refine_failure))
 
 
 def failure_cause(f: Failure) -> tuple[Cause, str] | None:
@@ -88,7 +92,10 @@ def failure_cause(f: Failure) -> tuple[Cause, str] | None:
     if f.outcome == Outcome.SUCCESS:
         return None
     if f.loop == LoopStop.BUDGET:
-        return Cause.OUT_OF_ROUNDS, "the closed loop used up its action or search budget without reaching the goal"
+        blocked = f"; its last search reached {_goal_states(f)} only by actions the kinematic check rejects" \
+            if f.goals_rejected else ""
+        return Cause.OUT_OF_ROUNDS, ("the closed loop used up its action or search budget without reaching the goal"
+                                     + blocked)
     if f.outcome in (Outcome.KINEMATIC_FAILURE, Outcome.REFINEMENT_FAILURE) and f.refine_failure is not None:
         r = f.refine_failure
         return Cause.EXECUTION, (f"action {r.get('action')} could not be carried out at execution "
@@ -112,6 +119,9 @@ def _no_plan(f: Failure) -> tuple[Cause, str]:
     after = " (after executed actions)" if f.loop is not None and f.step_miss_m else ""
     if f.loop == LoopStop.EMPTY_PLAN:
         return Cause.EMPTY_PLAN, "the planner returned no action while a block was off its goal" + after
+    if f.goals_rejected and f.search != SearchStatus.REFINEMENT_BUDGET:
+        return Cause.KINEMATICS, (f"the continuous search reached {_goal_states(f)} only by actions the kinematic "
+                                  f"check rejects{after}")
     if f.search in (SearchStatus.NODE_LIMIT, SearchStatus.TIME_LIMIT):
         return Cause.SEARCH_BUDGET, f"the continuous search reached its {f.search.replace('_', ' ')}{after}"
     if f.search == SearchStatus.STALLED:
@@ -122,6 +132,10 @@ def _no_plan(f: Failure) -> tuple[Cause, str]:
         return Cause.KINEMATICS, ("every plan or successor found was rejected by the kinematic check or failed "
                                   f"refinement ({f.rejected} rejections){after}")
     return Cause.PRUNED, f"the search ran out of actions to try (pruning, plan depth){after}"
+
+
+def _goal_states(f: Failure) -> str:
+    return f"{f.goals_rejected} goal state{'s' if f.goals_rejected > 1 else ''}"
 
 
 __all__ = ["AIMED", "MISS", "Cause", "Failure", "cause_of", "failure_cause", "stop_record"]

@@ -139,12 +139,18 @@ class SearchResult:
     generated: int = 0
     duplicates: int = 0
     predict_calls: int = 0  # Dynamics Model calls for successors (the fragility rollouts not counted)
-    best_error: float = float("inf")  # metres: smallest max-object goal distance among generated states
+    # metres: smallest max-object goal distance among generated states, a goal state once its last action passed the
+    #   kinematic check (the rejected ones: `goals_rejected`)
+    best_error: float = float("inf")
     time: float = 0.0  # seconds
     rejected: Counter = field(default_factory=Counter)  # reason -> successors the feasibility check pruned
     pruned: int = 0  # successors left out as (state, action) pairs known to fail refinement
     fragility_checks: int = 0  # goal states whose plans were rolled out perturbed (`verify.fragility`)
     ungraspable: int = 0  # actions left out before their prediction: the jaws cannot hold the block there (`graspable`)
+    # goal states generated whose last action the kinematic check rejected (the model's way to the goal is blocked:
+    #   a lift into a neighbour, a block resting on the one picked), and the closest of them (metres)
+    goals_rejected: int = 0
+    rejected_goal_error: float = float("inf")
     # unsolved: the path to the expanded state closest to the goal (least h), if closer than X_init; a closed
     # loop may take its first action to make progress from where the world is (`closed_loop.widened_search`)
     closest_plan: list[tuple[int, int, int, int]] | None = None
@@ -309,12 +315,21 @@ class ContinuousSearch:
                            f"{confident:g} cm with at most {cfg.max_fragility:.0%} after {expanded} expansions)",
                            index)
 
+    def closest_words(self) -> str:
+        """How close the search came, for an unsolved search's reason."""
+        out = self.out
+        words = f"closest predicted state {out.best_error * 100:.1f} cm from the goal"
+        if out.goals_rejected:
+            words += (f"; {out.goals_rejected} goal state{'s' if out.goals_rejected > 1 else ''} reached only by "
+                      f"actions the kinematic check rejects, the closest {out.rejected_goal_error * 100:.1f} cm")
+        return words
+
     def limit_reached(self) -> SearchResult | None:
         """The result when a limit ends the search before the next expansion (None: go on)."""
         out, cfg = self.out, self.config
         if self.candidate is not None and out.expanded >= self.look_until:
             return self.stop(SearchStatus.SOLVED, "")
-        closest = f"closest predicted state {out.best_error * 100:.1f} cm from it"
+        closest = self.closest_words()
         if out.expanded >= cfg.max_expansions:
             return self.stop(SearchStatus.NODE_LIMIT, f"node limit: {out.expanded} expansions without reaching the "
                              f"goal ({closest})")
@@ -351,7 +366,7 @@ class ContinuousSearch:
         offered = "goal-oriented actions" if cfg.prune else "all actions"
         return self.stop(SearchStatus.EXHAUSTED, f"exhausted: every state reachable within {cfg.max_depth} actions "
                          f"({offered}, {cfg.resolution * 100:g} cm grid) expanded, {out.expanded} expansions; "
-                         f"closest predicted state {out.best_error * 100:.1f} cm from the goal")
+                         f"{self.closest_words()}")
 
     def actions(self, P: np.ndarray) -> np.ndarray:
         """The actions from positions P: goal-oriented (or all) and, with `graspable`, only grasps that hold."""
@@ -376,9 +391,11 @@ class ContinuousSearch:
         out.generated += len(actions)
         dist = np.linalg.norm(succ - self.goal[None], axis=2)  # (B, n)
         worst = dist.max(axis=1)
-        out.best_error = min(out.best_error, float(worst.min()))
+        goal = worst < self.tolerance.eps
+        if not goal.all():  # a goal state counts once its last action has passed the check
+            out.best_error = min(out.best_error, float(worst[~goal].min()))
         h = self.heuristic(succ, dist).tolist()
-        reached = (worst < self.tolerance.eps).tolist()
+        reached = goal.tolist()
         keys = self.keys_of(succ)
         here = self.key(P) if self.pruned else b""
         nodes, best_g, pruned, frontier = self.nodes, self.best_g, self.pruned, self.frontier  # the hot loop's
@@ -394,11 +411,14 @@ class ContinuousSearch:
             nodes.append((succ[b], index, tuple(action), g + 1))
             if reached[b] and self.infeasible(len(nodes) - 1):
                 nodes.pop()
+                out.goals_rejected += 1
+                out.rejected_goal_error = min(out.rejected_goal_error, float(worst[b]))
                 continue
             if not reached[b]:
                 best_g[k] = g + 1
                 heapq.heappush(frontier, (g + 1 + weight * h[b], h[b], len(nodes) - 1))
                 continue
+            out.best_error = min(out.best_error, float(worst[b]))
             solved = self.reach_goal(k, g + 1, float(worst[b]))
             if solved is not None:
                 return solved

@@ -11,7 +11,8 @@ from tamp.planning.causes import AIMED, MISS, Cause, Failure, failure_cause
 def row(outcome: str, **fields) -> dict:
     """An evaluation row with the fields `row_cause` reads."""
     stop = {"loop": fields.pop("loop", None), "search": fields.pop("search", None),
-            "rejected": fields.pop("rejected", 0), "predicted_error_m": fields.pop("predicted", None)}
+            "rejected": fields.pop("rejected", 0), "predicted_error_m": fields.pop("predicted", None),
+            "goals_rejected": fields.pop("goals_rejected", 0)}
     return {"outcome": outcome, "step_miss_m": fields.pop("misses", []), "stop": stop,
             "refine_failure": fields.pop("refine_failure", None), **fields}
 
@@ -27,6 +28,8 @@ def row(outcome: str, **fields) -> dict:
     (row("no_plan", search="exhausted"), Cause.PRUNED, "ran out of actions"),
     (row("no_plan", search="exhausted", rejected=40), Cause.KINEMATICS, "40 rejections"),
     (row("no_plan", search="refinement_budget"), Cause.KINEMATICS, "kinematic check"),
+    (row("no_plan", search="node_limit", rejected=90, goals_rejected=12), Cause.KINEMATICS,
+     "reached 12 goal states only by actions the kinematic check rejects"),
     (row("no_plan"), Cause.NO_SYMBOLIC_PLAN, "no symbolic plan"),
     (row("refinement_failure", refine_failure={"action": 1, "stage": "motion", "where": "descend", "reason": "x"}),
      Cause.EXECUTION, "action 1 could not be carried out at execution (motion, descend)"),
@@ -34,6 +37,8 @@ def row(outcome: str, **fields) -> dict:
      Cause.EXECUTION, "(ik)"),
     # closed loops
     (row("wrong_plan", loop="budget", misses=[0.1]), Cause.OUT_OF_ROUNDS, "action or search budget"),
+    (row("wrong_plan", loop="budget", search="node_limit", goals_rejected=1, misses=[0.01]), Cause.OUT_OF_ROUNDS,
+     "its last search reached 1 goal state only by actions the kinematic check rejects"),
     (row("wrong_plan", loop="no_plan", search="exhausted", rejected=3, misses=[0.01]), Cause.KINEMATICS,
      "after executed actions"),
     (row("wrong_plan", loop="empty_plan", misses=[0.01]), Cause.EMPTY_PLAN, "no action"),

@@ -175,6 +175,25 @@ def test_a_search_that_must_avoid_an_infeasible_action_finds_another_plan():
     assert again.solved and again.plan[0] != (1, 0, 2, 0) and again.pruned >= 1
 
 
+def test_goal_states_reached_only_by_rejected_actions_are_counted_and_said():
+    """A goal the model reaches only by actions the kinematic check rejects is not a search that came close: the
+    result counts those goal states, its closest state is one the check let through, and the reason says both."""
+    G = goal_after([(1, 0, 2, 0)])
+    from tamp.planning.verify import goal_errors
+
+    def feasible(X_pred, action):  # every action into a goal state is blocked
+        after = world_step(X_pred, action)
+        return "collision" if goal_errors(after, G).max() < out_eps() else None
+
+    out = continuous_search(StubModel(), X, G, SearchConfig(max_expansions=40), feasible=feasible)
+    assert not out.solved and out.plan is None
+    assert out.goals_rejected >= 1 and out.rejected_goal_error < 0.01  # the direct action lands on the goal
+    assert out.best_error >= out_eps()
+    assert f"{out.goals_rejected} goal state" in out.reason and "kinematic check rejects" in out.reason
+    free = continuous_search(StubModel(), X, G, SearchConfig(max_expansions=40))
+    assert free.solved and free.goals_rejected == 0
+
+
 def out_eps() -> float:
     return VerifyConfig().eps
 
