@@ -56,12 +56,12 @@ def _write_report(directory: Path, ablation: Path | None = None) -> Path:
 def _eval_config(args: argparse.Namespace):
     """The EvalConfig of the flags of `_add_run_arguments` (`tamp evaluate`, `tamp refinability`)."""
     from evaluation.configuration import EvalConfig
-    from tamp.app.planner_flags import planner_config
+    from tamp.app.planner_flags import auto_given, planner_config
 
     faults = faults_of(args)
     planner = planner_config(args)
-    if args.stop_margin is None and _runs_until_goal(args.methods):  # the loop knows its observations' noise
-        planner = replace(planner, loop=faults.known_to(planner.loop))
+    if _runs_until_goal(args.methods):  # the loop knows its observations' noise
+        planner = replace(planner, loop=faults.known_to(planner.loop, auto_given(args)))
     return EvalConfig(planner=planner, fidelity=args.fidelity, workers=args.workers,
                       backend=args.backend, address=args.address,
                       oracle_max_plans=args.oracle_max_plans, progress=not args.quiet, faults=faults)

@@ -90,7 +90,7 @@ class EvalConfig:
         above = ("keep_plan", "on_course", "commit")
         # fields added since, left out at the value that plans as the loop did before them (older directories stay
         #   resumable; a directory made before the loop remembered misses is not resumed with it)
-        later = {"stop_margin": LoopConfig.stop_margin, "remember": None}
+        later = {"stop_margin": LoopConfig.stop_margin, "remember": None, "looks": LoopConfig.looks}
         loop = {k: v for k, v in dataclasses.asdict(p.loop).items() if k not in above}
         if p.loop.remember is None:
             del loop["remember_alike"]

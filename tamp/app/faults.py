@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import argparse
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Collection
 
 import numpy as np
 
@@ -32,6 +32,7 @@ if TYPE_CHECKING:  # the configuration loads no Drake: `tamp evaluate --help` st
 
 _CLEARANCE = 0.005  # metres: a pushed block's footprint keeps this gap to every other block's
 STOP_MARGIN_SIGMAS = 1.0  # the closed loop's stop margin in sigmas of the observation noise, when no flag sets it
+LOOKS_UNDER_NOISE = 2  # the closed loop's observations again after a round without a plan, when no flag sets them
 
 
 @dataclass(frozen=True)
@@ -63,10 +64,16 @@ class Faults:
             said.append(f"one free block pushed {low if low == high else low + '-' + high} cm after the first action")
         return "; ".join(said) or "none"
 
-    def known_to(self, loop: LoopConfig) -> LoopConfig:
-        """`loop` as a closed loop that knows this noise: it stops `STOP_MARGIN_SIGMAS` sigma inside eps (a block's
-        observed distance to its goal scatters by about one sigma around the true one)."""
-        return replace(loop, stop_margin=STOP_MARGIN_SIGMAS * self.noise_m) if self.noise_m > 0 else loop
+    def known_to(self, loop: LoopConfig, given: Collection[str] = ()) -> LoopConfig:
+        """`loop` as a closed loop that knows this noise, in the fields not `given` by the user: it stops
+        `STOP_MARGIN_SIGMAS` sigma inside eps (a block's observed distance to its goal scatters by about one sigma
+        around the true one), and after a round without a plan it looks again `LOOKS_UNDER_NOISE` times (the noise
+        may have put neighbours into each other, so that the kinematic check rejects every action)."""
+        if self.noise_m <= 0:
+            return loop
+        if "stop_margin" not in given:
+            loop = replace(loop, stop_margin=STOP_MARGIN_SIGMAS * self.noise_m)
+        return loop if "looks" in given else replace(loop, looks=LOOKS_UNDER_NOISE)
 
     def observe(self, X: np.ndarray, rng: np.random.Generator, scene: Scene | None = None) -> np.ndarray:
         """X as the planner observes it: horizontal positions with noise. With the world's `scene`, blocks

@@ -22,7 +22,7 @@ from tamp.app.args import (
 )
 from tamp.app.faults import Faults, add_fault_arguments, faults_of
 from tamp.app.plan_file import fmt_action
-from tamp.app.planner_flags import add_planner_arguments, loop_flags_given, planner_config
+from tamp.app.planner_flags import add_planner_arguments, auto_given, loop_flags_given, planner_config
 from tamp.errors import UserError
 from tamp.planning.causes import cause_of, stop_record
 from tamp.planning.config import PlanConfig
@@ -377,8 +377,8 @@ def options_from_args(args: argparse.Namespace) -> PlanOptions:
     if args.steps is not None and args.steps.suffix.lower() != ".json":
         raise UserError(f"the steps file is JSON; give a path ending in .json, got {args.steps}")
     faults, planner = faults_of(args), planner_config(args)
-    if args.replan and args.rounds is None and args.stop_margin is None:  # the loop knows its observations' noise
-        planner = replace(planner, loop=faults.known_to(planner.loop))
+    if args.replan and args.rounds is None:  # the loop knows its observations' noise
+        planner = replace(planner, loop=faults.known_to(planner.loop, auto_given(args)))
     return PlanOptions(args.method, args.execute, args.replan, args.rounds, args.replay, planner, args.steps,
                        args.trajectory, faults)
 

@@ -96,6 +96,11 @@ def add_planner_arguments(p: argparse.ArgumentParser, feasibility: bool = True) 
                    "predicted within --confident, so that noisy observations that put the blocks within the "
                    "tolerance while they are not do not end it (default 0: exact observations; with `tamp evaluate "
                    "--noise SIGMA`, SIGMA)")
+    p.add_argument("--looks", type=non_negative_int, default=None, metavar="N",
+                   help="the closed loop that does not know k (bilevel_loop) observes the scene again up to N times "
+                   "after a round without a plan before it stops: a noisy observation may put neighbours into each "
+                   "other, so that the kinematic check rejects every action, where the next one does not (default 0: "
+                   "exact observations; with --noise, 2)")
     p.add_argument("--remember", type=positive_float, default=default.loop.remember, metavar="METRES",
                    help="the closed loop that does not know k (bilevel_loop) remembers an action that lands this far "
                    "from the Dynamics Model's prediction; once the world has done it twice alike, the loop predicts "
@@ -217,15 +222,20 @@ PLANNER_FLAGS: dict[str, dict[str, str]] = {
     "loop": {"keep_plan": "keep_plan", "on_course": "on_course", "commit": "commit", "max_actions": "max_actions",
              "widen": "widen",
              "search_budget": "loop_search_budget", "greedy_search_budget": "loop_greedy_search_budget",
-             "stall": "loop_stall", "stop_margin": "stop_margin", "remember": "remember"},
+             "stall": "loop_stall", "stop_margin": "stop_margin", "remember": "remember", "looks": "looks"},
 }
-# flags whose None means "the default, or what the run's faults imply" (`tamp evaluate --noise` sets the stop margin)
-AUTO_FLAGS = ("stop_margin",)
+# flags whose None means "the default, or what the run's faults imply" (`--noise` sets the stop margin and the looks)
+AUTO_FLAGS = ("stop_margin", "looks")
 # the fields deliberately without a flag (their defaults hold; tests and benchmarks set them in code)
 NOT_EXPOSED = {"level1": ("seed", "time_budget", "verify_all", "alternatives", "alternatives_total", "nonempty"),
                "verify": ("tau_verify", "eps", "misplaced"), "kinematics": ("max_refinements",),
                "search": ("weight", "max_depth", "batched", "prune", "noise"),
                "loop": ("widen_expansions", "revisit", "progress", "remember_alike")}
+
+
+def auto_given(args: argparse.Namespace) -> set[str]:
+    """The LoopConfig fields of `AUTO_FLAGS` the user set (what the run's faults must not override)."""
+    return {dest for dest in AUTO_FLAGS if getattr(args, dest, None) is not None}
 
 
 def planner_config(args: argparse.Namespace) -> PlanConfig:
@@ -243,9 +253,9 @@ LOOP_FLAGS = {"keep_plan": "--no-keep-plan", "on_course": "--on-course/--no-on-c
               "max_actions": "--max-actions", "search_budget": "--loop-search-budget",
               "greedy_search_budget": "--loop-greedy-budget", "widen": "--no-widen",
               "stall": "--loop-stall", "commit": "--no-commit", "stop_margin": "--stop-margin",
-              "remember": "--remember/--no-remember"}
+              "remember": "--remember/--no-remember", "looks": "--looks"}
 UNTIL_GOAL_FIELDS = ("commit", "max_actions", "search_budget", "greedy_search_budget", "widen", "stall", "stop_margin",
-                     "remember")
+                     "remember", "looks")
 
 
 def loop_flags_given(config: PlanConfig, until_goal_only: bool = False) -> list[str]:

@@ -224,12 +224,16 @@ def run_closed_loop(method: str, models: Models, X_init: np.ndarray, X_goal: np.
             on_step(action, X, info, seconds)
         return X
 
+    def look() -> np.ndarray:  # the scene observed again, without acting (with new noise)
+        assert world.scene is not None  # reset above
+        return world.X if faults is None else faults.observe(world.X, rng, world.scene)
+
     if faults is not None and faults.noise_m > 0:
         injected.append(faults.noise_words)
     try:
         seen = X0 if faults is None else faults.observe(X0, rng, world.scene)
         loop = plan_closed_loop(method, models, seen, X_goal, step, rounds, config, on_round=on_round,
-                                planner=planner, kinematics=kinematics)
+                                planner=planner, kinematics=kinematics, look=look)
     finally:
         world.observer = None
     return ClosedLoopRun(loop, infos, step_times, action_starts, scene_init, q_init, X_after, world.config.fidelity,

@@ -106,13 +106,14 @@ def loop_outcome(loop: ClosedLoopResult, error: float | None = None) -> Outcome:
 
 
 Step = Callable[[PickPlace], np.ndarray]  # executes one action in the world, returns the observed (n, 5) state
+Look = Callable[[], np.ndarray]  # observes the world again without acting: the observed (n, 5) state
 
 
 def plan_closed_loop(method: str, models: Models, X_init, X_goal, step: Step, rounds: int | None,
                      cfg: PlanConfig = PlanConfig(),
                      on_round: Callable[[int, PlanResult], None] | None = None,
                      planner: Callable[..., PlanResult] | None = None,
-                     kinematics: KinematicFeasibility | None = None) -> ClosedLoopResult:
+                     kinematics: KinematicFeasibility | None = None, look: Look | None = None) -> ClosedLoopResult:
     """Plan, execute, observe, plan again; see the module doc. `rounds`: the paper's loop with that many
     replanning rounds (k - 1, `replan_rounds`: `paper_loop`); None: the loop that does not know k
     (`loop_until_goal`, cfg.loop).
@@ -121,10 +122,11 @@ def plan_closed_loop(method: str, models: Models, X_init, X_goal, step: Step, ro
     state; `on_round(r, result)` is called after each planning call, before anything is executed.
     `planner` (default `plan`, same signature) lets a caller reuse a plan it already has.
     `kinematics` is passed to every planning call; `step` must let it observe the new scene
-    (`FeasibilityChecker.observe`), since only the simulator knows the blocks' orientations.
+    (`FeasibilityChecker.observe`), since only the simulator knows the blocks' orientations. `look()`
+    observes the scene again without acting (the loop that does not know k, cfg.loop.looks).
     """
     if rounds is None:
-        return loop_until_goal(method, models, X_init, X_goal, step, cfg, on_round, planner, kinematics)
+        return loop_until_goal(method, models, X_init, X_goal, step, cfg, on_round, planner, kinematics, look)
     return paper_loop(method, models, X_init, X_goal, step, rounds, cfg, on_round, planner, kinematics)
 
 
@@ -153,10 +155,11 @@ def paper_loop(method: str, models: Models, X_init, X_goal, step: Step, rounds: 
 def loop_until_goal(method: str, models: Models, X_init, X_goal, step: Step, cfg: PlanConfig = PlanConfig(),
                     on_round: Callable[[int, PlanResult], None] | None = None,
                     planner: Callable[..., PlanResult] | None = None,
-                    kinematics: KinematicFeasibility | None = None) -> ClosedLoopResult:
+                    kinematics: KinematicFeasibility | None = None, look: Look | None = None) -> ClosedLoopResult:
     """The loop that does not know k (`bilevel_loop`): one action a round until the goal, within the action
     and search budgets of cfg.loop; a round without a plan widens its search, else steps toward the closest
-    state its searches found; actions that led back to an observed state are left out (`revisits`)."""
+    state its searches found, else (with `look`, up to cfg.loop.looks times) observes the scene again and plans
+    from that; actions that led back to an observed state are left out (`revisits`)."""
     out = ClosedLoopResult([], [], [np.asarray(X_init, dtype=float)], np.asarray(X_goal, dtype=float), cfg.verify.eps,
                            experience=None if cfg.loop.remember is None else Experience(cfg.loop.remember,
                                                                                         cfg.loop.remember_alike))
@@ -164,6 +167,7 @@ def loop_until_goal(method: str, models: Models, X_init, X_goal, step: Step, cfg
     budget = cfg.loop.search_budget_for(len(out.X_goal), cfg.search.greedy_from)
     spent = 0  # continuous-search expansions of every round so far
     remembered: list[str] = []  # the miss the last executed action added to the loop's experience, said once
+    looked = 0  # observations again after a round without a plan
     for r in itertools.count():
         X = out.X_final
         if at_goal(X, out.X_goal, inside.verify.eps):
@@ -205,6 +209,15 @@ def loop_until_goal(method: str, models: Models, X_init, X_goal, step: Step, cfg
                 spent += _expanded(result)
             else:  # no budget left to widen: what the round's search found may still bring the blocks closer
                 result = toward_closest(X, out.X_goal, cfg, result, [result.search])
+        if not result.solved and look is not None and looked < cfg.loop.looks and spent < budget:
+            looked += 1
+            out.rounds.append(_with_reasons(result, remembered))
+            if on_round is not None:
+                on_round(r, out.rounds[-1])
+            out.states[-1] = np.asarray(look(), dtype=float)  # the state the next action starts from, seen again
+            remembered = [f"no plan from the last observation: the scene observed again ({looked} of "
+                          f"{cfg.loop.looks})"]
+            continue
         ended = _planned(out, r, _with_reasons(result, remembered), on_round, budget if spent >= budget else None)
         if ended is not None:
             return ended

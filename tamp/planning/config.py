@@ -126,6 +126,10 @@ class LoopConfig:
     remember_alike: int = 2  # misses alike before one is trusted: one outcome may be scatter (a yaw X does not hold)
     stop_margin: float = 0.0  # metres: the loop that does not know k stops this far inside eps; short of that but
     #   within eps it steps only on a plan predicted within confident (0: exact observations; `--noise` sets sigma)
+    # times the loop that does not know k observes the scene again after a round without a plan, before it stops: a
+    #   noisy observation may put neighbours into each other where the next one does not (0: exact observations, where
+    #   a second look sees the same; `--noise` sets 2)
+    looks: int = 0
 
     def __post_init__(self) -> None:
         _positive("LoopConfig", on_course=self.on_course, remember=self.remember)
@@ -137,6 +141,8 @@ class LoopConfig:
         if self.greedy_search_budget is not None and self.greedy_search_budget < 1:
             raise UserError(f"LoopConfig.greedy_search_budget must be a positive number of expansions or None, got "
                             f"{self.greedy_search_budget}")
+        if self.looks < 0:
+            raise UserError(f"LoopConfig.looks must be 0 or more, got {self.looks}")
         if self.remember_alike < 1:
             raise UserError(f"LoopConfig.remember_alike must be 1 or more, got {self.remember_alike}")
         if self.max_actions < 1 or self.widen_expansions < 1 or self.search_budget < 1:

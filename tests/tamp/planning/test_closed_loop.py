@@ -129,6 +129,50 @@ def test_the_loop_says_why_it_stopped_when_no_action_is_left(models):
     assert "no plan over every action either" in out.reason
 
 
+class RejectInNoisyScene:
+    """A kinematic check that rejects every action in scenes where block A is observed 3 mm off its place (as
+    observation noise may put neighbours into each other) and none elsewhere."""
+
+    def graspable(self, X):
+        return np.ones((len(X), 3), dtype=bool)
+
+    def check(self, X, actions):
+        noisy = abs(float(X[0, 0]) - NOISY[0, 0]) < 1e-9
+        return [Infeasible.COLLISION if noisy else None for _ in np.asarray(actions)]
+
+    def refine(self, actions, trajectory, grid_m):
+        from tamp.planning.vocabulary import RefinementOutcome
+
+        return RefinementOutcome()
+
+
+NOISY = X_INIT + np.array([[0.003, 0.0, 0.0, 0, 0], [0.0, 0.0, 0.0, 0, 0]])
+
+
+def test_a_round_without_a_plan_under_noise_looks_again_before_the_loop_stops(models):
+    """Noise may put neighbours into each other so that the check rejects every action; the loop with looks left
+    observes the scene again (without acting) and plans from that, and says so; without looks it stops."""
+    looked = []
+
+    def look():
+        looked.append(1)
+        return X_INIT.copy()
+
+    def run(looks: int):
+        looked.clear()
+        return plan_closed_loop("bilevel", models, NOISY, A_ON_B, slipping_world(0), rounds=None, look=look,
+                                kinematics=RejectInNoisyScene(), cfg=PlanConfig(loop=LoopConfig(looks=looks)))
+
+    once = run(1)
+    assert once.success and once.stop == "goal" and len(looked) == 1 and len(once.executed) == 1
+    assert not once.rounds[0].solved and "observed again (1 of 1)" in once.rounds[1].reasons[0]
+    assert np.allclose(once.states[0], X_INIT)  # the action started from the state seen again
+    never = run(0)
+    assert never.stop == "no_plan" and not looked and not never.executed
+    with pytest.raises(UserError, match="looks"):
+        LoopConfig(looks=-1)
+
+
 def test_with_a_stop_margin_the_loop_does_not_stop_on_an_observation_just_inside_eps(models):
     # the first placement lands A 4.5 cm off along x: within eps (5 cm), not within eps less a 1 cm margin
     def near_miss(action):
