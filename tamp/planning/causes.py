@@ -29,7 +29,7 @@ from dataclasses import dataclass
 from enum import StrEnum
 from typing import TYPE_CHECKING, Sequence
 
-from tamp.planning.search import SearchStatus
+from tamp.planning.search import SearchStatus, goal_states
 from tamp.planning.vocabulary import LoopStop, Outcome
 
 if TYPE_CHECKING:
@@ -92,8 +92,8 @@ def failure_cause(f: Failure) -> tuple[Cause, str] | None:
     if f.outcome == Outcome.SUCCESS:
         return None
     if f.loop == LoopStop.BUDGET:
-        blocked = f"; its last search reached {_goal_states(f)} only by actions the kinematic check rejects" \
-            if f.goals_rejected else ""
+        blocked = (f"; its last search reached {goal_states(f.goals_rejected)} only by actions the kinematic check "
+                   f"rejects") if f.goals_rejected else ""
         return Cause.OUT_OF_ROUNDS, ("the closed loop used up its action or search budget without reaching the goal"
                                      + blocked)
     if f.outcome in (Outcome.KINEMATIC_FAILURE, Outcome.REFINEMENT_FAILURE) and f.refine_failure is not None:
@@ -120,8 +120,8 @@ def _no_plan(f: Failure) -> tuple[Cause, str]:
     if f.loop == LoopStop.EMPTY_PLAN:
         return Cause.EMPTY_PLAN, "the planner returned no action while a block was off its goal" + after
     if f.goals_rejected and f.search != SearchStatus.REFINEMENT_BUDGET:
-        return Cause.KINEMATICS, (f"the continuous search reached {_goal_states(f)} only by actions the kinematic "
-                                  f"check rejects{after}")
+        return Cause.KINEMATICS, (f"the continuous search reached {goal_states(f.goals_rejected)} only by actions "
+                                  f"the kinematic check rejects{after}")
     if f.search in (SearchStatus.NODE_LIMIT, SearchStatus.TIME_LIMIT):
         return Cause.SEARCH_BUDGET, f"the continuous search reached its {f.search.replace('_', ' ')}{after}"
     if f.search == SearchStatus.STALLED:
@@ -132,10 +132,6 @@ def _no_plan(f: Failure) -> tuple[Cause, str]:
         return Cause.KINEMATICS, ("every plan or successor found was rejected by the kinematic check or failed "
                                   f"refinement ({f.rejected} rejections){after}")
     return Cause.PRUNED, f"the search ran out of actions to try (pruning, plan depth){after}"
-
-
-def _goal_states(f: Failure) -> str:
-    return f"{f.goals_rejected} goal state{'s' if f.goals_rejected > 1 else ''}"
 
 
 __all__ = ["AIMED", "MISS", "Cause", "Failure", "cause_of", "failure_cause", "stop_record"]

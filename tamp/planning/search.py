@@ -175,6 +175,11 @@ def predict_positions(model: DynamicsModel, X: np.ndarray, actions: np.ndarray, 
     return X[None, :, :3] + np.array(e).reshape(len(actions), len(X), 3), len(actions)
 
 
+def goal_states(count: int) -> str:
+    """"1 goal state", "2 goal states": a count of goal states in words."""
+    return f"{count} goal state{'s' if count != 1 else ''}"
+
+
 def state_key(P: np.ndarray, resolution: float) -> bytes:
     """Duplicate-detection key of positions P (n, 3): the grid cell of every coordinate."""
     return np.round(np.asarray(P)[:, :3] / resolution).astype(np.int64).tobytes()
@@ -320,8 +325,8 @@ class ContinuousSearch:
         out = self.out
         words = f"closest predicted state {out.best_error * 100:.1f} cm from the goal"
         if out.goals_rejected:
-            words += (f"; {out.goals_rejected} goal state{'s' if out.goals_rejected > 1 else ''} reached only by "
-                      f"actions the kinematic check rejects, the closest {out.rejected_goal_error * 100:.1f} cm")
+            words += (f"; {goal_states(out.goals_rejected)} reached only by actions the kinematic check rejects, the "
+                      f"closest {out.rejected_goal_error * 100:.1f} cm")
         return words
 
     def limit_reached(self) -> SearchResult | None:
