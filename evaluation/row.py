@@ -64,7 +64,8 @@ class Row:
     effect_error_m: list[float | None] | None
     step_miss_m: list[float | None] | None  # the same with the worst block: how far it landed from its prediction
     # how the run ended: the closed loop's `LoopStop` (None: open loop), the last planning call's search status,
-    #   kinematic rejections and predicted error (`tamp.planning.causes.stop_record`); faults injected; the misses
+    #   kinematic rejections, goal states its search reached only by rejected actions (`goals_rejected`) and predicted
+    #   error (`tamp.planning.causes.stop_record`); faults injected; the misses
     #   the loop that does not know k remembered (`remembered`, `tamp.planning.experience`)
     stop: dict | None
     cause: list[str] | None  # [cause, sentence] of a failed row (`row_cause`, recomputed from these fields)
