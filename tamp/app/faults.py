@@ -102,7 +102,8 @@ def add_fault_arguments(p: argparse.ArgumentParser, which: str) -> None:
     p.add_argument("--noise", type=metres_below(0.05), default=0.0, metavar="METRES",
                    help=f"{which}: Gaussian noise of this standard deviation on every x and y the planner "
                    "observes, as a camera's would (default 0; the world itself is not moved; the loop that runs "
-                   "until the goal stops that far inside eps unless --stop-margin says otherwise)")
+                   "until the goal stops that far inside eps unless --stop-margin says otherwise, and looks again "
+                   "twice after a round without a plan unless --looks says otherwise)")
     p.add_argument("--push", type=_push_range, default=None, metavar="MIN,MAX",
                    help=f"{which}: once per problem, after the first action, push one free block MIN-MAX "
                    "metres in a random horizontal direction (e.g. 0.03,0.05), as a person or a slip would; both "

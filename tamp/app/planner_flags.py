@@ -94,8 +94,8 @@ def add_planner_arguments(p: argparse.ArgumentParser, feasibility: bool = True) 
                    help="the closed loop that does not know k (bilevel_loop) stops only this far inside the success "
                    "tolerance; within the tolerance but short of that it takes one more step only if a plan is "
                    "predicted within --confident, so that noisy observations that put the blocks within the "
-                   "tolerance while they are not do not end it (default 0: exact observations; with `tamp evaluate "
-                   "--noise SIGMA`, SIGMA)")
+                   "tolerance while they are not do not end it (default 0: exact observations; with --noise SIGMA, "
+                   "SIGMA)")
     p.add_argument("--looks", type=non_negative_int, default=None, metavar="N",
                    help="the closed loop that does not know k (bilevel_loop) observes the scene again up to N times "
                    "after a round without a plan before it stops: a noisy observation may put neighbours into each "
