@@ -78,6 +78,8 @@ class EvalConfig:
             out["search_max_doubt_m"] = p.search.max_doubt
         if p.search.resolution != 0.01:  # the grid of every directory made before it was a setting
             out["search_resolution_m"] = p.search.resolution
+        if p.search.clear_blockers:  # the search of every directory made before it offered goal-oriented actions only
+            out["search_clear_blockers"] = True
         if p.search.greedy_from is not None:
             out["search_greedy_from"] = p.search.greedy_from
             out["search_greedy_h_unit_m"] = p.search.greedy_h_unit

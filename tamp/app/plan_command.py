@@ -111,7 +111,8 @@ def print_result(result: PlanResult, tau: float, indent: str = "") -> None:
                   "would rank theirs lower; --no-level1-settle searches on)")
     if result.search is not None:
         s = result.search
-        print(f"{p}  continuous search: {s.reason}; {s.generated} successors in {s.predict_calls} model calls")
+        cleared = f", {s.clearing} of them moves of blocks in the way of a rejected action" if s.clearing else ""
+        print(f"{p}  continuous search: {s.reason}; {s.generated} successors in {s.predict_calls} model calls{cleared}")
     for k, a in enumerate(result.plan or []):
         print(f"{p}  action {k}: {fmt_action(a)}")
     shown = ("kept", "remembered")  # why the last plan was kept (on course, or its rollout); a miss the loop trusts

@@ -169,6 +169,11 @@ def add_planner_arguments(p: argparse.ArgumentParser, feasibility: bool = True) 
                    "the object with an offset release point closest to its goal and, for a goal above the table, onto "
                    "the object it would rest on (the top of a stack, or a raised bar on whose end it rests), each "
                    "when that is another object; `bilevel_alg1` always uses the paper's rule)")
+    p.add_argument("--no-clear-blockers", dest="clear_blockers", action="store_false",
+                   help="the continuous search offers only the goal-oriented actions (default: when the kinematic "
+                   "check rejects the action into a goal state, it also offers the moves of the blocks in that "
+                   "action's way, a neighbour of the picked block or of its place, since a block already at its goal "
+                   "may have to move first)")
     p.add_argument("--time-limit", type=positive_float, default=default.search.time_limit, metavar="SECONDS",
                    help="wall-clock bound on every planning call (each round of a closed loop is one): its continuous "
                    "searches end and no further plan is refined once it has run this long, and the result says so "
@@ -217,7 +222,8 @@ PLANNER_FLAGS: dict[str, dict[str, str]] = {
                "greedy_from": "greedy_from", "greedy_h_unit": "greedy_h_unit",
                "greedy_per_misplaced": "greedy_per_misplaced",
                "look_on": "look_on", "max_fragility": "max_fragility",
-               "release_targets": "release_targets", "max_doubt": "max_doubt", "resolution": "resolution"},
+               "release_targets": "release_targets", "max_doubt": "max_doubt", "resolution": "resolution",
+               "clear_blockers": "clear_blockers"},
     "kinematics": {"feasibility": "feasibility", "rest_within": "rest_within"},  # evaluate: feasibility per method
     "loop": {"keep_plan": "keep_plan", "on_course": "on_course", "commit": "commit", "max_actions": "max_actions",
              "widen": "widen",

@@ -28,7 +28,7 @@ def level2(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarray, config:
             if feas is not None:
                 feas.rejected[2].update(out.rejected)
                 if result.search is not None:  # a search again after a refinement failure: count all
-                    for name in ("expanded", "generated", "duplicates", "predict_calls", "ungraspable"):
+                    for name in ("expanded", "generated", "duplicates", "predict_calls", "ungraspable", "clearing"):
                         setattr(out, name, getattr(out, name) + getattr(result.search, name))
             result.search = out
             if not out.solved or feas is None or not out.plan:

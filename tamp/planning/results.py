@@ -195,7 +195,8 @@ class PlanResult:
                                for c in self.candidates],
                 "search": None if self.search is None else {
                     k: getattr(self.search, k) for k in ("status", "reason", "expanded", "generated",
-                                                         "duplicates", "predict_calls", "time", "goals_rejected")},
+                                                         "duplicates", "predict_calls", "time", "goals_rejected",
+                                                         "clearing")},
                 "timings": {k: round(v, 6) for k, v in self.timings.items()},
                 "reasons": list(self.reasons), "symbolic": self.symbolic_stats,
                 "rejected": self.rejected_dict(), "refinements": list(self.refinements), "kept": self.kept,

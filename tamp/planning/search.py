@@ -46,7 +46,7 @@ from typing import AbstractSet, Callable, Hashable
 import numpy as np
 
 from tamp.errors import UserError
-from tamp.planning.pruning import all_actions, goal_oriented_actions
+from tamp.planning.pruning import all_actions, blockers, goal_oriented_actions, moves_of
 from tamp.planning.verify import DynamicsModel, VerifyConfig, doubt, fragility, states_pair
 
 
@@ -84,6 +84,9 @@ class SearchConfig:
     # also target the object whose release point is closest and, for a goal above the table, the object below it
     #   (the top of a stack; False: the paper's rule, the closest object in 2-D)
     release_targets: bool = True
+    # when the kinematic check rejects the action into a goal state, also offer from its parent the moves of the
+    #   blocks in that action's way (`pruning.blockers`): a neighbour at its own goal may have to move first
+    clear_blockers: bool = True
     max_fragility: float | None = 0.3  # a goal state ends the search at once only if at most this fraction of
     #   its plan's perturbed rollouts miss the goal (`verify.fragility`); else it is a candidate (None: not checked)
     noise: float = 0.005  # metres: the input perturbation of `verify.fragility`
@@ -151,6 +154,7 @@ class SearchResult:
     #   a lift into a neighbour, a block resting on the one picked), and the closest of them (metres)
     goals_rejected: int = 0
     rejected_goal_error: float = float("inf")
+    clearing: int = 0  # successors by moves of the blocks in those actions' way (`SearchConfig.clear_blockers`)
     # unsolved: the path to the expanded state closest to the goal (least h), if closer than X_init; a closed
     # loop may take its first action to make progress from where the world is (`closed_loop.widened_search`)
     closest_plan: list[tuple[int, int, int, int]] | None = None
@@ -378,17 +382,36 @@ class ContinuousSearch:
         tol = self.tolerance
         actions = goal_oriented_actions(self.full(P), self.X_goal, tol.misplaced, tol.eps,
                                         self.config.release_targets) if self.config.prune else self.every
-        if self.graspable is not None:
-            holds = self.graspable[actions[:, 0], actions[:, 1] + 1]
-            self.out.ungraspable += len(actions) - int(holds.sum())
-            actions = actions[holds]
-        return actions
+        return self.holding(actions)
+
+    def holding(self, actions: np.ndarray) -> np.ndarray:
+        """`actions` without those whose grasp cannot hold the block (with `graspable`)."""
+        if self.graspable is None:
+            return actions
+        holds = self.graspable[actions[:, 0], actions[:, 1] + 1]
+        self.out.ungraspable += len(actions) - int(holds.sum())
+        return actions[holds]
 
     def expand(self, index: int) -> SearchResult | None:
-        """Generate node `index`'s successors in one batched prediction; the result if one ends the search."""
+        """Generate node `index`'s successors; the result if one ends the search. With `config.clear_blockers`,
+        goal states whose last action the check rejected add, once, the moves of the blocks in those actions' way
+        (`pruning.blockers`): the goal-oriented actions never move a block already at its goal."""
+        P = self.nodes[index][0]
+        blocked: list[tuple[tuple, np.ndarray]] = []
+        solved = self.successors(index, self.actions(P), blocked)
+        if solved is not None or not blocked or not (self.config.prune and self.config.clear_blockers):
+            return solved
+        full = self.full(P)
+        way = sorted(set().union(*(blockers(full, action, xy).tolist() for action, xy in blocked)))
+        moves = self.holding(moves_of(way, len(P)))
+        self.out.clearing += len(moves)
+        return self.successors(index, moves, [])
+
+    def successors(self, index: int, actions: np.ndarray, blocked: list) -> SearchResult | None:
+        """Generate node `index`'s successors by `actions` in one batched prediction; the result if one ends the
+        search. Appends to `blocked` (action, its block's predicted x, y) per goal state whose action was rejected."""
         out, cfg = self.out, self.config
         P, _, _, g = self.nodes[index]
-        actions = self.actions(P)
         if len(actions) == 0:
             return None
         succ, calls = predict_positions(self.model, self.full(P), actions, cfg.batched)
@@ -418,6 +441,7 @@ class ContinuousSearch:
                 nodes.pop()
                 out.goals_rejected += 1
                 out.rejected_goal_error = min(out.rejected_goal_error, float(worst[b]))
+                blocked.append((action, succ[b][action[0], :2]))
                 continue
             if not reached[b]:
                 best_g[k] = g + 1

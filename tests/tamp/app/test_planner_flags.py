@@ -111,7 +111,7 @@ def test_the_defining_settings_of_a_results_directory_are_unchanged():
                "search_release_targets": True, "search_time_limit_s": None, "search_stall": None,
                "search_greedy_from": 5, "search_greedy_h_unit_m": 0.5,
                "search_greedy_per_misplaced": 0.3, "search_greedy_stall": 800, "loop_greedy_search_budget": 1500,
-               "symbolic_backend": "python", "search_resolution_m": 0.02,
+               "symbolic_backend": "python", "search_resolution_m": 0.02, "search_clear_blockers": True,
                "tau_verify_m": 0.07,
                "loop": {"max_actions": 20, "widen": True, "widen_expansions": 400, "search_budget": 3000,
                         "greedy_search_budget": 1500, "stall": 300, "progress": 0.02, "revisit": 0.01,
@@ -133,6 +133,9 @@ def test_the_defining_settings_of_a_results_directory_are_unchanged():
     # a directory made on the 1 cm duplicate grid of before has no "search_resolution_m"
     fine = EvalConfig(planner=PlanConfig(search=SearchConfig(resolution=0.01))).defining()
     assert fine == {k: v for k, v in default.items() if k != "search_resolution_m"}
+    # nor one made when the search offered goal-oriented actions alone
+    alone = EvalConfig(planner=PlanConfig(search=SearchConfig(clear_blockers=False))).defining()
+    assert alone == {k: v for k, v in default.items() if k != "search_clear_blockers"}
     slow = EvalConfig(planner=PlanConfig(level1=Level1Config(symbolic_time_limit=3.0))).defining()
     assert slow == {**default, "symbolic_time_limit_s": 3.0}
     assert EvalConfig().plan_config(5, False) == PlanConfig(level1=Level1Config(seed=5),

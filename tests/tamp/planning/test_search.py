@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from tamp.errors import UserError
-from tamp.planning.pruning import goal_oriented_actions
+from tamp.planning.pruning import blockers, goal_oriented_actions
 from tamp.planning.search import SearchConfig, continuous_search
 from tamp.planning.verify import VerifyConfig, goal_error, rollout
 from tests.planning_stubs import StubModel, world_step
@@ -192,6 +192,45 @@ def test_goal_states_reached_only_by_rejected_actions_are_counted_and_said():
     assert f"{out.goals_rejected} goal state" in out.reason and "kinematic check rejects" in out.reason
     free = continuous_search(StubModel(), X, G, SearchConfig(max_expansions=40))
     assert free.solved and free.goals_rejected == 0
+
+
+def test_the_blockers_of_an_action_are_the_neighbours_of_its_pick_and_of_its_place():
+    # bar 0; cube 1 with cube 2 touching it (5 mm apart along y)
+    Y = np.array([[0.55, -0.15, 0.025, 0, 1], [0.7, 0.1, 0.025, 1, 0], [0.7, 0.155, 0.025, 1, 0]])
+    assert blockers(Y, (1, 0, 1, -1), np.array([0.7, 0.025])).tolist() == [2]  # beside the pick
+    assert blockers(Y, (2, 0, 2, 1), np.array([0.7, 0.23])).tolist() == [1]
+    free = Y.copy()
+    free[2, :2] = (0.9, 0.4)
+    assert blockers(free, (1, 0, 1, -1), np.array([0.7, 0.025])).tolist() == []
+    # a bar's length counts: a cube 17 cm along y from the bar's centre is beside its end, 19 cm is not
+    assert blockers(free, (2, 0, 0, 0), np.array([0.55, 0.02])).tolist() == []  # placed on the bar: not in the way
+    assert blockers(free, (2, 0, 2, 0), np.array([0.55, 0.02])).tolist() == [0]
+    assert blockers(free, (2, 0, 2, 0), np.array([0.55, 0.04])).tolist() == []
+
+
+def test_a_block_in_the_way_at_its_own_goal_moves_first():
+    """Cube 1's goal is 7.5 cm along -y; cube 2 touches it along x and stands at its goal. The goal-oriented
+    actions move only cube 1, and the kinematic check rejects every move of it while cube 2 is beside it (as it
+    would with a bar resting on its end). The search moves cube 2 out of the way, then cube 1, then cube 2 back."""
+    Y = np.array([[0.55, -0.15, 0.025, 0, 1], [0.7, 0.1, 0.025, 1, 0], [0.755, 0.1, 0.025, 1, 0]])
+    G = world_step(Y, (1, 0, 1, -1))
+
+    def moves(X_pred, action, i):
+        return np.abs(world_step(X_pred, action)[i, :2] - X_pred[i, :2]).max() > 1e-6
+
+    def feasible(X_pred, action):  # cube 1's lift hits cube 2 while they are within 1 cm
+        gap = np.abs(X_pred[2, :2] - X_pred[1, :2]) - 0.05
+        return "collision" if moves(X_pred, action, 1) and (gap < 0.01).all() else None
+
+    config = SearchConfig(max_expansions=200)
+    stuck = continuous_search(StubModel(), Y, G, replace(config, clear_blockers=False), feasible=feasible)
+    assert not stuck.solved and stuck.goals_rejected >= 1 and stuck.clearing == 0
+    out = continuous_search(StubModel(), Y, G, config, feasible=feasible)
+    assert out.solved and out.clearing > 0
+    states = rollout(StubModel(), Y, out.plan)
+    assert moves(Y, out.plan[0], 2) and not moves(Y, out.plan[0], 1)  # cube 2 out of the way first
+    assert goal_error(states[-1], G) < out_eps()
+    assert all(feasible(X_t, a) is None for X_t, a in zip(states, out.plan))
 
 
 def out_eps() -> float:
