@@ -1,12 +1,15 @@
 """Report section 16: the Dynamics Model where the planner acts. Every executed step's miss (the block
 farthest from its predicted place) against 2 and 5 cm, and against the model's own 95 % bound
 (`tamp.planning.calibration`): a calibrated model's miss exceeds its bound in about 5 % of steps, for
-every number of blocks and action class."""
+every number of blocks and action class; and by the scene each step starts from (blocks on the table, a stack,
+a leaning block) where the rows record it."""
 from __future__ import annotations
 
 from collections import defaultdict
 from pathlib import Path
 from typing import Any
+
+from tamp.planning.calibration import SCENES
 
 from ..format import fmt_cm, fmt_pct, md_table
 from ..stats import median
@@ -43,7 +46,7 @@ def section_calibration(res: Results, figures: Path) -> Section:
              "of the block farthest from its predicted place; the bound is the model's own 95 % bound of that "
              "distance (an ensemble's members and their spread; a single network without a spread head gives none). "
              "A calibrated model's miss exceeds its bound in about 5 % of steps.", ""]
-    data: dict[str, Any] = {"methods": {}, "classes": {}}
+    data: dict[str, Any] = {"methods": {}, "classes": {}, "scenes": {}}
     rows_out = []
     for m in res.methods:
         rs = res.select(m)
@@ -66,6 +69,17 @@ def section_calibration(res: Results, figures: Path) -> Section:
     lines += ["", "By action class, every method's steps together:", ""]
     lines += md_table(["action", "n", "steps", ">= 2 cm (%)", ">= 5 cm (%)", "beyond the 95 % bound (%)",
                        "median miss (cm)", "median bound (cm)"], class_rows)
+    by_scene = {name: [p for p in _predictions(res.rows) if p.get("scene") == name] for name in SCENES}
+    scene_rows = []
+    for name, predictions in by_scene.items():
+        if predictions:
+            data["scenes"][name] = f = step_figures(predictions)
+            scene_rows.append(_row(name, "all", f))
+    if scene_rows:
+        lines += ["", "By the scene the step starts from (a leaning block: a centre between the heights an upright "
+                  "block rests at; X holds no tilt), every method's steps together:", ""]
+        lines += md_table(["the step starts from", "n", "steps", ">= 2 cm (%)", ">= 5 cm (%)",
+                           "beyond the 95 % bound (%)", "median miss (cm)", "median bound (cm)"], scene_rows)
     return Section("calibration", title, lines, data)
 
 
