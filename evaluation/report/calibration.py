@@ -58,9 +58,10 @@ def section_calibration(res: Results, figures: Path) -> Section:
     lines += md_table(["method", "n", "steps", ">= 2 cm (%)", ">= 5 cm (%)", "beyond the 95 % bound (%)",
                        "median miss (cm)", "median bound (cm)"], rows_out)
     by_class: dict[str, list[dict]] = defaultdict(list)
-    for r in res.rows:
-        for p in r.get("predictions") or []:
-            by_class[p["class"]].append(p)
+    by_scene: dict[str | None, list[dict]] = defaultdict(list)  # None: rows made before the split
+    for p in _predictions(res.rows):
+        by_class[p["class"]].append(p)
+        by_scene[p.get("scene")].append(p)
     class_rows = []
     for name in sorted(by_class, key=lambda c: -len(by_class[c])):
         f = step_figures(by_class[name])
@@ -69,11 +70,10 @@ def section_calibration(res: Results, figures: Path) -> Section:
     lines += ["", "By action class, every method's steps together:", ""]
     lines += md_table(["action", "n", "steps", ">= 2 cm (%)", ">= 5 cm (%)", "beyond the 95 % bound (%)",
                        "median miss (cm)", "median bound (cm)"], class_rows)
-    by_scene = {name: [p for p in _predictions(res.rows) if p.get("scene") == name] for name in SCENES}
     scene_rows = []
-    for name, predictions in by_scene.items():
-        if predictions:
-            data["scenes"][name] = f = step_figures(predictions)
+    for name in SCENES:
+        if by_scene.get(name):
+            data["scenes"][name] = f = step_figures(by_scene[name])
             scene_rows.append(_row(name, "all", f))
     if scene_rows:
         lines += ["", "By the scene the step starts from (a leaning block: a centre between the heights an upright "
