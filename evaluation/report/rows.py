@@ -6,6 +6,7 @@ from pathlib import Path
 
 from guarded import LARGE, InputError, Schema, parse_json, read_json, read_jsonl
 from tamp.errors import UserError
+from tamp.planning.calibration import SCENES
 from tamp.planning.vocabulary import OUTCOMES, Outcome
 
 ERROR_OUTCOME = Outcome.ERROR.value  # a (problem, method) that raised (evaluation.run): listed, left out of the tables
@@ -26,7 +27,11 @@ ROW_SCHEMA = Schema({
         "refined": {"type": ["boolean", "null"]},
         "refine_failure": {"type": ["object", "null"], "required": ["stage"],
                            "properties": {"stage": {"enum": list(STAGES)}}},
-        "refine_time_s": {"type": ["array", "null"], "items": {"type": "number"}}}})
+        "refine_time_s": {"type": ["array", "null"], "items": {"type": "number"}},
+        "predictions": {"type": ["array", "null"], "items": {
+            "type": "object", "required": ["class", "miss_m"],
+            "properties": {"class": {"type": "string"}, "miss_m": {"type": "number"}, "bound_m": _NUMBER,
+                           "scene": {"enum": list(SCENES)}}}}}})
 
 
 def load_rows(path: Path) -> list[dict]:

@@ -617,6 +617,10 @@ def test_bad_rows_name_the_file_and_line(tmp_path):
     (tmp_path / "rows.jsonl").write_text("\n".join([text[0], json.dumps(bad)]) + "\n")
     with pytest.raises(ValueError, match=r"line 2: outcome: expected one of .*, got \"exploded\""):
         write_report(tmp_path)
+    odd = dict(rows[1], predictions=[{"class": "cube on a cube", "miss_m": 0.01, "scene": [1]}])
+    (tmp_path / "rows.jsonl").write_text("\n".join([text[0], json.dumps(odd)]) + "\n")
+    with pytest.raises(ValueError, match=r"line 2: predictions\[0\]\.scene: expected one of"):
+        write_report(tmp_path)
     (tmp_path / "rows.jsonl").write_text("\n".join([text[0], text[0]]) + "\n")
     with pytest.raises(ValueError, match=r"line 2: problem 'n2-k1-000' with method 'cfs' already on line 1"):
         write_report(tmp_path)
