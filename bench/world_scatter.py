@@ -1,6 +1,7 @@
 """Does the world scatter? The same action from the same scene, and from the scene moved by a millimetre.
 
     .venv/bin/python bench/world_scatter.py --scenes 300 --seed 7
+    .venv/bin/python bench/world_scatter.py --scenes 800 --seed 1 --stacked --model tamp/pretrained/dynamics.pt
 
 A random scene of 2-4 blocks (blocks apart on the table), one action among those that grasp a block
 (`World.graspable_actions`), run three times: from the scene itself with motion seed 1, and with motion
@@ -8,6 +9,11 @@ seeds 2 and 3 from the scene with every block shifted on the table by up to `--j
 Among the steps that moved something (all three executed), how often two outcomes differ by 2 cm (5 cm)
 or more: the part of a Dynamics Model's misses that no smooth prediction from X could avoid, since a
 state observed to a millimetre does not decide the outcome.
+
+`--stacked` measures where the planner's steps miss: before the measured action, 2-8 random graspable
+actions, and only scenes that then hold a stack or a leaning block (`start_scene`) are kept. `--model`
+prints a Dynamics Model's miss beside the scatter (its prediction from X against the first run), split by
+the scene and by the blocks' tilt, which X does not hold.
 """
 
 from __future__ import annotations
@@ -21,45 +27,103 @@ from tqdm import tqdm
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+TILTED_DEG = 5.0  # a block whose up axis leans this far from vertical counts as tilted
+
+
+def tilt_deg(X_WB) -> float:
+    """Degrees between a block's pose's z axis (or its opposite) and the vertical."""
+    return float(np.degrees(np.arccos(min(1.0, abs(X_WB.rotation().matrix()[2, 2])))))
+
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--scenes", type=int, default=300, help="random scenes, one action each (default 300)")
     ap.add_argument("--seed", type=int, default=7)
     ap.add_argument("--jitter-mm", type=float, default=1.0, help="largest shift of a block in x and y (default 1)")
+    ap.add_argument("--stacked", action="store_true",
+                    help="measure steps that start from a stack or a leaning block, after 2-8 random actions")
+    ap.add_argument("--model", type=Path, help="a Dynamics Model whose miss is printed beside the scatter")
     args = ap.parse_args()
+    if args.scenes < 1 or not args.jitter_mm >= 0:
+        ap.error("--scenes must be at least 1 and --jitter-mm 0 or more")
 
     from pydrake.math import RigidTransform
 
+    from tamp.planning.calibration import SCENES, start_scene
     from tamp.sim import World
     from tamp.sim.skill import Scene
     from tamp.sim.world_types import StepStatus
 
+    model = None
+    if args.model is not None:
+        from learned.ensemble import load_dynamics
+
+        model = load_dynamics(args.model)
     world = World()
     jitter = args.jitter_mm / 1000
     rng = np.random.default_rng(args.seed)
-    spread = []
-    for _ in tqdm(range(args.scenes), unit="scene"):
-        X0 = world.reset(n_objects=int(rng.integers(2, 5)), seed=int(rng.integers(2**62)))
-        scene, q = world.scene, world.q.copy()
-        actions = world.graspable_actions()
-        action = actions[rng.integers(len(actions))]
-        outcomes = []
-        for motion_seed in (1, 2, 3):
-            shifted = scene if motion_seed == 1 else Scene(scene.types, [
-                RigidTransform(X_WB.rotation(), X_WB.translation() + np.r_[rng.uniform(-1, 1, 2) * jitter, 0.0])
-                for X_WB in scene.X_WB])
-            world.set_scene(shifted, q, motion_seed=motion_seed)
-            X, info = world.step(action)
-            outcomes.append(X if info.status == StepStatus.OK else None)
-        if any(X is None for X in outcomes) or np.abs(outcomes[0][:, :3] - X0[:, :3]).max() < 0.01:
+    rows: list[tuple[str, bool, bool, float, float]] = []  # scene, any tilted, place tilted, scatter, model miss
+    with tqdm(total=args.scenes, unit="scene") as bar:
+        while bar.n < args.scenes:
+            X0 = world.reset(n_objects=int(rng.integers(2, 5)), seed=int(rng.integers(2**62)))
+            if args.stacked:
+                for _ in range(int(rng.integers(2, 9))):
+                    actions = world.graspable_actions()
+                    X0, _ = world.step(actions[rng.integers(len(actions))])
+                if start_scene(X0) == SCENES[0]:
+                    continue
+            bar.update()
+            scene, q = world.scene, world.q.copy()
+            actions = world.graspable_actions()
+            action = actions[rng.integers(len(actions))]
+            outcomes = []
+            for motion_seed in (1, 2, 3):
+                shifted = scene if motion_seed == 1 else Scene(scene.types, [
+                    RigidTransform(X_WB.rotation(), X_WB.translation() + np.r_[rng.uniform(-1, 1, 2) * jitter, 0.0])
+                    for X_WB in scene.X_WB])
+                world.set_scene(shifted, q, motion_seed=motion_seed)
+                X, info = world.step(action)
+                outcomes.append(X if info.status == StepStatus.OK else None)
+            if any(X is None for X in outcomes) or np.abs(outcomes[0][:, :3] - X0[:, :3]).max() < 0.01:
+                continue
+            scatter = max(np.linalg.norm(outcomes[i][:, :3] - outcomes[j][:, :3], axis=1).max()
+                          for i, j in ((0, 1), (0, 2), (1, 2)))
+            miss = np.nan
+            if model is not None:
+                effect = model.predict_effect(X0, np.asarray([tuple(action)], dtype=np.int64))[0]
+                miss = float(np.linalg.norm(X0[:, :3] + effect - outcomes[0][:, :3], axis=1).max())
+            tilts = [tilt_deg(X_WB) for X_WB in scene.X_WB]
+            rows.append((start_scene(X0), max(tilts) >= TILTED_DEG, tilts[action.place] >= TILTED_DEG, scatter, miss))
+    report(rows, args.scenes, model is not None, SCENES)
+
+
+def shares(d: np.ndarray) -> str:
+    """The percentages of distances (metres) of 2 cm or more and of 5 cm or more."""
+    return f"{100 * np.mean(d >= 0.02):5.1f} / {100 * np.mean(d >= 0.05):4.1f} %"
+
+
+def report(rows: list, n_scenes: int, with_model: bool, scenes: tuple[str, ...]) -> None:
+    """The share of steps whose outcomes differ (and, with a model, whose prediction missed) by 2 and 5 cm."""
+    if not rows:
+        print("no step moved anything")
+        return
+    kind = np.array([r[0] for r in rows])
+    tilted, place_tilted = np.array([r[1] for r in rows]), np.array([r[2] for r in rows])
+    scatter, miss = np.array([r[3] for r in rows]), np.array([r[4] for r in rows])
+    groups = [("every step", np.ones(len(rows), bool))]
+    groups += [(f"from {s}", kind == s) for s in scenes if (kind == s).any()]
+    groups += [(f"no block tilted {TILTED_DEG:g} deg or more", ~tilted),
+               (f"a block tilted {TILTED_DEG:g} deg or more", tilted),
+               ("the block placed on is tilted", place_tilted)]
+    print(f"{len(rows)} moving steps of {n_scenes} scenes; largest scatter {100 * scatter.max():.2f} cm")
+    print(f"{'':40s} {'steps':>6s}   scatter >= 2 / 5 cm" + ("   model miss >= 2 / 5 cm" if with_model else ""))
+    for name, m in groups:
+        if not m.any():
             continue
-        spread.append(max(np.linalg.norm(outcomes[i][:, :3] - outcomes[j][:, :3], axis=1).max()
-                          for i, j in ((0, 1), (0, 2), (1, 2))))
-    d = np.array(spread)
-    print(f"{len(d)} moving steps of {args.scenes} scenes; two of three runs differ by >= 2 cm: "
-          f"{100 * np.mean(d >= 0.02):.1f} %, >= 5 cm: {100 * np.mean(d >= 0.05):.1f} %; "
-          f"largest {100 * d.max():.2f} cm" if len(d) else "no step moved anything")
+        line = f"{name:40s} {m.sum():6d}   {shares(scatter[m])}"
+        if with_model:
+            line += f"        {shares(miss[m])}"
+        print(line)
 
 
 if __name__ == "__main__":
