@@ -84,14 +84,15 @@ def main() -> None:
                 world.set_scene(shifted, q, motion_seed=motion_seed)
                 X, info = world.step(action)
                 outcomes.append(X if info.status == StepStatus.OK else None)
-            if any(X is None for X in outcomes) or np.abs(outcomes[0][:, :3] - X0[:, :3]).max() < 0.01:
+            runs = [X for X in outcomes if X is not None]
+            if len(runs) < 3 or np.abs(runs[0][:, :3] - X0[:, :3]).max() < 0.01:
                 continue
-            scatter = max(np.linalg.norm(outcomes[i][:, :3] - outcomes[j][:, :3], axis=1).max()
+            scatter = max(np.linalg.norm(runs[i][:, :3] - runs[j][:, :3], axis=1).max()
                           for i, j in ((0, 1), (0, 2), (1, 2)))
             miss = np.nan
             if model is not None:
                 effect = model.predict_effect(X0, np.asarray([tuple(action)], dtype=np.int64))[0]
-                miss = float(np.linalg.norm(X0[:, :3] + effect - outcomes[0][:, :3], axis=1).max())
+                miss = float(np.linalg.norm(X0[:, :3] + effect - runs[0][:, :3], axis=1).max())
             tilts = [tilt_deg(X_WB) for X_WB in scene.X_WB]
             rows.append((start_scene(X0), max(tilts) >= TILTED_DEG, tilts[action.place] >= TILTED_DEG, scatter, miss))
     report(rows, args.scenes, model is not None, SCENES)
