@@ -57,8 +57,13 @@ def main() -> None:
     model = None
     if args.model is not None:
         from learned.ensemble import load_dynamics
+        from tamp.planning.models import require_kind
 
-        model = load_dynamics(args.model)
+        try:
+            model = load_dynamics(args.model)
+            require_kind(model, "dynamics", args.model)
+        except (OSError, ValueError) as e:  # a UserError is a ValueError
+            ap.error(f"--model {args.model}: {e}")
     world = World()
     jitter = args.jitter_mm / 1000
     rng = np.random.default_rng(args.seed)
