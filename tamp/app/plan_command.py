@@ -71,6 +71,7 @@ class PlanOptions:
     steps: Path | None = None  # per-step JSON (default: beside the replay, if any)
     trajectory: Path | None = None  # the executed joint trajectory (docs/trajectories.md)
     faults: Faults = Faults()  # with replan: observation noise and a push, drawn from the problem's seed
+    name: str | None = None  # the problem of a problem set (`tamp problems`) to plan
 
 
 def _ms(t: float) -> str:
@@ -240,13 +241,13 @@ def run_plan(problem_path: Path, models_dir: Path, options: PlanOptions) -> int:
     """The `tamp plan` command; returns the exit code (0: solved, and reached the goal if executed)."""
     import torch
 
-    from tamp.app.problem import load_problem
+    from tamp.app.problem import pick_problem
     from tamp.planning.models import load_bit_names, load_models
 
     # Planning runs many small forward passes: one thread is faster, and much faster when another
     # process keeps the second core busy (a 2-thread pass then waits for it: 20-40x slower, measured).
     torch.set_num_threads(1)
-    problem = load_problem(problem_path)
+    problem = pick_problem(problem_path, options.name)
     if options.rounds is not None and not options.replan:
         raise UserError("--rounds sets the replanning rounds of the closed loop; give it with --replan")
     if not options.replan and (given := loop_flags_given(options.planner)):
@@ -280,7 +281,8 @@ def run_plan(problem_path: Path, models_dir: Path, options: PlanOptions) -> int:
     models.require_objects(problem.n, str(problem_path))
     k = "?" if problem.k is None else problem.k
     symbolic = "" if options.method == "cfs" else f"; symbolic planner {cfg.level1.backend}"
-    print(f"problem {problem_path}: {problem.n} objects, k = {k}, seed {problem.seed}; initial error "
+    named = "" if options.name is None else f" {options.name}"
+    print(f"problem {problem_path}{named}: {problem.n} objects, k = {k}, seed {problem.seed}; initial error "
           f"{goal_error(problem.X_init, problem.X_goal) * 100:.1f} cm{symbolic}")
     timeline = None
     if options.replay is not None:
@@ -292,7 +294,8 @@ def run_plan(problem_path: Path, models_dir: Path, options: PlanOptions) -> int:
     if steps_file is not None and records:
         from tamp.app.step_report import steps_document, write_steps
 
-        write_steps(steps_file, steps_document(str(problem_path), options.method, None, records, names))
+        write_steps(steps_file, steps_document(f"{problem_path}{'' if options.name is None else ':' + options.name}",
+                                               options.method, None, records, names))
         print(f"steps written to {steps_file}")
     if timeline is not None:
         from tamp.app.step_report import panel_entries
@@ -305,8 +308,8 @@ def run_plan(problem_path: Path, models_dir: Path, options: PlanOptions) -> int:
         else:
             print("nothing was executed; no replay written")
     if options.trajectory is not None:
-        source = (f"tamp plan --problem {problem_path} --method {options.method} --execute {options.execute}"
-                  + (" --replan" if options.replan else ""))
+        source = (f"tamp plan --problem {problem_path}{'' if options.name is None else ' --name ' + options.name} "
+                  f"--method {options.method} --execute {options.execute}" + (" --replan" if options.replan else ""))
         write_executed_trajectory(None if episode is None else episode.motion, options.trajectory, source)
     return code
 
@@ -335,7 +338,10 @@ def write_executed_trajectory(executed, path: Path, source: str) -> None:
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """The flags of `tamp plan`."""
-    p.add_argument("--problem", type=Path, required=True, help="problem file (JSON: X_init, X_goal, k, seed)")
+    p.add_argument("--problem", type=Path, required=True,
+                   help="problem file (JSON: X_init, X_goal, k, seed), or a problem set of `tamp problems` "
+                   "(JSON Lines; pick its problem with --name)")
+    p.add_argument("--name", default=None, help="the problem of a problem set to plan (e.g. n4-k3-002)")
     p.add_argument("--models", type=models_directory, default=None, help=MODELS_HELP + "; default: pretrained")
     p.add_argument("--method", choices=tuple(METHODS), default="bilevel",
                    help="planner (default bilevel: verified symbolic plan, else continuous search; "
@@ -381,6 +387,6 @@ def options_from_args(args: argparse.Namespace) -> PlanOptions:
     if args.replan and args.rounds is None:  # the loop knows its observations' noise
         planner = replace(planner, loop=faults.known_to(planner.loop, auto_given(args)))
     return PlanOptions(args.method, args.execute, args.replan, args.rounds, args.replay, planner, args.steps,
-                       args.trajectory, faults)
+                       args.trajectory, faults, args.name)
 
 

@@ -122,6 +122,31 @@ def load_problem(path: str | Path) -> Problem:
     return problem_from_dict(read_json(path, "problem file"), str(path))
 
 
+def pick_problem(path: str | Path, name: str | None = None) -> Problem:
+    """One problem: a problem file, or the problem `name` of a problem set (JSON Lines, `tamp problems`; a set of
+    one problem needs no name). Errors name the file and, for a set without a name, its first problems."""
+    path = Path(path)
+    if name is None:
+        try:
+            return load_problem(path)
+        except ValueError as single:  # not one problem (a UserError or the reader's InputError): a set, perhaps
+            try:
+                problems = read_problem_set(path)
+            except ValueError:
+                raise single from None
+    else:
+        problems = read_problem_set(path)
+    if name is None:
+        if len(problems) == 1:
+            return problems[0]
+        shown = ", ".join(str(p.name) for p in problems[:3])
+        raise UserError(f"{path} is a problem set of {len(problems)} problems: pick one with --name (e.g. {shown})")
+    for problem in problems:
+        if problem.name == name:
+            return problem
+    raise UserError(f"{path}: no problem named {name!r} among its {len(problems)} (e.g. {problems[0].name})")
+
+
 def save_problem(path: str | Path, problem: Problem) -> None:
     Path(path).write_text(json.dumps(problem.to_dict()) + "\n")
 

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from tamp.app.cli import main
-from tamp.app.problem import Problem, load_problem, problem_from_dict, save_problem
+from tamp.app.problem import Problem, load_problem, pick_problem, problem_from_dict, save_problem
 
 X = [[0.6, 0.15, 0.025, 1, 0], [0.7, -0.1, 0.025, 0, 1]]
 GOAL = [[0.7, -0.1, 0.075, 1, 0], [0.7, -0.1, 0.025, 0, 1]]
@@ -54,6 +54,31 @@ def test_cli_reports_a_malformed_problem_in_one_line(tmp_path, capsys):
     assert err.count("\n") == 0 and "missing field 'X_goal'" in err and "Traceback" not in err
     path.write_text("{not json")
     assert main(["plan", "--problem", str(path), "--models", str(tmp_path)]) == 2
+    assert "not valid JSON" in capsys.readouterr().err
+
+
+def test_a_problem_is_picked_from_a_problem_set_by_name(tmp_path, capsys):
+    named = [dict(name=f"n2-k1-00{i}", X_init=X, X_goal=GOAL, k=1, seed=i) for i in range(3)]
+    path = tmp_path / "set.jsonl"
+    path.write_text("".join(json.dumps(p) + "\n" for p in named))
+    assert pick_problem(path, "n2-k1-002").seed == 2
+    with pytest.raises(ValueError, match=r"problem set of 3 problems: pick one with --name \(e.g. n2-k1-000"):
+        pick_problem(path)
+    with pytest.raises(ValueError, match="no problem named 'n9'"):
+        pick_problem(path, "n9")
+    one = tmp_path / "one.jsonl"
+    one.write_text(json.dumps(named[1]) + "\n")
+    assert pick_problem(one).seed == 1  # a set of one needs no name
+    single = tmp_path / "p.json"
+    save_problem(single, Problem(np.array(X, float), np.array(GOAL, float), k=2, seed=5))
+    assert pick_problem(single).seed == 5
+    # the command says so in one line; a malformed single file still names its own fault
+    assert main(["plan", "--problem", str(path), "--models", str(tmp_path)]) == 2
+    assert "pick one with --name" in capsys.readouterr().err
+    assert main(["plan", "--problem", str(path), "--name", "n9", "--models", str(tmp_path)]) == 2
+    assert "no problem named 'n9' among its 3" in capsys.readouterr().err
+    single.write_text("{not json")
+    assert main(["plan", "--problem", str(single), "--models", str(tmp_path)]) == 2
     assert "not valid JSON" in capsys.readouterr().err
 
 
