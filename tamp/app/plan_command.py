@@ -281,8 +281,8 @@ def run_plan(problem_path: Path, models_dir: Path, options: PlanOptions) -> int:
     models.require_objects(problem.n, str(problem_path))
     k = "?" if problem.k is None else problem.k
     symbolic = "" if options.method == "cfs" else f"; symbolic planner {cfg.level1.backend}"
-    named = "" if options.name is None else f" {options.name}"
-    print(f"problem {problem_path}{named}: {problem.n} objects, k = {k}, seed {problem.seed}; initial error "
+    which = str(problem_path) if options.name is None else f"{problem_path} --name {options.name}"
+    print(f"problem {which}: {problem.n} objects, k = {k}, seed {problem.seed}; initial error "
           f"{goal_error(problem.X_init, problem.X_goal) * 100:.1f} cm{symbolic}")
     timeline = None
     if options.replay is not None:
@@ -294,8 +294,7 @@ def run_plan(problem_path: Path, models_dir: Path, options: PlanOptions) -> int:
     if steps_file is not None and records:
         from tamp.app.step_report import steps_document, write_steps
 
-        write_steps(steps_file, steps_document(f"{problem_path}{'' if options.name is None else ':' + options.name}",
-                                               options.method, None, records, names))
+        write_steps(steps_file, steps_document(which, options.method, None, records, names))
         print(f"steps written to {steps_file}")
     if timeline is not None:
         from tamp.app.step_report import panel_entries
@@ -308,8 +307,8 @@ def run_plan(problem_path: Path, models_dir: Path, options: PlanOptions) -> int:
         else:
             print("nothing was executed; no replay written")
     if options.trajectory is not None:
-        source = (f"tamp plan --problem {problem_path}{'' if options.name is None else ' --name ' + options.name} "
-                  f"--method {options.method} --execute {options.execute}" + (" --replan" if options.replan else ""))
+        source = (f"tamp plan --problem {which} --method {options.method} --execute {options.execute}"
+                  + (" --replan" if options.replan else ""))
         write_executed_trajectory(None if episode is None else episode.motion, options.trajectory, source)
     return code
 
