@@ -133,6 +133,8 @@ def pick_problem(path: str | Path, name: str | None = None) -> Problem:
             try:
                 problems = read_problem_set(path)
             except ValueError:
+                if ".jsonl" in path.suffixes:  # meant as a set: its own fault (a line, a duplicate name) says more
+                    raise
                 raise single from None
     else:
         problems = read_problem_set(path)

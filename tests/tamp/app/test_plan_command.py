@@ -69,6 +69,9 @@ def test_a_problem_is_picked_from_a_problem_set_by_name(tmp_path, capsys):
     one = tmp_path / "one.jsonl"
     one.write_text(json.dumps(named[1]) + "\n")
     assert pick_problem(one).seed == 1  # a set of one needs no name
+    one.write_text(json.dumps(named[1]) + "\n" + json.dumps(named[1]) + "\n")
+    with pytest.raises(ValueError, match="line 2: duplicate problem name 'n2-k1-001'"):
+        pick_problem(one)  # a faulty set says what is wrong with it, not that it is not one problem
     single = tmp_path / "p.json"
     save_problem(single, Problem(np.array(X, float), np.array(GOAL, float), k=2, seed=5))
     assert pick_problem(single).seed == 5
