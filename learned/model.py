@@ -83,6 +83,10 @@ class ModelConfig:
     #   target the grasp offset and the picked block's type), so the picked block knows where it lands (False: the
     #   paper's encoding)
     whole_action: bool = False
+    # each message z_ij = MLP(u_j, a_j, x_j - x_i) reads where j stands from i, so that an offset reaches the
+    #   decoder exactly, not only through the bits (a Dynamics Model option: it would pass a Symbolic Model's
+    #   bottleneck by); h_i^k = sum_j s_k(i,j) z_ij (False: the paper's z_j)
+    relative_messages: bool = False
 
     @property
     def action_dim(self) -> int:
@@ -106,6 +110,9 @@ class ModelConfig:
             value = getattr(self, setting.name)
             if kind is not None and type(value) is not kind[0]:
                 raise ValueError(f"{setting.name} must be {kind[1]}, got {value!r}")
+        if self.relative_messages and self.activation == "gumbel_sigmoid":
+            raise ValueError("relative_messages gives the decoder each pair's offset past the symbols: a Dynamics "
+                             "Model option, not one for a Symbolic Model (gumbel_sigmoid)")
         if self.offset_from_relations and not self.offset_decoder:
             raise ValueError("offset_from_relations needs offset_decoder=True (the head it changes)")
         for f in ("n_max", "d_z", "heads", "d_key", "d_msg", "hidden", "layers"):
@@ -191,7 +198,7 @@ class EffectModel(nn.Module):
             self.key = nn.Linear(c.hidden, c.heads * c.d_key)
         else:  # pairwise: [x_i, x_j, (x_j - x_i)[:3]] per ordered pair, K logits out
             self.pair = mlp([2 * STATE_DIM + 3, *hid, c.heads])
-        self.object_mlp = mlp([c.n_unary + c.action_dim, *hid, c.d_msg])
+        self.object_mlp = mlp([c.n_unary + c.action_dim + 3 * c.relative_messages, *hid, c.d_msg])
         self.decoder = mlp([c.heads * c.d_msg, *hid, 3])
         if c.spread:
             self.spread_head = mlp([c.heads * c.d_msg + c.action_dim, *hid, 3])
@@ -282,10 +289,16 @@ class EffectModel(nn.Module):
 
     def messages(self, X: torch.Tensor, action: torch.Tensor, mask: torch.Tensor, u: torch.Tensor,
                  r: torch.Tensor) -> torch.Tensor:
-        """The decoder's input (B, N, K d_msg): h_i^k = sum_j s_k(i,j) z_j for every head k."""
+        """The decoder's input (B, N, K d_msg): h_i^k = sum_j s_k(i,j) z_j for every head k (z_ij with
+        `relative_messages`)."""
         B, N, _ = X.shape
         a = self.encode_actions(X, action)
-        z = self.object_mlp(torch.cat([u.expand(B, -1, -1), a], dim=-1))
+        f = torch.cat([u.expand(B, -1, -1), a], dim=-1)
+        if self.config.relative_messages:  # z[b, i, j] = MLP(f_j, (x_j - x_i) / std)
+            offsets = (self.pair_offsets(X) / self.pos_std).to(f.dtype)
+            z_pairs = self.object_mlp(torch.cat([f[:, None].expand(B, N, N, f.shape[-1]), offsets], dim=-1))
+            return torch.einsum("bkij,bijd->bikd", r, z_pairs).reshape(B, N, -1)
+        z = self.object_mlp(f)
         # h_i^k = sum_j s_k(i,j) z_j as one (K*N x N) @ (N x d_msg) product per scene: this op trains
         # 2-4x faster than broadcasting r (B, K, N, N) against z (B, 1, N, d_msg); same sums, but
         # float32 gradients differ from that form's in the last bits

@@ -44,6 +44,7 @@ def cmd_train(args: argparse.Namespace) -> int:
                                ("relations", args.relations),
                                ("type_symbol", True if args.type_symbol else None),
                                ("whole_action", True if args.whole_action else None),
+                               ("relative_messages", True if args.relative_messages else None),
                                ("offset_decoder", True if args.offset_loss else None),
                                ("offset_from_relations", True if args.offset_from_relations else None),
                                ("position_decoder", True if args.position_loss else None),
@@ -57,6 +58,9 @@ def cmd_train(args: argparse.Namespace) -> int:
         raise UserError("--extra-share must be above 0 (the share of each resample drawn from --extra-data)")
     if args.ensemble is not None and args.bottleneck == "gumbel_sigmoid":
         raise UserError("--ensemble trains a Dynamics Model: leave out --bottleneck gumbel_sigmoid")
+    if args.relative_messages and args.bottleneck == "gumbel_sigmoid":
+        raise UserError("--relative-messages gives the decoder each pair's offset past the symbols: a Dynamics "
+                        "Model option, leave out --bottleneck gumbel_sigmoid")
     if args.extra_data:
         asked["n_max"] = max(asked["n_max"], *(int(read_meta(d)["n_max"]) for d in args.extra_data))
     if args.init is None:
@@ -200,6 +204,10 @@ def add_train(sub) -> None:
                    "target's type, the target the grasp offset and the picked block's type, so the picked block knows "
                    "where it lands (on a cube or beside it); with --init, the network is widened with zero weights and "
                    "predicts as before until it trains (default: the paper's encoding)")
+    p.add_argument("--relative-messages", action="store_true",
+                   help="a Dynamics Model whose every message also reads where the sending object stands from the "
+                   "receiving one (x_j - x_i), so that offsets reach the decoder exactly; fits steps from stacks and "
+                   "leaning blocks better (default: the paper's messages; not with --bottleneck gumbel_sigmoid)")
     p.add_argument("--bit-usage", type=non_negative_float, default=0.0, metavar="WEIGHT",
                    help="weight of a penalty on learned bits and relations set in under 5 %% or over 95 %% of a "
                    "batch, so that the effect loss cannot leave a relation constant (default 0: the paper's loss)")

@@ -34,10 +34,12 @@ def all_actions(n):
 @pytest.mark.parametrize("activation,relations", [("sigmoid", "attention"), ("gumbel_sigmoid", "attention"),
                                                   ("tanh", "attention"), ("none", "attention"),
                                                   ("gumbel_sigmoid", "pairwise"), ("sigmoid", "pairwise"),
-                                                  ("gumbel_sigmoid", "pairwise+type")])
+                                                  ("gumbel_sigmoid", "pairwise+type"),
+                                                  ("sigmoid", "attention+relative")])
 def test_permuting_objects_permutes_effects_and_symbols(activation, relations):
-    typed = relations.endswith("+type")
-    m = make_model(activation, seed=1, relations=relations.removesuffix("+type"), type_symbol=typed)
+    typed, relative = relations.endswith("+type"), relations.endswith("+relative")
+    m = make_model(activation, seed=1, relations=relations.split("+")[0], type_symbol=typed,
+                   relative_messages=relative)
     X = scene(4, seed=2)
     acts = np.array(all_actions(4))
     perm = np.array([2, 0, 3, 1])          # new object k is old object perm[k]
@@ -62,9 +64,11 @@ def test_permuting_objects_permutes_effects_and_symbols(activation, relations):
 
 @pytest.mark.parametrize("activation,relations,typed", [("sigmoid", "attention", False),
                                                         ("gumbel_sigmoid", "attention", False),
-                                                        ("gumbel_sigmoid", "pairwise", True)])
+                                                        ("gumbel_sigmoid", "pairwise", True),
+                                                        ("sigmoid", "attention+relative", False)])
 def test_padding_does_not_change_predictions(activation, relations, typed):
-    m = make_model(activation, seed=3, relations=relations, type_symbol=typed)
+    m = make_model(activation, seed=3, relations=relations.split("+")[0], type_symbol=typed,
+                   relative_messages=relations.endswith("+relative"))
     X = torch.tensor(scene(2, seed=4), dtype=torch.float32)[None]
     acts = torch.tensor(all_actions(2))
     B = acts.shape[0]
@@ -82,6 +86,25 @@ def test_padding_does_not_change_predictions(activation, relations, typed):
     np.testing.assert_array_equal(u[0, :2], u2)
     np.testing.assert_array_equal(r[0][:, :2, :2], r2)
     assert not u[0, 2:].any() and not r[0][:, 2:].any() and not r[0][:, :, 2:].any()
+
+
+def test_relative_messages_read_where_the_other_block_stands():
+    """With relative_messages the message from j to i reads x_j - x_i: moving one block changes what a
+    block that does not move hears, beyond what its bits change (so offsets reach the decoder)."""
+    m = make_model(seed=7, relative_messages=True)
+    X = torch.tensor(scene(3, seed=8), dtype=torch.float32)[None]
+    a, mask = torch.tensor([[0, 0, 1, 0]]), torch.ones(1, 3, dtype=torch.bool)
+    with torch.no_grad():
+        u, r = m.encode(X, mask)
+        moved = X.clone()
+        moved[0, 2, 0] += 0.05  # block 2, 5 cm along x: the bits are held fixed below
+        h, h_moved = m.messages(X, a, mask, u, r), m.messages(moved, a, mask, u, r)
+        paper = make_model(seed=7)
+        same = paper.messages(X, a, mask, u, r), paper.messages(moved, a, mask, u, r)
+    assert (h_moved - h).abs().max() > 1e-3
+    torch.testing.assert_close(*same)  # the paper's messages read the bits and the action only
+    with pytest.raises(ValueError, match="Dynamics Model option"):
+        ModelConfig(activation="gumbel_sigmoid", relative_messages=True)
 
 
 def test_predict_effect_is_absolute_and_batched():

@@ -231,6 +231,23 @@ def test_fine_tune_a_dynamics_model_into_the_whole_action_encoding(tiny_dataset,
     capsys.readouterr()
 
 
+def test_a_dynamics_model_with_relative_messages_trains_and_a_symbolic_one_is_refused(tiny_dataset, tmp_path,
+                                                                                      capsys):
+    base = ["--epochs", "1", "--batch-size", "64", "--precision", "float32"]
+    model = tmp_path / "dynamics.pt"
+    assert main(["train", "--data", str(tiny_dataset), "--whole-action", "--relative-messages", "--out", str(model),
+                 *base]) == 0
+    assert learned.load_model(model).config.relative_messages
+    again = tmp_path / "again.pt"  # fine-tuned, it keeps its messages
+    assert main(["train", "--data", str(tiny_dataset), "--init", str(model), "--out", str(again), *base]) == 0
+    assert learned.load_model(again).config.relative_messages
+    capsys.readouterr()
+    assert main(["train", "--data", str(tiny_dataset), "--relative-messages", "--bottleneck", "gumbel_sigmoid",
+                 "--out", str(tmp_path / "symbolic.pt"), *base]) == 2
+    err = capsys.readouterr().err
+    assert "Dynamics Model option" in err and "Traceback" not in err and not (tmp_path / "symbolic.pt").exists()
+
+
 def test_hidden_width_and_layers_are_the_networks_and_init_keeps_its_own(tiny_dataset, tmp_path, capsys):
     model = tmp_path / "dynamics.pt"
     assert main(["train", "--data", str(tiny_dataset), "--hidden", "24", "--layers", "1", "--epochs", "1",
