@@ -206,8 +206,9 @@ def add_train(sub) -> None:
                    "predicts as before until it trains (default: the paper's encoding)")
     p.add_argument("--relative-messages", action="store_true",
                    help="a Dynamics Model whose every message also reads where the sending object stands from the "
-                   "receiving one (x_j - x_i), so that offsets reach the decoder exactly; fits steps from stacks and "
-                   "leaning blocks better (default: the paper's messages; not with --bottleneck gumbel_sigmoid)")
+                   "receiving one (x_j - x_i), so that offsets reach the decoder exactly: at equal data it fits steps "
+                   "from stacks and leaning blocks better, and plans 2-3x slower (an MLP per pair of blocks; "
+                   "docs/practice-and-doubt.md) (default: the paper's messages; not with --bottleneck gumbel_sigmoid)")
     p.add_argument("--bit-usage", type=non_negative_float, default=0.0, metavar="WEIGHT",
                    help="weight of a penalty on learned bits and relations set in under 5 %% or over 95 %% of a "
                    "batch, so that the effect loss cannot leave a relation constant (default 0: the paper's loss)")
