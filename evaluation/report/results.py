@@ -24,7 +24,7 @@ METHOD_INFO = {
     "bilevel_alg1": "the paper's Algorithm 1 exactly: verified probabilistic plan (Level 1), else continuous "
                     "search (Level 2)",
     "bilevel_replan": "bilevel in the paper's closed loop, up to k - 1 replanning rounds",
-    "bilevel_loop": "bilevel in the closed loop that does not know k: until the goal or 20 actions, widening the "
+    "bilevel_loop": "bilevel in the closed loop that does not know k: until the goal or 30 actions, widening the "
                     "search when a round finds no plan (the default of `tamp plan --replan` and `tamp demo`)",
     "symbolic_sigmoid": "deterministic symbolic planner, Sigmoid Symbolic Model and its domain (Fig. 4)",
     "cfs_gumbel": "continuous forward search, Gumbel-Sigmoid Dynamics Model (Fig. 4)",

@@ -106,7 +106,7 @@ class LoopConfig:
     # a plan on course whose end is predicted over verify.confident (but within eps) gives way only to one predicted
     #   within verify.confident (False: to any plan predicted closer, which let the loop wander between such plans)
     commit: bool = True
-    max_actions: int = 20  # actions sent before the loop gives up: k <= 5 needs 5, the rest is room for detours
+    max_actions: int = 30  # actions sent before the loop gives up: k <= 5 needs 5, the rest is room for detours
     widen: bool = True  # a round without a plan searches again over all 9 n^2 actions (make room, unstack)
     widen_expansions: int = 400  # node budget of the widened search (about 2-4 s at 4 blocks with kinematics)
     search_budget: int = 3000  # search expansions over all rounds: a loop whose rounds keep failing ends in about

@@ -113,7 +113,7 @@ def test_the_defining_settings_of_a_results_directory_are_unchanged():
                "search_greedy_per_misplaced": 0.3, "search_greedy_stall": 800, "loop_greedy_search_budget": 1500,
                "symbolic_backend": "python", "search_resolution_m": 0.02, "search_clear_blockers": True,
                "tau_verify_m": 0.07,
-               "loop": {"max_actions": 20, "widen": True, "widen_expansions": 400, "search_budget": 3000,
+               "loop": {"max_actions": 30, "widen": True, "widen_expansions": 400, "search_budget": 3000,
                         "greedy_search_budget": 1500, "stall": 300, "progress": 0.02, "revisit": 0.01,
                         "remember": 0.02, "remember_alike": 2}}
     assert EvalConfig().defining() == default
