@@ -60,6 +60,20 @@ def test_the_loop_stops_at_its_action_budget(models):
     assert "4 actions sent" in out.reason
 
 
+def test_a_larger_action_budget_changes_only_the_loops_that_ended_on_it(models):
+    # results measured with a smaller cap stay valid for every loop that did not end on it (results/default-models,
+    #   "The loop has room for detours"): the cap must not steer the loop before it is reached
+    forgetful = LoopConfig(remember=None)
+    runs = {cap: plan_closed_loop("bilevel", models, X_INIT, A_ON_B, slipping_world(2), rounds=None,
+                                  cfg=PlanConfig(loop=replace(forgetful, max_actions=cap))) for cap in (3, 4, 30)}
+    assert all(r.success and r.stop == "goal" for r in runs.values())
+    assert runs[3].executed == runs[4].executed == runs[30].executed and len(runs[3].executed) == 3
+    assert [r.reasons for r in runs[3].rounds] == [r.reasons for r in runs[30].rounds]
+    short = plan_closed_loop("bilevel", models, X_INIT, A_ON_B, slipping_world(2), rounds=None,
+                             cfg=PlanConfig(loop=replace(forgetful, max_actions=2)))
+    assert short.stop == "budget" and short.executed == runs[30].executed[:2]
+
+
 def test_the_loop_stops_when_its_rounds_have_spent_its_search_budget(models):
     cfg = PlanConfig(loop=LoopConfig(search_budget=3))
     out = plan_closed_loop("cfs", models, X_INIT, A_ON_B, slipping_world(100), rounds=None, cfg=cfg)
