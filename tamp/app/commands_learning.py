@@ -58,9 +58,6 @@ def cmd_train(args: argparse.Namespace) -> int:
         raise UserError("--extra-share must be above 0 (the share of each resample drawn from --extra-data)")
     if args.ensemble is not None and args.bottleneck == "gumbel_sigmoid":
         raise UserError("--ensemble trains a Dynamics Model: leave out --bottleneck gumbel_sigmoid")
-    if args.relative_messages and args.bottleneck == "gumbel_sigmoid":
-        raise UserError("--relative-messages gives the decoder each pair's offset past the symbols: a Dynamics "
-                        "Model option, leave out --bottleneck gumbel_sigmoid")
     if args.extra_data:
         asked["n_max"] = max(asked["n_max"], *(int(read_meta(d)["n_max"]) for d in args.extra_data))
     if args.init is None:
