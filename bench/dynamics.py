@@ -4,7 +4,7 @@ the same problems in one run, with kinematics in the planning loop and execution
     .venv/bin/python bench/dynamics.py --new runs/practice/models --seed 4242              # n = 2-4, 150 problems
     .venv/bin/python bench/dynamics.py --new M --objects 5,6 --per-cell 6 --seed 4243       # n = 5-6, 60 problems
     .venv/bin/python bench/dynamics.py --new M --seed 4242 --noise 0.005 --push 0.03,0.05   # a real cell's faults
-    .venv/bin/python bench/dynamics.py --new tamp/pretrained --baseline-flags=--no-commit   # a planner option
+    .venv/bin/python bench/dynamics.py --new tamp/pretrained --baseline-flags="--config c.toml"   # a planner option
 
 Generates a strict problem set (`tamp problems`), evaluates the methods with each models directory
 (`tamp evaluate`, into OUT/baseline and OUT/new, resumable) and prints, per method and models: success
@@ -75,9 +75,9 @@ def main() -> int | str:
     p.add_argument("--workers", type=int, default=2)
     p.add_argument("--noise", default=None, help="observation noise, metres (tamp evaluate --noise)")
     p.add_argument("--push", default=None, help="MIN,MAX metres of one push (tamp evaluate --push)")
-    p.add_argument("--max-doubt", default=None, help="METRES: the new models plan with --max-doubt")
+    p.add_argument("--max-doubt", default=None, help="METRES: the new models plan with search.max_doubt")
     p.add_argument("--baseline-flags", default="", metavar="FLAGS",
-                   help="planner flags of the baseline's evaluation alone, e.g. --baseline-flags=--no-commit: "
+                   help="flags of the baseline's evaluation alone, e.g. --baseline-flags='--config c.toml': "
                    "a planner option measured on the same models")
     p.add_argument("--name", default="new", help="the new models' results folder in OUT (several share OUT/baseline)")
     p.add_argument("--out", type=Path, default=None, help="results directory (default runs/bench-dynamics-...)")
@@ -99,7 +99,10 @@ def main() -> int | str:
                    "--methods", args.methods, "--workers", str(args.workers), "--no-report"]
         command += ["--noise", args.noise] if args.noise else []
         command += ["--push", args.push] if args.push else []
-        command += ["--max-doubt", args.max_doubt] if args.max_doubt and name != "baseline" else []
+        if args.max_doubt and name != "baseline":
+            config = out / f"{name}.toml"
+            config.write_text(f"[search]\nmax_doubt = {float(args.max_doubt)}\n")
+            command += ["--config", str(config)]
         command += shlex.split(args.baseline_flags) if name == "baseline" else []
         if subprocess.run(command).returncode != 0:  # tamp evaluate has said why, in one line
             return f"bench: the {name} evaluation stopped (its message is above); nothing compared"

@@ -17,10 +17,11 @@ from tamp.app.args import (
 )
 from tamp.app.faults import add_fault_arguments, faults_of
 from tamp.app.parallel import add_arguments as add_parallel_arguments
-from tamp.app.planner_flags import add_planner_arguments, backend_help
+from tamp.app.plan_command import add_max_actions_argument
 from tamp.app.problem import PROTOCOLS
+from tamp.app.settings import add_config_arguments
 from tamp.errors import UserError
-from tamp.planning.config import SYMBOLIC_BACKENDS
+from tamp.planning.config import SYMBOLIC_BACKENDS, symbolic_backend_help
 from tamp.sim.world_types import FIDELITIES
 
 
@@ -56,23 +57,19 @@ def _write_report(directory: Path, ablation: Path | None = None) -> Path:
 def _eval_config(args: argparse.Namespace):
     """The EvalConfig of the flags of `_add_run_arguments` (`tamp evaluate`, `tamp refinability`)."""
     from evaluation.configuration import EvalConfig
-    from tamp.app.planner_flags import auto_given, planner_config
-
-    faults = faults_of(args)
-    planner = planner_config(args)
-    if _runs_until_goal(args.methods):  # the loop knows its observations' noise
-        planner = replace(planner, loop=faults.known_to(planner.loop, auto_given(args)))
-    return EvalConfig(planner=planner, fidelity=args.fidelity, workers=args.workers,
-                      backend=args.backend, address=args.address,
-                      oracle_max_plans=args.oracle_max_plans, progress=not args.quiet, faults=faults)
-
-
-def _runs_until_goal(methods: list[str] | None) -> bool:
-    """Whether `methods` (None: every one available) include the loop that runs until the goal (bilevel_loop)."""
     from evaluation.methods import METHODS
+    from tamp.app.settings import settings_of
     from tamp.planning.vocabulary import Loop
 
-    return methods is None or any(m in METHODS and METHODS[m].loop == Loop.UNTIL_GOAL for m in methods)
+    if args.max_actions is not None and args.methods is not None and not any(
+            m in METHODS and METHODS[m].loop == Loop.UNTIL_GOAL for m in args.methods):
+        raise UserError(f"--max-actions sets the loop that runs until the goal (bilevel_loop); none of the methods "
+                        f"({', '.join(args.methods)}) runs it")
+    faults, settings = faults_of(args), settings_of(args)
+    planner = replace(settings.planner, loop=faults.known_to(settings.planner.loop))  # the loop knows its noise
+    return EvalConfig(planner=planner, fidelity=args.fidelity, workers=args.workers,
+                      backend=args.backend, address=args.address,
+                      oracle_max_plans=settings.evaluation.oracle_max_plans, progress=not args.quiet, faults=faults)
 
 
 def _add_run_arguments(p: argparse.ArgumentParser, models_help: str, out_help: str, methods_default,
@@ -85,10 +82,9 @@ def _add_run_arguments(p: argparse.ArgumentParser, models_help: str, out_help: s
     p.add_argument("--fidelity", choices=FIDELITIES, default="fast",
                    help="execute in the fast world (default) or with the arm under physics")
     add_parallel_arguments(p, workers_default=1)
-    add_planner_arguments(p, feasibility=False)
-    p.add_argument("--oracle-max-plans", type=positive_int, default=20,
-                   help="probabilistic_oracle: ranked plans executed at most per problem (default 20)")
     add_fault_arguments(p, "closed loops")
+    add_max_actions_argument(p, "bilevel_loop")
+    add_config_arguments(p)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
@@ -308,7 +304,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="evaluate this models directory, or a bundled set (paper: the paper's configuration), "
                         "instead of collecting and training")
     p.add_argument("--symbolic-backend", choices=tuple(SYMBOLIC_BACKENDS), default="python",
-                   help=backend_help("python"))
+                   help=symbolic_backend_help("python"))
     p.set_defaults(func=cmd_reproduce)
 
     from evaluation.practice import add_practice

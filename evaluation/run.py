@@ -58,14 +58,13 @@ from evaluation.row import (
 from guarded import LARGE, Schema, read_json, read_jsonl
 from tamp.app.args import check_output_dir
 from tamp.app.parallel import run_tasks
-from tamp.app.planner_flags import loop_flags_given
 from tamp.app.problem import Problem
 from tamp.errors import UserError
 from tamp.planning.causes import stop_record
 from tamp.planning.steps import dynamics_errors
 from tamp.planning.verify import goal_error
 from tamp.planning.vocabulary import Loop, Outcome
-from tamp.records import atomic_write_text, exclusive, package_versions
+from tamp.records import atomic_write_text, exclusive, package_versions, source_commit
 
 if TYPE_CHECKING:
     from tamp.sim.kinematic_checker import FeasibilityChecker
@@ -347,8 +346,9 @@ def _prepare(out: Path, meta: dict) -> None:
     now = json.loads(json.dumps(meta))  # as it would read back: tuples (a push's range) are lists there
     diffs = [d for key in DEFINING_KEYS for d in _differences(key, old.get(key), now[key])]
     if diffs:
-        raise UserError(f"{out} holds rows of other inputs ({'; '.join(diffs[:3])}); use a new --out "
-                         "directory, or the same models, problem set and settings to resume")
+        what = "another configuration" if any(d.startswith("config") for d in diffs) else "other inputs"
+        raise UserError(f"{out} holds rows made with {what} ({'; '.join(diffs[:3])}); use a new --out "
+                        "directory, or the same models, problem set and configuration to resume")
     if old.get("versions") != meta["versions"]:
         from tqdm import tqdm
 
@@ -395,20 +395,10 @@ def _write_symbols(out: Path, problems: Sequence[Problem], models_dir: Path, met
 
 
 def refuse_inapplicable(methods: Sequence[str], config: EvalConfig) -> None:
-    """UserError for a setting that none of `methods` would apply (a flag given in vain): meta.json
-    records the settings the rows were computed with, and nothing else."""
-    names = ", ".join(methods)
-    if not any(METHODS[m].closed_loop for m in methods):
-        given = (["--noise/--push"] if config.faults.any else []) + loop_flags_given(config.planner)
-        if given:
-            raise UserError(f"{given[0]} acts on closed loops (bilevel_replan, bilevel_loop); none of the methods "
-                            f"({names}) runs one")
-    if not any(METHODS[m].loop == Loop.UNTIL_GOAL for m in methods) and (
-            given := loop_flags_given(config.planner, until_goal_only=True)):
-        raise UserError(f"{given[0]} sets the loop that runs until the goal (bilevel_loop); none of the methods "
-                        f"({names}) runs it")
-    if config.oracle_max_plans != EvalConfig.oracle_max_plans and not any(METHODS[m].oracle for m in methods):
-        raise UserError(f"--oracle-max-plans sets probabilistic_oracle; none of the methods ({names}) is it")
+    """UserError for faults that none of `methods` would meet (flags given in vain): only closed loops observe."""
+    if config.faults.any and not any(METHODS[m].closed_loop for m in methods):
+        raise UserError(f"--noise/--push act on closed loops (bilevel_replan, bilevel_loop); none of the methods "
+                        f"({', '.join(methods)}) runs one")
 
 
 def evaluate(models_dir: str | Path, problems_path: str | Path, out_dir: str | Path,
@@ -443,7 +433,8 @@ def evaluate(models_dir: str | Path, problems_path: str | Path, out_dir: str | P
     meta = {"format": FORMAT, "models_dir": str(models_dir), "model_files": _model_files(models_dir),
             "problems": str(problems_path), "problems_sha256": _sha256(problems_path), "n_problems": len(problems),
             "config": config.defining(), "methods": methods, "versions": package_versions(), "started": started,
-            "runs": [{"started": started, "methods": methods, "workers": config.workers, "backend": config.backend}]}
+            "runs": [{"started": started, "methods": methods, "workers": config.workers, "backend": config.backend,
+                      "commit": source_commit()}]}
     out.mkdir(parents=True, exist_ok=True)
     with exclusive(out, LOCK_NAME, "tamp evaluate"):
         _prepare(out, meta)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import fcntl
 import os
+import subprocess
 import sys
 from contextlib import contextmanager
 from importlib import metadata
@@ -52,6 +53,22 @@ def exclusive(directory: Path, lock_name: str, what: str) -> Iterator[None]:
         except BlockingIOError:
             raise UserError(f"another {what} is writing to {directory}") from None
         yield
+
+
+def source_commit() -> str:
+    """The git commit of the code that runs (with "+changes" when the checkout has uncommitted changes to
+    tracked files), or "unknown" outside a git checkout: each report records what made it."""
+    root = Path(__file__).resolve().parents[1]
+    try:
+        head = subprocess.run(["git", "-C", str(root), "rev-parse", "HEAD"], capture_output=True, text=True,
+                              timeout=10)
+        dirty = subprocess.run(["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no"],
+                               capture_output=True, text=True, timeout=10)
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+    if head.returncode != 0:
+        return "unknown"
+    return head.stdout.strip() + ("+changes" if dirty.stdout.strip() else "")
 
 
 def package_versions() -> dict[str, str]:

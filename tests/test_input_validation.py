@@ -225,16 +225,11 @@ def test_unwritable_outputs_are_refused_before_the_work(tmp_path, capsys):
     (["train", "--data", "d", "--out", "m.pt", "--lr", "0"], "--lr"),
     (["train", "--data", "d", "--out", "m.pt", "--lr", "nan"], "--lr"),
     (["train", "--data", "d", "--out", "m.pt", "--val-fraction", "1.5"], "--val-fraction"),
-    (["plan", "--problem", "p", "--models", "m", "--time-limit", "nan"], "--time-limit"),
-    (["plan", "--problem", "p", "--models", "m", "--max-expansions", "0"], "--max-expansions"),
+    (["plan", "--problem", "p", "--models", "m", "--max-actions", "0"], "--max-actions"),
     (["plan", "--problem", "p", "--models", "m", "--rounds", "-2"], "--rounds"),
-    (["plan", "--problem", "p", "--models", "m", "--n-domains", "0"], "--n-domains"),
     (["domain", "--model", "m", "--data", "d", "--out", "o", "--sampled", "-1"], "--sampled"),
     (["domain", "--model", "m", "--data", "d", "--out", "o", "--min-prob", "2"], "--min-prob"),
-    (["evaluate", "--models", "m", "--problems", "p", "--out", "o", "--time-limit", "inf"], "--time-limit"),
-    (["evaluate", "--models", "m", "--problems", "p", "--out", "o", "--level1-focus-budget", "0"],
-     "--level1-focus-budget"),
-    (["evaluate", "--models", "m", "--problems", "p", "--out", "o", "--level1-objects", "1"], "--level1-objects"),
+    (["evaluate", "--models", "m", "--problems", "p", "--out", "o", "--max-actions", "-1"], "--max-actions"),
 ])
 def test_numeric_flags_are_range_checked_naming_the_flag(capsys, argv, flag):
     with pytest.raises(SystemExit) as info:

@@ -94,7 +94,7 @@ def section_table2(res: Results, figures: Path) -> Section:
         (["oracle (%)"] + (["oracle runs (%)"] if runs else []) if oracle else []) + ["paper probabilistic (%)"] + \
         (["oracle plans executed (mean)"] if oracle else []) + ["p", "paper p"]
     lines = md_table(header, rows)
-    cap = (res.meta or {}).get("config", {}).get("oracle_max_plans")
+    cap = (res.meta or {}).get("config", {}).get("evaluation", {}).get("oracle_max_plans")
     lines += ["Ours: all n pooled (problems both planners were run on); p on deterministic vs probabilistic. "
               "Paper: mean ± std over ten runs, averaged over n." + _runs_note(res) + _protocol_note(res) +
               _backend_note(res, ("deterministic", "probabilistic", "probabilistic_oracle")), ""]

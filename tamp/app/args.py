@@ -58,16 +58,8 @@ def positive_float(text: str) -> float:
 # name -> folder under tamp/pretrained/
 BUNDLED_MODELS = {"pretrained": "", "paper": "paper", "pairwise": "pairwise", "spatial": "spatial",
                   "regions": "regions", "random": "random", "practised": "practised"}
-MODELS_HELP = ("a models directory (symbolic.pt, dynamics.pt, domain/), or a bundled set: pretrained (the "
-               "default: symbols that say where a block stands and what stands beside it, a Dynamics Model that "
-               "reads the whole action and learned where blocks go from the steps that moved one; both learned "
-               "from data of today's world), paper (the paper's configuration), pairwise (pairwise relations with "
-               "the type symbol), spatial (pairwise relations that say on which side of a block another stands), "
-               "regions (the default's symbols learned from earlier data, with the paper set's Dynamics Model), "
-               "random (the default's symbols with a Dynamics Model of every random transition: it knows that a "
-               "motion may be blocked, and misses stacks and leaning blocks more often) or practised (random after "
-               "two rounds of tamp practice: a two-member ensemble Dynamics Model that also learned from its own "
-               "plans' steps, with a 95 %% bound per step); tamp/pretrained/PROVENANCE.md")
+MODELS_HELP = ("a models directory (symbolic.pt, dynamics.pt, domain/), or a bundled set: pretrained, paper, "
+               "pairwise, spatial, regions, random or practised (tamp/pretrained/PROVENANCE.md says what each is)")
 
 
 def models_directory(text: str) -> Path:

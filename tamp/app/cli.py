@@ -6,7 +6,7 @@ import gc
 import os
 import sys
 
-from tamp.app import commands_data, commands_learning, commands_planning, commands_symbolic, commands_world
+from tamp.app import commands_data, commands_learning, commands_planning, commands_symbolic, commands_world, settings
 from tamp.errors import is_user_error
 
 
@@ -29,6 +29,7 @@ def build_parser() -> argparse.ArgumentParser:
     commands_symbolic.add_symbols(sub)
     commands_planning.add_plan(sub)
     commands_planning.add_demo(sub)
+    settings.add_config(sub)
     _add_plugin_commands(sub)
     return parser
 

@@ -29,12 +29,12 @@ def cmd_plan(args: argparse.Namespace) -> int:
 def cmd_demo(args: argparse.Namespace) -> int:
     """A random problem planned, refined, executed under physics, summarised and replayed."""
     from tamp.app.demo import DemoConfig, run_demo
-    from tamp.app.planner_flags import loop_flags_given, planner_config
+    from tamp.app.settings import settings_of
 
     check_output_file(args.replay, "--replay")
-    planner = planner_config(args)
-    if args.open_loop and (given := loop_flags_given(planner)):
-        raise UserError(f"{given[0]} sets the closed loop; --open-loop executes one plan")
+    if args.open_loop and args.max_actions is not None:
+        raise UserError("--max-actions sets the closed loop; --open-loop executes one plan")
+    planner = settings_of(args).planner
     if args.trajectory is not None:
         check_output_file(args.trajectory, "--trajectory")
     cfg = DemoConfig(seed=args.seed, objects=args.objects, actions=args.actions, models=args.models,
@@ -66,8 +66,8 @@ def add_plan(sub) -> None:
 
 def add_demo(sub) -> None:
     """`tamp demo`."""
-    from tamp.app.plan_command import add_trajectory_argument
-    from tamp.app.planner_flags import add_planner_arguments
+    from tamp.app.plan_command import add_max_actions_argument, add_trajectory_argument
+    from tamp.app.settings import add_config_arguments
 
     p = sub.add_parser(
         "demo",
@@ -83,7 +83,7 @@ def add_demo(sub) -> None:
         "Meshcat HTML replay shows the goal (green) and the Dynamics Model's predicted blocks after "
         "each action (orange) as translucent blocks beside the executed ones. Exit status 0 on "
         "success, 1 if there was no plan, the plan could not be refined or it missed the goal. The "
-        "planner takes the flags of `tamp plan` (a random problem, then the plan command's planner).",
+        "planner's settings come from the configuration (--preset, --config; `tamp config show`).",
     )
     p.add_argument("--seed", type=seed, default=0, help="seed of the problem and the planner (default 0)")
     p.add_argument("--objects", type=positive_int, default=3, help="number of blocks (default 3)")
@@ -102,5 +102,6 @@ def add_demo(sub) -> None:
                    help="also execute the first N symbolic candidates that failed verification and write "
                    "a replay of each (OUT.candidateI.html, I their number in the candidate list)")
     add_trajectory_argument(p)
-    add_planner_arguments(p)
+    add_max_actions_argument(p, "the closed loop")
+    add_config_arguments(p)
     p.set_defaults(func=cmd_demo)

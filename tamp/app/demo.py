@@ -20,6 +20,7 @@ from tamp.app.plan_command import LEVELS, print_cause, print_result, write_execu
 from tamp.app.plan_file import fmt_action
 from tamp.app.problem import Problem, random_problem
 from tamp.app.runner import ClosedLoopRun, Episode, Execution, execute_plan, kinematics_for, run_episode
+from tamp.app.settings import Settings, settings_record
 from tamp.app.step_report import (
     closed_loop_steps,
     open_loop_steps,
@@ -125,7 +126,7 @@ def run_demo(cfg: DemoConfig = DemoConfig()) -> DemoResult:
     if cfg.candidates:
         _replay_candidates(out, models, cfg)
     if cfg.trajectory is not None:
-        write_executed_trajectory(out.episode.motion, cfg.trajectory, _source(cfg))
+        write_executed_trajectory(out.episode.motion, cfg.trajectory, _source(cfg), _record(cfg))
     return out
 
 
@@ -188,12 +189,17 @@ def _source(cfg: DemoConfig) -> str:
             + ("" if cfg.replan else " --open-loop") + ("" if cfg.models is None else f" --models {cfg.models}"))
 
 
+def _record(cfg: DemoConfig) -> dict:
+    """The configuration the demo planned with, as its outputs record it."""
+    return settings_record(Settings(planner=cfg.planner.with_seed(cfg.seed)))
+
+
 def _write_steps(timeline: Timeline, out: DemoResult, cfg: DemoConfig, names) -> None:
     """The steps as JSON beside the replay, and the replay's step panel."""
     if not out.steps or cfg.replay is None:
         return
     path = write_steps(steps_path(cfg.replay), steps_document(f"tamp demo --seed {cfg.seed}", "bilevel",
-                                                               out.result.level, out.steps, names))
+                                                               out.result.level, out.steps, names, _record(cfg)))
     timeline.show_panel(panel_entries(out.steps, timeline.t_end))
     print(f"steps written to {path}")
 

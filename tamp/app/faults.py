@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import argparse
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING, Collection
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -31,8 +31,8 @@ if TYPE_CHECKING:  # the configuration loads no Drake: `tamp evaluate --help` st
     from tamp.sim.skill import Scene
 
 _CLEARANCE = 0.005  # metres: a pushed block's footprint keeps this gap to every other block's
-STOP_MARGIN_SIGMAS = 1.0  # the closed loop's stop margin in sigmas of the observation noise, when no flag sets it
-LOOKS_UNDER_NOISE = 2  # the closed loop's observations again after a round without a plan, when no flag sets them
+STOP_MARGIN_SIGMAS = 1.0  # the stop margin in sigmas of the observation noise, where the configuration leaves it
+LOOKS_UNDER_NOISE = 2  # observations again after a round without a plan, where the configuration leaves them
 
 
 @dataclass(frozen=True)
@@ -64,16 +64,16 @@ class Faults:
             said.append(f"one free block pushed {low if low == high else low + '-' + high} cm after the first action")
         return "; ".join(said) or "none"
 
-    def known_to(self, loop: LoopConfig, given: Collection[str] = ()) -> LoopConfig:
-        """`loop` as a closed loop that knows this noise, in the fields not `given` by the user: it stops
-        `STOP_MARGIN_SIGMAS` sigma inside eps (a block's observed distance to its goal scatters by about one sigma
-        around the true one), and after a round without a plan it looks again `LOOKS_UNDER_NOISE` times (the noise
-        may have put neighbours into each other, so that the kinematic check rejects every action)."""
-        if self.noise_m <= 0:
-            return loop
-        if "stop_margin" not in given:
-            loop = replace(loop, stop_margin=STOP_MARGIN_SIGMAS * self.noise_m)
-        return loop if "looks" in given else replace(loop, looks=LOOKS_UNDER_NOISE)
+    def known_to(self, loop: LoopConfig) -> LoopConfig:
+        """`loop` as a closed loop that knows this noise, in the fields the configuration leaves to it (None): it
+        stops `STOP_MARGIN_SIGMAS` sigma inside eps (a block's observed distance to its goal scatters by about one
+        sigma around the true one), and after a round without a plan it looks again `LOOKS_UNDER_NOISE` times (the
+        noise may have put neighbours into each other, so that the kinematic check rejects every action). Without
+        noise they are 0: exact observations, where a second look sees the same."""
+        noisy = self.noise_m > 0
+        if loop.stop_margin is None:
+            loop = replace(loop, stop_margin=STOP_MARGIN_SIGMAS * self.noise_m if noisy else 0.0)
+        return loop if loop.looks is not None else replace(loop, looks=LOOKS_UNDER_NOISE if noisy else 0)
 
     def observe(self, X: np.ndarray, rng: np.random.Generator, scene: Scene | None = None) -> np.ndarray:
         """X as the planner observes it: horizontal positions with noise. With the world's `scene`, blocks
@@ -102,8 +102,8 @@ def add_fault_arguments(p: argparse.ArgumentParser, which: str) -> None:
     p.add_argument("--noise", type=metres_below(0.05), default=0.0, metavar="METRES",
                    help=f"{which}: Gaussian noise of this standard deviation on every x and y the planner "
                    "observes, as a camera's would (default 0; the world itself is not moved; the loop that runs "
-                   "until the goal stops that far inside eps unless --stop-margin says otherwise, and looks again "
-                   "twice after a round without a plan unless --looks says otherwise)")
+                   "until the goal stops 1 sigma inside eps and looks again twice after a round without a plan, "
+                   "unless the configuration sets loop.stop_margin and loop.looks)")
     p.add_argument("--push", type=_push_range, default=None, metavar="MIN,MAX",
                    help=f"{which}: once per problem, after the first action, push one free block MIN-MAX "
                    "metres in a random horizontal direction (e.g. 0.03,0.05), as a person or a slip would; both "

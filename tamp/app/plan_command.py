@@ -19,10 +19,11 @@ from tamp.app.args import (
     json_path,
     models_directory,
     non_negative_int,
+    positive_int,
 )
 from tamp.app.faults import Faults, add_fault_arguments, faults_of
 from tamp.app.plan_file import fmt_action
-from tamp.app.planner_flags import add_planner_arguments, auto_given, loop_flags_given, planner_config
+from tamp.app.settings import Settings, add_config_arguments, settings_of, settings_record
 from tamp.errors import UserError
 from tamp.planning.causes import cause_of, stop_record
 from tamp.planning.config import PlanConfig
@@ -34,24 +35,14 @@ from tamp.planning.vocabulary import Outcome
 from tamp.sim.world_types import FIDELITIES
 
 STEPS_HELP = """\
-reading the per-step output (printed after execution; the same in OUT.steps.json and the replay's panel):
+reading the per-step output (the same in OUT.steps.json and the replay's panel; docs/studying-refinement.md):
   step k: the action (pick a block at a grasp offset, place it on a block at a release offset)
-  symbols before   the Symbolic Model's bits read on the state observed before the step, as the facts
-                   the named bits say hold. A bit is named (u0(o2)=0 ~ o2 elevated) where `tamp symbols`
-                   finds a strong agreement (|phi| >= 0.7) with a geometric fact; the table is read from
-                   MODELS/symbols.json (`tamp symbols --model MODELS/symbolic.pt --problems P --json
-                   MODELS/symbols.json`); other bits keep their raw names (r0(o1,o2)=1). A Level-1
-                   plan made in a sub-scene (from 5 blocks on, --level1-objects) is read on its
-                   objects only, as it was planned: "(of o3, o4: the plan's sub-scene)"
-  operator         the learned operator grounding the action in those symbols, the effect expected
-                   (the one a Level-1 plan counted on, else the most probable), its probability, and
-                   the bits it expects to change
-  motion           refinement: the IK solver of the waypoints (one branch: elbow up, wrist down), each
-                   motion's planner ("direct": the straight joint segment is free; "rrtconnect": OMPL
-                   searched, with its time), and the failure stage, where and why if it did not refine
-  observed         the symbols read on the state after the step: "the expected symbols", or MISMATCH
-                   and the bits that differ (the motion did not produce the effect the abstraction
-                   counted on)
+  symbols before   the Symbolic Model's bits on the observed state, as the facts they name
+                   (MODELS/symbols.json from `tamp symbols`; unnamed bits keep raw names, r0(o1,o2)=1)
+  operator         the learned operator grounding the action, the effect expected, its probability
+  motion           refinement: IK branch, each motion's planner (direct or rrtconnect) and time, or
+                   the stage where it failed and why
+  observed         the symbols after the step: "the expected symbols", or MISMATCH and the bits
   Dynamics Model   its position error predicting the step from the observed state (mean over blocks)
 """
 
@@ -68,6 +59,8 @@ class PlanOptions:
     rounds: int | None = None  # the paper's loop with this many replanning rounds; None: until the goal
     replay: Path | None = None
     planner: PlanConfig = PlanConfig()  # its seed is replaced by the problem's
+    max_actions_given: bool = False  # --max-actions was given (it sets the loop that runs until the goal)
+    settings: Settings = Settings()  # the resolved configuration, recorded in the outputs
     steps: Path | None = None  # per-step JSON (default: beside the replay, if any)
     trajectory: Path | None = None  # the executed joint trajectory (docs/trajectories.md)
     faults: Faults = Faults()  # with replan: observation noise and a push, drawn from the problem's seed
@@ -109,7 +102,7 @@ def print_result(result: PlanResult, tau: float, indent: str = "") -> None:
         stopped = (result.symbolic_stats.get("outcomes") or {}).get("stopped")
         if result.symbolic_stats.get("settled") is not None and stopped:
             print(f"{p}    (the symbolic search ended once the plan was taken: {stopped} domains without a plan yet "
-                  "would rank theirs lower; --no-level1-settle searches on)")
+                  "would rank theirs lower; level1.settle = false searches on)")
     if result.search is not None:
         s = result.search
         cleared = f", {s.clearing} of them moves of blocks in the way of a rejected action" if s.clearing else ""
@@ -250,10 +243,8 @@ def run_plan(problem_path: Path, models_dir: Path, options: PlanOptions) -> int:
     problem = pick_problem(problem_path, options.name)
     if options.rounds is not None and not options.replan:
         raise UserError("--rounds sets the replanning rounds of the closed loop; give it with --replan")
-    if not options.replan and (given := loop_flags_given(options.planner)):
-        raise UserError(f"{given[0]} sets the closed loop; give it with --replan")
-    if options.rounds is not None and (given := loop_flags_given(options.planner, until_goal_only=True)):
-        raise UserError(f"{given[0]} sets the loop that runs until the goal; the paper's loop of --rounds has none")
+    if options.max_actions_given and (not options.replan or options.rounds is not None):
+        raise UserError("--max-actions sets the loop that runs until the goal; give it with --replan and no --rounds")
     if options.faults.any and not options.replan:
         raise UserError("--noise and --push disturb the closed loop; give them with --replan")
     if options.replan and options.execute == "none":
@@ -294,7 +285,8 @@ def run_plan(problem_path: Path, models_dir: Path, options: PlanOptions) -> int:
     if steps_file is not None and records:
         from tamp.app.step_report import steps_document, write_steps
 
-        write_steps(steps_file, steps_document(which, options.method, None, records, names))
+        write_steps(steps_file, steps_document(which, options.method, None, records, names,
+                                               settings_record(replace(options.settings, planner=cfg))))
         print(f"steps written to {steps_file}")
     if timeline is not None:
         from tamp.app.step_report import panel_entries
@@ -309,13 +301,14 @@ def run_plan(problem_path: Path, models_dir: Path, options: PlanOptions) -> int:
     if options.trajectory is not None:
         source = (f"tamp plan --problem {which} --method {options.method} --execute {options.execute}"
                   + (" --replan" if options.replan else ""))
-        write_executed_trajectory(None if episode is None else episode.motion, options.trajectory, source)
+        write_executed_trajectory(None if episode is None else episode.motion, options.trajectory, source,
+                                  settings_record(replace(options.settings, planner=cfg)))
     return code
 
 
-def write_executed_trajectory(executed, path: Path, source: str) -> None:
+def write_executed_trajectory(executed, path: Path, source: str, configuration: dict) -> None:
     """`--trajectory` of `tamp plan` and `tamp demo`: write what `executed` (an Execution or a
-    ClosedLoopRun; None: nothing ran) moved, and say so."""
+    ClosedLoopRun; None: nothing ran) moved, with the `configuration` that planned it, and say so."""
     import time
 
     from tamp.app.runner import executed_trajectory
@@ -325,7 +318,7 @@ def write_executed_trajectory(executed, path: Path, source: str) -> None:
         print("nothing was executed; no trajectory written")
         return
     t = time.perf_counter()
-    trajectory = executed_trajectory(executed, source)
+    trajectory = executed_trajectory(executed, source, configuration)
     if not trajectory.actions:
         print("no executed action moved the arm; no trajectory written")
         return
@@ -348,7 +341,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--replan", action="store_true",
                    help="closed loop: execute the first action, observe, plan again, until the goal is reached or "
                    "--max-actions actions were sent; a round that finds no plan first searches again over every "
-                   "action (--no-widen: it stops)")
+                   "action (loop.widen = false: it stops)")
     p.add_argument("--rounds", type=non_negative_int, default=None,
                    help="with --replan, the paper's loop instead: this many replanning rounds (the paper gives k - 1 "
                    "for a goal of k random actions), the last plan executed to its end, and it stops when a round "
@@ -364,7 +357,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="write the per-step record as JSON (default: beside the replay, if any)")
     add_trajectory_argument(p)
     add_fault_arguments(p, "with --replan")
-    add_planner_arguments(p)
+    add_max_actions_argument(p, "with --replan")
+    add_config_arguments(p)
+
+
+def add_max_actions_argument(p: argparse.ArgumentParser, which: str) -> None:
+    """--max-actions: the action budget of the loop that runs until the goal (`LoopConfig.max_actions`)."""
+    p.add_argument("--max-actions", type=positive_int, default=None, metavar="N",
+                   help=f"{which}: the closed loop gives up after sending N actions (default: loop.max_actions of "
+                   "the configuration, 30: a goal of k <= 5 random actions needs 5, the rest is room for detours)")
 
 
 def add_trajectory_argument(p: argparse.ArgumentParser) -> None:
@@ -382,10 +383,8 @@ def options_from_args(args: argparse.Namespace) -> PlanOptions:
         raise UserError(f"the replay is an HTML file; give a path ending in .html, got {args.replay}")
     if args.steps is not None and args.steps.suffix.lower() != ".json":
         raise UserError(f"the steps file is JSON; give a path ending in .json, got {args.steps}")
-    faults, planner = faults_of(args), planner_config(args)
-    if args.replan and args.rounds is None:  # the loop knows its observations' noise
-        planner = replace(planner, loop=faults.known_to(planner.loop, auto_given(args)))
-    return PlanOptions(args.method, args.execute, args.replan, args.rounds, args.replay, planner, args.steps,
-                       args.trajectory, faults, args.name)
-
-
+    faults, settings = faults_of(args), settings_of(args)
+    planner = replace(settings.planner, loop=faults.known_to(settings.planner.loop))  # the loop knows its noise
+    settings = replace(settings, planner=planner)
+    return PlanOptions(args.method, args.execute, args.replan, args.rounds, args.replay, planner,
+                       args.max_actions is not None, settings, args.steps, args.trajectory, faults, args.name)

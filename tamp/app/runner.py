@@ -265,7 +265,8 @@ def run_episode(method: str, models: Models, X_init: np.ndarray, X_goal: np.ndar
     return Episode(result, config.verify.eps, execution=execution)
 
 
-def executed_trajectory(run: Execution | ClosedLoopRun, source: str = "") -> PlanTrajectory:
+def executed_trajectory(run: Execution | ClosedLoopRun, source: str = "", configuration: dict | None = None
+                        ) -> PlanTrajectory:
     """The motion a run executed, action by action in order, from its exact initial scene, as the
     trajectory file holds it (`tamp.sim.trajectory_file.write_trajectory` writes it). Open loop:
     the refined actions that ran. Closed loop: each executed action's refined trajectory (rebuilt
@@ -275,7 +276,8 @@ def executed_trajectory(run: Execution | ClosedLoopRun, source: str = "") -> Pla
     if isinstance(run, Execution):
         steps = run.refined.steps[:len(run.X_after)]
         motions = [action_motion(k, step, X) for k, (step, X) in enumerate(zip(steps, run.X_after))]
-        return PlanTrajectory(run.refined.scene_init, run.refined.q_init, motions, run.fidelity, source)
+        return PlanTrajectory(run.refined.scene_init, run.refined.q_init, motions, run.fidelity, source,
+                              configuration=configuration or {})
     assert run.scene_init is not None and run.q_init is not None  # set by run_closed_loop
     motions, skipped = [], []
     X_before = run.scene_init.X()
@@ -289,4 +291,5 @@ def executed_trajectory(run: Execution | ClosedLoopRun, source: str = "") -> Pla
             step = refined_action(info.action, info, X_before, X, info.paths["approach"][0])
             motions.append(action_motion(k, step, X))
         X_before = X
-    return PlanTrajectory(run.scene_init, run.q_init, motions, run.fidelity, source, skipped)
+    return PlanTrajectory(run.scene_init, run.q_init, motions, run.fidelity, source, skipped,
+                          configuration=configuration or {})

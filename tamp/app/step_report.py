@@ -123,9 +123,10 @@ def closed_loop_steps(models: Models, run: ClosedLoopRun, names: BitNames) -> li
     return records
 
 
-def steps_document(problem: str, method: str, level: int | None, records: list[dict], names: BitNames) -> dict:
-    """The JSON file beside a replay: the run and its steps."""
-    return {"problem": problem, "method": method, "level": level,
+def steps_document(problem: str, method: str, level: int | None, records: list[dict], names: BitNames,
+                   configuration: dict | None = None) -> dict:
+    """The JSON file beside a replay: the run, the configuration it was planned with, and its steps."""
+    return {"problem": problem, "method": method, "level": level, "configuration": configuration or {},
             "bit_names": {bit: {"fact": fact, "bit 1 means": "not " + fact if negated else fact}
                           for bit, (fact, negated) in names.facts.items()},
             "steps": records}

@@ -21,7 +21,7 @@ from typing import AbstractSet, Sequence
 
 import numpy as np
 
-from tamp.planning.config import PlanConfig
+from tamp.planning.config import PlanConfig, paper_config
 from tamp.planning.kinematic_check import Feasibility
 from tamp.planning.level1 import level1, level1_serial
 from tamp.planning.level2 import level2
@@ -82,21 +82,13 @@ def level1_waits(models: Models, X_init, X_goal, chosen: Verification, wait_beyo
     return None
 
 
-ALG1_RESOLUTION = 0.01  # metres: `bilevel_alg1`'s duplicate grid (the paper gives none; its figures were measured so)
-
-
 def plan_bilevel_alg1(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig(),
                       kinematics: KinematicFeasibility | None = None) -> PlanResult:
-    """The paper's Algorithm 1 exactly: ranked symbolic plans verified alone (no look-alike
-    alternatives, any block picked) and the empty plan allowed whenever Sigma_init = Sigma_goal; its
+    """The paper's Algorithm 1 exactly (the `paper` preset over `cfg`): ranked symbolic plans verified alone (no
+    look-alike alternatives, any block picked) and the empty plan allowed whenever Sigma_init = Sigma_goal; its
     Level 2 returns the continuous search's first goal state, prunes actions by the paper's rule, counts h in metres
     and runs to its node budget (no stall cut), on the 1 cm duplicate grid its reproduction was measured with."""
-    paper = replace(cfg, level1=replace(cfg.level1, alternatives=0, nonempty=False, focus_from=None, wait_beyond=None,
-                                        cut=False),
-                    kinematics=replace(cfg.kinematics, feasibility=False),
-                    search=replace(cfg.search, look_on=0, release_targets=False, max_fragility=None, max_doubt=None,
-                                   stall=None, greedy_from=None, resolution=ALG1_RESOLUTION))
-    return replace(plan_bilevel(models, X_init, X_goal, paper), method="bilevel_alg1")
+    return replace(plan_bilevel(models, X_init, X_goal, paper_config(cfg)), method="bilevel_alg1")
 
 
 __all__: Sequence[str] = ["level1_waits", "plan_bilevel", "plan_bilevel_alg1"]

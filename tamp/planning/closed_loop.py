@@ -171,7 +171,7 @@ def loop_until_goal(method: str, models: Models, X_init, X_goal, step: Step, cfg
     for r in itertools.count():
         X = out.X_final
         if at_goal(X, out.X_goal, inside.verify.eps):
-            within = "within eps" if cfg.loop.stop_margin == 0 else f"{cfg.loop.stop_margin * 100:g} cm inside eps"
+            within = "within eps" if cfg.loop.margin == 0 else f"{cfg.loop.margin * 100:g} cm inside eps"
             return out.end(LoopStop.GOAL, f"the observed state is {within} of the goal")
         if len(out.executed) >= cfg.loop.max_actions:
             return out.end(LoopStop.BUDGET, f"{cfg.loop.max_actions} actions sent without reaching the goal "
@@ -209,14 +209,14 @@ def loop_until_goal(method: str, models: Models, X_init, X_goal, step: Step, cfg
                 spent += _expanded(result)
             else:  # no budget left to widen: what the round's search found may still bring the blocks closer
                 result = toward_closest(X, out.X_goal, cfg, result, [result.search])
-        if not result.solved and look is not None and looked < cfg.loop.looks and spent < budget:
+        if not result.solved and look is not None and looked < cfg.loop.looks_again and spent < budget:
             looked += 1
             out.rounds.append(_with_reasons(result, remembered))
             if on_round is not None:
                 on_round(r, out.rounds[-1])
             out.states[-1] = np.asarray(look(), dtype=float)  # the state the next action starts from, seen again
             remembered = [f"no plan from the last observation: the scene observed again ({looked} of "
-                          f"{cfg.loop.looks})"]
+                          f"{cfg.loop.looks_again})"]
             continue
         ended = _planned(out, r, _with_reasons(result, remembered), on_round, budget if spent >= budget else None)
         if ended is not None:
@@ -254,7 +254,7 @@ def _closer_than(X: np.ndarray, X_goal: np.ndarray, inside: PlanConfig) -> float
     """Metres: how close to the goal a plan from X, observed within eps but short of the stop margin, must be
     predicted to end for the loop to take a step: within `verify.confident` and the stop margin closer than X (a
     step from within eps must be worth its risk)."""
-    return min(inside.verify.confident, goal_error(X, X_goal) - inside.loop.stop_margin)
+    return min(inside.verify.confident, goal_error(X, X_goal) - inside.loop.margin)
 
 
 def aimed_inside(cfg: PlanConfig) -> PlanConfig:
@@ -263,7 +263,7 @@ def aimed_inside(cfg: PlanConfig) -> PlanConfig:
     only if a plan aimed there is predicted clearly closer (`_closer_than`), so that an observation whose noise
     puts the blocks within eps does not end the loop while they are not (the outcome is judged on the world at
     the user's eps)."""
-    margin = cfg.loop.stop_margin
+    margin = cfg.loop.margin
     if margin == 0:
         return cfg
     v = cfg.verify

@@ -55,7 +55,7 @@ def level1(models: Models, X_init, X_goal, config: Level1Config, goal: VerifyCon
         objects = level1_scene(X_init, X_goal, config, goal, release_targets)  # None: every object, as the paper
     if objects is not None and config.objects is not None and len(objects) > config.objects:
         record.reasons.append(f"level 1: the goal involves {len(objects)} objects, more than the "
-                              f"{config.objects} of the scenes it plans in (--level1-objects)")
+                              f"{config.objects} of the scenes it plans in (level1.objects)")
         return record
     verifier = Verifier(models, X_init, X_goal, config, goal, clock, feas, record)
 

@@ -54,45 +54,24 @@ from tamp.planning.verify import DynamicsModel, VerifyConfig, doubt, fragility, 
 class SearchConfig:
     """Level 2's own settings; what counts as the goal (eps, confident, misplaced) is `VerifyConfig`'s."""
 
-    weight: float = 1.5  # w in f = g + w h
-    # from this many blocks on, h counts in units of `greedy_h_unit` metres instead: with up to 27 successors per
-    #   misplaced block, h in metres leaves the search nearly breadth-first, out of nodes before depth 4-5 (None: never)
-    greedy_from: int | None = 5
+    weight: float = 1.5  # w in f = g + w h (the paper's)
+    greedy_from: int | None = 5  # from this many blocks on, h counts in units of greedy_h_unit: a deeper search
     greedy_h_unit: float = 0.5  # metres per unit of h from greedy_from blocks on
-    # from greedy_from blocks on, h also counts this many units per block farther than `misplaced` (2-D) from its
-    #   goal: each needs an action still
-    greedy_per_misplaced: float = 0.3
-    # metres: grid of the duplicate-detection key; states within one cell are one state to the search (the Dynamics
-    #   Model is good to about a centimetre, the goal's tolerance is 5 cm), so its node budget reaches more scenes
-    resolution: float = 0.02
-    # The node budget decides, so a result does not depend on the machine's load: about 4 s of search at
-    # n = 4 with kinematics on the 2-core development machine (2-3 ms per expansion)
-    max_expansions: int = 1500
-    # seconds of wall clock from the start of a planning call after which its searches end (a bound users set;
-    #   None: the node budget and the stall cut decide, so that results never depend on the machine's load)
-    time_limit: float | None = None
+    greedy_per_misplaced: float = 0.3  # from greedy_from blocks on, h also counts this per block off its goal
+    resolution: float = 0.02  # metres: duplicate-detection grid (the Dynamics Model is good to about 1 cm)
+    max_expansions: int = 1500  # node budget: it decides, so a result does not depend on the machine's load
+    time_limit: float | None = None  # seconds of wall clock per planning call (off: budgets decide, load-free)
     max_depth: int = 10  # longest plan considered
-    # expansions without a state closer to the goal (least h) before the search ends, below greedy_from blocks; off
-    #   (None: the node budget decides), since a search in metres may find its plan after a long plateau
-    stall: int | None = None
-    # from greedy_from blocks on, the stall cut in place of `stall`: with h greedier, a search finds its plan soon
-    #   after its last progress or not at all (docs/beyond-the-paper.md; None: the node budget decides)
-    greedy_stall: int | None = 800
+    stall: int | None = None  # below greedy_from blocks, expansions without progress before the search ends
+    greedy_stall: int | None = 800  # from greedy_from blocks on, the stall cut: there a plan comes soon or never
     look_on: int = 30  # expansions spent looking for a confident goal state after a less confident one
-    batched: bool = True  # one predict_effect call per expansion (False: one per action, for the benchmark)
-    prune: bool = True  # goal-oriented pruning (False: all 9 n^2 actions)
-    # also target the object whose release point is closest and, for a goal above the table, the object below it
-    #   (the top of a stack; False: the paper's rule, the closest object in 2-D)
-    release_targets: bool = True
-    # when the kinematic check rejects the action into a goal state, also offer from its parent the moves of the
-    #   blocks in that action's way (`pruning.blockers`): a neighbour at its own goal may have to move first
-    clear_blockers: bool = True
-    max_fragility: float | None = 0.3  # a goal state ends the search at once only if at most this fraction of
-    #   its plan's perturbed rollouts miss the goal (`verify.fragility`); else it is a candidate (None: not checked)
-    noise: float = 0.005  # metres: the input perturbation of `verify.fragility`
-    # a goal state ends the search at once only if no step of its plan may miss by more than this (metres, the
-    # 95 % bound of an ensemble Dynamics Model, `verify.doubt`); else it is a candidate, as a fragile one (None: off)
-    max_doubt: float | None = None
+    batched: bool = True  # one predict_effect call per expansion (false: one per action, for the benchmark)
+    prune: bool = True  # goal-oriented pruning (false: all 9 n^2 actions)
+    release_targets: bool = True  # also target the closest release point and the block below a raised goal
+    clear_blockers: bool = True  # when the action into a goal state is rejected, also move the blocks in its way
+    max_fragility: float | None = 0.3  # a goal state ends the search only if at most this share of rollouts misses
+    noise: float = 0.005  # metres: the input perturbation of the fragility rollouts (`verify.fragility`)
+    max_doubt: float | None = None  # metres: an ensemble's 95 % step bound a plan taken at once may not exceed
 
     def __post_init__(self) -> None:
         for name in ("stall", "greedy_stall"):

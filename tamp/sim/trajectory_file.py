@@ -143,6 +143,7 @@ class PlanTrajectory:
     source: str = ""  # what produced it, e.g. the command line
     skipped: list[dict] = field(default_factory=list)  # executed actions that moved nothing: index, action, reason
     limits: JointLimits = field(default_factory=model_limits)
+    configuration: dict = field(default_factory=dict)  # the planner's resolved configuration (`tamp config show`)
 
     @property
     def X_final(self) -> np.ndarray:
@@ -237,7 +238,7 @@ def to_document(plan: PlanTrajectory) -> dict[str, Any]:
 
     scene = plan.scene_init
     return {
-        "format": FORMAT, "version": VERSION, "source": plan.source,
+        "format": FORMAT, "version": VERSION, "source": plan.source, "configuration": plan.configuration,
         "robot": {"name": ROBOT, "model": f"drake_models/{ARM_FILE.name}", "joint_names": names,
                   "limits": plan.limits.to_dict()},
         "units": {"time": "s", "position": "rad", "velocity": "rad/s", "acceleration": "rad/s^2", "length": "m"},
@@ -277,7 +278,7 @@ _ACTION = {"type": "object", "required": ["index", "action", "duration", "segmen
                           "blocks_after": {"type": "array", "items": _NUMBERS[3]}}}
 # the structure of a version-1 file (docs/trajectories.md), checked after its format, version and robot
 SCHEMA = Schema({"type": "object", "required": ["robot", "recorded_world", "scene", "actions"], "properties": {
-    "source": {"type": "string"}, "recorded_world": {"enum": list(FIDELITIES)},
+    "source": {"type": "string"}, "configuration": {"type": "object"}, "recorded_world": {"enum": list(FIDELITIES)},
     "scene": {"type": "object", "required": ["blocks", "arm_positions"], "properties": {
         "blocks": {"type": "array", "minItems": 1, "items": {
             "type": "object", "required": ["type", "position", "quaternion_wxyz"],
@@ -315,7 +316,8 @@ def from_document(doc: Any, where: str) -> PlanTrajectory:
                   [_read_pose(b, f"{where}: scene.blocks[{i}]") for i, b in enumerate(blocks)])
     actions = [_action(a, f"{where}: actions[{k}]", scene) for k, a in enumerate(doc["actions"])]
     return PlanTrajectory(scene, np.array(doc["scene"]["arm_positions"], dtype=float), actions,
-                          doc["recorded_world"], doc.get("source", ""), doc.get("skipped", []))
+                          doc["recorded_world"], doc.get("source", ""), doc.get("skipped", []),
+                          configuration=doc.get("configuration", {}))
 
 
 def _short(value: Any) -> str:

@@ -343,7 +343,7 @@ def test_fast_downward_plans_like_the_in_process_search(serial, problems_file, t
                         progress=False)
     rows = read_rows(evaluate(tmp_path / "models", problems_file, tmp_path / "results", config=config,
                               methods=["deterministic", "probabilistic"], models=stub_models()))
-    assert json.loads((tmp_path / "results" / "meta.json").read_text())["config"]["symbolic_backend"] == "fd"
+    assert json.loads((tmp_path / "results" / "meta.json").read_text())["config"]["level1"]["backend"] == "fd"
     python = {(r["problem"], r["method"]): r for r in read_rows(serial)}
     assert len(rows) == 8
     for r in rows:
@@ -414,10 +414,11 @@ def test_cli_evaluates_with_model_files_and_keeps_the_rows_when_the_report_fails
         raise RuntimeError("the report module broke")
 
     monkeypatch.setattr(cli, "_write_report", broken_report)
-    out = tmp_path / "results"
+    out, config = tmp_path / "results", tmp_path / "c.toml"
+    config.write_text("[search]\nmax_expansions = 50\n")
     capsys.readouterr()
     assert main(["evaluate", "--models", str(models_dir), "--problems", str(problems), "--out", str(out),
-                 "--methods", "cfs_gumbel,symbolic_sigmoid,cfs", "--max-expansions", "50", "--quiet"]) == 0
+                 "--methods", "cfs_gumbel,symbolic_sigmoid,cfs", "--config", str(config), "--quiet"]) == 0
     err = capsys.readouterr().err
     assert "warning: no report" in err and "the report module broke" in err and "Traceback" not in err
     rows = read_rows(out / "rows.jsonl")
@@ -487,3 +488,17 @@ def test_an_evaluation_with_a_push_resumes(tmp_path):
     other = {**meta, "config": {"fidelity": "fast", "faults": {"noise_m": 0.005, "push_m": (0.03, 0.06)}}}
     with pytest.raises(UserError, match=r"config\.faults\.push_m: \[0\.03, 0\.05\] there, \[0\.03, 0\.06\] now"):
         _prepare(tmp_path, other)
+
+
+def test_a_results_directory_of_another_configuration_is_refused(tmp_path):
+    """The whole resolved configuration is recorded: a directory made with another one says so, naming the key."""
+    from evaluation.run import FORMAT, _prepare
+
+    meta = {"format": FORMAT, "models_dir": "m", "model_files": {"dynamics.pt": "ab"}, "problems": "p",
+            "problems_sha256": "cd", "n_problems": 2, "methods": ["cfs"], "versions": {"python": "3.11"},
+            "started": "now", "runs": [], "config": EvalConfig().defining()}
+    _prepare(tmp_path, dict(meta))
+    stalled = EvalConfig(planner=PlanConfig(search=SearchConfig(stall=300))).defining()
+    with pytest.raises(UserError, match=r"rows made with another configuration \(config\.search\.stall: null there, "
+                                        r"300 now\)"):
+        _prepare(tmp_path, {**meta, "config": stalled})

@@ -83,9 +83,9 @@ def test_demo_prints_the_summary_and_writes_replays_with_ghosts(tmp_path, capsys
         assert candidate.is_file() and b"/ghosts/predicted/block_0" in _scene_paths(candidate)
 
 
-def test_demo_plans_with_the_plan_commands_planner_flags(tmp_path, capsys, monkeypatch):
-    """`tamp demo` is a random problem, then the plan command's planner: its flags reach the demo's PlanConfig,
-    and a closed-loop flag with --open-loop is a one-line error."""
+def test_demo_plans_with_the_configuration(tmp_path, capsys, monkeypatch):
+    """`tamp demo` is a random problem, then the plan command's planner: the configuration file and --max-actions
+    reach the demo's PlanConfig, and --max-actions with --open-loop is a one-line error."""
     import tamp.app.demo as demo
     from tamp.planning.config import PlanConfig
 
@@ -93,7 +93,9 @@ def test_demo_plans_with_the_plan_commands_planner_flags(tmp_path, capsys, monke
     monkeypatch.setattr(demo, "run_demo", lambda cfg: seen.append(cfg) or demo.DemoResult(None, None, None, 0.05))
     monkeypatch.setattr(demo.DemoResult, "success", True)
     replay = str(tmp_path / "r.html")
-    flags = ["--max-expansions", "11", "--level1-budget", "9", "--max-actions", "4"]
+    config = tmp_path / "c.toml"
+    config.write_text("[search]\nmax_expansions = 11\n[level1]\nbudget = 9\n")
+    flags = ["--config", str(config), "--max-actions", "4"]
     assert main(["demo", "--replay", replay, *flags]) == 0
     planner = seen[0].planner
     assert (planner.search.max_expansions, planner.level1.budget, planner.loop.max_actions) == (11, 9, 4)

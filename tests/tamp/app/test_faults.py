@@ -88,20 +88,21 @@ def test_bad_faults_are_user_errors(kwargs, words):
         Faults(**kwargs)
 
 
-@pytest.mark.parametrize("flags, margin, looks", [
-    (["--noise", "0.005"], 0.005, 2),  # the loop knows its observations' noise
-    (["--noise", "0.005", "--stop-margin", "0"], 0.0, 2),  # a margin given wins, the looks still follow the noise
-    (["--noise", "0.005", "--looks", "0"], 0.005, 0),  # and looks given win
-    (["--stop-margin", "0.01"], 0.01, 0),
-    (["--looks", "3"], 0.0, 3),
-    ([], 0.0, 0),  # exact observations: a second look sees the same
-    (["--noise", "0.005", "--methods", "bilevel_replan"], 0.0, 0),  # no loop that runs until the goal
+@pytest.mark.parametrize("flags, loop_keys, margin, looks", [
+    (["--noise", "0.005"], "", 0.005, 2),  # the loop knows its observations' noise: 1 sigma, two looks
+    (["--noise", "0.005"], "stop_margin = 0.0", 0.0, 2),  # a margin the configuration sets wins, looks follow noise
+    (["--noise", "0.005"], "looks = 0", 0.005, 0),  # and looks it sets win
+    ([], "stop_margin = 0.01", 0.01, 0),
+    ([], "looks = 3", 0.0, 3),
+    ([], "", 0.0, 0),  # exact observations: a second look sees the same
 ])
-def test_tamp_evaluate_tells_the_loop_the_noise(flags, margin, looks):
+def test_tamp_evaluate_tells_the_loop_the_noise(tmp_path, flags, loop_keys, margin, looks):
     from evaluation.cli import _eval_config
     from tamp.app.cli import build_parser
 
+    config = tmp_path / "c.toml"
+    config.write_text(f"[loop]\n{loop_keys}\n")
     args = build_parser().parse_args(["evaluate", "--models", "pretrained", "--problems", "p.jsonl", "--out", "o",
-                                      *flags])
+                                      "--config", str(config), *flags])
     loop = _eval_config(args).planner.loop
-    assert loop.stop_margin == margin and loop.looks == looks and loop.revisit == LoopConfig().revisit
+    assert loop.stop_margin == pytest.approx(margin) and loop.looks == looks and loop.revisit == LoopConfig().revisit

@@ -157,8 +157,9 @@ def test_cli_plans_with_fast_downward_and_algorithm_1(models_dir, tmp_path, caps
     path = _problem_reachable_by_the_model(models_dir, tmp_path)
     lengths = {}
     for backend in ("python", "fd"):
+        (tmp_path / f"{backend}.toml").write_text(f'[level1]\nbackend = "{backend}"\n')
         assert main(["plan", "--problem", str(path), "--models", str(models_dir), "--method", "deterministic",
-                     "--symbolic-backend", backend, "--execute", "none"]) == 0
+                     "--config", str(tmp_path / f"{backend}.toml"), "--execute", "none"]) == 0
         out = capsys.readouterr().out
         assert f"symbolic planner {backend}" in out
         lengths[backend] = out.split("deterministic: plan of ")[1].split(" ")[0]
@@ -167,6 +168,25 @@ def test_cli_plans_with_fast_downward_and_algorithm_1(models_dir, tmp_path, caps
                  "--execute", "none"]) == 0
     out = capsys.readouterr().out
     assert "bilevel_alg1: plan of" in out and "same symbols as plan" not in out  # no look-alike alternatives
+
+
+@pytest.mark.sim
+def test_the_shown_configuration_plans_as_its_preset(models_dir, tmp_path, capsys):
+    """`tamp config show --preset P > c.toml`, then `tamp plan --config c.toml` gives the preset's plan; the paper
+    preset with `bilevel` is `bilevel_alg1`."""
+    path = _problem_reachable_by_the_model(models_dir, tmp_path)
+
+    def planned(*flags: str) -> list[str]:
+        assert main(["plan", "--problem", str(path), "--models", str(models_dir), "--execute", "none", *flags]) == 0
+        return [line.replace("bilevel_alg1", "bilevel") for line in capsys.readouterr().out.splitlines()
+                if "timings:" not in line]
+
+    for preset in ("default", "paper"):
+        assert main(["config", "show", "--preset", preset]) == 0
+        (tmp_path / "c.toml").write_text(capsys.readouterr().out)
+        assert planned("--config", str(tmp_path / "c.toml")) == planned("--preset", preset)
+    assert planned("--preset", "paper") == planned("--method", "bilevel_alg1")
+    assert planned() == planned("--preset", "default") != planned("--preset", "paper")
 
 
 @pytest.mark.sim
@@ -185,7 +205,9 @@ def _plan_with_replay(models_dir, tmp_path, capsys):
     assert code == (0 if "-> success" in out else 1)
     assert replay.is_file() and replay.stat().st_size > 10_000
     # the per-step view: printed, written beside the replay, and in the replay's panel
-    steps = json.loads((tmp_path / "out.steps.json").read_text())["steps"]
+    document = json.loads((tmp_path / "out.steps.json").read_text())
+    steps, recorded = document["steps"], document["configuration"]
+    assert recorded["format"] == "tamp-config/1" and recorded["search"]["max_expansions"] == 1500  # what planned it
     executed = int(re.search(r"refinement: (?:ok, )?(\d+) action", out).group(1)) if "refinement: ok" in out else None
     assert steps and (executed is None or len(steps) == executed)
     for k, step in enumerate(steps):
@@ -295,6 +317,7 @@ def test_cli_writes_the_executed_trajectory(models_dir, tmp_path, capsys):
         assert written is not None, text
         plan = read_trajectory(out)
         assert plan.world == "fast" and plan.source.startswith("tamp plan")
+        assert plan.configuration["format"] == "tamp-config/1" and plan.configuration["level1"]["n_domains"] == 100
         assert ("--replan" in plan.source) == bool(loop)
         assert len(plan.actions) == int(written.group(1)) >= 1
         out.unlink()

@@ -624,18 +624,19 @@ def test_a_failed_keep_is_counted_in_the_round_that_plans_again(domain):
     assert second.rejected[2]["refine_motion"] >= 1
 
 
-def test_on_course_flags():
-    import argparse
+def test_on_course_settings():
+    from guarded import InputError
+    from guarded.config import parse_toml
+    from tamp.planning.config import overlay
 
-    from tamp.app.planner_flags import add_planner_arguments, planner_config
+    def read(text: str) -> LoopConfig:
+        return overlay(PlanConfig(), parse_toml(f"[loop]\n{text}", "c.toml"), "c.toml").loop
 
-    parser = argparse.ArgumentParser()
-    add_planner_arguments(parser)
-    assert planner_config(parser.parse_args([])).loop.on_course == PlanConfig().loop.on_course == 0.015
-    assert planner_config(parser.parse_args(["--on-course", "0.02"])).loop.on_course == 0.02
-    assert planner_config(parser.parse_args(["--no-on-course"])).loop.on_course is None
-    with pytest.raises(SystemExit):
-        parser.parse_args(["--on-course", "0"])
+    assert read("").on_course == PlanConfig().loop.on_course == 0.015
+    assert read("on_course = 0.02").on_course == 0.02
+    assert read("on_course = false").on_course is None
+    with pytest.raises(InputError, match="LoopConfig.on_course must be positive"):
+        read("on_course = 0")
 
 
 def test_settled_plans_verified_during_the_search_give_algorithm_1s_plan_sooner(capsys):

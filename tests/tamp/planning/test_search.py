@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from tamp.errors import UserError
+from tamp.planning.config import PlanConfig
 from tamp.planning.pruning import blockers, goal_oriented_actions
 from tamp.planning.search import SearchConfig, continuous_search
 from tamp.planning.verify import VerifyConfig, goal_error, rollout
@@ -275,15 +276,12 @@ def test_a_shorter_plan_predicted_4_cm_off_beats_longer_exact_ones():
         VerifyConfig(confident=0.06)
 
 
-def test_paper_pruning_flag_restores_the_papers_rule():
-    import argparse
+def test_the_papers_pruning_rule_is_a_setting():
+    from guarded.config import parse_toml
+    from tamp.planning.config import overlay
 
-    from tamp.app.planner_flags import add_planner_arguments, planner_config
-
-    parser = argparse.ArgumentParser()
-    add_planner_arguments(parser)
-    assert planner_config(parser.parse_args([])).search.release_targets
-    assert not planner_config(parser.parse_args(["--paper-pruning"])).search.release_targets
+    assert PlanConfig().search.release_targets
+    assert not overlay(PlanConfig(), parse_toml("[search]\nrelease_targets = false", "c"), "c").search.release_targets
 
 
 class FragileModel(StubModel):
@@ -333,18 +331,19 @@ def test_a_fragile_goal_state_waits_for_a_robust_one():
         SearchConfig(max_fragility=1.0)
 
 
-def test_fragility_flags():
-    import argparse
+def test_fragility_settings():
+    from guarded import InputError
+    from guarded.config import parse_toml
+    from tamp.planning.config import overlay
 
-    from tamp.app.planner_flags import add_planner_arguments, planner_config
+    def read(text: str) -> SearchConfig:
+        return overlay(PlanConfig(), parse_toml(f"[search]\n{text}", "c.toml"), "c.toml").search
 
-    parser = argparse.ArgumentParser()
-    add_planner_arguments(parser)
-    assert planner_config(parser.parse_args([])).search.max_fragility == SearchConfig().max_fragility == 0.3
-    assert planner_config(parser.parse_args(["--max-fragility", "0.1"])).search.max_fragility == 0.1
-    assert planner_config(parser.parse_args(["--no-fragility"])).search.max_fragility is None
-    with pytest.raises(SystemExit):
-        parser.parse_args(["--max-fragility", "1"])
+    assert read("").max_fragility == SearchConfig().max_fragility == 0.3
+    assert read("max_fragility = 0.1").max_fragility == 0.1
+    assert read("max_fragility = false").max_fragility is None
+    with pytest.raises(InputError, match="c.toml: the continuous search needs 0 <= max_fragility < 1"):
+        read("max_fragility = 1")
 
 
 class DoubtfulModel(StubModel):
