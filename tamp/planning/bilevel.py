@@ -27,7 +27,7 @@ from tamp.planning.level1 import level1, level1_serial
 from tamp.planning.level2 import level2
 from tamp.planning.models import Models
 from tamp.planning.results import Clock, Level2Result, PlanResult, assemble
-from tamp.planning.search import SearchConfig
+from tamp.planning.search import FRAGILITY_NOISE_M, SearchConfig
 from tamp.planning.verify import Verification, VerifyConfig, doubt, fragility
 from tamp.planning.vocabulary import KinematicFeasibility
 
@@ -73,7 +73,7 @@ def level1_waits(models: Models, X_init, X_goal, chosen: Verification, wait_beyo
                 f"(over {wait_beyond * 100:g} cm); kept while level 2 searches")
     model = models.require_dynamics()
     if wait_beyond is not None and search.max_fragility is not None and chosen.actions and fragility(
-            model, X_init, X_goal, chosen.actions, goal.eps, search.noise) > search.max_fragility:
+            model, X_init, X_goal, chosen.actions, goal.eps, FRAGILITY_NOISE_M) > search.max_fragility:
         return (f"level 1: its verified plan misses the goal in over {search.max_fragility:.0%} of its perturbed "
                 "rollouts; kept while level 2 searches")
     if search.max_doubt is not None and doubt(model, chosen.trajectory, chosen.actions) > search.max_doubt:

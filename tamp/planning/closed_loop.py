@@ -18,7 +18,7 @@ Two loops share one round (`_round`: plan, or keep the rest of the last plan whi
   the 9 n^2 actions, so blocks can be moved out of the way, unstacked, or moved although at their
   goal); when that finds none either (or the search budget has nothing left to widen with), it takes
   the first action toward the closest state either search expanded (`toward_closest`), if that is
-  `LoopConfig.progress` closer (the world may do better than the model predicts, and the next round
+  `PROGRESS_M` closer (the world may do better than the model predicts, and the next round
   plans from there). Back at a state it observed before (`revisits`), it
   leaves out the actions it took from there, which would start the same cycle again in a deterministic world.
   An action that misses what the loop expected twice alike is from then on predicted as the world did it
@@ -57,6 +57,11 @@ from tamp.planning.results import Candidate, Clock, PlanResult, assemble, take_p
 from tamp.planning.search import SearchResult, state_key
 from tamp.planning.verify import Verification, at_goal, goal_error, goal_errors, verify
 from tamp.planning.vocabulary import KinematicFeasibility, LoopStop, Outcome, PickPlace
+
+WIDEN_EXPANSIONS = 400  # node budget of a widened search (over all 9 n^2 actions)
+PROGRESS_M = 0.02  # metres over blocks: without a plan, step toward the closest state only if it is this closer
+REVISIT_M = 0.01  # metres: back this close to an observed state, leave out the actions taken from there
+REMEMBER_ALIKE = 2  # misses alike before the loop trusts one (`LoopConfig.remember`): one outcome may be scatter
 
 
 @dataclass
@@ -162,7 +167,7 @@ def loop_until_goal(method: str, models: Models, X_init, X_goal, step: Step, cfg
     from that; actions that led back to an observed state are left out (`revisits`)."""
     out = ClosedLoopResult([], [], [np.asarray(X_init, dtype=float)], np.asarray(X_goal, dtype=float), cfg.verify.eps,
                            experience=None if cfg.loop.remember is None else Experience(cfg.loop.remember,
-                                                                                        cfg.loop.remember_alike))
+                                                                                        REMEMBER_ALIKE))
     inside = aimed_inside(cfg)
     budget = cfg.loop.search_budget_for(len(out.X_goal), cfg.search.greedy_from)
     spent = 0  # continuous-search expansions of every round so far
@@ -182,7 +187,7 @@ def loop_until_goal(method: str, models: Models, X_init, X_goal, step: Step, cfg
         avoid = revisits(out, cfg)
         seen = experienced(models, out.experience)  # the Dynamics Model with the misses the loop trusts
         if at_goal(X, out.X_goal, cfg.verify.eps):  # within eps, not within the stop margin: one clearly closer step
-            result = _round(method, seen, X, out.X_goal, out, _within(inside, cfg.loop.widen_expansions,
+            result = _round(method, seen, X, out.X_goal, out, _within(inside, WIDEN_EXPANSIONS,
                                                                         budget - spent), planner, kinematics, avoid,
                             until_goal=True)
             spent += _expanded(result)
@@ -204,7 +209,7 @@ def loop_until_goal(method: str, models: Models, X_init, X_goal, step: Step, cfg
         if cfg.loop.widen and not (result.solved and result.plan):
             if spent < budget:
                 result = widened_search(method, seen, X, out.X_goal,
-                                        _within(cfg, cfg.loop.widen_expansions, budget - spent), kinematics, result,
+                                        _within(cfg, WIDEN_EXPANSIONS, budget - spent), kinematics, result,
                                         avoid)
                 spent += _expanded(result)
             else:  # no budget left to widen: what the round's search found may still bring the blocks closer
@@ -306,12 +311,12 @@ def _expanded(result: PlanResult) -> int:
 
 def revisits(out: ClosedLoopResult, cfg: PlanConfig) -> frozenset[tuple[bytes, tuple]]:
     """The (state key of the observed state, action) pairs to leave out: the actions the loop executed from
-    an earlier observed state that every block is within `LoopConfig.revisit` of now (it came back, and the
+    an earlier observed state that every block is within `REVISIT_M` of now (it came back, and the
     same action would start the same cycle again)."""
     X = out.states[-1]
     key = state_key(X, cfg.search.resolution)
     return frozenset((key, tuple(int(v) for v in action)) for before, action in zip(out.states, out.executed)
-                     if np.linalg.norm(before[:, :3] - X[:, :3], axis=1).max() < cfg.loop.revisit)
+                     if np.linalg.norm(before[:, :3] - X[:, :3], axis=1).max() < REVISIT_M)
 
 
 def _round(method: str, models: Models, X: np.ndarray, X_goal: np.ndarray, out: ClosedLoopResult,
@@ -333,7 +338,7 @@ def _round(method: str, models: Models, X: np.ndarray, X_goal: np.ndarray, out: 
         return kept
     if marginal:  # a search for a plan aimed closer than one that already predicts success: no longer than a widening
         cfg = replace(cfg, search=replace(cfg.search, max_expansions=min(cfg.search.max_expansions,
-                                                                         cfg.loop.widen_expansions)))
+                                                                         WIDEN_EXPANSIONS)))
     result = (planner or plan)(method, models, X, X_goal, cfg, **extra)
     if kept is not None and kept_error is not None and marginal:  # a plan aimed within confident (closer) replaces it
         new_error = result.predicted_error if result.solved and result.plan else None
@@ -370,7 +375,7 @@ def widened_search(method: str, models: Models, X: np.ndarray, X_goal: np.ndarra
 def toward_closest(X: np.ndarray, X_goal: np.ndarray, cfg: PlanConfig, result: PlanResult,
                    searches: Sequence[SearchResult | None]) -> PlanResult:
     """`result` (a round without a plan) given the path to the closest state any of `searches` expanded (least
-    summed distance to the goal), when that state is `LoopConfig.progress` closer than the observed X: the
+    summed distance to the goal), when that state is `PROGRESS_M` closer than the observed X: the
     loop executes its first action and plans again from what the world did. Unchanged otherwise."""
     found = [(float(goal_errors(s.closest_trajectory[-1], X_goal).sum()), i, s) for i, s in enumerate(searches)
              if s is not None and s.closest_trajectory is not None and s.closest_plan]
@@ -379,7 +384,7 @@ def toward_closest(X: np.ndarray, X_goal: np.ndarray, cfg: PlanConfig, result: P
     _, _, search = min(found)
     closest = search.closest_trajectory
     assert closest is not None and search.closest_plan is not None  # filtered above
-    if not _progress(X, closest[-1], X_goal, cfg.loop.progress):
+    if not _progress(X, closest[-1], X_goal, PROGRESS_M):
         return result
     toward = (f"toward the closest state found (predicted {goal_error(closest[-1], X_goal) * 100:.1f} cm from the "
               f"goal, from {goal_error(X, X_goal) * 100:.1f} cm)")

@@ -56,11 +56,8 @@ class Level1Config:
     backend: str = "python"  # symbolic planner: python (in-process, fastest), fd (Fast Downward), fd-naive
     symbolic_time_limit: float = 10.0  # seconds per symbolic planner call: a safety net behind `budget`
     budget: int | None = 100_000  # symbolic states one search for all N domains may generate: deterministic
-    time_budget: float | None = None  # seconds for all N symbolic calls (off: it would depend on the machine)
-    verify_all: bool = False  # verify every candidate (default: stop at the first verified one, as Alg. 1)
     settle: bool = True  # verify ranked plans as soon as their rank is final: Alg. 1's plan, found sooner
     alternatives: int = 64  # per symbolic plan, verify the best plans of a beam this wide over its skeleton
-    alternatives_total: int = 256  # per problem (later symbolic plans are verified alone): bounds the time
     nonempty: bool = True  # X_init not within tau of X_goal: the symbolic plan needs >= 1 action
     focus_from: int | None = 5  # from this many objects on, plans pick up only misplaced blocks
     focus_budget: int | None = 25_000  # from focus_from objects on, `budget`'s stand-in: later plans rarely verify
@@ -119,22 +116,17 @@ class LoopConfig:
     commit: bool = True  # a kept plan short of confident gives way only to a plan predicted within confident
     max_actions: int = 30  # actions sent before the loop gives up: k <= 5 needs 5, the rest is room for detours
     widen: bool = True  # a round without a plan searches again over all 9 n^2 actions (make room, unstack)
-    widen_expansions: int = 400  # node budget of the widened search
     search_budget: int = 3000  # search expansions over all rounds: a failing loop ends in about two searches' time
     greedy_search_budget: int | None = 1500  # from search.greedy_from blocks on, search_budget's stand-in
     stall: int | None = 300  # the stall cut of its rounds' searches, in place of search.stall and .greedy_stall
-    progress: float = 0.02  # metres over blocks: without a plan, step toward the closest state only if this closer
-    revisit: float = 0.01  # metres: back this close to an observed state, leave out the actions taken from there
     remember: float | None = 0.02  # metres: a step missing its prediction this far, seen alike, is predicted so
-    remember_alike: int = 2  # misses alike before one is trusted: one outcome may be scatter
     stop_margin: float | None = None  # metres inside eps the loop stops (false: 1 sigma of the observation noise)
     looks: int | None = None  # observations again after a round without a plan (false: 2 under noise, else 0)
 
     def __post_init__(self) -> None:
         _positive("LoopConfig", on_course=self.on_course, remember=self.remember)
-        if not self.revisit >= 0 or not self.progress >= 0 or not self.margin >= 0:
-            raise UserError(f"LoopConfig.revisit, .progress and .stop_margin must be distances of 0 m or more, got "
-                            f"{self.revisit}, {self.progress} and {self.stop_margin}")
+        if not self.margin >= 0:
+            raise UserError(f"LoopConfig.stop_margin must be a distance of 0 m or more, got {self.stop_margin}")
         if self.stall is not None and self.stall < 1:
             raise UserError(f"LoopConfig.stall must be a positive number of expansions or None, got {self.stall}")
         if self.greedy_search_budget is not None and self.greedy_search_budget < 1:
@@ -142,12 +134,9 @@ class LoopConfig:
                             f"{self.greedy_search_budget}")
         if self.looks_again < 0:
             raise UserError(f"LoopConfig.looks must be 0 or more, got {self.looks}")
-        if self.remember_alike < 1:
-            raise UserError(f"LoopConfig.remember_alike must be 1 or more, got {self.remember_alike}")
-        if self.max_actions < 1 or self.widen_expansions < 1 or self.search_budget < 1:
+        if self.max_actions < 1 or self.search_budget < 1:
             raise UserError(f"the closed loop needs at least 1 action and 1 expansion of its searches, got "
-                            f"{self.max_actions} actions, {self.widen_expansions} expansions widened and a search "
-                            f"budget of {self.search_budget}")
+                            f"{self.max_actions} actions and a search budget of {self.search_budget}")
 
     @property
     def margin(self) -> float:

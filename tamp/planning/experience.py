@@ -2,7 +2,7 @@
 
 The loop that does not know k executes one action a round and observes the result. When an action lands
 `LoopConfig.remember` metres or more from the prediction, the loop records the observed transition. Once the
-world has done the same action alike `LoopConfig.remember_alike` times (2), the loop trusts the miss: whenever a
+world has done the same action alike `closed_loop.REMEMBER_ALIKE` times (2), the loop trusts the miss: whenever a
 planning call asks the model about that action from a state in which the blocks that decide its outcome lie
 within that distance of where they were (every block but the picked one, when it is carried to another block;
 all of them for a shift along itself), the prediction is what the world did: every block displaced as it was, a

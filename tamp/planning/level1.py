@@ -37,6 +37,8 @@ from tamp.planning.verify import (
     without_repicks,
 )
 
+ALTERNATIVES_TOTAL = 256  # look-alike alternatives verified per problem (later symbolic plans alone): bounds time
+
 
 # --- Algorithm 1, lines 4-14 -------------------------------------------------------------------
 def level1(models: Models, X_init, X_goal, config: Level1Config, goal: VerifyConfig, clock: Clock,
@@ -65,7 +67,7 @@ def level1(models: Models, X_init, X_goal, config: Level1Config, goal: VerifyCon
         verifier.ranked += plans
         return verifier.run()
 
-    settle = verify_settled if config.settle and not config.verify_all else None
+    settle = verify_settled if config.settle else None
     verifier.ranked = symbolic_plans(models, X_init, X_goal, config, goal, clock, record, objects=objects,
                                      on_settled=settle)  # lines 5-7
     verifier.run()  # line 9: in decreasing order of probability, lines 10-12
@@ -116,7 +118,7 @@ def symbolic_plans(models: Models, X_init, X_goal, config: Level1Config, goal: V
     if probabilistic:
         with clock.stage("symbolic"):
             out = planner.plan_probabilistic(problem, n_domains=config.n_domains, seed=config.seed,
-                                             time_budget=config.time_budget, budget=config.budget_for(len(X_init)),
+                                             budget=config.budget_for(len(X_init)),
                                              on_settled=None if on_settled is None else
                                              lambda plans: on_settled([candidate(p) for p in plans]))
         record.symbolic_stats = {"n_domains": out.n_domains, "unique_plans": len(out.plans), "settled": out.settled,
@@ -161,7 +163,7 @@ class Verifier:
         self.model = models.require_dynamics()
         self.checked: list[Candidate] = []  # verified so far: ranked plans and their alternatives
         self.any_verified = False
-        self.alternatives_left = config.alternatives_total
+        self.alternatives_left = ALTERNATIVES_TOTAL
         self._rollouts: dict[int, Verification] = {}
         self._done = 0  # ranked plans checked
         self._ended = False  # a plan taken, or no refinement left
@@ -172,7 +174,7 @@ class Verifier:
         while not self._ended and self._done < len(self.ranked):
             with self.clock.stage("verify"):
                 self.check(self._done)
-            self._ended = (self.record.chosen is not None and not self.config.verify_all) or \
+            self._ended = self.record.chosen is not None or \
                 self.refinements_used_up()
         return self._ended
 

@@ -49,12 +49,14 @@ from tamp.errors import UserError
 from tamp.planning.pruning import all_actions, blockers, goal_oriented_actions, moves_of
 from tamp.planning.verify import DynamicsModel, VerifyConfig, doubt, fragility, states_pair
 
+WEIGHT = 1.5  # w in f = g + w h (the paper's)
+FRAGILITY_NOISE_M = 0.005  # metres: the input perturbation of the fragility rollouts (`verify.fragility`)
+
 
 @dataclass(frozen=True)
 class SearchConfig:
     """Level 2's own settings; what counts as the goal (eps, confident, misplaced) is `VerifyConfig`'s."""
 
-    weight: float = 1.5  # w in f = g + w h (the paper's)
     greedy_from: int | None = 5  # from this many blocks on, h counts in units of greedy_h_unit: a deeper search
     greedy_h_unit: float = 0.5  # metres per unit of h from greedy_from blocks on
     greedy_per_misplaced: float = 0.3  # from greedy_from blocks on, h also counts this per block off its goal
@@ -70,7 +72,6 @@ class SearchConfig:
     release_targets: bool = True  # also target the closest release point and the block below a raised goal
     clear_blockers: bool = True  # when the action into a goal state is rejected, also move the blocks in its way
     max_fragility: float | None = 0.3  # a goal state ends the search only if at most this share of rollouts misses
-    noise: float = 0.005  # metres: the input perturbation of the fragility rollouts (`verify.fragility`)
     max_doubt: float | None = None  # metres: an ensemble's 95 % step bound a plan taken at once may not exceed
 
     def __post_init__(self) -> None:
@@ -81,9 +82,8 @@ class SearchConfig:
         if self.time_limit is not None and not self.time_limit > 0 or self.max_expansions < 1 or self.max_depth < 1:
             raise UserError(f"the continuous search needs a positive time limit, node limit and depth, got "
                             f"{self.time_limit} s, {self.max_expansions} nodes, depth {self.max_depth}")
-        if self.max_fragility is not None and not 0 <= self.max_fragility < 1 or not self.noise > 0:
-            raise UserError(f"the continuous search needs 0 <= max_fragility < 1 (or None) and a positive noise, "
-                            f"got {self.max_fragility} and {self.noise} m")
+        if self.max_fragility is not None and not 0 <= self.max_fragility < 1:
+            raise UserError(f"the continuous search needs 0 <= max_fragility < 1 (or None), got {self.max_fragility}")
         if self.max_doubt is not None and not self.max_doubt > 0:
             raise UserError(f"the continuous search's max_doubt must be a positive distance (or None), got "
                             f"{self.max_doubt} m")
@@ -208,7 +208,7 @@ class ContinuousSearch:
         self.per_misplaced = config.greedy_per_misplaced if greedy else 0.0
         self.stall = config.greedy_stall if greedy else config.stall
         h0 = float(self.heuristic(self.X_init[None, :, :3], self.d0[None])[0])
-        self.frontier = [(config.weight * h0, h0, 0)]  # (f, h, node index)
+        self.frontier = [(WEIGHT * h0, h0, 0)]  # (f, h, node index)
         self.closest = (h0, 0)  # (h, node index) of the expanded state closest to the goal
         self.closer_at = 0  # expansions when the closest state last came closer
         self.every = all_actions(len(self.X_init))
@@ -261,7 +261,7 @@ class ContinuousSearch:
             return 0.0
         self.out.fragility_checks += 1
         return fragility(self.model, self.X_init, self.X_goal, self.path(index)[0], self.tolerance.eps,
-                         self.config.noise)
+                         FRAGILITY_NOISE_M)
 
     def doubtful(self, index: int) -> bool:
         """Whether a step of the plan into node `index` may miss by more than config.max_doubt (`verify.doubt`)."""
@@ -406,7 +406,7 @@ class ContinuousSearch:
         keys = self.keys_of(succ)
         here = self.key(P) if self.pruned else b""
         nodes, best_g, pruned, frontier = self.nodes, self.best_g, self.pruned, self.frontier  # the hot loop's
-        too_deep, weight = cfg.max_depth + 1, cfg.weight
+        too_deep, weight = cfg.max_depth + 1, WEIGHT
         for b, action in enumerate(actions.tolist()):
             k = keys[b]
             if best_g.get(k, too_deep) <= g + 1:

@@ -101,7 +101,7 @@ DAMAGED = [
     (b"search = 3\n", "search must be a table of keys"),
     (b"[search.stall]\nx = 1\n", "search.stall is a setting, not a table"),
     (b"[loop]\nstop_margin = 0.06\n", "stop margin (0.06 m) must be below the success tolerance"),
-    (b"[search]\nweight = inf\n", "search.weight must be a finite number"),
+    (b"[search]\ngreedy_h_unit = inf\n", "search.greedy_h_unit must be a finite number"),
     (b"\xff\xfe[search]\n", "not UTF-8"),
     (b"[evaluation]\noracle_max_plans = 0\n", "oracle_max_plans must be a positive integer"),
     (b"[" * 5000, "not TOML"),
@@ -136,7 +136,7 @@ def test_validation_lives_with_the_fields():
                        (lambda: VerifyConfig(tau_verify=-1.0), "VerifyConfig.tau_verify"),
                        (lambda: LoopConfig(on_course=0.0), "LoopConfig.on_course"),
                        (lambda: LoopConfig(remember=0.0), "LoopConfig.remember"),
-                       (lambda: LoopConfig(remember_alike=0), "LoopConfig.remember_alike"),
+                       (lambda: LoopConfig(max_actions=0), "at least 1 action"),
                        (lambda: KinematicsConfig(rest_within=0.0), "KinematicsConfig.rest_within"),
                        (lambda: SearchConfig(resolution=0.0), "duplicate grid")):
         with pytest.raises(UserError, match=field):

@@ -278,7 +278,7 @@ def test_back_at_an_earlier_state_the_loop_leaves_out_the_action_it_took_from_th
         assert other.solved and tuple(other.plan[0]) != first
 
 
-def test_without_a_plan_the_loop_steps_toward_the_closest_state_while_that_makes_progress(models):
+def test_without_a_plan_the_loop_steps_toward_the_closest_state_while_that_makes_progress(models, monkeypatch):
     goal = A_ON_B.copy()
     out = plan_closed_loop("bilevel", models, X_INIT, goal, slipping_world(0), rounds=None,
                            kinematics=RejectGoalMoves())
@@ -289,8 +289,11 @@ def test_without_a_plan_the_loop_steps_toward_the_closest_state_while_that_makes
     assert all(b <= a - 0.02 + 1e-9 for a, b in zip(distances, distances[1:]))  # every step made progress
     assert not out.success and out.stop == "no_plan"  # A cannot get onto B: it stops when no step helps
     assert "toward the closest state" in toward[0].reasons[-1]
+    import tamp.planning.closed_loop as closed_loop
+
+    monkeypatch.setattr(closed_loop, "PROGRESS_M", 1.0)  # no step is that much closer
     still = plan_closed_loop("bilevel", models, X_INIT, goal, slipping_world(0), rounds=None,
-                             kinematics=RejectGoalMoves(), cfg=PlanConfig(loop=LoopConfig(progress=1.0)))
+                             kinematics=RejectGoalMoves())
     assert not still.executed and still.stop == "no_plan"
 
 
