@@ -32,8 +32,8 @@ def relative_links(text: str) -> list[str]:
 
 def test_the_documents_are_found_and_linked():
     names = {f.relative_to(ROOT).as_posix() for f in documents()}
-    assert {"README.md", "BUILD_NOTES.md", "docs/reproducing-the-paper.md", "results/scaling/README.md",
-            "results/archive/README.md"} <= names
+    assert {"README.md", "BUILD_NOTES.md", "docs/reproducing-the-paper.md", "results/README.md",
+            "results/methods/README.md", "results/scaling/README.md"} <= names
     readme = (ROOT / "README.md").read_text()
     for page in sorted((ROOT / "docs").glob("*.md")):  # every docs page is listed in the README
         assert f"(docs/{page.name})" in readme, f"docs/{page.name} is not linked from README.md"
