@@ -184,7 +184,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "actions: a random scene, then k random actions simulated in the fast Drake world give the goal. "
         "--protocol strict (default) redraws actions that fail or move nothing, so every one of the k "
         "moves a block; --protocol paper keeps every drawn action whatever its outcome, as the paper's "
-        "authors do (about half of them move nothing, so many k = 1 goals equal the initial scene). Each "
+        "authors do (an action that moves nothing changes nothing, so a k = 1 goal can equal the initial "
+        "scene). Each "
         "line of --out is a `tamp plan --problem` object with its name (n{n}-k{k}-{i}, or r{run}-n{n}-k{k}-{i} "
         "with --runs), seed, generating actions and how many of them moved a block; the same arguments "
         "give the same file, byte for byte, for any number of workers.",
@@ -284,7 +285,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "Symbolic Models and the two Fig. 4 variants (with the Table I ablation alongside), learn the "
         "domains, generate the problem set, evaluate every method in the Drake world and write "
         "OUT/results/report.md. Stages that finished are skipped when the command is run again, so an "
-        "interrupted run resumes. --scale quick fits in an hour on 2 cores; --scale paper is the "
+        "interrupted run resumes. --scale quick (the default) runs every stage small (40k samples, 250 "
+        "epochs, 10 problems per cell), to check the whole pipeline; --scale paper is the "
         "paper's size (160k samples, 4000 epochs, 100 problems per cell) for bigger machines or Ray. "
         "With --models DIR only the problems, the evaluation and the report are made, for DIR's models "
         "(e.g. `--models paper --protocol paper --runs 3`: the bundled paper set, the paper's protocol, three runs).",

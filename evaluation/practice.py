@@ -413,8 +413,7 @@ def add_practice(sub) -> None:
                    f"{PracticeConfig.extra_share})")
     p.add_argument("--epochs", type=positive_int, default=PracticeConfig.epochs,
                    help=f"at most this many epochs per member and round (default {PracticeConfig.epochs}); a warm "
-                   "start's validation error falls slowly, so this bounds a round's training time (about 12 s an "
-                   "epoch on 184,000 transitions, one core a member)")
+                   "start's validation error falls slowly, so this bounds a round's training time")
     p.add_argument("--patience", type=positive_int, default=PracticeConfig.patience,
                    help=f"a member stops after this many epochs without a better validation error (default "
                    f"{PracticeConfig.patience})")

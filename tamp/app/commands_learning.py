@@ -203,9 +203,10 @@ def add_train(sub) -> None:
                    "predicts as before until it trains (default: the paper's encoding)")
     p.add_argument("--relative-messages", action="store_true",
                    help="a Dynamics Model whose every message also reads where the sending object stands from the "
-                   "receiving one (x_j - x_i), so that offsets reach the decoder exactly: at equal data it fits steps "
-                   "from stacks and leaning blocks better, and plans 2-3x slower (an MLP per pair of blocks; "
-                   "docs/practice-and-doubt.md) (default: the paper's messages; not with --bottleneck gumbel_sigmoid)")
+                   "receiving one (x_j - x_i), so that offsets reach the decoder exactly, for steps from stacks and "
+                   "leaning blocks; each message is then an MLP per pair of blocks, so every prediction the "
+                   "planner makes costs more (docs/practice-and-doubt.md) (default: the paper's messages; not "
+                   "with --bottleneck gumbel_sigmoid)")
     p.add_argument("--bit-usage", type=non_negative_float, default=0.0, metavar="WEIGHT",
                    help="weight of a penalty on learned bits and relations set in under 5 %% or over 95 %% of a "
                    "batch, so that the effect loss cannot leave a relation constant (default 0: the paper's loss)")
@@ -220,8 +221,7 @@ def add_train(sub) -> None:
                    "every pair)")
     p.add_argument("--offset-from-relations", action="store_true",
                    help="with --offset-loss: read the offset back from the pair's relations alone, not its unary "
-                   "bits too, meant to make a relation say which block stands higher (measured at paper scale, "
-                   "the third relation stays mixed: docs/learned-symbols.md)")
+                   "bits too, meant to make a relation say which block stands higher (docs/learned-symbols.md)")
     p.add_argument("--position-loss", type=non_negative_float, default=0.0, metavar="WEIGHT",
                    help="weight of a loss that reads each block's place on the table back from its unary bits alone, "
                    "so that a unary bit says in which part of the table a block stands, a symbol only the moved "
@@ -244,7 +244,7 @@ def add_train(sub) -> None:
     p.add_argument("--resume", action="store_true", help="continue from <out>.last.pt")
     p.add_argument("--init", type=Path, default=None, metavar="CHECKPOINT",
                    help="fine-tune: start from this model's weights and input normalisation (e.g. "
-                   "tamp/pretrained/dynamics.pt, trained on 2-4 blocks, on data with 5 and 6) instead of random "
+                   "tamp/pretrained/paper/dynamics.pt, trained on 2-4 blocks, on data with 5 and 6) instead of random "
                    "ones; its network settings are kept (--bottleneck, --d-z, --heads, --no-arm-input must agree "
                    "if given) and the object limit is the data's")
     p.add_argument("--ensemble", type=positive_int, default=None, metavar="M",

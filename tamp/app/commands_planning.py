@@ -102,6 +102,6 @@ def add_demo(sub) -> None:
                    help="also execute the first N symbolic candidates that failed verification and write "
                    "a replay of each (OUT.candidateI.html, I their number in the candidate list)")
     add_trajectory_argument(p)
-    add_max_actions_argument(p, "the closed loop")
+    add_max_actions_argument(p, "closed loop")
     add_config_arguments(p)
     p.set_defaults(func=cmd_demo)

@@ -142,3 +142,22 @@ def test_validation_lives_with_the_fields():
         with pytest.raises(UserError, match=field):
             bad()
     assert PlanConfig().with_seed(7).level1 == Level1Config(seed=7)
+
+
+def test_every_extension_of_the_ablation_bench_is_a_setting_it_switches():
+    """bench/ablation.py switches each extension off by a configuration file: each must parse and change its key."""
+    import importlib.util
+
+    from guarded.config import parse_toml
+    from tamp.planning.config import overlay
+    from tests.paths import ROOT
+
+    spec = importlib.util.spec_from_file_location("ablation", ROOT / "bench" / "ablation.py")
+    assert spec is not None and spec.loader is not None
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    default = PlanConfig()
+    for name, toml in bench.EXTENSIONS.items():
+        part, key = name.split(".")
+        off = overlay(default, parse_toml(toml, name), name)
+        assert getattr(getattr(off, part), key) != getattr(getattr(default, part), key), name
