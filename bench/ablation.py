@@ -4,10 +4,12 @@
     .venv/bin/python bench/ablation.py --problems P.jsonl --only search.clear_blockers,loop.widen
 
 One `tamp evaluate` per extension (OUT/NAME, resumable) with a configuration file that switches it off, and
-one of the default (OUT/default), all on the same problems and methods. Printed per extension and method:
-success of the default and without the extension, the problems each one alone solves (paired), and the
-planning time without it over the default's, mean and median of the per-problem ratios (a ratio below 1:
-faster without it). An extension whose removal changes neither success nor time beyond noise does not pay.
+one of the default (OUT/default), all on the same problems and methods: success of the default and without
+the extension, and the problems each one alone solves (paired). Planning time is measured apart, since
+evaluations minutes apart run under other loads: with `--time` (open-loop methods), each problem is planned
+with the default and without the extension back to back in this process, in alternating order, and the
+ratio is per problem (below 1: faster without it), mean and median. An extension whose removal changes
+neither success nor time beyond noise does not pay.
 """
 from __future__ import annotations
 
@@ -69,6 +71,39 @@ def _compare(name: str, base: list[dict], rows: list[dict], methods: list[str]) 
     return lines
 
 
+def paired_times(problems: Path, models_dir: str, method: str, toml: str) -> list[float]:
+    """Per problem, planning time without the extension over the default's, planned back to back (open loop)."""
+    import time
+
+    import torch
+
+    from guarded.config import parse_toml
+    from tamp.app.problem import read_problem_set
+    from tamp.app.runner import kinematics_for
+    from tamp.planning.config import PlanConfig, overlay
+    from tamp.planning.models import load_models
+    from tamp.planning.planners import plan
+
+    torch.set_num_threads(1)
+    models = load_models(models_dir)
+    configs = (PlanConfig(), overlay(PlanConfig(), parse_toml(toml, "extension"), "extension"))
+    warm: set[int] = set()
+    ratios = []
+    for i, p in enumerate(read_problem_set(problems)):
+        seconds = [0.0, 0.0]
+        for which in ((0, 1) if i % 2 == 0 else (1, 0)) if p.n in warm else (0, 0, 1):  # warm up each n first
+            cfg = configs[which].with_seed(p.seed)
+            kinematics = kinematics_for(method, cfg)
+            if kinematics is not None:
+                kinematics.reset(p.X_init)
+            start = time.perf_counter()
+            plan(method, models, p.X_init, p.X_goal, cfg, kinematics=kinematics)
+            seconds[which] = time.perf_counter() - start
+        warm.add(p.n)
+        ratios.append(seconds[1] / seconds[0])
+    return ratios
+
+
 def main() -> int | str:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--problems", type=Path, required=True, help="a held-out problem set (tamp problems)")
@@ -77,11 +112,20 @@ def main() -> int | str:
     p.add_argument("--methods", default="bilevel,bilevel_loop")
     p.add_argument("--workers", type=int, default=2)
     p.add_argument("--only", default=None, help="comma-separated extensions (default: every one of EXTENSIONS)")
+    p.add_argument("--time", default=None, metavar="METHOD",
+                   help="instead of evaluating: time METHOD's planning calls paired per problem (e.g. bilevel)")
     args = p.parse_args()
     names = list(EXTENSIONS) if args.only is None else args.only.split(",")
     unknown = [n for n in names if n not in EXTENSIONS]
     if unknown:
         return f"bench: unknown extension {unknown[0]}; known: {', '.join(EXTENSIONS)}"
+    if args.time is not None:
+        print("| without | method | time ratio mean | median | p90 | problems |\n|---|---|---|---|---|---|")
+        for name in names:
+            r = sorted(paired_times(args.problems, args.models, args.time, EXTENSIONS[name]))
+            print(f"| {name} | {args.time} | {statistics.fmean(r):.2f} | {statistics.median(r):.2f} | "
+                  f"{r[int(0.9 * (len(r) - 1))]:.2f} | {len(r)} |", flush=True)
+        return 0
     tamp = str(Path(sys.executable).with_name("tamp"))
     methods = args.methods.split(",")
     base = _evaluate(tamp, args, args.out / "default", None)
