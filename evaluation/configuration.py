@@ -56,8 +56,11 @@ class EvalConfig:
                 "faults": {"noise_m": self.faults.noise_m, "push_m": self.faults.push_m}}
 
     def plan_config(self, seed: int, feasibility: bool = True) -> PlanConfig:
+        """The planner's configuration for one problem and method: the problem's seed, kinematics in the loop
+        where the method has them (`Method.feasibility`) and the configuration does not turn them off."""
         p = self.planner.with_seed(seed)
-        return dataclasses.replace(p, kinematics=dataclasses.replace(p.kinematics, feasibility=feasibility))
+        on = feasibility and p.kinematics.feasibility
+        return dataclasses.replace(p, kinematics=dataclasses.replace(p.kinematics, feasibility=on))
 
 
 __all__ = ["EvalConfig"]

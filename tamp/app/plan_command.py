@@ -364,7 +364,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def add_max_actions_argument(p: argparse.ArgumentParser, which: str) -> None:
     """--max-actions: the action budget of the loop that runs until the goal (`LoopConfig.max_actions`)."""
     p.add_argument("--max-actions", type=positive_int, default=None, metavar="N",
-                   help=f"{which}: the closed loop gives up after sending N actions (default: loop.max_actions of "
+                   help=f"{which}: give up after sending N actions (default: loop.max_actions of "
                    "the configuration, 30: a goal of k <= 5 random actions needs 5, the rest is room for detours)")
 
 

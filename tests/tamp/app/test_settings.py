@@ -161,3 +161,15 @@ def test_every_extension_of_the_ablation_bench_is_a_setting_it_switches():
         part, key = name.split(".")
         off = overlay(default, parse_toml(toml, name), name)
         assert getattr(getattr(off, part), key) != getattr(getattr(default, part), key), name
+
+
+def test_the_paper_preset_evaluates_every_method_without_kinematics():
+    """`tamp evaluate --preset paper --methods bilevel` plans as `bilevel_alg1`: a method's kinematics in the loop
+    (`Method.feasibility`) hold only where the configuration does not turn them off."""
+    from evaluation.configuration import EvalConfig
+
+    assert EvalConfig().plan_config(3, feasibility=True).kinematics.feasibility
+    assert not EvalConfig().plan_config(3, feasibility=False).kinematics.feasibility
+    paper = EvalConfig(planner=load_settings("paper").planner)
+    assert not paper.plan_config(3, feasibility=True).kinematics.feasibility
+    assert paper.plan_config(3).level1.seed == 3

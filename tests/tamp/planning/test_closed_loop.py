@@ -60,9 +60,8 @@ def test_the_loop_stops_at_its_action_budget(models):
     assert "4 actions sent" in out.reason
 
 
-def test_a_larger_action_budget_changes_only_the_loops_that_ended_on_it(models):
-    # results measured with a smaller cap stay valid for every loop that did not end on it (results/default-models,
-    #   "The loop has room for detours"): the cap must not steer the loop before it is reached
+def test_the_action_budget_does_not_steer_the_loop_before_it_is_reached(models):
+    # --max-actions is a user's bound: a loop that reaches the goal within it acts and reasons as with any larger one
     forgetful = LoopConfig(remember=None)
     runs = {cap: plan_closed_loop("bilevel", models, X_INIT, A_ON_B, slipping_world(2), rounds=None,
                                   cfg=PlanConfig(loop=replace(forgetful, max_actions=cap))) for cap in (3, 4, 30)}

@@ -16,7 +16,7 @@ from tests.paths import DATA
 
 pytestmark = [pytest.mark.sim, pytest.mark.slow]
 
-# four problems of results/practice/n2-4-problems.jsonl.gz (seed 4242): Level-2 plans found after 215-340
+# four problems of a strict set of seed 4242 (tests/data/tail-problems.jsonl): Level-2 plans found after 215-340
 # expansions, and a search that finds none (the stall cut ends it after about 1,000 expansions instead of 1,500), on
 # the 1 cm duplicate grid they were chosen with
 FINE = replace(PlanConfig(), search=replace(PlanConfig().search, resolution=0.01))
