@@ -24,9 +24,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 # each extension beyond the paper, and the TOML that switches it off (tamp/planning/config.py says what it does)
 EXTENSIONS = {
     "level1.settle": "[level1]\nsettle = false", "level1.alternatives": "[level1]\nalternatives = 0",
-    "level1.nonempty": "[level1]\nnonempty = false", "level1.focus_from": "[level1]\nfocus_from = false",
+    "level1.focus_from": "[level1]\nfocus_from = false",
     "level1.objects": "[level1]\nobjects = false", "level1.serial": "[level1]\nserial = false",
-    "level1.wait_beyond": "[level1]\nwait_beyond = false", "level1.cut": "[level1]\ncut = false",
+    "level1.wait_beyond": "[level1]\nwait_beyond = false",
     "search.greedy_from": "[search]\ngreedy_from = false", "search.greedy_stall": "[search]\ngreedy_stall = false",
     "search.resolution": "[search]\nresolution = 0.01", "search.look_on": "[search]\nlook_on = 0",
     "search.release_targets": "[search]\nrelease_targets = false",

@@ -4,6 +4,7 @@ Standard library and `guarded` only, so every layer may use them."""
 from __future__ import annotations
 
 SEED_LIMIT = 2**63  # seeds are integers in [0, 2^63): numpy's generators and every --seed flag take them
+MAX_DOMAINS = 10_000  # sampled domains at most: the paper's N is 100; 10,000 of a 21,000-operator domain hold 1.7 GB
 SEED = {"type": "integer", "minimum": 0, "maximum": SEED_LIMIT - 1}
 OFFSET = {"enum": [-1, 0, 1]}  # a grasp or release offset, in steps of 7.5 cm
 BLOCK = {"type": "integer", "minimum": 0}  # an index into the scene's blocks (checked against n after the schema)

@@ -20,6 +20,7 @@ from typing import Any
 
 from guarded.config import build, read_toml
 from tamp.errors import UserError
+from tamp.inputs import MAX_DOMAINS
 from tamp.planning.search import SearchConfig
 from tamp.planning.verify import EPS_SUCCESS, VerifyConfig
 
@@ -58,20 +59,19 @@ class Level1Config:
     budget: int | None = 100_000  # symbolic states one search for all N domains may generate: deterministic
     settle: bool = True  # verify ranked plans as soon as their rank is final: Alg. 1's plan, found sooner
     alternatives: int = 64  # per symbolic plan, verify the best plans of a beam this wide over its skeleton
-    nonempty: bool = True  # X_init not within tau of X_goal: the symbolic plan needs >= 1 action
     focus_from: int | None = 5  # from this many objects on, plans pick up only misplaced blocks
     focus_budget: int | None = 25_000  # from focus_from objects on, `budget`'s stand-in: later plans rarely verify
     objects: int | None = 4  # from focus_from on, plan in the goal's sub-scene of this many objects (training size)
     serial: bool = True  # from focus_from on, with no verified plan, plan one misplaced block at a time
     wait_beyond: float | None = EPS_SUCCESS  # metres: a verified plan predicted this far waits for Level 2
-    cut: bool = True  # end a verified plan where it reaches the goal, drop repeated picks (false: the paper's)
 
     def __post_init__(self) -> None:
         if self.backend not in SYMBOLIC_BACKENDS:
             raise UserError(f"symbolic backend must be one of {', '.join(SYMBOLIC_BACKENDS)}, got {self.backend!r}")
         _positive("Level1Config", symbolic_time_limit=self.symbolic_time_limit, wait_beyond=self.wait_beyond)
-        if self.n_domains < 1:
-            raise UserError(f"the number of sampled domains must be at least 1, got {self.n_domains}")
+        if not 1 <= self.n_domains <= MAX_DOMAINS:  # each draws an effect per operator: (N, operators) in memory
+            raise UserError(f"level1.n_domains, the number of sampled domains, must be in 1..{MAX_DOMAINS:,}, "
+                            f"got {self.n_domains}")
         if self.focus_from is not None and self.focus_from < 1:
             raise UserError(f"Level1Config.focus_from must be a positive object count or None, got {self.focus_from}")
         for name in ("budget", "focus_budget"):

@@ -11,10 +11,9 @@ has settled its place in the ranking (`symbolic.search.settled_prefix`), and the
 taken; the plan is the one line 9 would reach after the whole search, sooner.
 
 Our extensions (`Level1Config`; `bilevel_alg1` turns them off): the plans through the same symbolic
-states verified with each ranked plan (`alternatives`), a non-empty plan when X_init is not at the
-goal (`nonempty`), and from `focus_from` objects on: only misplaced blocks picked, Level 1 in the
-sub-scene the goal involves (`level1_scene`), else one block at a time (`level1_serial`); a verified
-plan cut where it reaches the goal (`cut`); kinematics (`feas`) before a verified plan is taken.
+states verified with each ranked plan (`alternatives`), and from `focus_from` objects on: only misplaced
+blocks picked, Level 1 in the sub-scene the goal involves (`level1_scene`), else one block at a time
+(`level1_serial`); kinematics (`feas`) before a verified plan is taken.
 """
 from __future__ import annotations
 
@@ -30,11 +29,9 @@ from tamp.planning.results import Candidate, Clock, Level1Result, reasons_json
 from tamp.planning.verify import (
     Verification,
     VerifyConfig,
-    goal_error,
     refine_skeleton,
     verify,
     verify_many,
-    without_repicks,
 )
 
 ALTERNATIVES_TOTAL = 256  # look-alike alternatives verified per problem (later symbolic plans alone): bounds time
@@ -77,10 +74,8 @@ def level1(models: Models, X_init, X_goal, config: Level1Config, goal: VerifyCon
 
 def symbolic_problem(models: Models, X_init: np.ndarray, X_goal: np.ndarray, config: Level1Config,
                      goal: VerifyConfig, objects: tuple[int, ...] | None = None):
-    """Sigma_init, Sigma_goal of the scene, or of the sub-scene of `objects` (`level1_scene`); with
-    config.nonempty, the empty plan is ruled out when it cannot verify (X_init itself is not within tau
-    of X_goal although the symbols may agree); from config.focus_from objects on, plans may pick up only
-    the blocks off their goal."""
+    """Sigma_init, Sigma_goal of the scene, or of the sub-scene of `objects` (`level1_scene`); from
+    config.focus_from objects on, plans may pick up only the blocks off their goal."""
     from symbolic import make_problem
 
     assert models.symbolic is not None  # models.symbolic_planner() checked it
@@ -92,8 +87,7 @@ def symbolic_problem(models: Models, X_init: np.ndarray, X_goal: np.ndarray, con
     if config.focused(len(X_init)):
         wrong = misplaced_objects(X_init, X_goal, goal.misplaced, goal.eps).tolist()
         movable = (wrong if objects is None else [objects.index(o) for o in wrong]) or None
-    nonempty = config.nonempty and goal_error(X_init, X_goal) >= goal.tau_verify
-    return make_problem(ui, ri, ug, rg, nonempty=nonempty, movable=movable)
+    return make_problem(ui, ri, ug, rg, movable=movable)
 
 
 def symbolic_plans(models: Models, X_init, X_goal, config: Level1Config, goal: VerifyConfig, clock: Clock,
@@ -219,22 +213,10 @@ class Verifier:
             c.error, c.verified = v.error, v.verified
         self.checked += group
         verified = [v for v in checks if v.verified]
-        if self.config.cut:
-            verified = [self._shortened(v) for v in verified]
         verified.sort(key=lambda v: v.error)
         self.any_verified = self.any_verified or bool(verified)
         if self.record.chosen is None:
             self.record.chosen = feasible_choice(verified, self.feas)
-
-    def _shortened(self, v: Verification) -> Verification:
-        """`v` cut where it reaches the goal, then without the picks the next action repeats if that
-        plan is predicted within goal.confident of the goal or no farther than `v` (config.cut)."""
-        v = v.cut(self.X_goal, self.goal.confident)
-        shorter = without_repicks(v.actions)
-        if len(shorter) == len(v.actions):
-            return v
-        w = verify(self.model, self.X_init, self.X_goal, shorter, self.goal.tau_verify)
-        return w if w.verified and (w.error < self.goal.confident or w.error <= v.error) else v
 
     def finish(self) -> None:
         """Record the candidates (checked ones, then the rest) and, without a chosen plan, why."""

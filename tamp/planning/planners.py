@@ -12,7 +12,7 @@
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import AbstractSet, Callable, Sequence
 
 from tamp.planning.bilevel import plan_bilevel, plan_bilevel_alg1
@@ -31,8 +31,7 @@ def _symbolic_only(method: str, probabilistic: bool):
     def run(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig(),
             kinematics: KinematicFeasibility | None = None) -> PlanResult:
         started, clock, record = time.perf_counter(), Clock(), Level1Result()
-        any_plan = replace(cfg.level1, nonempty=False)
-        record.candidates = symbolic_plans(models, X_init, X_goal, any_plan, cfg.verify, clock, record, probabilistic)
+        record.candidates = symbolic_plans(models, X_init, X_goal, cfg.level1, cfg.verify, clock, record, probabilistic)
         if not record.candidates:
             return assemble(method, X_goal, clock, started, level1=record)
         with clock.stage("verify"):

@@ -160,7 +160,7 @@ class PlanResult:
         for states, plan, objects, _ in sorted(known, key=lambda k: not k[3]):  # the symbolic planners take
             if plan == actions:  # their top plan unverified
                 return states, objects
-        for states, plan, objects, verified in known:  # a verified plan cut where it reaches the goal (level1_cut)
+        for states, plan, objects, verified in known:  # the first actions of a verified plan
             if verified and plan[:len(actions)] == actions:
                 return states[:len(actions) + 1], objects
         return None

@@ -28,7 +28,7 @@ class VerifyConfig:
 
     tau_verify: float = TAU_VERIFY  # metres: Level 1 takes a plan whose rollout ends this close (the paper's)
     eps: float = EPS_SUCCESS  # metres: success, every object within eps (the search's goal test, the loops, evaluation)
-    confident: float = 0.035  # metres: a goal state predicted this close ends a search; a kept or cut plan must end so
+    confident: float = 0.035  # metres: a goal state predicted this close ends a search; a kept plan must end so
     misplaced: float = EPS_SUCCESS  # metres: 2-D distance beyond which a block is off its goal (it needs an action)
 
     def __post_init__(self) -> None:
@@ -96,23 +96,6 @@ class Verification:
     @property
     def verified(self) -> bool:
         return self.error < self.tau
-
-    def cut(self, X_goal: np.ndarray, within: float) -> "Verification":
-        """The plan up to its first action whose predicted state has every object within `within` metres
-        of X_goal, if that is before its last action; else this plan. Actions after the goal is
-        reached only add chances to fail."""
-        for k in range(1, len(self.actions)):
-            errors = goal_errors(self.trajectory[k], X_goal)
-            if errors.max(initial=0.0) < within:
-                return Verification(self.actions[:k], self.trajectory[:k + 1], errors, self.tau)
-        return self
-
-
-def without_repicks(actions: Sequence) -> tuple:
-    """The plan without each action whose block the next action picks up again: that pick takes the
-    block wherever it lies, so the earlier move mostly decides nothing but adds a chance to fail."""
-    plan = tuple(tuple(int(v) for v in a) for a in actions)
-    return tuple(a for a, b in zip(plan, plan[1:] + (None,)) if b is None or b[0] != a[0])
 
 
 def predict_many(model: DynamicsModel, Xs: np.ndarray, actions: np.ndarray) -> np.ndarray:

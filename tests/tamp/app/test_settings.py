@@ -52,14 +52,13 @@ def test_the_default_preset_is_the_code_defaults():
 def test_the_paper_preset_is_algorithm_1():
     """The paper's Algorithm 1 with its settings, as `bilevel_alg1` plans: every extension of ours off."""
     d = PlanConfig()
-    paper = replace(d, level1=replace(d.level1, alternatives=0, nonempty=False, focus_from=None, wait_beyond=None,
-                                      cut=False),
+    paper = replace(d, level1=replace(d.level1, alternatives=0, focus_from=None, wait_beyond=None),
                     kinematics=replace(d.kinematics, feasibility=False),
                     search=replace(d.search, look_on=0, release_targets=False, max_fragility=None, max_doubt=None,
                                    stall=None, greedy_from=None, resolution=0.01))
     assert load_settings("paper").planner == paper == paper_config(d)
     # over another configuration, the paper's settings win and the rest stays
-    mine = replace(d, level1=replace(d.level1, n_domains=7, cut=True))
+    mine = replace(d, level1=replace(d.level1, n_domains=7, alternatives=5))
     assert paper_config(mine).level1 == replace(paper.level1, n_domains=7)
 
 
@@ -95,8 +94,8 @@ DAMAGED = [
     (b"[serach]\nstall = 300\n", "unknown key serach; did you mean search?"),
     (b"[search]\nstall = \"300\"\n", "search.stall must be an integer, or false for off"),
     (b"[search]\nmax_fragility = true\n", "search.max_fragility must be a number, or false for off"),
-    (b"[level1]\ncut = 1\n", "level1.cut must be true or false"),
-    (b"[level1]\nn_domains = 0\n", "the number of sampled domains must be at least 1"),
+    (b"[level1]\nsettle = 1\n", "level1.settle must be true or false"),
+    (b"[level1]\nn_domains = 0\n", "the number of sampled domains, must be in 1..10,000"),
     (b"[search]\nresolution = 0.5\n", "duplicate grid must be more than 0 and at most 5 cm"),
     (b"search = 3\n", "search must be a table of keys"),
     (b"[search.stall]\nx = 1\n", "search.stall is a setting, not a table"),

@@ -38,39 +38,6 @@ def execute(X, actions):
     return X
 
 
-def test_a_verified_plan_is_cut_where_it_reaches_the_goal():
-    stub = StubModel()
-    # A onto B reaches the goal; shifting B afterwards leaves the blocks 9 cm off
-    v = verify(stub, X_INIT, A_ON_B, [(0, 0, 1, 0), (1, 0, 1, 1)], tau=0.1)
-    assert v.verified and v.error > 0.07
-    cut = v.cut(A_ON_B, 0.035)
-    assert cut.actions == ((0, 0, 1, 0),) and cut.error < 1e-9 and len(cut.trajectory) == 2
-    assert np.array_equal(cut.trajectory, v.trajectory[:2])
-    # a plan that reaches the goal only with its last action is kept whole
-    whole = verify(stub, X_INIT, A_ON_B, [(1, 0, 1, 1), (1, 0, 1, -1), (0, 0, 1, 0)])
-    assert whole.cut(A_ON_B, 0.035) is whole
-
-
-def test_a_pick_that_the_next_action_repeats_is_dropped_when_the_shorter_plan_is_as_good(domain):
-    from tamp.planning.level1 import Verifier
-    from tamp.planning.results import Clock, Level1Result
-    from tamp.planning.verify import without_repicks
-
-    assert without_repicks([(4, 0, 0, 1), (4, -1, 1, 0)]) == ((4, -1, 1, 0),)
-    assert without_repicks([(1, 0, 0, 0), (2, 0, 2, 1), (2, 0, 0, 0), (1, 0, 2, 0)]) == \
-        ((1, 0, 0, 0), (2, 0, 0, 0), (1, 0, 2, 0))  # only consecutive picks of one block
-    # A first released beside B, then picked again and put on B: A on B in one action does the same
-    twice = verify(StubModel(), X_INIT, A_ON_B, [(0, 0, 1, 1), (0, 0, 1, 0)])
-    assert twice.verified and twice.error < 1e-9
-    verifier = Verifier(models(domain), X_INIT, A_ON_B, Level1Config(), VerifyConfig(), Clock(), None, Level1Result())
-    assert verifier._shortened(twice).actions == ((0, 0, 1, 0),)
-    # a repeated pick that matters stays: B shifted twice along y (15 cm); once ends 7.5 cm off
-    goal = execute(X_INIT, [(1, 0, 1, 1), (1, 0, 1, 1)])
-    two = verify(StubModel(), X_INIT, goal, [(1, 0, 1, 1), (1, 0, 1, 1)])
-    shifts = Verifier(models(domain), X_INIT, goal, Level1Config(), VerifyConfig(), Clock(), None, Level1Result())
-    assert two.verified and shifts._shortened(two) is two
-
-
 def test_verify_rolls_out_and_uses_the_per_object_max():
     stub = StubModel()
     v = verify(stub, X_INIT, A_ON_B, [(0, 0, 1, 1)])
@@ -83,7 +50,7 @@ def test_verify_rolls_out_and_uses_the_per_object_max():
     assert good.verified and good.error < 1e-9
 
 
-PAPER = dict(alternatives=0, nonempty=False)  # Algorithm 1 exactly, without our two additions
+PAPER = dict(alternatives=0)  # Algorithm 1's Level 1 exactly, without look-alike alternatives
 
 
 def with_level1(**fields) -> PlanConfig:
@@ -192,23 +159,21 @@ def test_a_fragile_verified_plan_waits_for_the_continuous_search(domain):
     assert plan("bilevel", models(domain), X_INIT, A_ON_B, with_level1(n_domains=100, seed=0)).level == 1
 
 
-def test_same_symbols_but_goal_elsewhere_needs_a_nonempty_plan():
-    # a large bar shifted 15 cm along y: the same symbols before and after. The empty plan cannot
-    # verify (X_init is 15 cm from the goal), so Level 1 asks for at least one action and finds the
-    # shift, a symbolic no-op; the paper's Algorithm 1 returns the empty plan and falls through.
+def test_same_symbols_but_goal_elsewhere_falls_through_to_the_continuous_search():
+    # a large bar shifted 15 cm along y: the same symbols before and after. Level 1's plan is the empty
+    # one, as in the paper's Algorithm 1; it cannot verify (X_init is 15 cm from the goal), so Level 2
+    # finds the shift, a symbolic no-op.
     domain = two_block_domain(shift=True)
     X = np.array([[0.6, 0.0, 0.025, 0, 1], [0.75, -0.2, 0.025, 1, 0]])
     goal = X.copy()
     goal[0, 1] = 0.15
     ours = plan("bilevel", models(domain), X, goal, with_level1(n_domains=20))
-    assert ours.level == 1 and ours.plan == [(0, -1, 0, 1)] and ours.search is None
+    assert ours.candidates[0].actions == () and ours.candidates[0].verified is False
+    assert ours.level == 2 and ours.plan == [(0, -1, 0, 1)]
     assert goal_error(execute(X, ours.plan), goal) < 0.05
-    paper = plan("bilevel", models(domain), X, goal, with_level1(n_domains=20, **PAPER))
-    assert paper.candidates[0].actions == () and paper.candidates[0].verified is False
-    assert paper.level == 2 and paper.plan == [(0, -1, 0, 1)]
 
 
-def test_bilevel_alg1_never_returns_an_alternative_or_a_forced_nonempty_plan(domain, monkeypatch):
+def test_bilevel_alg1_never_returns_an_alternative(domain, monkeypatch):
     def summary(result):
         return result.plan, result.level, [(c.actions, c.verified, c.alternative_of) for c in result.candidates]
 
@@ -217,7 +182,7 @@ def test_bilevel_alg1_never_returns_an_alternative_or_a_forced_nonempty_plan(dom
     alg1 = plan("bilevel_alg1", models(domain), X_INIT, A_ON_B, with_level1(n_domains=100, seed=0))
     assert alg1.method == "bilevel_alg1" and all(c.alternative_of is None for c in alg1.candidates)
     assert alg1.level == 1 and alg1.plan == [(0, 0, 1, 0)] and alg1.candidates[1].count < alg1.candidates[0].count
-    # where `bilevel` forces a non-empty symbolic plan, Algorithm 1 tries the empty one and falls through
+    # where the symbols do not change, Algorithm 1 tries the empty plan and falls through
     shift = two_block_domain(shift=True)
     X = np.array([[0.6, 0.0, 0.025, 0, 1], [0.75, -0.2, 0.025, 1, 0]])
     goal = X.copy()
@@ -231,7 +196,7 @@ def test_bilevel_alg1_never_returns_an_alternative_or_a_forced_nonempty_plan(dom
                         searched.append(config) or continuous_search(model, x, g, config, *rest, **kw))
     plan("bilevel_alg1", models(shift), X, goal, with_level1(n_domains=20))
     assert searched and all(not c.release_targets and c.look_on == 0 for c in searched)
-    assert alg1_shift.level == 2  # Level 1's plan was not cut or kept: alg1's rules are the paper's
+    assert alg1_shift.level == 2  # Level 1's plan was not kept: alg1's rules are the paper's
     monkeypatch.undo()
     # whatever the configuration says, it is `bilevel` with both extensions off
     for m, x, g, cfg in ((models(domain), X_INIT, A_ON_B, with_level1(n_domains=100, seed=0)),
