@@ -26,9 +26,10 @@ lint: $(STAMP)
 	$(BIN)/mypy
 
 # Everything: lint, then the whole suite (the simulator and slow tests included; see BUILD_NOTES.md
-# for `-m "not sim"` and `-m "not slow"`).
+# for `-m "not sim"` and `-m "not slow"`), on two pytest-xdist workers: the tests of a file that share a
+# module-scoped fixture stay on one worker (tests/conftest.py).
 test: lint
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -n 2
 
 clean:
 	rm -rf $(VENV) *.egg-info

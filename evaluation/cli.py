@@ -8,11 +8,12 @@ from pathlib import Path
 
 from evaluation.methods import methods_help
 from tamp.app.args import (
+    WORKERS_LIMIT,
+    Count,
     check_output_dir,
     check_output_file,
     int_list,
     models_directory,
-    positive_int,
     seed,
 )
 from tamp.app.faults import add_fault_arguments, faults_of
@@ -194,14 +195,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--objects", type=int_list, default=(2, 3, 4), help="object counts (default 2,3,4)")
     p.add_argument("--actions", type=int_list, default=(1, 2, 3, 4, 5),
                    help="numbers k of random actions per goal (default 1,2,3,4,5)")
-    p.add_argument("--per-cell", type=positive_int, default=10, help="problems per (objects, k) (default 10)")
+    p.add_argument("--per-cell", type=Count(1, 100_000), default=10, help="problems per (objects, k) (default 10)")
     p.add_argument("--seed", type=seed, default=0, help="seed of the set (default 0); run j uses seed + j")
     p.add_argument("--protocol", choices=PROTOCOLS, default="strict",
                    help="strict: every action moves something (default); paper: actions kept whatever their "
                    "outcome, as the paper's authors do")
-    p.add_argument("--runs", type=positive_int, default=1,
+    p.add_argument("--runs", type=Count(1, 1000), default=1,
                    help="problem sets of seeds seed, seed + 1, ... in one file, for mean ± std over runs (default 1)")
-    p.add_argument("--workers", type=positive_int, default=1, help="worker processes (default 1)")
+    p.add_argument("--workers", type=Count(1, WORKERS_LIMIT), default=1, help="worker processes (default 1)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_problems)
 
@@ -299,7 +300,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--protocol", choices=PROTOCOLS, default="strict",
                    help="problem sets: strict (every random action moves something, default) or paper (actions "
                    "kept whatever their outcome, as the paper's authors do)")
-    p.add_argument("--runs", type=positive_int, default=1,
+    p.add_argument("--runs", type=Count(1, 1000), default=1,
                    help="problem sets of consecutive seeds, reported as mean ± std over runs "
                         "(default 1; the paper: 10)")
     p.add_argument("--models", type=models_directory, default=None,

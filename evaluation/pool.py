@@ -10,12 +10,12 @@ with the same models and settings (their meta.json say so), else pooling them is
 """
 from __future__ import annotations
 
-import json
 import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Sequence
 
+from guarded import atomic_write_json, dumps
 from tamp.errors import UserError
 from tamp.records import atomic_write_text
 
@@ -88,8 +88,8 @@ def pool(out: str | Path, sources: Sequence[str | Path]) -> PoolReport:
             "pooled": [{**r, "started": m.get("started")} for r, m in zip(record, metas)]}
     meta.pop("runs", None)  # each source's evaluation runs (workers, times) stay in its own meta.json
     out.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(out / ROWS_NAME, "".join(json.dumps(r) + "\n" for r in rows))
-    atomic_write_text(out / META_NAME, json.dumps(meta, indent=2) + "\n")
+    atomic_write_text(out / ROWS_NAME, "".join(dumps(r, str(out / ROWS_NAME)) + "\n" for r in rows))
+    atomic_write_json(out / META_NAME, meta, indent=2)
     return PoolReport(out, len(rows), record)
 
 

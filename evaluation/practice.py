@@ -34,6 +34,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import os
 import shutil
 import sys
 import time
@@ -41,9 +42,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from guarded import Schema, read_json
+from guarded import Schema, atomic_write_json, read_json
 from tamp.errors import UserError
-from tamp.records import atomic_write_text
+from tamp.records import atomic_write_text, made_by_tool, output_dir
 from tamp.sim.world_types import FIDELITIES, fidelity_of
 
 if TYPE_CHECKING:
@@ -95,6 +96,13 @@ class PracticeConfig:
             raise UserError(f"--extra-share must be in (0, 1), got {self.extra_share}")
         if not 0 <= self.seed < 2**62:
             raise UserError(f"--seed must be in [0, 2^62), got {self.seed}")
+        from evaluation.problems import _counts
+        from tamp.app.problem import MAX_K, PROTOCOLS
+
+        _counts(self.objects, "--objects", 1, 6)  # as `generate_problems` checks them, before anything is written
+        _counts(self.actions, "--actions", 1, MAX_K)
+        if not self.protocols or any(p not in PROTOCOLS for p in self.protocols):
+            raise UserError(f"protocols must be among {', '.join(PROTOCOLS)}, got {self.protocols!r}")
         fidelity_of(self.fidelity, "--fidelity")
         if self.precision not in ("float32", "bfloat16"):
             raise UserError(f"--precision must be float32 or bfloat16, got {self.precision!r}")
@@ -246,7 +254,7 @@ def _prepare(out: Path, models: Path, data: list[Path], config: PracticeConfig) 
                             "inputs and settings to resume")
         return old
     out.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(path, json.dumps({**state, "rounds": []}, indent=2) + "\n")
+    atomic_write_json(path, {**state, "rounds": []}, indent=2)
     return {**state, "rounds": []}
 
 
@@ -254,8 +262,6 @@ def practise(models: Path, data: list[Path], out: Path, config: PracticeConfig =
              progress: bool = True) -> list[dict[str, Any]]:
     """Run `config.rounds` practice rounds and one more that measures the last models (module docstring);
     returns the learning curve, one record per round."""
-    from evaluation.configuration import EvalConfig
-    from evaluation.run import evaluate
     from learned import read_meta
     from tamp.planning.models import load_models
 
@@ -263,7 +269,21 @@ def practise(models: Path, data: list[Path], out: Path, config: PracticeConfig =
     load_models(models)  # every input checked before anything is written
     for d in data:
         read_meta(d)
-    state = _prepare(out, models, data, config)
+    final = out / "models"
+    if final.exists() and not final.is_symlink() and not made_by_tool(final):
+        raise UserError(f"{final} is a folder the tool did not make (it puts a link to the last round's models "
+                        "there); move it away or give another --out")
+    with output_dir(out, "--out", own=(STATE_NAME,)):
+        state = _prepare(out, models, data, config)
+    return _rounds(models, data, out, config, state, progress)
+
+
+def _rounds(models: Path, data: list[Path], out: Path, config: PracticeConfig, state: dict[str, Any],
+            progress: bool) -> list[dict[str, Any]]:
+    """The rounds of `practise` in the claimed folder `out`, then the link OUT/models to the last round's models."""
+    from evaluation.configuration import EvalConfig
+    from evaluation.run import evaluate
+
     curve: list[dict[str, Any]] = []
     current = models
     for r in range(config.rounds + 1):
@@ -300,15 +320,30 @@ def practise(models: Path, data: list[Path], out: Path, config: PracticeConfig =
             point["wall_s"] = {k: max(v, previous.get("wall_s", {}).get(k, 0.0)) for k, v in timings.items()}
         curve.append(point)
         state["rounds"] = curve + [p for p in state.get("rounds", []) if p["round"] > r]
-        atomic_write_text(out / STATE_NAME, json.dumps(state, indent=2) + "\n")
+        atomic_write_json(out / STATE_NAME, state, indent=2)
         write_curve(out, curve)
         if progress:
             print(format_point(point), file=sys.stderr, flush=True)
-    final = out / "models"
-    if final.is_symlink() or final.exists():
-        final.unlink() if final.is_symlink() else shutil.rmtree(final)
-    final.symlink_to(current.resolve(), target_is_directory=True)
+    link_models(out / "models", current)
     return curve
+
+
+def link_models(final: Path, current: Path) -> None:
+    """Point the link `final` at `current`, atomically (a new link renamed over it); what is at `final` is
+    replaced only when the tool made it (a link, or a folder with its marker): never a folder of the user's."""
+    if final.exists() and not final.is_symlink():
+        if not made_by_tool(final):
+            raise UserError(f"{final} is a folder the tool did not make; it is left alone, the last round's "
+                            f"models are at {current}")
+        shutil.rmtree(final)
+    tmp = final.with_name(f".{final.name}.tmp-{os.getpid()}")
+    tmp.unlink(missing_ok=True)
+    try:
+        tmp.symlink_to(current.resolve(), target_is_directory=True)
+        os.replace(tmp, final)
+    except OSError as error:
+        tmp.unlink(missing_ok=True)
+        raise UserError(f"cannot write {final}: {error.strerror}") from None
 
 
 def format_point(p: dict[str, Any]) -> str:
@@ -322,7 +357,7 @@ def format_point(p: dict[str, Any]) -> str:
 
 def write_curve(out: Path, curve: list[dict[str, Any]]) -> None:
     """OUT/curve.json and OUT/curve.md: one line per round."""
-    atomic_write_text(out / CURVE_JSON, json.dumps(curve, indent=2) + "\n")
+    atomic_write_json(out / CURVE_JSON, curve, indent=2)
     ns = sorted({n for p in curve for n in p["success_by_n"]}, key=int)
     header = ["round", "problems", "success (%)", *[f"n = {n} (%)" for n in ns], "steps", ">= 2 cm (%)",
               ">= 5 cm (%)", "beyond bound (%)", "median miss / bound (cm)", "transitions (executed + beside)",
@@ -373,7 +408,7 @@ def cmd_practice(args: argparse.Namespace) -> int:
 
 def add_practice(sub) -> None:
     """`tamp practice`."""
-    from tamp.app.args import fraction, int_list, models_directory, non_negative_int, positive_int, seed
+    from tamp.app.args import WORKERS_LIMIT, Count, fraction, int_list, models_directory, positive_int, seed
 
     p = sub.add_parser(
         "practice",
@@ -390,10 +425,10 @@ def add_practice(sub) -> None:
                    help="the models to start from (default: the bundled ones); their Symbolic Model and domain are "
                    "kept in every round")
     p.add_argument("--out", type=Path, required=True, help="the practice directory (rounds, curve, final models)")
-    p.add_argument("--rounds", type=positive_int, default=PracticeConfig.rounds,
+    p.add_argument("--rounds", type=Count(1, 1000), default=PracticeConfig.rounds,
                    help=f"practice-and-train cycles (default {PracticeConfig.rounds}); one more round measures "
                    "the last models")
-    p.add_argument("--per-cell", type=positive_int, default=PracticeConfig.per_cell,
+    p.add_argument("--per-cell", type=Count(1, 100_000), default=PracticeConfig.per_cell,
                    help=f"problems per (objects, k) and protocol each round (default {PracticeConfig.per_cell}: "
                    "600 problems a round)")
     p.add_argument("--objects", type=int_list, default=PracticeConfig.objects,
@@ -403,10 +438,10 @@ def add_practice(sub) -> None:
                    "one evaluates on)")
     p.add_argument("--fidelity", choices=FIDELITIES, default="fast",
                    help="the world plans are executed in: fast (default) or full (the arm under physics)")
-    p.add_argument("--explore", type=non_negative_int, default=PracticeConfig.explore, metavar="ACTIONS",
+    p.add_argument("--explore", type=Count(0, 10_000), default=PracticeConfig.explore, metavar="ACTIONS",
                    help="from every state a round visited, run up to this many other goal-oriented actions beside the "
                    f"plan and learn from them too (default {PracticeConfig.explore}: the executed steps alone)")
-    p.add_argument("--members", type=positive_int, default=PracticeConfig.members,
+    p.add_argument("--members", type=Count(1, 64), default=PracticeConfig.members,
                    help=f"ensemble members of the Dynamics Model (default {PracticeConfig.members})")
     p.add_argument("--extra-share", type=fraction, default=PracticeConfig.extra_share,
                    help=f"share of each member's resample drawn from the practice data (default "
@@ -417,7 +452,7 @@ def add_practice(sub) -> None:
     p.add_argument("--patience", type=positive_int, default=PracticeConfig.patience,
                    help=f"a member stops after this many epochs without a better validation error (default "
                    f"{PracticeConfig.patience})")
-    p.add_argument("--batch-size", type=positive_int, default=PracticeConfig.batch_size,
+    p.add_argument("--batch-size", type=Count(1, 1 << 20), default=PracticeConfig.batch_size,
                    help=f"the members' training batch (default {PracticeConfig.batch_size})")
     p.add_argument("--precision", choices=("float32", "bfloat16"), default=PracticeConfig.precision,
                    help=f"the members' training precision (default {PracticeConfig.precision}, the bundled model's)")
@@ -428,7 +463,7 @@ def add_practice(sub) -> None:
                    help="train the members on the transitions that moved their picked block alone, random and "
                    "practised (tamp train --only-moved), as the default set's Dynamics Model was fine-tuned; "
                    "without it every transition, which teaches such a model partial moves again")
-    p.add_argument("--workers", type=positive_int, default=2,
+    p.add_argument("--workers", type=Count(1, WORKERS_LIMIT), default=2,
                    help="worker processes of the evaluation, and members trained at once (default 2)")
     p.add_argument("--backend", choices=("local", "ray"), default="local",
                    help="the evaluation's workers: a local process pool (default) or Ray")

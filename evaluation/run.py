@@ -20,6 +20,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+import math
 import os
 import sys
 import traceback
@@ -55,7 +56,7 @@ from evaluation.row import (
     step_records,
     transition_records,
 )
-from guarded import LARGE, Schema, read_json, read_jsonl
+from guarded import LARGE, Schema, append_line, atomic_write_json, dumps, read_json, read_jsonl
 from tamp.app.args import check_output_dir
 from tamp.app.parallel import run_tasks
 from tamp.app.problem import Problem
@@ -64,7 +65,7 @@ from tamp.planning.causes import stop_record
 from tamp.planning.steps import dynamics_errors
 from tamp.planning.verify import goal_error
 from tamp.planning.vocabulary import Loop, Outcome
-from tamp.records import atomic_write_text, exclusive, package_versions, source_commit
+from tamp.records import exclusive, output_dir, package_versions, source_commit
 
 if TYPE_CHECKING:
     from tamp.sim.kinematic_checker import FeasibilityChecker
@@ -337,7 +338,7 @@ def _prepare(out: Path, meta: dict) -> None:
     if not path.exists():
         if (out / ROWS_NAME).exists():
             raise UserError(f"{out} has {ROWS_NAME} but no {META_NAME}; give a new --out directory")
-        atomic_write_text(path, json.dumps(meta, indent=2) + "\n")
+        atomic_write_json(path, meta, indent=2)
         return
     old = read_json(path, "meta file")
     if not isinstance(old, dict) or old.get("format") != FORMAT:
@@ -357,7 +358,7 @@ def _prepare(out: Path, meta: dict) -> None:
     old["models_dir"], old["problems"] = meta["models_dir"], meta["problems"]  # where the inputs are now
     old["methods"] = [m for m in METHODS if m in set(old.get("methods", [])) | set(meta["methods"])]
     old["runs"] = old.get("runs", []) + meta["runs"]
-    atomic_write_text(path, json.dumps(old, indent=2) + "\n")
+    atomic_write_json(path, old, indent=2)
 
 
 def _differences(name: str, there, now) -> list[str]:
@@ -391,7 +392,7 @@ def _write_symbols(out: Path, problems: Sequence[Problem], models_dir: Path, met
     if symbolic is None:
         return
     report = interpret_symbols(symbolic.symbols, [X for p in problems for X in (p.X_init, p.X_goal)])
-    atomic_write_text(out / SYMBOLS_NAME, json.dumps([b.to_dict() for b in report], indent=1) + "\n")
+    atomic_write_json(out / SYMBOLS_NAME, [b.to_dict() for b in report], indent=1)
 
 
 def refuse_inapplicable(methods: Sequence[str], config: EvalConfig) -> None:
@@ -435,8 +436,7 @@ def evaluate(models_dir: str | Path, problems_path: str | Path, out_dir: str | P
             "config": config.defining(), "methods": methods, "versions": package_versions(), "started": started,
             "runs": [{"started": started, "methods": methods, "workers": config.workers, "backend": config.backend,
                       "commit": source_commit()}]}
-    out.mkdir(parents=True, exist_ok=True)
-    with exclusive(out, LOCK_NAME, "tamp evaluate"):
+    with output_dir(out, "--out", own=(META_NAME, ROWS_NAME)), exclusive(out, LOCK_NAME, "tamp evaluate"):
         _prepare(out, meta)
         rows_path = out / ROWS_NAME
         rows, end = _scan_rows(rows_path)
@@ -450,8 +450,8 @@ def evaluate(models_dir: str | Path, problems_path: str | Path, out_dir: str | P
             raise UserError(f"{rows_path} holds a (problem, method) row twice; the file was edited")
         pairs = [(p, m) for p in problems for m in methods]
         tasks = [(p, m) for p, m in pairs if (p.name, m) not in done]
-        with open(rows_path, "a") as f, tqdm(total=len(pairs), initial=len(pairs) - len(tasks), desc="evaluate",
-                                             unit="row", disable=not config.progress, file=sys.stderr) as bar:
+        with tqdm(total=len(pairs), initial=len(pairs) - len(tasks), desc="evaluate", unit="row",
+                  disable=not config.progress, file=sys.stderr) as bar:
             if tasks:
                 # closed on every exit (Ctrl-C between two rows included): the pool stops, its workers with it
                 with closing(run_tasks(tasks, EvalWorker, (str(models_dir), methods, models, config),
@@ -462,10 +462,32 @@ def evaluate(models_dir: str | Path, problems_path: str | Path, out_dir: str | P
                             tqdm.write(f"warning: problem {row['problem']}, method {row['method']}: {row['error']}; "
                                        f"recorded as an error row (traceback in {rows_path}), the run goes on",
                                        file=sys.stderr)
-                        f.write(json.dumps(row) + "\n")
-                        f.flush()
+                        append_line(rows_path, row_line(row))
                         bar.update()
         return rows_path
+
+
+def row_line(row: dict) -> str:
+    """A row as its line of rows.jsonl. A number that is not JSON (NaN, infinity: a model or a measurement gone
+    wrong) is never written: the row becomes an error row that says which fields held one."""
+    try:
+        return dumps(row) + "\n"
+    except ValueError:
+        bad = sorted(k for k, v in row.items() if not _finite(v))
+        error = f"non-finite number (NaN or infinity) in the row's {', '.join(bad) or 'values'}; nothing of it kept"
+        kept = {k: v if _finite(v) else None for k, v in row.items()}
+        return dumps({**kept, "outcome": ERROR_OUTCOME, "success": False, "error": error}) + "\n"
+
+
+def _finite(value) -> bool:
+    """Whether `value` holds no NaN or infinity (at any depth)."""
+    if isinstance(value, float):
+        return math.isfinite(value)
+    if isinstance(value, dict):
+        return all(_finite(v) for v in value.values())
+    if isinstance(value, (list, tuple)):
+        return all(_finite(v) for v in value)
+    return True
 
 
 def strip_timings(row: dict) -> dict:

@@ -373,7 +373,6 @@ def format_ablation_markdown(results: dict[str, Any]) -> str:
 def write_ablation_report(results: dict[str, Any], out_dir: str | Path) -> tuple[Path, Path]:
     """Write ``ablation.md`` and ``ablation.json`` into ``out_dir`` (each atomically); returns both paths."""
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     md, js = out / "ablation.md", out / "ablation.json"
     for path, text in ((md, format_ablation_markdown(results)), (js, json.dumps(results, indent=2) + "\n")):
         atomic_write_bytes(path, lambda f, text=text: f.write(text.encode()))

@@ -11,6 +11,7 @@ import io
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import torch
 
 from .dataset import atomic_write_bytes
@@ -82,7 +83,33 @@ def model_from_payload(payload: dict[str, Any], path: str | Path = "<checkpoint>
     except (KeyError, TypeError, ValueError, RuntimeError) as e:
         raise ValueError(f"{path}: checkpoint does not match the EffectModel architecture "
                          f"({type(e).__name__}: {e})") from e
+    check_finite(model, path)
     return model.eval()
+
+
+# the probe scene a loaded model must predict finite numbers on: a cube and a bar on the table, side by side
+PROBE_SCENE = np.array([[0.70, -0.10, 0.025, 1.0, 0.0], [0.70, 0.10, 0.025, 0.0, 1.0]])
+
+
+def check_finite(model: EffectModel, path: str | Path) -> None:
+    """Refuse (ValueError naming `path`) a model whose weights hold NaN or infinity, or whose symbols or effects
+    on `PROBE_SCENE` do (weights finite but overflowing): such a model would plan nothing and write NaN."""
+    for name, tensor in model.state_dict().items():
+        if tensor.is_floating_point() and not bool(torch.isfinite(tensor).all()):
+            raise ValueError(f"{path}: the model's weights are not finite ({name} holds NaN or infinity); the file "
+                             "is damaged or its training diverged: train it again")
+    X = PROBE_SCENE[:min(len(PROBE_SCENE), model.config.n_max)]
+    n = len(X)
+    actions = np.array([(i, di, j, dj) for i in range(n) for j in range(n) for di in (-1, 0, 1) for dj in (-1, 0, 1)],
+                       np.int64)
+    with torch.inference_mode():
+        Xt = torch.as_tensor(X, dtype=torch.float32)[None]
+        logits = [model.unary_logits(Xt), model.relation_logits(Xt)]
+    mean, variance = model.predict_gaussian(np.repeat(X[None], len(actions), axis=0), actions)
+    if not all(bool(torch.isfinite(t).all()) for t in logits) or not (np.isfinite(mean).all()
+                                                                       and np.isfinite(variance).all()):
+        raise ValueError(f"{path}: the model predicts non-finite symbols or effects (NaN or infinity) on a probe "
+                         "scene of two blocks; its weights overflow: train it again")
 
 
 def load_model(path: str | Path) -> EffectModel:

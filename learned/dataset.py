@@ -34,7 +34,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from guarded import Schema, read_json
+from guarded import Schema, output, read_json
 
 from .effects import STATE_DIM, as_action_array
 
@@ -193,33 +193,16 @@ def pack_samples(samples: Sequence[Mapping[str, Any]], n_max: int) -> dict[str, 
 
 # ----------------------------------------------------------------------------- writing
 
-def _fsync_dir(directory: Path) -> None:
-    try:
-        fd = os.open(directory, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    except OSError:
-        pass
-    finally:
-        os.close(fd)
-
-
 def atomic_write_bytes(path: Path, write) -> None:
-    """Call ``write(fileobj)`` on a temp file next to ``path``, fsync, then rename over ``path``."""
-    path = Path(path)
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    try:
+    """Call ``write(fileobj)`` on a temp file next to ``path``, fsync, then rename over ``path`` (``guarded.output``:
+    a full disk or read-only folder is one OutputError naming ``path``, nothing left behind)."""
+    def to_file(tmp: Path) -> None:
         with open(tmp, "wb") as f:
             write(f)
             f.flush()
             os.fsync(f.fileno())
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
-    _fsync_dir(path.parent)
+
+    output.atomic_write(path, to_file)
 
 
 def write_meta(directory: Path, meta: Mapping[str, Any]) -> None:
@@ -254,7 +237,7 @@ class DatasetWriter:
                  seed: int, status_codes: Mapping[str, int], versions: Mapping[str, str] | None = None,
                  shard_size: int = 1000, extra_meta: Mapping[str, Any] | None = None):
         self.directory = Path(directory)
-        self.directory.mkdir(parents=True, exist_ok=True)
+        output.make_dirs(self.directory)
         self.n_max, self.shard_size = int(n_max), int(shard_size)
         codes = {str(k): int(v) for k, v in status_codes.items()}
         if len(set(codes.values())) != len(codes):

@@ -22,7 +22,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from guarded import Schema, read_json
+from guarded import Schema, output, read_json
 
 BLOCK_HALF_XY = np.array([[0.025, 0.025], [0.025, 0.125]])  # small cube, large bar (along y): half sizes, metres
 HEIGHT_M = 0.05  # every block is 5 cm tall
@@ -330,7 +330,4 @@ def write_symbols_png(report: Sequence[BitReport], path) -> None:
         ax.set_title(f"|phi| of learned {title} with geometric facts", fontsize=9)
         fig.colorbar(im, ax=ax, fraction=0.02, pad=0.01)
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    fig.savefig(tmp, format="png", dpi=110, bbox_inches="tight")
-    tmp.replace(path)
+    output.atomic_write(path, lambda tmp: fig.savefig(tmp, format="png", dpi=110, bbox_inches="tight"))

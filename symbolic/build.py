@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Sequence
 
 import numpy as np
 
+from guarded import atomic_write_text, dumps, make_dirs
 from symbolic.atoms import check_bits
 from symbolic.dataset import make_dataset, restrict_to_involved, split_dataset
 from symbolic.lifted import max_arity as lifted_max_arity
@@ -64,7 +64,7 @@ def build_domain(unary_pre, rel_pre, actions, unary_post, rel_post, n_per_transi
     if len(ops) == 0:
         raise ValueError(f"no operator was seen {min_count} times or more: lower min_count")
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    make_dirs(out)
     paths = write_domains(ops, out)
     save_operators(ops, out / "operators.json")
     report = stats(ops)
@@ -83,7 +83,7 @@ def build_domain(unary_pre, rel_pre, actions, unary_post, rel_post, n_per_transi
     if sampled_domains > 0:
         written = write_sampled_domains(ops, out / "sampled", sampled_domains, seed)
         report["sampled_domains"] = {"n": sampled_domains, "distinct": len(written)}
-    (out / "stats.json").write_text(json.dumps(report, indent=1))
+    atomic_write_text(out / "stats.json", dumps(report, indent=1))
     return report
 
 

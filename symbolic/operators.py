@@ -30,7 +30,6 @@ price of coverage.
 from __future__ import annotations
 
 import itertools
-import json
 from collections import Counter, defaultdict
 from dataclasses import replace
 from pathlib import Path
@@ -38,7 +37,7 @@ from typing import Any
 
 import numpy as np
 
-from guarded import LARGE, Schema, read_json
+from guarded import LARGE, Schema, atomic_write_text, dumps, read_json
 from symbolic.structs import Effect, Operator, OperatorSet, SymbolicDataset
 
 FORMAT = "symbolic-operators"
@@ -375,7 +374,8 @@ def from_json(doc: Any, where: str = "operators") -> OperatorSet:
 
 
 def save_operators(ops: OperatorSet, path: str | Path) -> None:
-    Path(path).write_text(json.dumps(to_json(ops), separators=(",", ":")))
+    """Write `ops` as an operators.json, atomically."""
+    atomic_write_text(path, dumps(to_json(ops), separators=(",", ":")))
 
 
 def load_operators(path: str | Path) -> OperatorSet:

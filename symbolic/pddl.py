@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from guarded import atomic_write_text
 from symbolic.atoms import predicate_declarations, rel_atom, state_atoms, unary_atom
 from symbolic.grounding import check_problem
 from symbolic.structs import Effect, Operator, OperatorSet, SymbolicProblem
@@ -136,9 +137,8 @@ def problem_pddl(ops: OperatorSet, problem: SymbolicProblem, domain_name: str = 
 def write_domains(ops: OperatorSet, out_dir: str | Path, min_prob: float = 0.0) -> dict[str, Path]:
     """Write domain.pddl (most frequent effects) and domain.ppddl into out_dir."""
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     w = DomainWriter(ops)
     paths = {"pddl": out / "domain.pddl", "ppddl": out / "domain.ppddl"}
-    paths["pddl"].write_text(w.pddl())
-    paths["ppddl"].write_text(w.ppddl(min_prob))
+    atomic_write_text(paths["pddl"], w.pddl())
+    atomic_write_text(paths["ppddl"], w.ppddl(min_prob))
     return paths

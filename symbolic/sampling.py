@@ -14,12 +14,12 @@ Python int per effect whose bit k says that domain k chose it, so that one searc
 
 from __future__ import annotations
 
-import json
 import time
 from pathlib import Path
 
 import numpy as np
 
+from guarded import atomic_write_text, dumps
 from symbolic.pddl import DomainWriter, effect_probabilities
 from symbolic.structs import OperatorSet
 
@@ -159,16 +159,15 @@ def write_sampled_domains(ops: OperatorSet, out_dir: str | Path, n_domains: int,
                           min_prob: float = 0.0) -> list[tuple[Path, int]]:
     """Write the distinct sampled domains as domain_XXX.pddl plus sampled.json (multiplicities)."""
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     choices = sample_choices(ops, n_domains, seed, min_prob)
     reps, counts, _ = dedup_choices(choices)
     writer = DomainWriter(ops)
     written = []
     for j, (k, c) in enumerate(zip(reps, counts)):
         path = out / f"domain_{j:03d}.pddl"
-        path.write_text(writer.pddl(choices[k]))
+        atomic_write_text(path, writer.pddl(choices[k]))
         written.append((path, int(c)))
-    (out / "sampled.json").write_text(json.dumps({
+    atomic_write_text(out / "sampled.json", dumps({
         "n_domains": n_domains, "seed": seed, "min_prob": min_prob,
         "domains": [{"file": p.name, "count": c, "first_index": int(k)} for (p, c), k in zip(written, reps)],
     }, indent=1))

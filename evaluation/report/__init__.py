@@ -15,11 +15,12 @@ and what the sections share (`results`: `Results`, the groups, `Section`); this 
 """
 from __future__ import annotations
 
-import json
 import math
+import shutil
 from pathlib import Path
 from typing import Any
 
+from guarded import atomic_write_json, make_dirs
 from tamp.errors import UserError
 from tamp.planning.vocabulary import OUTCOMES
 from tamp.records import atomic_write_text
@@ -108,11 +109,18 @@ def write_report(results_dir: Path, ablation: Path | None = None) -> Path:
     ablation_data = load_ablation(ablation_path) if ablation_path.is_file() else None
     symbols_path = results_dir / "symbols.json"
     symbols = _read_symbols(symbols_path) if symbols_path.is_file() else None
-    md, numbers = build_report(Results(rows, meta, notes), results_dir / "figures", ablation_data, ablation_path,
-                               str(rows_path), symbols, symbols_path)
-    out = results_dir / "report.md"
-    atomic_write_text(results_dir / "report.json", json.dumps(numbers, indent=1, ensure_ascii=False) + "\n")
-    atomic_write_text(out, md)
+    figures = results_dir / "figures"
+    made = make_dirs(figures)
+    try:
+        md, numbers = build_report(Results(rows, meta, notes), figures, ablation_data, ablation_path,
+                                   str(rows_path), symbols, symbols_path)
+        out = results_dir / "report.md"
+        atomic_write_json(results_dir / "report.json", numbers, indent=1, ensure_ascii=False)
+        atomic_write_text(out, md)
+    except BaseException:
+        if made:  # a figures folder this run made holds only this run's figures: gone with the failed report
+            shutil.rmtree(made[0], ignore_errors=True)
+        raise
     return out
 
 

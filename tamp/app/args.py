@@ -8,7 +8,8 @@ import os
 from pathlib import Path
 
 from tamp.errors import UserError
-from tamp.inputs import SEED_LIMIT
+from tamp.inputs import MAX_DOMAINS, SEED_LIMIT  # noqa: F401 (MAX_DOMAINS: the bound of --sampled)
+from tamp.planning.validate import MAX_OBJECTS  # noqa: F401 (the bound of the count flags of objects)
 
 
 def _number(text: str, parse, ok, expected: str):
@@ -22,9 +23,28 @@ def _number(text: str, parse, ok, expected: str):
     return value
 
 
-def positive_int(text: str) -> int:
-    """argparse type: an integer >= 1."""
-    return _number(text, int, lambda v: v >= 1, "a positive integer")
+COUNT_LIMIT = 1_000_000  # a count flag's largest value unless it has its own: what memory and a run's lifetime hold
+WORKERS_LIMIT = 1024  # worker processes or Ray actors: each holds a world (hundreds of MB) or a network
+MAX_K = 100  # goal-generating actions of a problem (`tamp.app.problem.MAX_K`, which imports more than a parser needs)
+
+
+class Count:
+    """argparse type: an integer in [low, limit]. The machine holds no more than `limit` (lists, processes or
+    tensors of that length); `tamp.app.cli.build_parser` states the limit in every such flag's help."""
+
+    def __init__(self, low: int, limit: int = COUNT_LIMIT) -> None:
+        self.low, self.limit = low, limit
+        self.__name__ = f"an integer in {low}..{limit:,}"  # argparse names the type so in its messages
+
+    def __call__(self, text: str) -> int:
+        return _number(text, int, lambda v: self.low <= v <= self.limit, f"an integer in {self.low}..{self.limit:,}")
+
+    def __repr__(self) -> str:
+        return f"Count({self.low}, {self.limit})"
+
+
+positive_int = Count(1)  # argparse type: an integer in 1..COUNT_LIMIT (`Count(1, N)` for another limit)
+non_negative_int = Count(0)  # argparse type: an integer in 0..COUNT_LIMIT
 
 
 def int_list(text: str) -> tuple[int, ...]:
@@ -38,11 +58,6 @@ def int_list(text: str) -> tuple[int, ...]:
 def object_count(text: str) -> int:
     """argparse type: a number of objects >= 2 (a block and an object to place it on)."""
     return _number(text, int, lambda v: v >= 2, "an integer >= 2")
-
-
-def non_negative_int(text: str) -> int:
-    """argparse type: an integer >= 0."""
-    return _number(text, int, lambda v: v >= 0, "an integer >= 0")
 
 
 def seed(text: str) -> int:
@@ -120,17 +135,14 @@ def _writable_folder(folder: Path, flag: str, target: Path) -> None:
 
 def check_output_file(path: str | Path, flag: str = "--out") -> Path:
     """Check before any work that the output file `path` can be written (not a folder, its folder
-    writable); missing parent folders are created. ValueError naming the flag otherwise."""
+    writable or makeable); nothing is created (its missing folders are made when it is written, so a run
+    that fails first leaves none). ValueError naming the flag otherwise."""
     path = Path(path)
     if path.is_dir():
         raise UserError(f"{flag} {path}: is a folder; give a file path")
     if path.exists() and not os.access(path, os.W_OK):
         raise UserError(f"{flag} {path}: the file is not writable")
     _writable_folder(path.parent, flag, path)
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-    except OSError as error:
-        raise UserError(f"{flag} {path}: cannot create its folder ({error.strerror})") from None
     return path
 
 

@@ -7,6 +7,7 @@ import os
 import sys
 
 from tamp.app import commands_data, commands_learning, commands_planning, commands_symbolic, commands_world, settings
+from tamp.app.args import Count
 from tamp.errors import is_user_error
 
 
@@ -31,7 +32,16 @@ def build_parser() -> argparse.ArgumentParser:
     commands_planning.add_demo(sub)
     settings.add_config(sub)
     _add_plugin_commands(sub)
+    for command in sub.choices.values():
+        state_limits(command)
     return parser
+
+
+def state_limits(parser: argparse.ArgumentParser) -> None:
+    """Say in the help of every count flag (type `Count`) the largest value it takes, where it does not yet."""
+    for action in parser._actions:
+        if isinstance(action.type, Count) and action.help and f"{action.type.limit:,}" not in action.help:
+            action.help += f" (at most {action.type.limit:,})"
 
 
 def _add_plugin_commands(sub) -> None:

@@ -37,7 +37,7 @@ from tamp.app.parallel import BACKENDS, import_ray, run_tasks
 from tamp.errors import UserError
 from tamp.inputs import SEED_LIMIT
 from tamp.planning.validate import MAX_OBJECTS
-from tamp.records import exclusive, package_versions
+from tamp.records import exclusive, output_dir, package_versions
 from tamp.sim.world_types import STATUSES, StepStatus, WorldConfig
 
 STATUS_CODES = {name: code for code, name in enumerate(STATUSES)}
@@ -49,6 +49,9 @@ SAMPLINGS: tuple[str, ...] = get_args(Sampling)
 ACTIONS_DRAWN = {"uniform": "uniform over the 9 n^2 actions, chained from the previous outcome",
                  "graspable": "uniform over the actions whose grasp point holds a block in the current state, "
                               "chained from the previous outcome"}
+
+
+MAX_SAMPLES, MAX_ACTIONS_PER_SCENE, MAX_SCENES_PER_SHARD = 10_000_000, 10_000, 100_000  # what memory holds
 
 
 @dataclass(frozen=True)
@@ -66,6 +69,11 @@ class CollectConfig:
     def __post_init__(self) -> None:
         if isinstance(self.samples, bool) or not isinstance(self.samples, int) or self.samples < 1:
             raise UserError(f"--samples must be a positive integer, got {self.samples!r}")
+        for flag, value, limit in (("--samples", self.samples, MAX_SAMPLES),
+                                   ("--actions-per-scene", self.actions_per_scene, MAX_ACTIONS_PER_SCENE),
+                                   ("--scenes-per-shard", self.scenes_per_shard, MAX_SCENES_PER_SHARD)):
+            if value > limit:  # the scenes' tasks are listed in memory, a shard is held in memory
+                raise UserError(f"{flag} must be at most {limit:,}, got {value}")
         objects = tuple(int(n) for n in self.objects)
         if not objects:
             raise UserError("--objects needs at least one object count, e.g. 2,3,4")
@@ -241,7 +249,6 @@ def prepare_directory(out: Path, cfg: CollectConfig, meta: dict) -> tuple[set[in
     elif out.exists() and any(not p.name.startswith(".") for p in out.iterdir()):
         raise UserError(f"{out} is not empty and has no {META_NAME}; give a new or empty --out directory")
     else:
-        out.mkdir(parents=True, exist_ok=True)
         write_meta(out, meta)
 
     for stale in out.glob(".*.tmp-*"):  # temp files of a killed run (shards or meta.json)
@@ -336,11 +343,7 @@ def collect(out: str | Path, cfg: CollectConfig, workers: int | None = None, bac
     out = Path(out)
     t_start = time.perf_counter()
     meta = cfg.meta()
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as error:
-        raise UserError(f"cannot create the dataset directory {out}: {error.strerror}") from None
-    with exclusive(out, LOCK_NAME, "tamp collect"):
+    with output_dir(out, "--out", own=("meta.json",), into_existing=True), exclusive(out, LOCK_NAME, "tamp collect"):
         good, bad = prepare_directory(out, cfg, meta)
         missing = [j for j in range(cfg.n_shards) if j not in good]
         done = sum(cfg.shard_samples(j) for j in good)

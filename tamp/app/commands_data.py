@@ -9,7 +9,7 @@ from tamp.app.args import (
     check_output_file,
     seed,
 )
-from tamp.app.collect import SAMPLINGS
+from tamp.app.collect import MAX_ACTIONS_PER_SCENE, MAX_SAMPLES, MAX_SCENES_PER_SHARD, SAMPLINGS
 from tamp.app.parallel import add_arguments as add_parallel_arguments
 
 
@@ -61,20 +61,20 @@ def add_collect(sub) -> None:
         "dataset depends on the parameters only (not on --workers or --backend); running the same "
         "command again after an interruption finishes it, re-collecting missing or corrupt shards.",
     )
-    p.add_argument("--samples", type=int, required=True, help="number of transitions")
+    p.add_argument("--samples", type=int, required=True, help=f"number of transitions (at most {MAX_SAMPLES:,})")
     p.add_argument("--objects", type=_object_counts, default=(2, 3, 4),
                    help="object counts drawn uniformly per scene, e.g. 2,3,4 (default)")
     p.add_argument("--out", type=Path, required=True, help="dataset directory (new, or the one to resume)")
     add_parallel_arguments(p)
     p.add_argument("--seed", type=seed, default=0, help="dataset seed (default 0)")
     p.add_argument("--actions-per-scene", type=int, default=10, metavar="M",
-                   help="chained random actions per scene (default 10)")
+                   help=f"chained random actions per scene (default 10, at most {MAX_ACTIONS_PER_SCENE:,})")
     p.add_argument("--sampling", choices=SAMPLINGS, default="uniform",
                    help="uniform: every action alike, as the paper collects (default); graspable: only actions "
                         "whose grasp point holds a block, so that more of the data moves something (to add to "
                         "uniform data with `tamp train --data A B`)")
     p.add_argument("--scenes-per-shard", type=int, default=20, metavar="K",
-                   help="scenes per shard file, the unit of resumption (default 20)")
+                   help=f"scenes per shard file, the unit of resumption (default 20, at most {MAX_SCENES_PER_SHARD:,})")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_collect)
 

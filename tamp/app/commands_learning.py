@@ -5,6 +5,8 @@ import argparse
 from pathlib import Path
 
 from tamp.app.args import (
+    WORKERS_LIMIT,
+    Count,
     check_output_dir,
     check_output_file,
     fraction,
@@ -108,7 +110,7 @@ def _train_ensemble(args: argparse.Namespace, config, settings) -> int:
 def _add_train_arguments(p: argparse.ArgumentParser) -> None:
     """How to train, for `train` and `ablate-activations`: learned.TrainConfig.fast()'s defaults, spelled
     out so that --help does not import torch (a test checks they agree); `_train_config` reads them."""
-    p.add_argument("--batch-size", type=positive_int, default=1024,
+    p.add_argument("--batch-size", type=Count(1, 1 << 20), default=1024,
                    help="Adam batch size (default 1024; the paper's: 128)")
     p.add_argument("--lr", type=positive_float, default=None,
                    help="Adam learning rate (default 1e-4 * batch size / 128; the paper's: 1e-4 at batch 128)")
@@ -120,7 +122,7 @@ def _add_train_arguments(p: argparse.ArgumentParser) -> None:
                    "bfloat16, else float32; weights and loss stay float32)")
     p.add_argument("--seed", type=seed, default=0,
                    help="seed of the split, the initial weights and the batches")
-    p.add_argument("--threads", type=positive_int, default=1, help="torch threads (default 1)")
+    p.add_argument("--threads", type=Count(1, 256), default=1, help="torch threads (default 1)")
 
 
 def _train_config(args: argparse.Namespace, **changes):
@@ -155,8 +157,11 @@ def cmd_ablate(args: argparse.Namespace) -> int:
         except ValueError as e:
             raise UserError(f"--summarize: {e}") from e
     else:
-        result = ablate_activations(args.data, runs=args.runs, train=_train_config(args), out_dir=args.out_dir,
-                                    resume=args.resume)
+        from tamp.records import output_dir
+
+        with output_dir(args.out_dir, "--out-dir", own=("ablation.json", "models"), into_existing=args.resume):
+            result = ablate_activations(args.data, runs=args.runs, train=_train_config(args), out_dir=args.out_dir,
+                                        resume=args.resume)
     print(format_ablation_markdown(result))
     print(f"written to {args.out_dir}/ablation.md and ablation.json")
     return 0
@@ -180,13 +185,13 @@ def add_train(sub) -> None:
     p.add_argument("--epochs", type=positive_int, default=1000,
                    help="training epochs at most (default 1000; --patience usually stops earlier)")
     p.add_argument("--out", required=True, help="checkpoint file to write (e.g. models/dynamics.pt)")
-    p.add_argument("--d-z", type=positive_int, default=None,
+    p.add_argument("--d-z", type=Count(1, 64), default=None,
                    help="unary symbol bits per object (default: learned.ModelConfig's; more bits, more operators)")
-    p.add_argument("--heads", type=positive_int, default=None,
+    p.add_argument("--heads", type=Count(1, 64), default=None,
                    help="relation types = attention heads (default: learned.ModelConfig's)")
-    p.add_argument("--hidden", type=positive_int, default=None,
+    p.add_argument("--hidden", type=Count(1, 4096), default=None,
                    help="width of every MLP's hidden layers (default: learned.ModelConfig's, 128)")
-    p.add_argument("--layers", type=positive_int, default=None,
+    p.add_argument("--layers", type=Count(1, 64), default=None,
                    help="hidden layers per MLP (default: learned.ModelConfig's, 2)")
     p.add_argument("--relations", choices=RELATION_ENCODERS, default=None,
                    help="relation encoder: attention = the paper's q_k(x_i) . k_k(x_j) (default, or --init's); "
@@ -247,7 +252,7 @@ def add_train(sub) -> None:
                    "tamp/pretrained/paper/dynamics.pt, trained on 2-4 blocks, on data with 5 and 6) instead of random "
                    "ones; its network settings are kept (--bottleneck, --d-z, --heads, --no-arm-input must agree "
                    "if given) and the object limit is the data's")
-    p.add_argument("--ensemble", type=positive_int, default=None, metavar="M",
+    p.add_argument("--ensemble", type=Count(1, 64), default=None, metavar="M",
                    help="a Dynamics Model that knows its doubt: M members, each trained on a bootstrap resample and "
                    "given a head that predicts how widely each effect scatters; the planner takes their mean and "
                    "the rows their 95 %% bound (docs/beyond-the-paper.md). --init may be an ensemble (member m "
@@ -257,7 +262,7 @@ def add_train(sub) -> None:
                    "member's resample at --extra-share beside the --data")
     p.add_argument("--extra-share", type=fraction, default=0.25,
                    help="with --extra-data: the share of each member's resample drawn from it (default 0.25)")
-    p.add_argument("--workers", type=positive_int, default=1,
+    p.add_argument("--workers", type=Count(1, WORKERS_LIMIT), default=1,
                    help="with --ensemble: members trained at a time, one process and one torch thread each (default 1)")
     p.add_argument("--no-arm-input", action="store_true",
                    help="leave the arm's pick-to-place displacement out of the action encoding, so that "
@@ -277,7 +282,7 @@ def add_ablate_activations(sub) -> None:
         "and report the mean effect-prediction error (cm) on a held-out test split, as Markdown and JSON.",
     )
     p.add_argument("--data", required=True, help="dataset directory")
-    p.add_argument("--runs", type=positive_int, default=3, help="seeds per activation (default 3; the paper: 10)")
+    p.add_argument("--runs", type=Count(1, 1000), default=3, help="seeds per activation (default 3; the paper: 10)")
     p.add_argument("--epochs", type=positive_int, default=20, help="epochs per run (default 20)")
     p.add_argument("--out-dir", default="runs/ablation", help="where ablation.md / ablation.json go")
     p.add_argument("--resume", action="store_true",
@@ -294,7 +299,7 @@ def add_ablate_activations(sub) -> None:
                    "results/paper-scale/ablation.json with --data from `tamp collect --samples 160000 --seed 0`; "
                    "the settings must be the table's (checked). With --summarize: train nothing, write the "
                    "table with those runs as they stand in --out-dir")
-    p.add_argument("--workers", type=positive_int, default=1,
+    p.add_argument("--workers", type=Count(1, WORKERS_LIMIT), default=1,
                    help="with --finish: runs trained at a time, one process and one torch thread each (default 1)")
     _add_train_arguments(p)
     p.set_defaults(func=cmd_ablate)

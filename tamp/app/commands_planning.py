@@ -6,12 +6,13 @@ import textwrap
 from pathlib import Path
 
 from tamp.app.args import (
+    MAX_K,
+    MAX_OBJECTS,
     MODELS_HELP,
+    Count,
     _html_path,
     check_output_file,
     models_directory,
-    non_negative_int,
-    positive_int,
     seed,
 )
 from tamp.errors import UserError
@@ -86,8 +87,8 @@ def add_demo(sub) -> None:
         "planner's settings come from the configuration (--preset, --config; `tamp config show`).",
     )
     p.add_argument("--seed", type=seed, default=0, help="seed of the problem and the planner (default 0)")
-    p.add_argument("--objects", type=positive_int, default=3, help="number of blocks (default 3)")
-    p.add_argument("--actions", type=positive_int, default=3,
+    p.add_argument("--objects", type=Count(1, MAX_OBJECTS), default=3, help="number of blocks (default 3)")
+    p.add_argument("--actions", type=Count(1, MAX_K), default=3,
                    help="k: random actions that generate the goal (default 3)")
     p.add_argument("--models", type=models_directory, default=None,
                    help=MODELS_HELP + "; default: pretrained")
@@ -98,7 +99,7 @@ def add_demo(sub) -> None:
     p.add_argument("--open-loop", action="store_true",
                    help="execute one plan to its end (the paper's Algorithm 1) instead of the closed loop "
                    "that executes the first action, observes the scene and plans again until the goal")
-    p.add_argument("--candidates", type=non_negative_int, default=0, metavar="N",
+    p.add_argument("--candidates", type=Count(0, 10_000), default=0, metavar="N",
                    help="also execute the first N symbolic candidates that failed verification and write "
                    "a replay of each (OUT.candidateI.html, I their number in the candidate list)")
     add_trajectory_argument(p)

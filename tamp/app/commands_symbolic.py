@@ -3,11 +3,15 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 from pathlib import Path
 
 import numpy as np
 
+from guarded import atomic_write_text, dumps
 from tamp.app.args import (
+    MAX_DOMAINS,
+    Count,
     check_output_dir,
     check_output_file,
     fraction,
@@ -43,8 +47,7 @@ def cmd_symbols(args: argparse.Namespace) -> int:
     print(format_symbols_markdown(report))
     print("\n".join(summary.lines()))
     if args.json is not None:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps([b.to_dict() for b in report], indent=1) + "\n")
+        atomic_write_text(args.json, dumps([b.to_dict() for b in report], indent=1) + "\n")
         print(f"written {args.json}")
     if args.png is not None:
         write_symbols_png(report, args.png)
@@ -78,11 +81,14 @@ def cmd_domain(args: argparse.Namespace) -> int:
     check_output_dir(args.out, "--out")
     if args.core_from_all and not args.involved_only:
         raise UserError("--core-from-all needs --involved-only (it adds operators of the picked and target objects)")
-    report = learn_domain(args.model, args.data, args.out, holdout=args.holdout, seed=args.seed,
-                          sampled_domains=args.sampled, involved_only=args.involved_only,
-                          min_count=args.min_count, min_prob=args.min_prob, only_moved=args.only_moved,
-                          any_bottleneck=args.any_bottleneck, max_arity=args.max_arity,
-                          core_from_all=args.core_from_all, general_bystanders=args.general_bystanders)
+    from tamp.records import output_dir
+
+    with output_dir(args.out, "--out", own=("operators.json", "stats.json", "domain.pddl")):
+        report = learn_domain(args.model, args.data, args.out, holdout=args.holdout, seed=args.seed,
+                              sampled_domains=args.sampled, involved_only=args.involved_only,
+                              min_count=args.min_count, min_prob=args.min_prob, only_moved=args.only_moved,
+                              any_bottleneck=args.any_bottleneck, max_arity=args.max_arity,
+                              core_from_all=args.core_from_all, general_bystanders=args.general_bystanders)
     held = report.get("coverage_holdout") or {}
     general = f" ({report['n_general']} general)" if args.general_bystanders else ""
     print(f"{report['n_operators']} operators{general} from {report['transitions']} transitions -> {args.out}")
@@ -100,18 +106,54 @@ def cmd_domain(args: argparse.Namespace) -> int:
 def cmd_pddl(args: argparse.Namespace) -> int:
     """A models directory's learned domain (and a problem's symbols) as PDDL files."""
     from tamp.app.problem import load_problem
-    from tamp.planning.domain import export_pddl
-    from tamp.planning.models import pretrained_dir
+    from tamp.planning.models import load_models, pretrained_dir
 
     check_output_dir(args.out, "--out")
+    models_dir = args.models or pretrained_dir()
     problem = None if args.problem is None else load_problem(args.problem)
-    paths = export_pddl(args.models or pretrained_dir(), args.out, None if problem is None else problem.X_init,
-                        None if problem is None else problem.X_goal,
-                        problem_name=(problem.name or args.problem.stem) if problem is not None else "symbolic-task",
-                        sampled=args.sampled, seed=args.seed)
+    if problem is not None:  # every model the problem needs is checked before a file is written
+        load_models(models_dir).require_objects(problem.n, str(args.problem))
+    paths = staged_export(models_dir, args.out, problem, args)
     for kind, path in paths.items():
         print(f"{kind}: {path}")
     return 0
+
+
+PDDL_OUTPUTS = ("domain.pddl", "domain.ppddl", "problem.pddl", "sampled")  # what `tamp pddl` writes in --out
+
+
+def staged_export(models_dir: Path, out: Path, problem, args: argparse.Namespace) -> dict[str, Path]:
+    """`export_pddl` into a staging folder beside `out`, moved into `out` once every file is written: a
+    failure (a full disk, a model that cannot be read) leaves `out` as it was and no staging behind."""
+    import shutil
+
+    from guarded import OutputError
+    from tamp.planning.domain import export_pddl
+    from tamp.records import made_by_tool, output_dir
+
+    foreign = [out / name for name in PDDL_OUTPUTS if (out / name).is_dir() and not made_by_tool(out)]
+    if foreign and args.sampled > 0:  # a folder there is replaced only when the tool made the folder around it
+        raise UserError(f"--out {out}: {foreign[0]} is a folder the tool did not make; give another --out")
+    staging = out.parent / f".{out.name}.staging-{os.getpid()}"
+    try:
+        with output_dir(out, "--out", own=PDDL_OUTPUTS):
+            try:
+                made = export_pddl(models_dir, staging, None if problem is None else problem.X_init,
+                                   None if problem is None else problem.X_goal,
+                                   problem_name=(problem.name or args.problem.stem) if problem is not None
+                                   else "symbolic-task", sampled=args.sampled, seed=args.seed)
+            except OSError as error:
+                raise OutputError(f"cannot write {out}: {error.strerror or error}") from None
+            paths = {}
+            for kind, path in made.items():
+                target = out / path.relative_to(staging)
+                if target.is_dir() and not target.is_symlink():  # a folder of the tool's (checked above)
+                    shutil.rmtree(target)
+                os.replace(path, target)
+                paths[kind] = target
+            return paths
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
 
 
 def add_domain(sub) -> None:
@@ -130,7 +172,8 @@ def add_domain(sub) -> None:
                    help="dataset directory, or several (learned from together)")
     p.add_argument("--out", required=True, help="output directory")
     p.add_argument("--holdout", type=fraction, default=0.1, help="fraction of transitions held out for coverage")
-    p.add_argument("--sampled", type=non_negative_int, default=0, metavar="N", help="also write N sampled PDDL domains")
+    p.add_argument("--sampled", type=Count(0, MAX_DOMAINS), default=0, metavar="N",
+                   help="also write N sampled PDDL domains")
     p.add_argument("--involved-only", action="store_true",
                    help="operators mention only the objects a transition involves (picked, target, and "
                    "those whose symbols change) rather than every object in the scene: far fewer operators")
@@ -148,7 +191,7 @@ def add_domain(sub) -> None:
                    "motions left out, as the paper's authors do)")
     p.add_argument("--min-count", type=non_negative_int, default=0, metavar="N",
                    help="keep operators seen at least N times (default 0: all; the paper's authors: 51)")
-    p.add_argument("--max-arity", type=positive_int, default=None, metavar="A",
+    p.add_argument("--max-arity", type=Count(1, 16), default=None, metavar="A",
                    help="learn no operator from a transition that involves more than A objects (default: the "
                    "most the lifted search takes, 4 with 1 unary bit and 3 relations; larger ones are refused "
                    "by the planner)")
@@ -177,7 +220,7 @@ def add_pddl(sub) -> None:
                    "(the default), pairwise, spatial or regions")
     p.add_argument("--out", type=Path, required=True, help="output directory")
     p.add_argument("--problem", type=Path, default=None, help="problem file (JSON: X_init, X_goal) to export")
-    p.add_argument("--sampled", type=non_negative_int, default=0, metavar="N",
+    p.add_argument("--sampled", type=Count(0, MAX_DOMAINS), default=0, metavar="N",
                    help="also write the distinct domains among N sampled ones (sampled/, with sampled.json)")
     p.add_argument("--seed", type=seed, default=0, help="seed of the sampled domains (default 0)")
     p.set_defaults(func=cmd_pddl)

@@ -9,9 +9,10 @@ from pathlib import Path
 import numpy as np
 
 from tamp.app.args import (
+    MAX_OBJECTS,
+    Count,
     _html_path,
     check_output_file,
-    positive_int,
     seed,
 )
 from tamp.errors import UserError
@@ -143,9 +144,9 @@ def add_simulate(sub) -> None:
         "(IK, OMPL motions, physics after release). Prints one line per action: the action, what "
         "happened and where the time went.",
     )
-    p.add_argument("--objects", type=positive_int, default=3, help="number of blocks, 1..6 (default 3)")
+    p.add_argument("--objects", type=int, default=3, help=f"number of blocks, 1..{MAX_OBJECTS} (default 3)")
     p.add_argument("--seed", type=seed, default=0, help="seed of the scene and the actions (default 0)")
-    p.add_argument("--steps", type=positive_int, default=5, help="number of random actions (default 5)")
+    p.add_argument("--steps", type=Count(1, 10_000), default=5, help="number of random actions (default 5)")
     p.add_argument("--json", action="store_true", help="print JSON lines instead of text")
     p.add_argument("--replay", type=_html_path, metavar="OUT.html",
                    help="write a self-contained Meshcat HTML replay of the arm and blocks")

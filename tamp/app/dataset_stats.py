@@ -25,6 +25,7 @@ import numpy as np
 
 from tamp.errors import UserError
 from tamp.planning.vocabulary import BLOCK_SIZES, LARGE, SMALL
+from tamp.records import atomic_write
 from tamp.sim.world_types import STATUSES, StepStatus
 
 MOVE_TOL = 0.01  # metres: an object moved if its centre moved more than this
@@ -156,9 +157,10 @@ class DatasetStats:
         ax2.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.0, 1.0))
         fig.suptitle(f"{self.directory.name}: {len(self.n)} samples")
         fig.tight_layout()
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fig.savefig(path, dpi=100)
-        plt.close(fig)
+        try:
+            atomic_write(path, lambda tmp: fig.savefig(tmp, format="png", dpi=100))
+        finally:
+            plt.close(fig)
         return path
 
 

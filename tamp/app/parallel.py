@@ -19,7 +19,7 @@ import time
 from contextlib import contextmanager
 from typing import Any, Callable, Generator, Iterator, Protocol, Sequence
 
-from tamp.app.args import positive_int
+from tamp.app.args import WORKERS_LIMIT, Count
 from tamp.errors import UserError
 
 BACKENDS = ("local", "ray")
@@ -169,7 +169,7 @@ def _run_ray(tasks: Sequence[Any], make: Callable[..., Worker], args: tuple, wor
 def add_arguments(p, workers_default: int | None = None) -> None:
     """--workers, --backend and --address, the same for collect, evaluate and reproduce."""
     default = "all CPUs, of the cluster with --address" if workers_default is None else str(workers_default)
-    p.add_argument("--workers", type=positive_int, default=workers_default,
+    p.add_argument("--workers", type=Count(1, WORKERS_LIMIT), default=workers_default,
                    help=f"worker processes or Ray actors (default: {default})")
     p.add_argument("--backend", choices=BACKENDS, default="local",
                    help="local process pool (default) or Ray actors (optional extra: pip install 'bilevel-tamp[ray]')")

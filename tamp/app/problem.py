@@ -21,14 +21,13 @@ overlap).
 """
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from guarded import Schema, read_json, read_jsonl
+from guarded import Schema, atomic_write_text, dumps, read_json, read_jsonl
 from tamp.errors import UserError
 from tamp.inputs import ACTION, SCENE, SEED, blocks_out_of_range
 from tamp.planning.validate import check_problem
@@ -150,7 +149,8 @@ def pick_problem(path: str | Path, name: str | None = None) -> Problem:
 
 
 def save_problem(path: str | Path, problem: Problem) -> None:
-    Path(path).write_text(json.dumps(problem.to_dict()) + "\n")
+    """Write `problem` as a problem file, atomically."""
+    atomic_write_text(path, dumps(problem.to_dict()) + "\n")
 
 
 def read_problem_set(path: str | Path) -> list[Problem]:

@@ -21,15 +21,14 @@ One record per step (JSON keys):
 """
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Iterator, Sequence
 
+from guarded import atomic_write_json
 from learned.interpret import BitNames
 from tamp.app.plan_file import fmt_action
 from tamp.planning.steps import SymbolicStep, symbolic_steps
-from tamp.records import atomic_write_text
 
 if TYPE_CHECKING:
     from tamp.app.runner import ClosedLoopRun, Execution
@@ -133,7 +132,7 @@ def steps_document(problem: str, method: str, level: int | None, records: list[d
 
 
 def write_steps(path: Path, document: dict) -> Path:
-    return atomic_write_text(path, json.dumps(document, indent=1) + "\n")
+    return atomic_write_json(path, document, indent=1)
 
 
 def _change(bit: str, value: int, meaning: str | None) -> str:

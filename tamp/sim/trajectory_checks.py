@@ -13,6 +13,10 @@ sample (docs/trajectories.md, "Checks").
 - Structure: segments of known names in their order, the still ones (`grasp`, `release`) still; the
   jaws close inside `grasp` and open inside `release`; actions and grasps name blocks of the scene;
   indices increase; the scene is one the world can hold.
+- Grasps where the blocks are: at each close of the jaws, the grasped block's pose in the tcp frame
+  (`block_in_tcp`), carried by the arm's configuration there, lies within GRASP_TOLERANCE of that block in
+  the scene before the action (the file's scene, then each action's `blocks_after`). The simulator's grasp
+  snaps any block within 1.5 cm into the grip: a scene moved away from its motion would replay as if not.
 - Duration: at most MAX_ACTION_S per action and MAX_TOTAL_S in all, so `tamp view` (about a third of
   real time in the full world) never runs for long.
 """
@@ -32,6 +36,7 @@ if TYPE_CHECKING:
 TOLERANCE = 1e-5  # rad, rad/s, rad/s^2 and s: slack of the limit, continuity and timing checks (rounding)
 POSITION_TOLERANCE = 1e-6  # rad: q[k+1] - q[k] against (v[k] + v[k+1]) h / 2
 VELOCITY_TOLERANCE = 1e-4  # rad/s: v[k+1] - v[k] against a[k] h
+GRASP_TOLERANCE = 0.001  # m: a grasp lies this close to its block in the scene (files written here: within 1e-6)
 MAX_ACTION_S = 60.0  # one pick-place of the skill takes 3-8 s
 MAX_TOTAL_S = 600.0  # all actions: `tamp view` simulates them in about a third of that
 # segment names in their order; the still ones: the jaws close at the end of `grasp`, open at the start of `release`
@@ -151,3 +156,21 @@ def check(plan: PlanTrajectory, limits: JointLimits, where: str) -> None:
         _check_segments(action, where)
         _check_blocks(plan, action, where)
         prev = f"action {action.index}"
+    _check_grasps(plan, where)
+
+
+def _check_grasps(plan: PlanTrajectory, where: str) -> None:
+    """Each grasp where its block is in the scene before the action (GRASP_TOLERANCE); says by how much."""
+    from tamp.sim.kinematics import tcp_pose
+
+    X = plan.scene_init.X()
+    for action in plan.actions:
+        grasp = next(s for s in action.segments if s.name == "grasp")
+        k = min(int(np.searchsorted(grasp.start + grasp.t, action.t_close)), len(grasp.t) - 1)
+        held = (tcp_pose(grasp.q[k]) @ action.X_GC).translation()
+        off = float(np.linalg.norm(held - X[action.block, :3]))
+        if not off <= GRASP_TOLERANCE:
+            raise TrajectoryError(f"{where}: action {action.index}: the jaws close on block {action.block} "
+                                  f"{1000 * off:.1f} mm from where the scene before the action has it (at most "
+                                  f"{1000 * GRASP_TOLERANCE:g} mm): the motion is not of this scene")
+        X = action.X_after

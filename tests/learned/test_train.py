@@ -156,7 +156,7 @@ def test_the_bit_usage_penalty_keeps_relations_the_effect_loss_leaves_constant(t
     config = ModelConfig(hidden=32, d_msg=16, d_z=2, heads=3, activation="gumbel_sigmoid", relations="pairwise")
     rates = {}
     for weight in (0.0, 1.0):
-        fit(data, config, 60, tmp_path / f"m{weight}.pt", lr=3e-3, seed=0, bit_usage=weight)
+        fit(data, config, 30, tmp_path / f"m{weight}.pt", lr=3e-3, seed=0, bit_usage=weight)
         _, r = load_model(tmp_path / f"m{weight}.pt").symbols_batch(data.X, data.mask)
         rates[weight] = [float(r[:, k][pairs].mean()) for k in range(3)]
     assert max(rates[0.0]) < 0.01, rates
@@ -177,7 +177,7 @@ def test_the_offset_loss_makes_relations_say_on_which_side_of_a_block_another_st
     for weight in (0.0, 1.0):
         config = ModelConfig(hidden=32, d_msg=16, d_z=2, heads=3, activation="gumbel_sigmoid", relations="pairwise",
                              offset_decoder=bool(weight))
-        fit(data, config, 60, tmp_path / f"m{weight}.pt", lr=3e-3, seed=0, offset_weight=weight)
+        fit(data, config, 30, tmp_path / f"m{weight}.pt", lr=3e-3, seed=0, offset_weight=weight)
         _, r = load_model(tmp_path / f"m{weight}.pt").symbols_batch(data.X, data.mask)
         bits = [r[:, k][pairs] for k in range(3)]
         best[weight] = max((abs(np.corrcoef(b, side)[0, 1]) for b in bits if b.std() for side in sides), default=0.0)

@@ -289,7 +289,7 @@ def test_tamp_pddl_exports_the_bundled_domain_and_a_problem_that_an_independent_
     save_problem(tmp_path / "p.json", Problem(np.array(X, float), np.array(GOAL, float), name="problem"))
     assert main(["pddl", "--out", str(tmp_path / "out"), "--problem", str(tmp_path / "p.json")]) == 0
     out = tmp_path / "out"
-    assert {p.name for p in out.iterdir()} == {"domain.pddl", "domain.ppddl", "problem.pddl"}
+    assert {p.name for p in out.iterdir()} == {"domain.pddl", "domain.ppddl", "problem.pddl", ".tamp-output"}
     parsed = pddl.parse_problem(out / "problem.pddl")  # a problem named `problem` is renamed, not rejected
     assert parsed.name != "problem" and {o.name for o in parsed.objects} == {"o0", "o1"}
     assert "(:action pp0_" in (out / "domain.pddl").read_text()[:5000]
