@@ -1,7 +1,7 @@
 """The ablation of our extensions: each switched off alone against the default, on the same problems.
 
     .venv/bin/python bench/ablation.py --problems results/problems/strict-n2-4-s781.jsonl.gz --out runs/ablation
-    .venv/bin/python bench/ablation.py --problems P.jsonl --only search.clear_blockers,loop.widen
+    .venv/bin/python bench/ablation.py --problems P.jsonl --only search.look_on,loop.widen
 
 One `tamp evaluate` per extension (OUT/NAME, resumable) with a configuration file that switches it off, and
 one of the default (OUT/default), all on the same problems and methods: success of the default and without
@@ -23,20 +23,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 # each extension beyond the paper, and the TOML that switches it off (tamp/planning/config.py says what it does)
 EXTENSIONS = {
-    "level1.settle": "[level1]\nsettle = false", "level1.alternatives": "[level1]\nalternatives = 0",
-    "level1.focus_from": "[level1]\nfocus_from = false",
-    "level1.objects": "[level1]\nobjects = false", "level1.serial": "[level1]\nserial = false",
+    "level1.focus_from": "[level1]\nfocus_from = false", "level1.serial": "[level1]\nserial = false",
     "level1.wait_beyond": "[level1]\nwait_beyond = false",
     "search.greedy_from": "[search]\ngreedy_from = false", "search.greedy_stall": "[search]\ngreedy_stall = false",
     "search.resolution": "[search]\nresolution = 0.01", "search.look_on": "[search]\nlook_on = 0",
     "search.release_targets": "[search]\nrelease_targets = false",
-    "search.clear_blockers": "[search]\nclear_blockers = false",
-    "search.max_fragility": "[search]\nmax_fragility = false",
-    "kinematics.rest_within": "[kinematics]\nrest_within = false",
-    "loop.keep_plan": "[loop]\nkeep_plan = false", "loop.on_course": "[loop]\non_course = false",
-    "loop.commit": "[loop]\ncommit = false", "loop.widen": "[loop]\nwiden = false",
-    "loop.greedy_search_budget": "[loop]\ngreedy_search_budget = false", "loop.stall": "[loop]\nstall = false",
-    "loop.remember": "[loop]\nremember = false",
+    "loop.keep_plan": "[loop]\nkeep_plan = false", "loop.commit": "[loop]\ncommit = false",
+    "loop.widen": "[loop]\nwiden = false", "loop.stall": "[loop]\nstall = false",
 }
 
 

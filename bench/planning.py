@@ -119,13 +119,12 @@ def main() -> int:
     ap.add_argument("--time-limit", type=float, default=30.0, help="continuous search limit per problem, s")
     ap.add_argument("--compare-expansions", type=int, default=2000,
                     help="expansion cap of each search in the batched vs unbatched comparison (default 2000)")
-    ap.add_argument("--symbolic-time-limit", type=float, default=2.0, help="per symbolic search call, s")
     ap.add_argument("--train-seconds", type=float, default=100.0, help="--synthetic: training time per model")
     args = ap.parse_args()
 
     import torch
     torch.set_num_threads(1)
-    from tamp.planning.config import Level1Config, PlanConfig
+    from tamp.planning.config import PlanConfig
     from tamp.planning.models import load_models
     from tamp.planning.planners import plan
     from tamp.planning.search import SearchConfig, continuous_search
@@ -138,8 +137,7 @@ def main() -> int:
         print(f"training toy models into {directory} ...", flush=True)
         make_synthetic_models(directory, seconds=args.train_seconds)
     models = load_models(directory)
-    cfg = PlanConfig(level1=Level1Config(symbolic_time_limit=args.symbolic_time_limit),
-                     search=SearchConfig(time_limit=args.time_limit, max_expansions=10**6))
+    cfg = PlanConfig(search=SearchConfig(time_limit=args.time_limit, max_expansions=10**6))
     drake = args.models is not None  # real models plan in the Drake world; toy models in the toy one
     problems = drake_problem_set(args.per_cell) if drake else problem_set(args.per_cell)
     succeeded = drake_executed_ok if drake else executed_ok
@@ -148,7 +146,7 @@ def main() -> int:
     rows = []
     for n in (2, 3, 4):
         t = time.perf_counter()
-        models.symbolic_planner(cfg.level1.backend, cfg.level1.symbolic_time_limit).task(n)
+        models.symbolic_planner(cfg.level1.backend).task(n)
         print(f"n = {n}: symbolic grounding (one-off, not timed below) {time.perf_counter() - t:.2f} s", flush=True)
         for pn, k, X, G in problems:
             if pn != n:
@@ -212,7 +210,7 @@ def main() -> int:
             out = {}
             for batched in (True, False):
                 t = time.perf_counter()
-                out[batched] = continuous_search(models.dynamics, r["X"], r["G"], replace(compare, batched=batched))
+                out[batched] = continuous_search(models.dynamics, r["X"], r["G"], compare, batched=batched)
                 dt = time.perf_counter() - t
                 tb, tu = (tb + dt, tu) if batched else (tb, tu + dt)
             exp += out[True].expanded

@@ -13,7 +13,7 @@ what Level 1 costs, not how well they predict beyond the counts they were traine
 Stages per problem (the `bilevel` planner's Level 1 with the default PlanConfig, kinematics off):
 symbols (the Symbolic Model on X_init and X_goal), sampling (effects drawn for the operators the
 search meets), search (the one search for all N domains, backward distances included), verification
-(ranked plans and their alternatives rolled out with the Dynamics Model). Level 1 = their sum.
+(ranked plans rolled out with the Dynamics Model). Level 1 = their sum.
 
 Baseline (n <= --baseline-max-n; the grounded task of the old planner has 466k ground actions at
 n = 5, 1.27 million at n = 6): the plain planner (`symbolic.reference.plan_each_domain`: a
@@ -84,7 +84,7 @@ def main() -> None:
 
     from symbolic.grounding import problem_states
     from symbolic.reference import GroundTask, plan_each_domain
-    from tamp.planning.config import KinematicsConfig, PlanConfig
+    from tamp.planning.config import FOCUS_BUDGET, KinematicsConfig, PlanConfig
     from tamp.planning.level1 import symbolic_problem
     from tamp.planning.models import load_models, pretrained_dir
     from tamp.planning.planners import plan
@@ -100,13 +100,13 @@ def main() -> None:
                      search=SearchConfig(max_expansions=1))
     level1 = cfg.level1
     print(f"domain: {len(models.domain)} operators; N = {level1.n_domains}; Level-1 budget {level1.budget} "
-          f"generated states ({level1.focus_budget} from {level1.focus_from} objects on); {len(problems)} problems")
+          f"generated states ({FOCUS_BUDGET} from {level1.focus_from} objects on); {len(problems)} problems")
     rows: dict[int, list[dict]] = {}
     old: dict[int, list[float]] = {}
     for n in sorted({p.n for p in problems}):
         batch = [p for p in problems if p.n == n]
         t0 = time.perf_counter()
-        models.symbolic_planner(cfg.level1.backend, cfg.level1.symbolic_time_limit).task(n)
+        models.symbolic_planner(cfg.level1.backend).task(n)
         setup = time.perf_counter() - t0
         plan("bilevel", models, batch[0].X_init, batch[0].X_goal, cfg)  # warm-up: first forward passes
         rows[n] = []

@@ -21,6 +21,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from tamp.errors import UserError
+from tamp.records import atomic_write_text, made_by_tool, output_dir
 
 
 @dataclass(frozen=True)
@@ -106,7 +107,10 @@ def explore(rows_path: Path, problems_path: Path, directory: Path, per_state: in
     if done.is_file():
         return len(load_transitions(directory)) if any(directory.glob("shard-*.npz")) else 0
     if directory.exists():
-        shutil.rmtree(directory)
+        if not made_by_tool(directory):
+            raise UserError(f"{directory}: an unfinished exploration in a folder the tool did not make; give "
+                            "a new folder")
+        shutil.rmtree(directory)  # an unfinished exploration of ours: made again from its rows
     goals = {str(p.name): p.X_goal for p in read_problem_set(problems_path)}
     tasks = state_tasks(read_rows(rows_path), goals, per_state, seed)
     results: dict[int, list[dict[str, Any]]] = {}
@@ -114,14 +118,14 @@ def explore(rows_path: Path, problems_path: Path, directory: Path, per_state: in
         for index, samples in run_tasks(tasks, StateWorker, (), workers=workers, backend=backend):
             results[index] = samples
             bar.update()
-    directory.mkdir(parents=True)
     samples = [s for index in sorted(results) for s in results[index]]
-    if samples:
-        with DatasetWriter(directory, n_max=MAX_OBJECTS, world_config=WorldConfig().to_dict(), seed=seed,
-                           status_codes=STATUS_CODES, shard_size=1000,
-                           extra_meta={"collection": {"source": f"steps beside the plans of {rows_path}",
-                                                      "per_state": per_state}}) as writer:
-            for s in samples:
-                writer.add(s["X"], s["action"], s["X_next"], s["grasped"], s["status"])
-    done.write_text("")
+    with output_dir(directory, "the exploration folder"):  # marked: an unfinished one is ours to make again
+        if samples:
+            with DatasetWriter(directory, n_max=MAX_OBJECTS, world_config=WorldConfig().to_dict(), seed=seed,
+                               status_codes=STATUS_CODES, shard_size=1000,
+                               extra_meta={"collection": {"source": f"steps beside the plans of {rows_path}",
+                                                          "per_state": per_state}}) as writer:
+                for s in samples:
+                    writer.add(s["X"], s["action"], s["X_next"], s["grasped"], s["status"])
+        atomic_write_text(done, "")
     return len(samples)

@@ -17,7 +17,7 @@ from typing import Any, Sequence
 
 from guarded import atomic_write_json, dumps
 from tamp.errors import UserError
-from tamp.records import atomic_write_text
+from tamp.records import atomic_write_text, output_dir
 
 from .compare import load_rows
 from .report import read_json_object
@@ -87,9 +87,9 @@ def pool(out: str | Path, sources: Sequence[str | Path]) -> PoolReport:
             "n_problems": sum(int(m.get("n_problems") or 0) for m in metas),
             "pooled": [{**r, "started": m.get("started")} for r, m in zip(record, metas)]}
     meta.pop("runs", None)  # each source's evaluation runs (workers, times) stay in its own meta.json
-    out.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(out / ROWS_NAME, "".join(dumps(r, str(out / ROWS_NAME)) + "\n" for r in rows))
-    atomic_write_json(out / META_NAME, meta, indent=2)
+    with output_dir(out, "OUT", own=(ROWS_NAME, META_NAME)):  # a failed write leaves no folder behind
+        atomic_write_text(out / ROWS_NAME, "".join(dumps(r, str(out / ROWS_NAME)) + "\n" for r in rows))
+        atomic_write_json(out / META_NAME, meta, indent=2)
     return PoolReport(out, len(rows), record)
 
 

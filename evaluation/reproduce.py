@@ -37,7 +37,7 @@ from typing import TYPE_CHECKING, Any
 
 from guarded import Schema, read_json
 from tamp.errors import UserError
-from tamp.records import atomic_write_text
+from tamp.records import atomic_write_text, output_dir
 
 if TYPE_CHECKING:
     from learned import TrainConfig
@@ -203,8 +203,14 @@ def reproduce(out: str | Path, scale_name: str = "quick", workers: int | None = 
         if not models.is_dir():
             raise UserError(f"no models directory at {models} (--models: symbolic.pt, dynamics.pt, domain/)")
     scale, out = SCALES[scale_name], Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    workers = workers or available_cpus()
+    with output_dir(out, "--out", own=("stages.json",)):
+        return _reproduce(out, scale_name, scale, workers or available_cpus(), backend, fidelity, protocol, runs,
+                          models, symbolic_backend, address)
+
+
+def _reproduce(out: Path, scale_name: str, scale: Scale, workers: int, backend: str, fidelity: str, protocol: str,
+               runs: int, models: Path | None, symbolic_backend: str, address: str | None) -> Path:
+    """`reproduce` in its claimed folder `out`."""
     stages = Stages(out, scale_name, scale, protocol=protocol, runs=runs,
                     models=None if models is None else str(models), symbolic_backend=symbolic_backend)
     data = out / "data"

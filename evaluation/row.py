@@ -37,7 +37,7 @@ class Row:
     planning_time_s: float  # closed loop: summed over rounds
     level1_time_s: float | None  # Level 1's stages (symbols, symbolic, verify), summed over rounds
     predicted_error_m: float | None  # the plan's predicted distance to the goal (closed loop: the first round's)
-    candidates: list[dict]  # the planner's candidates in its order: ranked symbolic plans, then their alternatives
+    candidates: list[dict]  # the planner's candidates in its order: the ranked symbolic plans
     refined: bool | None  # every action refined (IK, collision-free motion, grasp)
     refine_failure: dict | None  # the first action that did not refine: stage, where, reason
     refine_time_s: list[float]  # per World.step (planning and, in `full`, execution)
@@ -126,7 +126,7 @@ def search_expanded(results: list) -> int | None:
 
 def candidate_records(result) -> list[dict]:
     return [{"error_m": round_m(c.error), "verified": None if c.verified is None else bool(c.verified),
-             "count": int(c.count), "alternative_of": c.alternative_of}
+             "count": int(c.count)}
             for c in result.candidates[:MAX_CANDIDATES]]
 
 

@@ -96,7 +96,7 @@ class Evaluator:
         if self._checker is None:
             from tamp.sim.kinematic_checker import FeasibilityChecker
 
-            self._checker = FeasibilityChecker(rest_within=self.config.planner.kinematics.rest_within)
+            self._checker = FeasibilityChecker()
         checker = self._checker
         scene = checker.reset(problem.X_init)
         layout = tuple(int(t) for t in scene.types)
@@ -126,7 +126,7 @@ class Evaluator:
             return
         cfg = self.config.plan_config(problem.seed)
         if models.symbolic is not None and models.domain is not None:
-            models.symbolic_planner(cfg.level1.backend, cfg.level1.symbolic_time_limit).task(problem.n)
+            models.symbolic_planner(cfg.level1.backend).task(problem.n)
             models.symbolic.symbols(problem.X_init)
         if models.dynamics is not None:
             models.dynamics.predict_effect(problem.X_init, np.zeros((1, 4), dtype=np.int64))

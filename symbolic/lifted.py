@@ -350,13 +350,6 @@ class LiftedTask:
         tuple_idx, rows = self._all.match(self._keys(state))
         return sorted(set((self.effect_op[rows] * self.n_tuples + tuple_idx).tolist()))
 
-    def actions_to(self, state: int, target: int) -> list[GroundAction]:
-        """The ground actions applicable in `state` one of whose effects leads to `target`, in order."""
-        tuple_idx, rows = self._all.match(self._keys(state))
-        want = np.frombuffer((state ^ target).to_bytes(8 * self.words, "little"), dtype=np.uint64)
-        hit = (self._flips(tuple_idx, rows) == want).all(axis=1)
-        return sorted(set((self.effect_op[rows[hit]] * self.n_tuples + tuple_idx[hit]).tolist()))
-
     def clear_cache(self) -> None:
         """Forget the expansions cached per state."""
         self._cache.clear()

@@ -18,11 +18,9 @@ Backends:
 
 from __future__ import annotations
 
-import itertools
 import os
 import time
 from collections import Counter
-from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
@@ -32,9 +30,8 @@ from symbolic.grounding import check_problem, problem_states, steps_to_actions
 from symbolic.lifted import LiftedTask
 from symbolic.pddl import DomainWriter, problem_pddl
 from symbolic.sampling import DomainSet, EffectSampler, dedup_choices
-from symbolic.search import SearchOutcome, search_domains, settled_prefix
+from symbolic.search import SearchOutcome, search_domains
 from symbolic.structs import (
-    Action,
     OperatorSet,
     PlannerResult,
     PlannerStatus,
@@ -117,19 +114,13 @@ class SymbolicPlanner:
 
     # ---- probabilistic -------------------------------------------------------------------------
     def plan_probabilistic(self, problem: SymbolicProblem, n_domains: int = 100, seed: int = 0,
-                           time_budget: float | None = None, budget: int | None = None,
-                           on_settled: Callable[[list[RankedPlan]], bool] | None = None) -> ProbabilisticPlanResult:
+                           time_budget: float | None = None, budget: int | None = None) -> ProbabilisticPlanResult:
         """Plan in N sampled domains and rank the plans by frequency. Python backend: with `budget`
         (states the shared search may generate; machine-independent, default the planner's) or
-        `time_budget` (seconds), the domains without a plan when either runs out count as timed out.
-        `on_settled` (python backend): called during the search with the plans that have just taken
-        their final place at the top of the ranking (`search.settled_prefix`), in rank order; when it
-        returns True the search ends there (Level 1 verifies them as they come and stops once it takes
-        one): the domains still without a plan are STOPPED, `settled` says how many plans lead the
-        final ranking, and only those are returned."""
+        `time_budget` (seconds), the domains without a plan when either runs out count as timed out."""
         check_problem(self.ops, problem)
         if self.backend == "python":
-            return self._probabilistic_python(problem, n_domains, seed, time_budget, budget, on_settled)
+            return self._probabilistic_python(problem, n_domains, seed, time_budget, budget)
         t0 = time.perf_counter()
         choices = self.sampler.choices(n_domains, seed)
         timings = {"sampling": time.perf_counter() - t0}
@@ -144,53 +135,31 @@ class SymbolicPlanner:
         return ProbabilisticPlanResult(ranked, n_domains, n_unique, n_searches, dict(statuses), timings)
 
     def _search(self, problem: SymbolicProblem, domains: DomainSet, budget: int,
-                deadline: float, stop=None) -> SearchOutcome:
+                deadline: float) -> SearchOutcome:
         """The one search for all `domains`, until `budget` generated states or `deadline` (time.perf_counter s)."""
         task = self.task(problem.n, problem.movable)
         init, goal = problem_states(problem)
         try:
-            return search_domains(task, domains, init, goal, budget, deadline, problem.nonempty, stop)
+            return search_domains(task, domains, init, goal, budget, deadline, problem.nonempty)
         finally:  # expansions are not kept between problems (honest per-problem cost, bounded memory)
             task.clear_cache()
 
     def _probabilistic_python(self, problem: SymbolicProblem, n_domains: int, seed: int,
-                              time_budget: float | None, budget: int | None,
-                              on_settled: Callable[[list[RankedPlan]], bool] | None = None
-                              ) -> ProbabilisticPlanResult:
+                              time_budget: float | None, budget: int | None) -> ProbabilisticPlanResult:
         start = time.perf_counter()
         deadline = None if time_budget is None else start + time_budget
         deadline = min(deadline or np.inf, start + self.time_limit)
         domains = DomainSet.sampled(self.sampler, n_domains, seed)
         task = self.task(problem.n, problem.movable)  # the search's ground action numbers
-        given, elsewhere = 0, 0.0  # plans handed to on_settled so far; seconds spent in it
-
-        def stop(out: SearchOutcome, remaining: int) -> bool:
-            nonlocal given, elsewhere
-            ranked = _ranked(_found(task, out, n_domains))
-            settled = settled_prefix([p.count for p in ranked], remaining)
-            if settled <= given or on_settled is None:
-                return False
-            t = time.perf_counter()
-            new, given = ranked[given:settled], settled
-            done = on_settled(new)
-            elsewhere += time.perf_counter() - t
-            return done
-
-        out = self._search(problem, domains, self.budget if budget is None else budget, deadline,
-                           stop if on_settled is not None else None)
-        searched = time.perf_counter() - start - elsewhere
+        out = self._search(problem, domains, self.budget if budget is None else budget, deadline)
+        searched = time.perf_counter() - start
         t0 = time.perf_counter()
         ranked = _ranked(_found(task, out, n_domains))
         statuses = Counter(s.value for s in out.status)
-        settled_count = None
-        if statuses.get(PlannerStatus.STOPPED.value, 0):  # only the plans whose place is final
-            settled_count = given
-            ranked = ranked[:given]
         timings = {"sampling": domains.seconds, "planner": searched - domains.seconds,
-                   "backward": out.timings.get("backward", 0.0), "parsing": time.perf_counter() - t0,
-                   "elsewhere": elsewhere}  # in on_settled, during the search (not the planner's)
+                   "backward": out.timings.get("backward", 0.0), "parsing": time.perf_counter() - t0}
         return ProbabilisticPlanResult(ranked, n_domains, None, 1, dict(statuses), timings, out.expanded,
-                                       out.generated, settled_count)
+                                       out.generated)
 
     def _rank(self, per_domain: list[PlannerResult], n: int) -> list[RankedPlan]:
         found: dict[tuple, list] = {}
@@ -216,29 +185,6 @@ class SymbolicPlanner:
             return PlannerResult(out.status[domain], None, out.message, seconds)
         return PlannerResult(out.status[domain], [task.step(g) for g in out.plans[i]], out.message, seconds,
                              states=list(out.states[i]))
-
-    def skeleton_options(self, n: int, states: tuple[int, ...]) -> list[list[Action]]:
-        """Per step of a plan through the symbolic `states` (a RankedPlan's), every ground action
-        applicable in that state one of whose learned effects leads to the next state: the plan's
-        skeleton, with the choices the symbols cannot tell apart (typically the grasp and release
-        offsets, or which of two symbolically alike blocks is used)."""
-        task = self.task(n)
-        return [list(dict.fromkeys(task.action(g) for g in task.actions_to(s, t)))
-                for s, t in zip(states[:-1], states[1:])]
-
-    def alternatives(self, n: int, actions: tuple[Action, ...], states: tuple[int, ...] | None,
-                     limit: int = 64) -> list[tuple[Action, ...]]:
-        """Other plans through the same symbolic `states` as `actions`, at most `limit`, in the
-        order of `itertools.product` over `skeleton_options` (the last step varies fastest)."""
-        if states is None or not actions or limit < 1:
-            return []
-        out = []
-        for combo in itertools.product(*self.skeleton_options(n, states)):
-            if combo != tuple(actions):
-                out.append(combo)
-                if len(out) == limit:
-                    break
-        return out
 
     def _run_fd(self, problem, choices, timings):
         t0 = time.perf_counter()

@@ -28,7 +28,6 @@ runs out are TIMEOUT; a domain whose bounded search was not cut anywhere has no 
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -96,15 +95,10 @@ class _Distances:
         return self.dist.get(state, self.beyond)
 
 def search_domains(task: LiftedTask, domains: DomainSet, init: int, goal: int, budget: int = 1_000_000,
-                   deadline: float | None = None, nonempty: bool = False,
-                   stop: Callable[[SearchOutcome, int], bool] | None = None) -> SearchOutcome:
+                   deadline: float | None = None, nonempty: bool = False) -> SearchOutcome:
     """For each of the domains, its first shortest plan from `init` to the full goal state `goal`.
 
     With `nonempty`, a goal equal to `init` needs a plan of at least one action (a shortest cycle).
-    `stop(outcome, remaining)` is asked after each depth bound D is searched, when the plans found so
-    far are final (every domain with a plan of at most D actions has it) and `remaining` domains are
-    still without one (any plan they get is longer); True ends the search there, those domains
-    STOPPED (`settled_prefix` says which ranked plans that leaves in their final places).
     """
     N = domains.n
     out = SearchOutcome([], [], [-1] * N, [PlannerStatus.TIMEOUT] * N)
@@ -112,7 +106,7 @@ def search_domains(task: LiftedTask, domains: DomainSet, init: int, goal: int, b
         out.plans, out.states = [()], [(init,)]
         out.plan_of, out.status = [0] * N, [PlannerStatus.SOLVED] * N
         return out
-    return _BoundedSearch(task, domains, init, goal, budget, deadline, out).run(stop)
+    return _BoundedSearch(task, domains, init, goal, budget, deadline, out).run()
 
 
 class _BoundedSearch:
@@ -128,7 +122,7 @@ class _BoundedSearch:
         self.t_back = 0.0
         self.small = len(task.expand(init).successors) <= SMALL_BRANCHING
 
-    def run(self, stop: Callable[[SearchOutcome, int], bool] | None) -> SearchOutcome:
+    def run(self) -> SearchOutcome:
         out, distances, init = self.out, self.distances, self.init
         D = 1
         while self.active:
@@ -151,12 +145,6 @@ class _BoundedSearch:
             for k in _bits(unsolvable):
                 out.status[k] = PlannerStatus.UNSOLVABLE
             self.active &= ~unsolvable
-            if self.active and stop is not None and stop(out, self.active.bit_count()):
-                for k in _bits(self.active):
-                    out.status[k] = PlannerStatus.STOPPED
-                out.message = f"stopped after depth bound {D}: the first ranked plans are settled"
-                self.active = 0
-                break
             D += 1
         for k in _bits(self.active):
             out.status[k] = PlannerStatus.UNSOLVABLE  # the goal is unreachable from init
@@ -238,16 +226,6 @@ class _BoundedSearch:
             layer = nxt
         self.active = active
         return cut
-
-
-def settled_prefix(counts: list[int], remaining: int) -> int:
-    """How many of the plans found so far, by decreasing count (`counts`), hold their final place in the
-    ranking whatever the `remaining` domains without a plan yet produce (`search_domains`' `stop`).
-
-    The counts found are final (a plan is found at its own length by every domain it is the first
-    shortest plan of), and a later plan is longer than each of them and has at most `remaining`
-    domains: it ranks below a plan of `remaining` domains or more (ties go to the shorter plan)."""
-    return sum(c >= remaining for c in counts)
 
 
 def _radius(depth_bound: int) -> int:

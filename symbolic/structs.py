@@ -176,7 +176,6 @@ class PlannerStatus(enum.Enum):
     UNSOLVABLE = "unsolvable"
     TIMEOUT = "timeout"
     CRASHED = "crashed"
-    STOPPED = "stopped"  # the shared search was ended once the plans that matter were settled (no plan sought)
 
 
 PlanStep = tuple[str, tuple[str, ...]]  # (operator name, argument object names)
@@ -220,4 +219,3 @@ class ProbabilisticPlanResult:
     timings: dict[str, float] = field(default_factory=dict)  # seconds: sampling, planner, parsing, ...
     expanded: int = 0  # python backend: states expanded by the shared search (forward and backward)
     generated: int = 0  # python backend: states those expansions generated (the budget's unit)
-    settled: int | None = None  # a search stopped early (`settle`): the first plans, whose place is final; None: all

@@ -1,5 +1,7 @@
 import ast
 import functools
+import gc
+import hashlib
 import os
 import sys
 from pathlib import Path
@@ -13,6 +15,32 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 SIM_FILE_MARK = "pytestmark = pytest.mark.sim"
 _first_drake_test: list[str] = []  # the first test after which pydrake was loaded
 _workers_with_drake: list[str] = []  # under pytest-xdist: the same, of each worker that loaded it
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _each_domain_read_once():
+    """An operators file is parsed and checked once per test process: `symbolic.load_domain` (which
+    `load_models` calls) gives the OperatorSet read before from a file of the same bytes (a copied domain and
+    the bundled sets that share one domain included: the set does not depend on the file's path). The
+    bundled domains take 1-4 s each to read, and the suite loads them about 90 times; a file that fails to
+    load goes through the reader every time, so its error names it."""
+    import symbolic.build
+
+    read = symbolic.build.load_operators
+    known: dict[bytes, object] = {}
+
+    def load_operators(path):
+        try:
+            key = hashlib.blake2b(Path(path).read_bytes()).digest()
+        except OSError:
+            return read(path)  # the reader names what is missing
+        if key not in known:
+            known[key] = read(path)
+        return known[key]
+
+    symbolic.build.load_operators = load_operators
+    yield
+    symbolic.build.load_operators = read
 
 
 def _selects(config: pytest.Config, marks: set[str]) -> bool:
@@ -84,6 +112,12 @@ def pytest_xdist_make_scheduler(config: pytest.Config, log):
             super()._assign_work_unit(node)
 
     return SharedFixtureScheduling(config, log)
+
+
+def pytest_collection_finish(session: pytest.Session) -> None:
+    """What is loaded by now (the packages, the collected tests) lives as long as the session: the cyclic garbage
+    collector leaves it alone from here on (its full passes over it took a tenth of the suite's time)."""
+    gc.freeze()
 
 
 @pytest.hookimpl(hookwrapper=True)

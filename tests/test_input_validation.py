@@ -102,14 +102,22 @@ def test_arm_reach_matches_the_ik():
         assert analytic_ik(topdown(np.r_[direction * (ARM_REACH_M + 0.03), 0.025], 0.0), Q_HOME) is None
 
 
+@pytest.fixture(scope="module")
+def world():
+    """One fast world for the generated problems: a problem depends on its seed alone (`random_problem`)."""
+    from tamp.sim.world import World
+
+    return World()
+
+
 @pytest.mark.sim
 @pytest.mark.parametrize("n, k, seed, protocol", [(n, k, 1000 + 10 * n + k, p) for n in (2, 3, 4, 6)
                                                   for k in (1, 3, 5) for p in ("strict", "paper")]
                          + [(3, 3, 0, "strict")])  # the last: the bundled demo's problem
-def test_generated_problems_pass_the_check(n, k, seed, protocol):
+def test_generated_problems_pass_the_check(world, n, k, seed, protocol):
     # (measured on a few hundred more when the check was written: 300 problems of both protocols and
     # 3000 collected transitions of 2-6 blocks all pass; the largest tolerance they need is 0.02 mm)
-    p = random_problem(n, k, seed, protocol=protocol)
+    p = random_problem(n, k, seed, world, protocol=protocol)
     check_problem(p.X_init, p.X_goal, f"seed {seed}")
     check_scene(p.X_init, upright=False)
 

@@ -19,8 +19,8 @@ METHOD_INFO = {
     "probabilistic_oracle": "ORACLE, the paper's measure: the N sampled domains' plans executed, most frequent "
                             "first, until one reaches the goal (no planner can choose so without the simulator)",
     "cfs": "continuous forward search, Sigmoid Dynamics Model",
-    "bilevel": "Algorithm 1 with our Level-1 extensions (look-alike alternatives, non-empty plans), else "
-               "continuous search (Level 2)",
+    "bilevel": "Algorithm 1 with our extensions (kinematics in the loop, the goal's sub-scene from 5 blocks "
+               "on), else continuous search (Level 2)",
     "bilevel_alg1": "the paper's Algorithm 1 exactly: verified probabilistic plan (Level 1), else continuous "
                     "search (Level 2)",
     "bilevel_replan": "bilevel in the paper's closed loop, up to k - 1 replanning rounds",

@@ -71,12 +71,6 @@ def _ms(t: float) -> str:
     return f"{t * 1e3:.1f} ms" if t < 1 else f"{t:.2f} s"
 
 
-def _rank(result: PlanResult, ranked_index: int) -> int:
-    """The printed number (1-based position in result.candidates) of ranked symbolic plan `ranked_index`."""
-    ranked = [i for i, c in enumerate(result.candidates) if c.alternative_of is None and c.stages is None]
-    return ranked[ranked_index] + 1
-
-
 def print_result(result: PlanResult, tau: float, indent: str = "") -> None:
     p = indent
     if result.solved:
@@ -93,20 +87,14 @@ def print_result(result: PlanResult, tau: float, indent: str = "") -> None:
             check = "not checked" if c.error is None else \
                 f"error {c.error * 100:.1f} cm, {'verified' if c.verified else 'unverified'}"
             chosen = "  <- plan" if result.level == 1 and result.plan == list(c.actions) else ""
-            source = f"same symbols as plan {_rank(result, c.alternative_of)}" if c.alternative_of is not None \
-                else f"one block at a time (blocks {', '.join(map(str, c.stages))})" if c.stages is not None \
+            source = f"one block at a time (blocks {', '.join(map(str, c.stages))})" if c.stages is not None \
                 else f"{c.count:3d} domains ({c.probability:.2f})"
             print(f"{p}    {i + 1}. {source}: {list(c.actions)}; {check}{chosen}")
         if len(result.candidates) > 10:
             print(f"{p}    ... {len(result.candidates) - 10} more")
-        stopped = (result.symbolic_stats.get("outcomes") or {}).get("stopped")
-        if result.symbolic_stats.get("settled") is not None and stopped:
-            print(f"{p}    (the symbolic search ended once the plan was taken: {stopped} domains without a plan yet "
-                  "would rank theirs lower; level1.settle = false searches on)")
     if result.search is not None:
         s = result.search
-        cleared = f", {s.clearing} of them moves of blocks in the way of a rejected action" if s.clearing else ""
-        print(f"{p}  continuous search: {s.reason}; {s.generated} successors in {s.predict_calls} model calls{cleared}")
+        print(f"{p}  continuous search: {s.reason}; {s.generated} successors in {s.predict_calls} model calls")
     for k, a in enumerate(result.plan or []):
         print(f"{p}  action {k}: {fmt_action(a)}")
     shown = ("kept", "remembered")  # why the last plan was kept (on course, or its rollout); a miss the loop trusts

@@ -46,7 +46,7 @@ def kinematics_for(method: str, config: PlanConfig) -> FeasibilityChecker | None
     kinematics in the planning loop (`Planner.kinematic`) when `config.kinematics.feasibility`, else None."""
     if not (config.kinematics.feasibility and METHODS[method].kinematic):
         return None
-    return FeasibilityChecker(rest_within=config.kinematics.rest_within)
+    return FeasibilityChecker()
 
 
 def executing_world(fidelity: str = "fast") -> World:

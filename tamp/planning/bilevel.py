@@ -27,8 +27,8 @@ from tamp.planning.level1 import level1, level1_serial
 from tamp.planning.level2 import level2
 from tamp.planning.models import Models
 from tamp.planning.results import Clock, Level2Result, PlanResult, assemble
-from tamp.planning.search import FRAGILITY_NOISE_M, SearchConfig
-from tamp.planning.verify import Verification, VerifyConfig, doubt, fragility
+from tamp.planning.search import SearchConfig
+from tamp.planning.verify import Verification, VerifyConfig, doubt
 from tamp.planning.vocabulary import KinematicFeasibility
 
 
@@ -65,17 +65,12 @@ def plan_bilevel(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig(),
 def level1_waits(models: Models, X_init, X_goal, chosen: Verification, wait_beyond: float | None,
                  search: SearchConfig, goal: VerifyConfig) -> str | None:
     """Why Level 1's verified plan waits while Level 2 searches (our extensions; None: it is taken): predicted
-    `wait_beyond` metres or more from the goal (`Level1Config.wait_beyond`), fragile (`verify.fragility`,
-    the continuous search's test of a goal state; both off with `wait_beyond` None, as in the paper) or doubtful
-    (a step's 95 % bound, `verify.doubt`)."""
+    `wait_beyond` metres or more from the goal (`Level1Config.wait_beyond`; None: never, as in the paper) or
+    doubtful (a step's 95 % bound, `verify.doubt`)."""
     if wait_beyond is not None and chosen.error >= wait_beyond:
         return (f"level 1: its verified plan is predicted {chosen.error * 100:.1f} cm from the goal "
                 f"(over {wait_beyond * 100:g} cm); kept while level 2 searches")
     model = models.require_dynamics()
-    if wait_beyond is not None and search.max_fragility is not None and chosen.actions and fragility(
-            model, X_init, X_goal, chosen.actions, goal.eps, FRAGILITY_NOISE_M) > search.max_fragility:
-        return (f"level 1: its verified plan misses the goal in over {search.max_fragility:.0%} of its perturbed "
-                "rollouts; kept while level 2 searches")
     if search.max_doubt is not None and doubt(model, chosen.trajectory, chosen.actions) > search.max_doubt:
         return (f"level 1: a step of its verified plan may miss by over {search.max_doubt * 100:g} cm (the Dynamics "
                 "Model's 95 % bound); kept while level 2 searches")
@@ -84,8 +79,8 @@ def level1_waits(models: Models, X_init, X_goal, chosen: Verification, wait_beyo
 
 def plan_bilevel_alg1(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig(),
                       kinematics: KinematicFeasibility | None = None) -> PlanResult:
-    """The paper's Algorithm 1 exactly (the `paper` preset over `cfg`): ranked symbolic plans verified alone (no
-    look-alike alternatives, any block picked) and the empty plan allowed whenever Sigma_init = Sigma_goal; its
+    """The paper's Algorithm 1 exactly (the `paper` preset over `cfg`): ranked symbolic plans verified in order (any
+    block picked) and the empty plan allowed whenever Sigma_init = Sigma_goal; its
     Level 2 returns the continuous search's first goal state, prunes actions by the paper's rule, counts h in metres
     and runs to its node budget (no stall cut), on the 1 cm duplicate grid its reproduction was measured with."""
     return replace(plan_bilevel(models, X_init, X_goal, paper_config(cfg)), method="bilevel_alg1")

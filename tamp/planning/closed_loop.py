@@ -22,14 +22,14 @@ Two loops share one round (`_round`: plan, or keep the rest of the last plan whi
   plans from there). Back at a state it observed before (`revisits`), it
   leaves out the actions it took from there, which would start the same cycle again in a deterministic world.
   An action that misses what the loop expected twice alike is from then on predicted as the world did it
-  (`LoopConfig.remember`, `tamp.planning.experience`), so the loop stops trying a move the world keeps undoing.
+  (`REMEMBER_M`, `tamp.planning.experience`), so the loop stops trying a move the world keeps undoing.
   With noisy observations (`LoopConfig.stop_margin`, set from `tamp evaluate --noise`) it stops only that far
   inside eps; within eps but short of that, it takes a step only on a plan predicted within
   `verify.confident` (`aimed_inside`, `_closer_than`), and otherwise stops at what it observes.
 
 Keeping a plan (`LoopConfig.keep_plan`, our extension, both loops): a round keeps the rest of the last
 plan when it refines and still ends within `verify.confident` of the goal: as the plan predicted, if
-the observed state is where the plan predicted it (every block within `LoopConfig.on_course`), else
+the observed state is where the plan predicted it (every block within `ON_COURSE_M`), else
 rolled out from the observed state; only otherwise does it plan again, so a plan on course is not
 traded for another one. The loop that does not know k keeps a plan on course while its own prediction
 still ends within eps (the plan was taken by that prediction, and the world is doing what it said);
@@ -61,7 +61,9 @@ from tamp.planning.vocabulary import KinematicFeasibility, LoopStop, Outcome, Pi
 WIDEN_EXPANSIONS = 400  # node budget of a widened search (over all 9 n^2 actions)
 PROGRESS_M = 0.02  # metres over blocks: without a plan, step toward the closest state only if it is this closer
 REVISIT_M = 0.01  # metres: back this close to an observed state, leave out the actions taken from there
-REMEMBER_ALIKE = 2  # misses alike before the loop trusts one (`LoopConfig.remember`): one outcome may be scatter
+ON_COURSE_M = 0.015  # metres: blocks this close to a kept plan's prediction keep its prediction (`keep_rest`)
+REMEMBER_M = 0.02  # metres: a step missing its prediction this far is remembered (`tamp.planning.experience`)
+REMEMBER_ALIKE = 2  # misses alike before the loop trusts one: one outcome may be scatter
 
 
 @dataclass
@@ -73,7 +75,7 @@ class ClosedLoopResult:
     eps: float
     reason: str = ""
     stop: LoopStop | None = None  # how the loop ended
-    experience: Experience | None = None  # the misses the loop that does not know k remembers (`LoopConfig.remember`)
+    experience: Experience | None = None  # the misses the loop that does not know k remembers (`REMEMBER_M`)
     expected: list[np.ndarray] = field(default_factory=list)  # with experience: the (n, 3) positions, metres, the
     #   loop expected after each executed action (the Dynamics Model with the misses it trusted then)
 
@@ -166,8 +168,7 @@ def loop_until_goal(method: str, models: Models, X_init, X_goal, step: Step, cfg
     state its searches found, else (with `look`, up to cfg.loop.looks times) observes the scene again and plans
     from that; actions that led back to an observed state are left out (`revisits`)."""
     out = ClosedLoopResult([], [], [np.asarray(X_init, dtype=float)], np.asarray(X_goal, dtype=float), cfg.verify.eps,
-                           experience=None if cfg.loop.remember is None else Experience(cfg.loop.remember,
-                                                                                        REMEMBER_ALIKE))
+                           experience=Experience(REMEMBER_M, REMEMBER_ALIKE))
     inside = aimed_inside(cfg)
     budget = cfg.loop.search_budget_for(len(out.X_goal), cfg.search.greedy_from)
     spent = 0  # continuous-search expansions of every round so far
@@ -273,7 +274,7 @@ def aimed_inside(cfg: PlanConfig) -> PlanConfig:
         return cfg
     v = cfg.verify
     eps = v.eps - margin
-    return replace(cfg, verify=replace(v, eps=eps, misplaced=v.misplaced - margin, confident=min(v.confident, eps)))
+    return replace(cfg, verify=replace(v, eps=eps, confident=min(v.confident, eps)))
 
 
 def _planned(out: ClosedLoopResult, r: int, result: PlanResult, on_round: Callable[[int, PlanResult], None] | None,
@@ -360,8 +361,7 @@ def widened_search(method: str, models: Models, X: np.ndarray, X_goal: np.ndarra
     goal-oriented actions only move misplaced blocks toward their goal, and cannot move a block out of
     the way, unstack one, or move a block already at its goal. The failed round's time, reasons and
     rejections are counted in the result (`PlanResult.widened`)."""
-    wide = replace(cfg, search=replace(cfg.search, prune=False))  # cfg.search.max_expansions: the caller's
-    searched = plan_cfs(models, X, X_goal, wide, kinematics=kinematics, avoid=avoid)
+    searched = plan_cfs(models, X, X_goal, cfg, kinematics=kinematics, avoid=avoid, every_action=True)
     result = _absorbed(replace(searched, method=method, widened=True), failed, "planned")
     empty = ["the planner returned an empty plan with a block off its goal"] if failed.solved and not failed.plan \
         else []
@@ -428,7 +428,7 @@ def keep_rest(models: Models, X: np.ndarray, X_goal: np.ndarray, last: PlanResul
               on_course_within: float | None = None) -> PlanResult:
     """The rest of `last` (its first action executed) as this round's plan, if it ends within
     cfg.verify.confident of X_goal as `last` predicted it, when the observed state X is within
-    cfg.loop.on_course of that prediction (or within `on_course_within`, if given: the loop that does not
+    `ON_COURSE_M` of that prediction (or within `on_course_within`, if given: the loop that does not
     know k keeps a plan on course while it still predicts success, cfg.verify.eps), or rolled out from X
     otherwise; and, with `kinematics` (and cfg.kinematics.feasibility), it passes the check and refines.
     Else a result without a plan (its reasons say why, its timings what the check cost). The plan keeps
@@ -447,7 +447,7 @@ def keep_rest(models: Models, X: np.ndarray, X_goal: np.ndarray, last: PlanResul
         return without_plan("keep: the last plan has no actions left")
     v: Verification | None = None
     deviation = off_course(X, last)
-    on_course = cfg.loop.on_course is not None and deviation <= cfg.loop.on_course
+    on_course = deviation <= ON_COURSE_M
     if on_course:  # the plan's own prediction of the rest, unless the loop has since seen one of its steps missed
         assert last.predicted is not None  # a finite deviation needs the prediction
         trajectory = np.concatenate([np.asarray(X, dtype=float)[None], last.predicted[2:]])

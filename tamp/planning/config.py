@@ -37,6 +37,11 @@ def symbolic_backend_help(default: str) -> str:
 
 PRESETS_DIR = Path(__file__).resolve().parents[1] / "presets"  # NAME.toml: the shipped presets
 
+FOCUS_BUDGET = 25_000  # symbolic states from focus_from objects on, `budget`'s stand-in: later plans rarely verify
+SUBSCENE_OBJECTS = 4  # from focus_from on, Level 1 plans in the goal's sub-scene of at most this many objects
+#   (the Symbolic Model's training size; more: one block at a time, `Level1Config.serial`)
+GREEDY_SEARCH_BUDGET = 1500  # the closed loop's search budget from search.greedy_from blocks on: a plan comes soon
+
 
 def _positive(owner: str, **values: float | None) -> None:
     """UserError unless each value is positive (None allowed: the option is off)."""
@@ -49,38 +54,28 @@ def _positive(owner: str, **values: float | None) -> None:
 class Level1Config:
     """Level 1 (Algorithm 1, lines 4-14): symbolic planning over N sampled domains, then verification.
 
-    The fields from `settle` on are our extensions (bilevel only; the `paper` preset turns them off, the
+    The fields from `focus_from` on are our extensions (bilevel only; the `paper` preset turns them off, the
     unverified baselines never use them); docs/beyond-the-paper.md describes each."""
 
     n_domains: int = 100  # N sampled PDDL domains (the paper's N)
     seed: int = 0  # seed of the sampled domains; callers set the problem's
     backend: str = "python"  # symbolic planner: python (in-process, fastest), fd (Fast Downward), fd-naive
-    symbolic_time_limit: float = 10.0  # seconds per symbolic planner call: a safety net behind `budget`
     budget: int | None = 100_000  # symbolic states one search for all N domains may generate: deterministic
-    settle: bool = True  # verify ranked plans as soon as their rank is final: Alg. 1's plan, found sooner
-    alternatives: int = 64  # per symbolic plan, verify the best plans of a beam this wide over its skeleton
     focus_from: int | None = 5  # from this many objects on, plans pick up only misplaced blocks
-    focus_budget: int | None = 25_000  # from focus_from objects on, `budget`'s stand-in: later plans rarely verify
-    objects: int | None = 4  # from focus_from on, plan in the goal's sub-scene of this many objects (training size)
     serial: bool = True  # from focus_from on, with no verified plan, plan one misplaced block at a time
     wait_beyond: float | None = EPS_SUCCESS  # metres: a verified plan predicted this far waits for Level 2
 
     def __post_init__(self) -> None:
         if self.backend not in SYMBOLIC_BACKENDS:
             raise UserError(f"symbolic backend must be one of {', '.join(SYMBOLIC_BACKENDS)}, got {self.backend!r}")
-        _positive("Level1Config", symbolic_time_limit=self.symbolic_time_limit, wait_beyond=self.wait_beyond)
+        _positive("Level1Config", wait_beyond=self.wait_beyond)
         if not 1 <= self.n_domains <= MAX_DOMAINS:  # each draws an effect per operator: (N, operators) in memory
             raise UserError(f"level1.n_domains, the number of sampled domains, must be in 1..{MAX_DOMAINS:,}, "
                             f"got {self.n_domains}")
         if self.focus_from is not None and self.focus_from < 1:
             raise UserError(f"Level1Config.focus_from must be a positive object count or None, got {self.focus_from}")
-        for name in ("budget", "focus_budget"):
-            if getattr(self, name) is not None and getattr(self, name) < 1:
-                raise UserError(f"Level1Config.{name} must be a positive number of states or None, "
-                                f"got {getattr(self, name)}")
-        if self.objects is not None and self.objects < 2:
-            raise UserError(f"Level1Config.objects must be at least 2 objects (a block and where it goes) "
-                            f"or None, got {self.objects}")
+        if self.budget is not None and self.budget < 1:
+            raise UserError(f"Level1Config.budget must be a positive number of states or None, got {self.budget}")
 
     def focused(self, n_objects: int) -> bool:
         """Whether Level 1 focuses on the blocks off their goal in a scene of `n_objects` blocks."""
@@ -88,9 +83,9 @@ class Level1Config:
 
     def budget_for(self, n_objects: int) -> int | None:
         """Level 1's budget (generated symbolic states) in a scene of `n_objects` blocks."""
-        if not self.focused(n_objects) or self.focus_budget is None:
+        if not self.focused(n_objects):
             return self.budget
-        return min(self.focus_budget, self.budget or self.focus_budget)
+        return min(FOCUS_BUDGET, self.budget or FOCUS_BUDGET)
 
 
 @dataclass(frozen=True)
@@ -99,10 +94,8 @@ class KinematicsConfig:
 
     feasibility: bool = True  # check actions on the predicted states, refine a plan before returning it
     max_refinements: int = 4  # full refinements per planning call (Level-1 and Level-2 plans): bounds time
-    rest_within: float | None = 0.01  # metres: a predicted block this close to resting is checked resting
 
     def __post_init__(self) -> None:
-        _positive("KinematicsConfig", rest_within=self.rest_within)
         if self.max_refinements < 1:
             raise UserError(f"KinematicsConfig.max_refinements must be at least 1, got {self.max_refinements}")
 
@@ -112,26 +105,19 @@ class LoopConfig:
     """The closed loops (`tamp.planning.closed_loop`): keeping a plan (both), and the loop that does not know k."""
 
     keep_plan: bool = True  # keep the rest of the last plan while it ends within verify.confident and refines
-    on_course: float | None = 0.015  # metres: blocks this close to the plan's prediction keep its prediction
     commit: bool = True  # a kept plan short of confident gives way only to a plan predicted within confident
     max_actions: int = 30  # actions sent before the loop gives up: k <= 5 needs 5, the rest is room for detours
     widen: bool = True  # a round without a plan searches again over all 9 n^2 actions (make room, unstack)
     search_budget: int = 3000  # search expansions over all rounds: a failing loop ends in about two searches' time
-    greedy_search_budget: int | None = 1500  # from search.greedy_from blocks on, search_budget's stand-in
     stall: int | None = 300  # the stall cut of its rounds' searches, in place of search.stall and .greedy_stall
-    remember: float | None = 0.02  # metres: a step missing its prediction this far, seen alike, is predicted so
     stop_margin: float | None = None  # metres inside eps the loop stops (false: 1 sigma of the observation noise)
     looks: int | None = None  # observations again after a round without a plan (false: 2 under noise, else 0)
 
     def __post_init__(self) -> None:
-        _positive("LoopConfig", on_course=self.on_course, remember=self.remember)
         if not self.margin >= 0:
             raise UserError(f"LoopConfig.stop_margin must be a distance of 0 m or more, got {self.stop_margin}")
         if self.stall is not None and self.stall < 1:
             raise UserError(f"LoopConfig.stall must be a positive number of expansions or None, got {self.stall}")
-        if self.greedy_search_budget is not None and self.greedy_search_budget < 1:
-            raise UserError(f"LoopConfig.greedy_search_budget must be a positive number of expansions or None, got "
-                            f"{self.greedy_search_budget}")
         if self.looks_again < 0:
             raise UserError(f"LoopConfig.looks must be 0 or more, got {self.looks}")
         if self.max_actions < 1 or self.search_budget < 1:
@@ -152,7 +138,7 @@ class LoopConfig:
         """The loop's search budget (expansions over all rounds) in a scene of `n_objects` blocks, the search
         greedy from `greedy_from` blocks on (`SearchConfig.greedy_from`)."""
         greedy = greedy_from is not None and n_objects >= greedy_from
-        return self.greedy_search_budget if greedy and self.greedy_search_budget is not None else self.search_budget
+        return min(GREEDY_SEARCH_BUDGET, self.search_budget) if greedy else self.search_budget
 
 
 @dataclass(frozen=True)

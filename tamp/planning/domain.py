@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from guarded import atomic_write_text
 from tamp.errors import UserError
 
 
@@ -82,7 +83,7 @@ def export_pddl(models_dir: str | Path, out_dir: str | Path, X_init: np.ndarray 
         models.require_objects(len(X_init), "the problem")
         problem = symbolic.make_problem(*models.symbolic.symbols(X_init), *models.symbolic.symbols(X_goal))
         paths["problem"] = out / "problem.pddl"
-        paths["problem"].write_text(symbolic.problem_pddl(ops, problem, name=problem_name))
+        atomic_write_text(paths["problem"], symbolic.problem_pddl(ops, problem, name=problem_name))
     if sampled > 0:
         written = symbolic.write_sampled_domains(ops, out / "sampled", sampled, seed)
         paths["sampled"] = written[0][0].parent

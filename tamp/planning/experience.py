@@ -1,7 +1,7 @@
 """What the world did in this loop: the Dynamics Model corrected where the loop meets a miss again.
 
 The loop that does not know k executes one action a round and observes the result. When an action lands
-`LoopConfig.remember` metres or more from the prediction, the loop records the observed transition. Once the
+`closed_loop.REMEMBER_M` metres (2 cm) or more from the prediction, the loop records the observed transition. Once the
 world has done the same action alike `closed_loop.REMEMBER_ALIKE` times (2), the loop trusts the miss: whenever a
 planning call asks the model about that action from a state in which the blocks that decide its outcome lie
 within that distance of where they were (every block but the picked one, when it is carried to another block;

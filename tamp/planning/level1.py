@@ -6,35 +6,22 @@
           roll it out with the Dynamics Model: within tau of X_goal?       lines 10-11  `Verifier.check`
           the first verified plan is Level 1's                             line 12
 
-How it runs (`Level1Config.settle`, on for both planners): a ranked plan is verified as soon as the search
-has settled its place in the ranking (`symbolic.search.settled_prefix`), and the search ends once one is
-taken; the plan is the one line 9 would reach after the whole search, sooner.
-
-Our extensions (`Level1Config`; `bilevel_alg1` turns them off): the plans through the same symbolic
-states verified with each ranked plan (`alternatives`), and from `focus_from` objects on: only misplaced
-blocks picked, Level 1 in the sub-scene the goal involves (`level1_scene`), else one block at a time
-(`level1_serial`); kinematics (`feas`) before a verified plan is taken.
+Our extensions (`Level1Config`; `bilevel_alg1` turns them off): from `focus_from` objects on, only
+misplaced blocks picked, Level 1 in the sub-scene the goal involves (`level1_scene`), else one block at a
+time (`level1_serial`); kinematics (`feas`) before a verified plan is taken.
 """
 from __future__ import annotations
 
-from typing import Callable, Sequence
+from typing import Sequence
 
 import numpy as np
 
-from tamp.planning.config import Level1Config
+from tamp.planning.config import SUBSCENE_OBJECTS, Level1Config
 from tamp.planning.kinematic_check import Feasibility, feasible_choice
 from tamp.planning.models import Models
 from tamp.planning.pruning import goal_oriented_actions, misplaced_objects
 from tamp.planning.results import Candidate, Clock, Level1Result, reasons_json
-from tamp.planning.verify import (
-    Verification,
-    VerifyConfig,
-    refine_skeleton,
-    verify,
-    verify_many,
-)
-
-ALTERNATIVES_TOTAL = 256  # look-alike alternatives verified per problem (later symbolic plans alone): bounds time
+from tamp.planning.verify import Verification, VerifyConfig, verify, verify_many
 
 
 # --- Algorithm 1, lines 4-14 -------------------------------------------------------------------
@@ -43,30 +30,18 @@ def level1(models: Models, X_init, X_goal, config: Level1Config, goal: VerifyCon
     """Level 1 of Algorithm 1 (lines 4-14): Sigma_init, Sigma_goal -> plans of N sampled domains, ranked
     by frequency -> the first plan whose Dynamics Model rollout ends within tau of X_goal (`chosen`).
 
-    The plans are verified as the search settles their place (config.settle, module docstring).
     Our extensions: from config.focus_from objects on, Sigma is read on the sub-scene of the objects the
     goal involves (`level1_scene`, by the continuous search's pruning with `release_targets`; none when they
-    are more than config.objects); and in `Verifier.check`, a ranked plan is verified together with the plans
-    through the same symbolic states (`config.alternatives`), and a verified plan must pass the kinematic
-    check and refine (`feas`)."""
+    are more than SUBSCENE_OBJECTS); and a verified plan must pass the kinematic check and refine (`feas`)."""
     record = Level1Result()
     with clock.stage("symbols"):
         objects = level1_scene(X_init, X_goal, config, goal, release_targets)  # None: every object, as the paper
-    if objects is not None and config.objects is not None and len(objects) > config.objects:
+    if objects is not None and len(objects) > SUBSCENE_OBJECTS:
         record.reasons.append(f"level 1: the goal involves {len(objects)} objects, more than the "
-                              f"{config.objects} of the scenes it plans in (level1.objects)")
+                              f"{SUBSCENE_OBJECTS} of the scenes it plans in")
         return record
-    verifier = Verifier(models, X_init, X_goal, config, goal, clock, feas, record)
-
-    def verify_settled(plans: list[Candidate]) -> bool:
-        """Plans whose place in the ranking is final, as the search settles them: verified now, and the
-        search ends once one is taken (our speed-up, `Level1Config.settle`: Alg. 1's plan, sooner)."""
-        verifier.ranked += plans
-        return verifier.run()
-
-    settle = verify_settled if config.settle else None
-    verifier.ranked = symbolic_plans(models, X_init, X_goal, config, goal, clock, record, objects=objects,
-                                     on_settled=settle)  # lines 5-7
+    verifier = Verifier(models, X_init, X_goal, goal, clock, feas, record)
+    verifier.ranked = symbolic_plans(models, X_init, X_goal, config, goal, clock, record, objects=objects)  # 5-7
     verifier.run()  # line 9: in decreasing order of probability, lines 10-12
     verifier.finish()
     return record
@@ -91,16 +66,14 @@ def symbolic_problem(models: Models, X_init: np.ndarray, X_goal: np.ndarray, con
 
 
 def symbolic_plans(models: Models, X_init, X_goal, config: Level1Config, goal: VerifyConfig, clock: Clock,
-                   record: Level1Result, probabilistic: bool = True, objects: tuple[int, ...] | None = None,
-                   on_settled: Callable[[list[Candidate]], bool] | None = None) -> list[Candidate]:
+                   record: Level1Result, probabilistic: bool = True,
+                   objects: tuple[int, ...] | None = None) -> list[Candidate]:
     """Symbolic candidates, best first, their actions on the whole scene (planned in the sub-scene of
     `objects` if given); the planner's figures go to record.symbolic_stats, failures to record.reasons
-    (prefixed 'level 1'). `on_settled` (python backend): given the candidates as their place in the ranking
-    becomes final, during the search; True ends the search, and only the candidates given are returned
-    (`SymbolicPlanner.plan_probabilistic`; symbolic_stats["settled"]: how many, None: all)."""
+    (prefixed 'level 1')."""
     with clock.stage("symbols"):
         try:
-            planner = models.symbolic_planner(config.backend, config.symbolic_time_limit)
+            planner = models.symbolic_planner(config.backend)
             problem = symbolic_problem(models, X_init, X_goal, config, goal, objects)
         except ValueError as error:
             record.reasons.append(f"level 1: {error}")
@@ -112,10 +85,8 @@ def symbolic_plans(models: Models, X_init, X_goal, config: Level1Config, goal: V
     if probabilistic:
         with clock.stage("symbolic"):
             out = planner.plan_probabilistic(problem, n_domains=config.n_domains, seed=config.seed,
-                                             budget=config.budget_for(len(X_init)),
-                                             on_settled=None if on_settled is None else
-                                             lambda plans: on_settled([candidate(p) for p in plans]))
-        record.symbolic_stats = {"n_domains": out.n_domains, "unique_plans": len(out.plans), "settled": out.settled,
+                                             budget=config.budget_for(len(X_init)))
+        record.symbolic_stats = {"n_domains": out.n_domains, "unique_plans": len(out.plans),
                                  "outcomes": dict(out.statuses), "expanded": out.expanded,
                                  "generated": out.generated, "movable": problem.movable,
                                  "objects": None if objects is None else list(objects),
@@ -139,25 +110,21 @@ def symbolic_plans(models: Models, X_init, X_goal, config: Level1Config, goal: V
 
 
 class Verifier:
-    """Verification of Level 1's ranked plans (Alg. 1, lines 9-14) with our extensions, into `record`.
+    """Verification of Level 1's ranked plans (Alg. 1, lines 9-14), into `record`.
 
-    - The ranked plans' own rollouts are computed in growing chunks (1, 2, 4, ... plans), all prefixes
+    - The ranked plans' rollouts are computed in growing chunks (1, 2, 4, ... plans), all prefixes
       of one length in one forward pass (`verify_many`): the same numbers as one plan at a time.
-    - Alternatives (config.alternatives > 0, states known): the best plans of a beam search over the
-      plan's skeleton (`refine_skeleton`), whose rollouts verify them; the group's verified plans are
-      tried smallest predicted error first.
-    - Kinematics (`feas`): a verified plan is taken only if it passes the check and refines.
+    - Kinematics (`feas`, our extension): a verified plan is taken only if it passes the check and refines.
     """
 
-    def __init__(self, models: Models, X_init, X_goal, config: Level1Config, goal: VerifyConfig, clock: Clock,
+    def __init__(self, models: Models, X_init, X_goal, goal: VerifyConfig, clock: Clock,
                  feas: Feasibility | None, record: Level1Result):
-        self.models, self.X_init, self.X_goal, self.config, self.goal = models, X_init, X_goal, config, goal
+        self.X_init, self.X_goal, self.goal = X_init, X_goal, goal
         self.clock, self.feas, self.record = clock, feas, record
         self.ranked: list[Candidate] = []
         self.model = models.require_dynamics()
-        self.checked: list[Candidate] = []  # verified so far: ranked plans and their alternatives
+        self.checked: list[Candidate] = []  # verified so far, in rank order
         self.any_verified = False
-        self.alternatives_left = ALTERNATIVES_TOTAL
         self._rollouts: dict[int, Verification] = {}
         self._done = 0  # ranked plans checked
         self._ended = False  # a plan taken, or no refinement left
@@ -188,35 +155,14 @@ class Verifier:
         return self._rollouts[i]
 
     def check(self, i: int) -> None:
-        """Verify ranked plan i (and its alternatives); take the first acceptable verified plan."""
-        candidate = self.ranked[i]
+        """Verify ranked plan i; take it if it verifies (and passes the kinematic check and refines)."""
+        candidate, v = self.ranked[i], self._rollout(i)
         self._done += 1
-        group: list[Candidate] = [candidate]
-        checks: list[Verification] = []
-        limit = min(self.config.alternatives, self.alternatives_left)
-        if limit > 0 and candidate.states is not None and candidate.actions:
-            planner = self.models.symbolic_planner(self.config.backend, self.config.symbolic_time_limit)
-            objects = candidate.objects
-            options = [list(in_scene(step, objects)) for step in planner.skeleton_options(
-                len(self.X_init) if objects is None else len(objects), candidate.states)]
-            best, own = refine_skeleton(self.model, self.X_init, self.X_goal, options, limit + 1,
-                                        self.goal.tau_verify, also=candidate.actions)
-            assert own is not None  # `also` given
-            alternatives = [v for v in best if v.actions != candidate.actions][:limit]
-            self.alternatives_left -= len(alternatives)
-            group += [Candidate(v.actions, candidate.count, candidate.probability, alternative_of=i,
-                                states=candidate.states, objects=objects) for v in alternatives]
-            checks = [own] + alternatives
-        else:
-            checks = [self._rollout(i)]
-        for c, v in zip(group, checks):
-            c.error, c.verified = v.error, v.verified
-        self.checked += group
-        verified = [v for v in checks if v.verified]
-        verified.sort(key=lambda v: v.error)
-        self.any_verified = self.any_verified or bool(verified)
-        if self.record.chosen is None:
-            self.record.chosen = feasible_choice(verified, self.feas)
+        candidate.error, candidate.verified = v.error, v.verified
+        self.checked.append(candidate)
+        self.any_verified = self.any_verified or v.verified
+        if self.record.chosen is None and v.verified:
+            self.record.chosen = feasible_choice([v], self.feas)
 
     def finish(self) -> None:
         """Record the candidates (checked ones, then the rest) and, without a chosen plan, why."""
@@ -229,11 +175,8 @@ class Verifier:
                                   f"(rejected: {reasons_json(feas.rejected[1])})")
             return
         best = min(c.error for c in self.checked if c.error is not None)
-        alts = sum(c.alternative_of is not None for c in self.checked)
-        record.reasons.append(f"level 1: none of the {len(ranked)} symbolic plans verified"
-                              + (f" (nor {alts} alternatives through the same symbols)" if alts else "")
-                              + f" (best predicted error {best * 100:.1f} cm, "
-                                f"tau {self.goal.tau_verify * 100:g} cm)")
+        record.reasons.append(f"level 1: none of the {len(ranked)} symbolic plans verified (best predicted error "
+                              f"{best * 100:.1f} cm, tau {self.goal.tau_verify * 100:g} cm)")
 
 
 def verify_candidate(models: Models, X_init, X_goal, candidate: Candidate, goal: VerifyConfig) -> Verification:
@@ -246,15 +189,15 @@ def verify_candidate(models: Models, X_init, X_goal, candidate: Candidate, goal:
 # --- our extensions: the goal's sub-scene, one block at a time ---------------------------------
 def level1_scene(X_init: np.ndarray, X_goal: np.ndarray, config: Level1Config, goal: VerifyConfig,
                  release_targets: bool = True) -> tuple[int, ...] | None:
-    """The objects Level 1 plans over (our extension, `Level1Config.objects`); None: every object.
+    """The objects Level 1 plans over (our extension); None: every object.
 
     From config.focus_from objects on: the objects of the continuous search's pruned actions in X_init
     (`pruning.goal_oriented_actions`, with or without `release_targets`), i.e. the blocks off their goal
     and, for each, the objects it would be placed on. The Symbolic Model then sees a scene of the size it
     was trained on, and the symbols of blocks that play no part cannot make Sigma_goal unreachable; the
-    Dynamics Model verifies the plans in the whole scene. With more than config.objects, Level 1 plans
+    Dynamics Model verifies the plans in the whole scene. With more than SUBSCENE_OBJECTS, Level 1 plans
     only one block at a time (`level1_serial`)."""
-    if config.objects is None or not config.focused(len(X_init)):
+    if not config.focused(len(X_init)):
         return None
     actions = goal_oriented_actions(np.asarray(X_init), np.asarray(X_goal), goal.misplaced, goal.eps,
                                     release_targets)

@@ -13,10 +13,11 @@ from tamp.planning.verify import DynamicsModel, VerifyConfig
 
 
 def level2(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarray, config: SearchConfig, goal: VerifyConfig,
-           clock: Clock, started: float, feas: Feasibility | None = None) -> Level2Result:
+           clock: Clock, started: float, feas: Feasibility | None = None, every_action: bool = False) -> Level2Result:
     """Continuous search; with `feas`, infeasible successors are pruned and a found plan is refined,
     searching again without the failing (state, action) while the refinement budget lasts. `started`:
-    time.perf_counter() when the planning call began (`SearchConfig.time_limit` counts from it)."""
+    time.perf_counter() when the planning call began (`SearchConfig.time_limit` counts from it);
+    `every_action`: over all actions (`continuous_search`)."""
     result = Level2Result()
     check = None if feas is None else feas.action
     graspable = None if feas is None else feas.kinematics.graspable(X_init)
@@ -24,11 +25,11 @@ def level2(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarray, config:
         while True:
             out = continuous_search(model, X_init, X_goal, config, goal, feasible=check,
                                     pruned=frozenset() if feas is None else feas.pruned, started=started,
-                                    graspable=graspable)
+                                    graspable=graspable, every_action=every_action)
             if feas is not None:
                 feas.rejected[2].update(out.rejected)
                 if result.search is not None:  # a search again after a refinement failure: count all
-                    for name in ("expanded", "generated", "duplicates", "predict_calls", "ungraspable", "clearing"):
+                    for name in ("expanded", "generated", "duplicates", "predict_calls", "ungraspable"):
                         setattr(out, name, getattr(out, name) + getattr(result.search, name))
             result.search = out
             if not out.solved or feas is None or not out.plan:

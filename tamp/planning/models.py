@@ -37,24 +37,30 @@ class SymbolModel(Protocol):
         """Unary bits (n, d_z) and relation bits (K, n, n) of scene X."""
 
 
+# seconds per symbolic planner call, by backend: the in-process search's safety net behind its state budget;
+#   Fast Downward has no such budget, and translating a large learned domain takes longer from 4 blocks on
+SYMBOLIC_TIME_LIMIT_S = {"python": 10.0, "fd": 120.0, "fd-naive": 120.0}
+
+
 @dataclass
 class Models:
     dynamics: DynamicsModel | None
     symbolic: SymbolModel | None = None
     domain: OperatorSet | None = None
-    planners: dict = field(default_factory=dict)  # SymbolicPlanner per (backend, time limit), reused
+    planners: dict = field(default_factory=dict)  # SymbolicPlanner per backend, reused
 
-    def symbolic_planner(self, backend: str = "python", time_limit: float = 10.0):
-        """A SymbolicPlanner over `domain`, built once (it caches ground tasks per object count)."""
+    def symbolic_planner(self, backend: str = "python"):
+        """A SymbolicPlanner over `domain`, built once (it caches ground tasks per object count), with the
+        backend's time limit per call (`SYMBOLIC_TIME_LIMIT_S`)."""
         from symbolic import SymbolicPlanner
 
         if self.symbolic is None or self.domain is None:
             raise UserError("the symbolic level needs a Symbolic Model and a learned domain "
                              f"({SYMBOLIC_FILE} and {DOMAIN_DIR}/ in the models directory)")
-        if (backend, time_limit) not in self.planners:
-            self.planners[backend, time_limit] = SymbolicPlanner(self.domain, backend=backend,
-                                                                 time_limit=time_limit)
-        return self.planners[backend, time_limit]
+        if backend not in self.planners:
+            self.planners[backend] = SymbolicPlanner(self.domain, backend=backend,
+                                                     time_limit=SYMBOLIC_TIME_LIMIT_S[backend])
+        return self.planners[backend]
 
     @property
     def n_max(self) -> int | None:

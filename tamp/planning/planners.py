@@ -47,13 +47,14 @@ plan_deterministic = _symbolic_only("deterministic", False)
 
 def plan_cfs(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig(),
              kinematics: KinematicFeasibility | None = None,
-             avoid: AbstractSet[tuple[bytes, tuple]] = frozenset()) -> PlanResult:
+             avoid: AbstractSet[tuple[bytes, tuple]] = frozenset(), every_action: bool = False) -> PlanResult:
     """Continuous forward search alone; with `kinematics` (and cfg.kinematics.feasibility) infeasible successors
     are pruned, as are the pairs of `avoid` (see `plan_bilevel`), and the plan is refined before it is
-    returned."""
+    returned. `every_action`: over all 9 n^2 actions, not the goal-oriented ones (a closed loop's widened search)."""
     started, clock = time.perf_counter(), Clock()
     feas = Feasibility.of(kinematics, cfg.kinematics, clock, cfg.search.resolution, avoid)
-    found = level2(models.require_dynamics(), X_init, X_goal, cfg.search, cfg.verify, clock, started, feas)
+    found = level2(models.require_dynamics(), X_init, X_goal, cfg.search, cfg.verify, clock, started, feas,
+                   every_action)
     return assemble("cfs", X_goal, clock, started, level2=found, plan=found.plan,
                     rejected=None if feas is None else feas.rejected,
                     refinements=() if feas is None else feas.refinements)

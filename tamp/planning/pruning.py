@@ -20,27 +20,18 @@ stack, where the object closest in 2-D may be its bottom: a tower of three bars 
 by detours; or a bar beside the goal's column, on whose end the block rests); with no object at that level
 (a leaning block's goal), the object closest (3-D) to the place one block height below the goal.
 
-Blockers (our extension, `blockers`, `moves_of`): these actions never move a block already at its goal, yet a
-goal may be reachable only once such a block moves out of the way (a bar resting on the end of the block to
-pick, a neighbour the lift would hit). When the kinematic check rejects the action into a goal state, the
-continuous search also offers, from that state's parent, every move of the blocks beside the picked block or its
-place (`SearchConfig.clear_blockers`), as TAMP planners turn a motion failure's obstacles into a new subgoal.
 """
 from __future__ import annotations
 
 import numpy as np
 
 from tamp.planning.verify import EPS_SUCCESS
-from tamp.planning.vocabulary import BLOCK_HEIGHT, BLOCK_SIZES, LARGE, OFFSET_STEP, OFFSETS, ON_TABLE, SMALL
+from tamp.planning.vocabulary import BLOCK_HEIGHT, OFFSET_STEP, OFFSETS, ON_TABLE
 
 _PAIRS = np.array([(g, r) for g in OFFSETS for r in OFFSETS], dtype=np.int64)  # the 9 offset pairs
 # metres: where a placed block's centre ends relative to its target object's, (r - g) * OFFSET_STEP along y
 _RELEASE_SHIFTS = np.array([(0.0, s * OFFSET_STEP) for s in range(-2, 3)])
 _LEVEL = BLOCK_HEIGHT / 2  # metres: an object whose centre is this close to a height stands at that level of a stack
-_HALF_XY = np.array([BLOCK_SIZES[SMALL][:2], BLOCK_SIZES[LARGE][:2]]) / 2  # metres, per type: half x, y extents
-# metres between two footprints within which a block is in the way of another's pick or place (the jaws' clearance
-#   beside the block, about 2 cm, and the Dynamics Model's centimetre)
-BLOCKER_GAP = 0.03
 
 
 def misplaced_objects(X: np.ndarray, X_goal: np.ndarray, misplaced: float = EPS_SUCCESS,
@@ -102,33 +93,6 @@ def _actions_onto(i: int, targets) -> np.ndarray:
     rows[:, 2] = np.repeat(np.asarray(targets, dtype=np.int64), 9)
     rows[:, 3] = np.tile(_PAIRS[:, 1], len(targets))
     return rows
-
-
-def blockers(X: np.ndarray, action, placed_xy: np.ndarray, gap: float = BLOCKER_GAP) -> np.ndarray:
-    """The objects in the way of `action` (pick, g, place, r) in state X (n, 5), the picked object predicted to end
-    at `placed_xy` (metres): those whose footprint (axis-aligned, as X holds no yaw) lies within `gap` of the picked
-    object's where it stands (a neighbour its lift may hit, a block resting on it) or where it is placed (other
-    than the object it is placed on). The goal-oriented actions never move an object at its goal, so a goal
-    reached only through such a pick or place is out of their reach until one of these moves first."""
-    i, j = int(action[0]), int(action[2])
-    half = _HALF_XY[np.argmax(X[:, 3:5], axis=1)]  # (n, 2)
-    reach = half + half[i] + gap
-
-    def near(xy) -> np.ndarray:
-        return (np.abs(X[:, :2] - np.asarray(xy)[None, :2]) < reach).all(axis=1)
-
-    at_place = near(placed_xy)
-    at_place[j] = False
-    way = near(X[i, :2]) | at_place
-    way[i] = False
-    return np.flatnonzero(way)
-
-
-def moves_of(objects, n: int) -> np.ndarray:
-    """The (9 n len(objects), 4) actions picking each of `objects` and placing it on every object, every offset
-    pair."""
-    return np.concatenate([_actions_onto(int(i), range(n)) for i in objects]) if len(objects) \
-        else np.zeros((0, 4), np.int64)
 
 
 def all_actions(n: int) -> np.ndarray:

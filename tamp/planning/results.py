@@ -74,7 +74,6 @@ class Candidate:
     probability: float
     error: float | None = None  # metres: max per-object distance of the predicted final state to the goal
     verified: bool | None = None
-    alternative_of: int | None = None  # index of the ranked symbolic plan whose symbolic states it shares
     states: tuple[int, ...] | None = field(default=None, repr=False)  # packed symbolic states (python backend)
     objects: tuple[int, ...] | None = None  # the sub-scene's objects the states describe, in the scene's
     #   indices (`level1_scene`); None: all objects
@@ -191,12 +190,11 @@ class PlanResult:
                 "predicted_error_m": self.predicted_error,
                 "candidates": [{"actions": [list(a) for a in c.actions], "count": c.count,
                                 "probability": round(c.probability, 4), "error_m": c.error,
-                                "verified": c.verified, "alternative_of": c.alternative_of}
+                                "verified": c.verified}
                                for c in self.candidates],
                 "search": None if self.search is None else {
                     k: getattr(self.search, k) for k in ("status", "reason", "expanded", "generated",
-                                                         "duplicates", "predict_calls", "time", "goals_rejected",
-                                                         "clearing")},
+                                                         "duplicates", "predict_calls", "time", "goals_rejected")},
                 "timings": {k: round(v, 6) for k, v in self.timings.items()},
                 "reasons": list(self.reasons), "symbolic": self.symbolic_stats,
                 "rejected": self.rejected_dict(), "refinements": list(self.refinements), "kept": self.kept,

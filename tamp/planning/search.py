@@ -2,8 +2,8 @@
 
 A node is (X, g, plan); f = g + w h(X) with g = number of actions, w = 1.5 and
 h(X) = sum_i ||pos_i(X) - pos_i(X_goal)||_2 in metres (the paper's formula). From `greedy_from` blocks
-on (our extension) h counts in units of `greedy_h_unit` metres, so that an action weighs less against
-the distance still to go, plus `greedy_per_misplaced` per block still off its goal in 2-D. The
+on (our extension) h counts in units of `GREEDY_H_UNIT_M` (0.5 m), so that an action weighs less against
+the distance still to go, plus `GREEDY_PER_MISPLACED` (0.3) per block still off its goal in 2-D. The
 Dynamics Model is the transition, X' = X + e_hat; all successors of one expansion are predicted in one
 batched `predict_effect` call.
 
@@ -14,12 +14,10 @@ worst object is predicted farther than `confident` (3.5 cm; both `VerifyConfig`'
 what counts as the goal for every stage) is kept as a candidate while the search
 looks on, for at most `look_on` more expansions, for one within `confident` reached with no more
 actions; then the closest candidate is returned (our extension: the Dynamics Model's plans predicted
-to end 4-5 cm from the goal failed in execution about as often as they succeeded). A goal state also
-needs a robust plan to end the search (`max_fragility`, our extension): at most 30 % of its rollouts
-with the model's inputs perturbed by 5 mm may miss the goal (`verify.fragility`); candidates are
-ranked by that fraction, then by predicted error. With an ensemble Dynamics Model (`max_doubt`, our
-extension), a goal state whose plan has a step that may miss by more than `max_doubt` (its 95 % bound,
-`verify.doubt`) is a candidate too, ranked after every goal state without such a step.
+to end 4-5 cm from the goal failed in execution about as often as they succeeded). With an ensemble
+Dynamics Model (`max_doubt`, our extension), a goal state whose plan has a step that may miss by more
+than `max_doubt` (its 95 % bound, `verify.doubt`) is a candidate too, ranked after every goal state
+without such a step.
 
 Duplicate detection:
 positions rounded to a `resolution` grid; a state is pushed again only when reached with fewer
@@ -46,20 +44,19 @@ from typing import AbstractSet, Callable, Hashable
 import numpy as np
 
 from tamp.errors import UserError
-from tamp.planning.pruning import all_actions, blockers, goal_oriented_actions, moves_of
-from tamp.planning.verify import DynamicsModel, VerifyConfig, doubt, fragility, states_pair
+from tamp.planning.pruning import all_actions, goal_oriented_actions
+from tamp.planning.verify import DynamicsModel, VerifyConfig, doubt, states_pair
 
 WEIGHT = 1.5  # w in f = g + w h (the paper's)
-FRAGILITY_NOISE_M = 0.005  # metres: the input perturbation of the fragility rollouts (`verify.fragility`)
+GREEDY_H_UNIT_M = 0.5  # metres per unit of h from greedy_from blocks on: the distance to go weighs twice
+GREEDY_PER_MISPLACED = 0.3  # units of h per block off its goal (2-D), from greedy_from blocks on
 
 
 @dataclass(frozen=True)
 class SearchConfig:
     """Level 2's own settings; what counts as the goal (eps, confident, misplaced) is `VerifyConfig`'s."""
 
-    greedy_from: int | None = 5  # from this many blocks on, h counts in units of greedy_h_unit: a deeper search
-    greedy_h_unit: float = 0.5  # metres per unit of h from greedy_from blocks on
-    greedy_per_misplaced: float = 0.3  # from greedy_from blocks on, h also counts this per block off its goal
+    greedy_from: int | None = 5  # from this many blocks on, h in half metres and per block off its goal: deeper
     resolution: float = 0.02  # metres: duplicate-detection grid (the Dynamics Model is good to about 1 cm)
     max_expansions: int = 1500  # node budget: it decides, so a result does not depend on the machine's load
     time_limit: float | None = None  # seconds of wall clock per planning call (off: budgets decide, load-free)
@@ -67,11 +64,7 @@ class SearchConfig:
     stall: int | None = None  # below greedy_from blocks, expansions without progress before the search ends
     greedy_stall: int | None = 800  # from greedy_from blocks on, the stall cut: there a plan comes soon or never
     look_on: int = 30  # expansions spent looking for a confident goal state after a less confident one
-    batched: bool = True  # one predict_effect call per expansion (false: one per action, for the benchmark)
-    prune: bool = True  # goal-oriented pruning (false: all 9 n^2 actions)
     release_targets: bool = True  # also target the closest release point and the block below a raised goal
-    clear_blockers: bool = True  # when the action into a goal state is rejected, also move the blocks in its way
-    max_fragility: float | None = 0.3  # a goal state ends the search only if at most this share of rollouts misses
     max_doubt: float | None = None  # metres: an ensemble's 95 % step bound a plan taken at once may not exceed
 
     def __post_init__(self) -> None:
@@ -82,17 +75,12 @@ class SearchConfig:
         if self.time_limit is not None and not self.time_limit > 0 or self.max_expansions < 1 or self.max_depth < 1:
             raise UserError(f"the continuous search needs a positive time limit, node limit and depth, got "
                             f"{self.time_limit} s, {self.max_expansions} nodes, depth {self.max_depth}")
-        if self.max_fragility is not None and not 0 <= self.max_fragility < 1:
-            raise UserError(f"the continuous search needs 0 <= max_fragility < 1 (or None), got {self.max_fragility}")
         if self.max_doubt is not None and not self.max_doubt > 0:
             raise UserError(f"the continuous search's max_doubt must be a positive distance (or None), got "
                             f"{self.max_doubt} m")
-        if not self.greedy_h_unit > 0 or self.greedy_from is not None and self.greedy_from < 1:
-            raise UserError(f"the continuous search needs a positive unit of h and greedy_from of at least 1 block (or "
-                            f"None), got greedy_h_unit {self.greedy_h_unit} m, greedy_from {self.greedy_from}")
-        if not self.greedy_per_misplaced >= 0:
-            raise UserError(f"the continuous search's greedy_per_misplaced must be 0 or more units of h, got "
-                            f"{self.greedy_per_misplaced}")
+        if self.greedy_from is not None and self.greedy_from < 1:
+            raise UserError(f"the continuous search's greedy_from must be at least 1 block (or None), got "
+                            f"{self.greedy_from}")
         if self.look_on < 0:
             raise UserError(f"the continuous search needs look_on >= 0, got {self.look_on}")
         if not 0 < self.resolution <= 0.05:
@@ -120,20 +108,18 @@ class SearchResult:
     expanded: int = 0
     generated: int = 0
     duplicates: int = 0
-    predict_calls: int = 0  # Dynamics Model calls for successors (the fragility rollouts not counted)
+    predict_calls: int = 0  # Dynamics Model calls for successors
     # metres: smallest max-object goal distance among generated states, a goal state once its last action passed the
     #   kinematic check (the rejected ones: `goals_rejected`)
     best_error: float = float("inf")
     time: float = 0.0  # seconds
     rejected: Counter = field(default_factory=Counter)  # reason -> successors the feasibility check pruned
     pruned: int = 0  # successors left out as (state, action) pairs known to fail refinement
-    fragility_checks: int = 0  # goal states whose plans were rolled out perturbed (`verify.fragility`)
     ungraspable: int = 0  # actions left out before their prediction: the jaws cannot hold the block there (`graspable`)
     # goal states generated whose last action the kinematic check rejected (the model's way to the goal is blocked:
     #   a lift into a neighbour, a block resting on the one picked), and the closest of them (metres)
     goals_rejected: int = 0
     rejected_goal_error: float = float("inf")
-    clearing: int = 0  # successors by moves of the blocks in those actions' way (`SearchConfig.clear_blockers`)
     # unsolved: the path to the expanded state closest to the goal (least h), if closer than X_init; a closed
     # loop may take its first action to make progress from where the world is (`closed_loop.widened_search`)
     closest_plan: list[tuple[int, int, int, int]] | None = None
@@ -182,13 +168,17 @@ class ContinuousSearch:
     -1, 0, +1; `KinematicFeasibility.graspable`) leaves out, before they are predicted, the actions whose
     grasp can never hold the picked block (a cube grasped off its centre): `feasible` would reject every
     one of them. `config.time_limit` counts from `started` (time.perf_counter() when the planning call
-    began; default: now)."""
+    began; default: now). `every_action`: all 9 n^2 actions instead of the goal-oriented ones (a closed loop's
+    widened search); `batched`: one predict_effect call per expansion (False: one per action, the benchmark's
+    baseline)."""
 
     def __init__(self, model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarray,
                  config: SearchConfig = SearchConfig(), goal: VerifyConfig = VerifyConfig(),
                  feasible: FeasibilityFn | None = None, pruned: AbstractSet[tuple[bytes, tuple]] = frozenset(),
-                 started: float | None = None, graspable: np.ndarray | None = None):
+                 started: float | None = None, graspable: np.ndarray | None = None, every_action: bool = False,
+                 batched: bool = True):
         self.t0 = time.perf_counter()
+        self.every_action, self.batched = every_action, batched
         self.model, self.config, self.tolerance, self.feasible = model, config, goal, feasible
         self.pruned, self.graspable = pruned, graspable
         self.deadline = float("inf") if config.time_limit is None else \
@@ -200,12 +190,12 @@ class ContinuousSearch:
         self.d0 = np.linalg.norm(self.X_init[:, :3] - self.goal, axis=1)
         self.out = SearchResult(SearchStatus.EXHAUSTED, None, None, "", best_error=float(self.d0.max(initial=0.0)))
         self.best_g = {self.key(self.X_init[:, :3]): 0}
-        # (doubtful, fragility, worst object's predicted error, node): the best goal state that did not end the search
-        self.candidate: tuple[bool, float, float, int] | None = None
+        # (doubtful, worst object's predicted error, node): the best goal state that did not end the search
+        self.candidate: tuple[bool, float, int] | None = None
         self.look_until = config.max_expansions  # expansions after which the candidate is returned
         greedy = config.greedy_from is not None and len(self.X_init) >= config.greedy_from
-        self.h_unit = config.greedy_h_unit if greedy else 1.0  # metres per unit of h
-        self.per_misplaced = config.greedy_per_misplaced if greedy else 0.0
+        self.h_unit = GREEDY_H_UNIT_M if greedy else 1.0  # metres per unit of h
+        self.per_misplaced = GREEDY_PER_MISPLACED if greedy else 0.0
         self.stall = config.greedy_stall if greedy else config.stall
         h0 = float(self.heuristic(self.X_init[None, :, :3], self.d0[None])[0])
         self.frontier = [(WEIGHT * h0, h0, 0)]  # (f, h, node index)
@@ -255,14 +245,6 @@ class ContinuousSearch:
             self.out.rejected[reason] += 1
         return reason is not None
 
-    def fragile(self, index: int) -> float:
-        """`verify.fragility` of the plan into goal node `index` (0 when not checked)."""
-        if self.config.max_fragility is None:
-            return 0.0
-        self.out.fragility_checks += 1
-        return fragility(self.model, self.X_init, self.X_goal, self.path(index)[0], self.tolerance.eps,
-                         FRAGILITY_NOISE_M)
-
     def doubtful(self, index: int) -> bool:
         """Whether a step of the plan into node `index` may miss by more than config.max_doubt (`verify.doubt`)."""
         if self.config.max_doubt is None:
@@ -286,7 +268,7 @@ class ContinuousSearch:
         """End at a limit: the candidate goal state if there is one."""
         if self.candidate is None:
             return self.finish(status, reason)
-        unsure, risk, error, index = self.candidate
+        unsure, error, index = self.candidate
         cfg, expanded, actions = self.config, self.out.expanded, self.nodes[index][3]
         if unsure:
             limit = (cfg.max_doubt or 0.0) * 100
@@ -294,14 +276,8 @@ class ContinuousSearch:
                                f"from the goal, a step's 95 % bound over {limit:g} cm (no goal state without one "
                                f"after {expanded} expansions)", index)
         confident = self.tolerance.confident * 100
-        if cfg.max_fragility is None:
-            return self.finish(SearchStatus.SOLVED, f"solved: {actions} actions, predicted {error * 100:.1f} cm "
-                               f"from the goal (no goal state within {confident:g} cm after {expanded} expansions)",
-                               index)
         return self.finish(SearchStatus.SOLVED, f"solved: {actions} actions, predicted {error * 100:.1f} cm "
-                           f"from the goal, {risk:.0%} of perturbed rollouts off it (no goal state within "
-                           f"{confident:g} cm with at most {cfg.max_fragility:.0%} after {expanded} expansions)",
-                           index)
+                           f"from the goal (no goal state within {confident:g} cm after {expanded} expansions)", index)
 
     def closest_words(self) -> str:
         """How close the search came, for an unsolved search's reason."""
@@ -351,7 +327,7 @@ class ContinuousSearch:
             if solved is not None:
                 return solved
         cfg, out = self.config, self.out
-        offered = "goal-oriented actions" if cfg.prune else "all actions"
+        offered = "all actions" if self.every_action else "goal-oriented actions"
         return self.stop(SearchStatus.EXHAUSTED, f"exhausted: every state reachable within {cfg.max_depth} actions "
                          f"({offered}, {cfg.resolution * 100:g} cm grid) expanded, {out.expanded} expansions; "
                          f"{self.closest_words()}")
@@ -359,8 +335,8 @@ class ContinuousSearch:
     def actions(self, P: np.ndarray) -> np.ndarray:
         """The actions from positions P: goal-oriented (or all) and, with `graspable`, only grasps that hold."""
         tol = self.tolerance
-        actions = goal_oriented_actions(self.full(P), self.X_goal, tol.misplaced, tol.eps,
-                                        self.config.release_targets) if self.config.prune else self.every
+        actions = self.every if self.every_action else goal_oriented_actions(
+            self.full(P), self.X_goal, tol.misplaced, tol.eps, self.config.release_targets)
         return self.holding(actions)
 
     def holding(self, actions: np.ndarray) -> np.ndarray:
@@ -372,28 +348,13 @@ class ContinuousSearch:
         return actions[holds]
 
     def expand(self, index: int) -> SearchResult | None:
-        """Generate node `index`'s successors; the result if one ends the search. With `config.clear_blockers`,
-        goal states whose last action the check rejected add, once, the moves of the blocks in those actions' way
-        (`pruning.blockers`): the goal-oriented actions never move a block already at its goal."""
-        P = self.nodes[index][0]
-        blocked: list[tuple[tuple, np.ndarray]] = []
-        solved = self.successors(index, self.actions(P), blocked)
-        if solved is not None or not blocked or not (self.config.prune and self.config.clear_blockers):
-            return solved
-        full = self.full(P)
-        way = sorted(set().union(*(blockers(full, action, xy).tolist() for action, xy in blocked)))
-        moves = self.holding(moves_of(way, len(P)))
-        self.out.clearing += len(moves)
-        return self.successors(index, moves, [])
-
-    def successors(self, index: int, actions: np.ndarray, blocked: list) -> SearchResult | None:
-        """Generate node `index`'s successors by `actions` in one batched prediction; the result if one ends the
-        search. Appends to `blocked` (action, its block's predicted x, y) per goal state whose action was rejected."""
+        """Generate node `index`'s successors in one batched prediction; the result if one ends the search."""
         out, cfg = self.out, self.config
         P, _, _, g = self.nodes[index]
+        actions = self.actions(P)
         if len(actions) == 0:
             return None
-        succ, calls = predict_positions(self.model, self.full(P), actions, cfg.batched)
+        succ, calls = predict_positions(self.model, self.full(P), actions, self.batched)
         out.predict_calls += calls
         out.generated += len(actions)
         dist = np.linalg.norm(succ - self.goal[None], axis=2)  # (B, n)
@@ -420,7 +381,6 @@ class ContinuousSearch:
                 nodes.pop()
                 out.goals_rejected += 1
                 out.rejected_goal_error = min(out.rejected_goal_error, float(worst[b]))
-                blocked.append((action, succ[b][action[0], :2]))
                 continue
             if not reached[b]:
                 best_g[k] = g + 1
@@ -434,30 +394,30 @@ class ContinuousSearch:
 
     def reach_goal(self, k: bytes, g: int, worst: float) -> SearchResult | None:
         """The newest node is a goal state of `g` actions, its worst block predicted `worst` metres off: it
-        ends the search when confident and robust, else it may become the candidate (not expanded)."""
+        ends the search when confident and not doubtful, else it may become the candidate (not expanded)."""
         cfg, index = self.config, len(self.nodes) - 1
-        if self.candidate is not None and g > self.nodes[self.candidate[3]][3]:
+        if self.candidate is not None and g > self.nodes[self.candidate[2]][3]:
             self.best_g[k] = g
             return None  # a goal state of a longer plan than the candidate's: more actions to go wrong
         if cfg.look_on == 0:
             return self.finish(SearchStatus.SOLVED, f"solved: {g} actions after {self.out.expanded} expansions", index)
-        risk = self.fragile(index)
         unsure = self.doubtful(index)
-        robust = risk <= (cfg.max_fragility or 0.0) and not unsure
-        if worst < self.tolerance.confident and robust:
+        if worst < self.tolerance.confident and not unsure:
             return self.finish(SearchStatus.SOLVED, f"solved: {g} actions after {self.out.expanded} expansions", index)
-        if robust:  # a fragile goal state stays open to other actions: another grasp may reach it robustly
+        if not unsure:  # a doubtful goal state stays open to other actions: another grasp may reach it surely
             self.best_g[k] = g
         if self.candidate is None:
             self.look_until = min(self.look_until, self.out.expanded + cfg.look_on)
-        if self.candidate is None or (unsure, risk, worst) < self.candidate[:3]:
-            self.candidate = (unsure, risk, worst, index)
+        if self.candidate is None or (unsure, worst) < self.candidate[:2]:
+            self.candidate = (unsure, worst, index)
         return None
 
 
 def continuous_search(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarray,
                       config: SearchConfig = SearchConfig(), goal: VerifyConfig = VerifyConfig(), *,
                       feasible: FeasibilityFn | None = None, pruned: AbstractSet[tuple[bytes, tuple]] = frozenset(),
-                      started: float | None = None, graspable: np.ndarray | None = None) -> SearchResult:
+                      started: float | None = None, graspable: np.ndarray | None = None, every_action: bool = False,
+                      batched: bool = True) -> SearchResult:
     """`ContinuousSearch(...).run()`: weighted A* from X_init to X_goal (see the class)."""
-    return ContinuousSearch(model, X_init, X_goal, config, goal, feasible, pruned, started, graspable).run()
+    return ContinuousSearch(model, X_init, X_goal, config, goal, feasible, pruned, started, graspable, every_action,
+                            batched).run()

@@ -29,15 +29,19 @@ class VerifyConfig:
     tau_verify: float = TAU_VERIFY  # metres: Level 1 takes a plan whose rollout ends this close (the paper's)
     eps: float = EPS_SUCCESS  # metres: success, every object within eps (the search's goal test, the loops, evaluation)
     confident: float = 0.035  # metres: a goal state predicted this close ends a search; a kept plan must end so
-    misplaced: float = EPS_SUCCESS  # metres: 2-D distance beyond which a block is off its goal (it needs an action)
 
     def __post_init__(self) -> None:
-        for name in ("tau_verify", "eps", "misplaced"):
+        for name in ("tau_verify", "eps"):
             if not getattr(self, name) > 0:
                 raise UserError(f"VerifyConfig.{name} must be positive, got {getattr(self, name)}")
         if not 0 < self.confident <= self.eps:
             raise UserError(f"VerifyConfig needs 0 < confident <= eps, got confident {self.confident} m, "
                             f"eps {self.eps} m")
+
+    @property
+    def misplaced(self) -> float:
+        """Metres: the 2-D distance beyond which a block is off its goal (it needs an action): eps."""
+        return self.eps
 
 
 class DynamicsModel(Protocol):
@@ -110,31 +114,6 @@ def predict_many(model: DynamicsModel, Xs: np.ndarray, actions: np.ndarray) -> n
     return out
 
 
-def fragility(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarray, actions: Sequence,
-              eps: float = EPS_SUCCESS, noise: float = 0.005, samples: int = 32, seed: int = 0) -> float:
-    """Fraction of `samples` perturbed rollouts of the plan that end with some object eps or farther
-    (metres) from its goal: before each action every block's (x, y) input to the Dynamics Model is
-    shifted by Gaussian noise of `noise` metres, and the predicted effect is added to the unperturbed
-    positions.
-
-    A plan whose prediction reaches the goal only from exactly these positions is one whose outcome
-    the model finds uncertain (a block released at an edge, on a tilted block): in the held-out rows
-    such plans ended off the goal in execution far more often than their predicted error says.
-    One batched forward pass per action; deterministic for a given `seed`.
-    """
-    X_init, X_goal = states_pair(X_init, X_goal)
-    plan = np.asarray([tuple(int(v) for v in a) for a in actions], dtype=np.int64).reshape(-1, 4)
-    rng = np.random.default_rng(seed)
-    Xs = np.repeat(X_init[None], samples, axis=0)
-    for a in plan:
-        inputs = Xs.copy()
-        inputs[:, :, :2] += rng.normal(0.0, noise, size=(samples, len(X_init), 2))
-        Xs = Xs.copy()
-        Xs[:, :, :3] += predict_many(model, inputs, np.repeat(a[None], samples, axis=0))
-    worst = np.linalg.norm(Xs[:, :, :3] - X_goal[None, :, :3], axis=2).max(axis=1)
-    return float(np.mean(worst >= eps))
-
-
 def doubt(model: DynamicsModel, trajectory: np.ndarray, actions: Sequence) -> float:
     """Metres: the largest 95 % bound of a plan's steps (`learned.ensemble`: how far the farthest-off block may
     land from the prediction), each predicted from the plan's predicted state before it (`trajectory`, k + 1
@@ -173,65 +152,6 @@ def verify_many(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarray, pl
         trajectory = np.stack([states[plan[:t]] for t in range(len(plan) + 1)])
         out.append(Verification(plan, trajectory, goal_errors(trajectory[-1], X_goal), tau))
     return out
-
-
-def refine_skeleton(model: DynamicsModel, X_init: np.ndarray, X_goal: np.ndarray,
-                    options: Sequence[Sequence], width: int, tau: float = TAU_VERIFY,
-                    also: Sequence | None = None) -> tuple[list[Verification], Verification | None]:
-    """Concrete plans for a symbolic skeleton, best first, verified: a beam search with the Dynamics Model.
-
-    `options[t]` are the actions that can take step t of the skeleton (every action that leads
-    from its symbolic state to the next: `SymbolicPlanner.skeleton_options`). Step by step, every
-    kept partial plan is extended by every option (one batched forward pass per step) and the
-    `width` best are kept: by the sum of per-object distances to the goal (the continuous
-    search's heuristic) after an intermediate step, by the largest per-object distance (the
-    verification measure) after the last; plans that predict the same state (to 1 mm) count once.
-    Which offsets and which of several symbolically alike objects a plan uses decides where the
-    blocks end, and symbols of a few bits cannot say; the Dynamics Model can. The rollouts of the
-    search are the plans' verifications (the same predictions as `verify`). `also`, a plan of the
-    skeleton's length (the ranked plan itself), is rolled out in the same forward passes and returned
-    verified beside the best plans (None without it).
-    """
-    X_init, X_goal = np.asarray(X_init, dtype=float), np.asarray(X_goal, dtype=float)
-    beam: list[tuple[tuple, list[np.ndarray]]] = [((), [X_init])]
-    extra = None if also is None else [tuple(int(v) for v in a) for a in also]
-    if extra is not None and len(extra) != len(options):
-        raise ValueError(f"`also` has {len(extra)} actions, the skeleton {len(options)} steps")
-    extra_states = [X_init]
-    for t, step in enumerate(options):
-        step = [tuple(int(v) for v in a) for a in step]
-        if not step or width < 1:
-            return [], (None if extra is None else verify_many(model, X_init, X_goal, [extra], tau)[0])
-        plans = [(plan + (a,), states) for plan, states in beam for a in step]
-        Xs = np.repeat(np.stack([states[-1] for _, states in beam]), len(step), axis=0)
-        actions = [p[-1] for p, _ in plans]
-        if extra is not None:  # the extra plan's step t rides along in the same pass
-            Xs = np.concatenate([Xs, extra_states[-1][None]])
-            actions.append(extra[t])
-        effects = predict_many(model, Xs, np.asarray(actions, dtype=np.int64))
-        Xs = Xs.copy()
-        Xs[:, :, :3] += effects
-        if extra is not None:
-            extra_states.append(Xs[-1])
-            Xs = Xs[:-1]
-        dist = np.linalg.norm(Xs[:, :, :3] - X_goal[None, :, :3], axis=-1)
-        score = dist.max(axis=1) if t == len(options) - 1 else dist.sum(axis=1)
-        beam, seen = [], set()
-        for b in np.argsort(score, kind="stable"):
-            key = np.round(Xs[b, :, :3] * 1000).astype(np.int64).tobytes()
-            if key not in seen:
-                seen.add(key)
-                beam.append((plans[b][0], plans[b][1] + [Xs[b]]))
-                if len(beam) == width:
-                    break
-    beam = [(plan, states) for plan, states in beam if plan]
-    if beam:  # every plan's per-object errors in one operation
-        finals = np.stack([states[-1][:, :3] for _, states in beam])
-        errors = np.linalg.norm(finals - X_goal[None, :, :3], axis=-1)
-    best = [Verification(plan, np.stack(states), errors[b], tau) for b, (plan, states) in enumerate(beam)]
-    if extra is None:
-        return best, None
-    return best, Verification(tuple(extra), np.stack(extra_states), goal_errors(extra_states[-1], X_goal), tau)
 
 
 def states_pair(X_init, X_goal) -> tuple[np.ndarray, np.ndarray]:

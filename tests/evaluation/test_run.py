@@ -228,15 +228,14 @@ def test_the_oracle_succeeds_iff_one_executed_plan_succeeds(serial):
         if not top["solved"]:
             assert oracle["executed_plans"] == 0 and not oracle["success"]
             continue
-        ranked = [c for c in oracle["candidates"] if c["alternative_of"] is None]
-        assert 1 <= oracle["executed_plans"] <= min(len(ranked), CONFIG.oracle_max_plans)
+        assert 1 <= oracle["executed_plans"] <= min(len(oracle["candidates"]), CONFIG.oracle_max_plans)
         if top["success"]:  # the top plan is tried first, in the same reseeded world
             assert oracle["success"] and oracle["executed_plans"] == 1 and oracle["plan"] == top["plan"]
         elif oracle["success"]:  # a later plan reached the goal: it is the one reported
             assert oracle["executed_plans"] > 1 and oracle["plan"] != top["plan"]
             tried_more += 1
         else:  # every plan was tried (up to the cap) and none reached the goal
-            assert oracle["executed_plans"] == min(len(ranked), CONFIG.oracle_max_plans)
+            assert oracle["executed_plans"] == min(len(oracle["candidates"]), CONFIG.oracle_max_plans)
             tried_more += oracle["executed_plans"] > 1
     assert tried_more >= 1  # the set exercises the oracle beyond the top plan
 
@@ -284,8 +283,10 @@ def test_the_oracle_counts_success_iff_some_plan_reaches_the_goal(monkeypatch):
 @pytest.mark.sim
 @pytest.mark.slow
 def test_an_evaluation_killed_midway_resumes_without_redoing_or_losing_rows(serial, problems_file, tmp_path):
+    """Killed and resumed on the set's first two problems: a row depends on its problem and method alone."""
     (tmp_path / "models").mkdir()
     out = tmp_path / "results"
+    problems_file = write_problems(tmp_path / "problems.jsonl", read_problems(problems_file)[:2])
     script = ("from tests.evaluation.test_run import CONFIG, stub_models\n"
               "from evaluation.run import evaluate\n"
               f"evaluate({str(tmp_path / 'models')!r}, {str(problems_file)!r}, {str(out)!r}, config=CONFIG, "
@@ -301,7 +302,7 @@ def test_an_evaluation_killed_midway_resumes_without_redoing_or_losing_rows(seri
     before = rows_path.read_bytes()
     complete = before[:before.rfind(b"\n") + 1]
     n_before = complete.count(b"\n")
-    total = 4 * len(METHODS)
+    total = 2 * len(METHODS)
     assert 2 <= n_before < total, "killed too late to test resumption"
     with open(rows_path, "ab") as f:  # a kill in the middle of writing a row leaves half a line
         f.write(complete.splitlines(keepends=True)[0][:40])
@@ -311,7 +312,7 @@ def test_an_evaluation_killed_midway_resumes_without_redoing_or_losing_rows(seri
     rows = read_rows(rows_path)
     keys = [(r["problem"], r["method"]) for r in rows]
     assert len(keys) == len(set(keys)) == total
-    assert _by_key(rows) == _by_key(read_rows(serial))
+    assert _by_key(rows) == {k: v for k, v in _by_key(read_rows(serial)).items() if k[0] in ("n2-k1-000", "n2-k2-000")}
     # running again computes nothing, also with the results and the problem set moved elsewhere
     evaluate(tmp_path / "models", problems_file, out, config=CONFIG, models=stub_models())
     assert rows_path.read_bytes() == after
@@ -326,12 +327,14 @@ def test_an_evaluation_killed_midway_resumes_without_redoing_or_losing_rows(seri
 @pytest.mark.sim
 @pytest.mark.slow
 def test_two_workers_give_the_same_rows_as_one(serial, problems_file, tmp_path):
+    """On the solvable problems (k = 1, 2, 3): each worker plans and executes problems one after another."""
     (tmp_path / "models").mkdir()
+    problems_file = write_problems(tmp_path / "problems.jsonl", read_problems(problems_file)[:3])
     rows = read_rows(evaluate(tmp_path / "models", problems_file, tmp_path / "results",
                               config=EvalConfig(planner=PlanConfig(search=SearchConfig(max_expansions=300)),
                                                 progress=False, workers=2),
                               models=stub_models()))
-    assert _by_key(rows) == _by_key(read_rows(serial))
+    assert _by_key(rows) == {k: v for k, v in _by_key(read_rows(serial)).items() if k[0] != "n2-unreachable"}
 
 
 @pytest.mark.sim
@@ -455,15 +458,14 @@ def test_reproduce_evaluates_given_models_under_the_paper_protocol_over_runs(mod
 
     monkeypatch.setitem(rep.SCALES, "quick", rep.Scale(samples=0, epochs=0, train_time_limit_s=None, ablation_runs=0,
                                                        ablation_epochs=0, per_cell=1, search_time_limit_s=5.0,
-                                                       objects=(2,), actions=(1, 2)))
+                                                       objects=(2,), actions=(1,)))
     out = tmp_path / "repro"
     args = ["reproduce", "--out", str(out), "--models", str(models_dir), "--protocol", "paper", "--runs", "2",
             "--workers", "1"]
     assert main(args) == 0
     problems = read_problems(out / "problems.jsonl")
-    assert [(p.name, p.protocol, p.run) for p in problems] == [
-        ("r0-n2-k1-000", "paper", 0), ("r0-n2-k2-000", "paper", 0), ("r1-n2-k1-000", "paper", 1),
-        ("r1-n2-k2-000", "paper", 1)]
+    assert [(p.name, p.protocol, p.run) for p in problems] == [("r0-n2-k1-000", "paper", 0),
+                                                               ("r1-n2-k1-000", "paper", 1)]
     stages = json.loads((out / "stages.json").read_text())
     assert set(stages["finished"]) == {"problems", "evaluate", "report"} and not (out / "data").exists()
     assert stages["setup"]["protocol"] == "paper" and stages["setup"]["runs"] == 2

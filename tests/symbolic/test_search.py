@@ -66,35 +66,6 @@ def test_ranked_plans_of_the_bundled_domain_are_unchanged(bundled, golden):
         assert out.statuses == entry["statuses"], entry["name"]
 
 
-def test_plans_handed_out_during_the_search_lead_the_final_ranking(bundled, golden):
-    """`on_settled` gets plans only once their place in the ranking is final: what it was given leads the
-    ranking of the whole search, in order, with the final counts; ending the search there returns just
-    those plans, the domains still without a plan STOPPED, after generating fewer states."""
-    planner = SymbolicPlanner(bundled)
-    stopped_early = 0
-    for entry in golden["problems"]:
-        problem = _problem(entry, bundled)
-        given: list = []
-
-        def keep(plans: list, given: list = given) -> bool:
-            given.extend(plans)
-            return False
-
-        full = planner.plan_probabilistic(problem, golden["n_domains"], entry["seed"], budget=golden["budget"],
-                                          on_settled=keep)
-        assert _ranked(full) == entry["ranked"] and full.settled is None, entry["name"]
-        assert [[[list(a) for a in p.actions], p.count] for p in given] == entry["ranked"][:len(given)]
-        if not given:
-            continue
-        first = planner.plan_probabilistic(problem, golden["n_domains"], entry["seed"], budget=golden["budget"],
-                                           on_settled=lambda plans: True)
-        assert first.settled == len(first.plans) >= 1 and _ranked(first) == entry["ranked"][:first.settled]
-        if first.statuses.get("stopped"):
-            stopped_early += 1
-            assert sum(first.statuses.values()) == golden["n_domains"] and first.generated < full.generated
-    assert stopped_early >= 3
-
-
 def _check_against_one_bfs_per_domain(ops, problems, n_domains: int) -> int:
     planner = SymbolicPlanner(ops)
     compared = 0
@@ -142,11 +113,7 @@ def test_lifted_successors_are_the_grounded_ones_in_ground_action_order(bundled,
                 successors = list(dict.fromkeys(s ^ f for g in gs for f in ground.flips[g]))
                 x = task.expand(s)
                 assert x.successors == successors
-                # the ground actions that lead to a successor, in ground-action order
-                for t in successors[:10]:
-                    want = [(ground.op_index[g], ground.binding[g]) for g in gs
-                            if any(s ^ f == t for f in ground.flips[g])]
-                    assert [(task.operator(g), task.binding(g)) for g in task.actions_to(s, t)] == want
+                for t in successors[:10]:  # each successor's predecessors hold the state
                     if t != s:
                         assert s in task.predecessors(t)
 

@@ -105,4 +105,5 @@ def test_tamp_evaluate_tells_the_loop_the_noise(tmp_path, flags, loop_keys, marg
     args = build_parser().parse_args(["evaluate", "--models", "pretrained", "--problems", "p.jsonl", "--out", "o",
                                       "--config", str(config), *flags])
     loop = _eval_config(args).planner.loop
-    assert loop.stop_margin == pytest.approx(margin) and loop.looks == looks and loop.remember == LoopConfig().remember
+    assert loop.stop_margin == pytest.approx(margin) and loop.looks == looks
+    assert loop.max_actions == LoopConfig().max_actions  # the rest as the defaults

@@ -52,14 +52,14 @@ def test_the_default_preset_is_the_code_defaults():
 def test_the_paper_preset_is_algorithm_1():
     """The paper's Algorithm 1 with its settings, as `bilevel_alg1` plans: every extension of ours off."""
     d = PlanConfig()
-    paper = replace(d, level1=replace(d.level1, alternatives=0, focus_from=None, wait_beyond=None),
+    paper = replace(d, level1=replace(d.level1, focus_from=None, wait_beyond=None),
                     kinematics=replace(d.kinematics, feasibility=False),
-                    search=replace(d.search, look_on=0, release_targets=False, max_fragility=None, max_doubt=None,
+                    search=replace(d.search, look_on=0, release_targets=False, max_doubt=None,
                                    stall=None, greedy_from=None, resolution=0.01))
     assert load_settings("paper").planner == paper == paper_config(d)
     # over another configuration, the paper's settings win and the rest stays
-    mine = replace(d, level1=replace(d.level1, n_domains=7, alternatives=5))
-    assert paper_config(mine).level1 == replace(paper.level1, n_domains=7)
+    mine = replace(d, level1=replace(d.level1, n_domains=7, serial=False))
+    assert paper_config(mine).level1 == replace(paper.level1, n_domains=7, serial=False)
 
 
 def test_config_show_reads_back_equal(tmp_path, capsys):
@@ -93,14 +93,14 @@ DAMAGED = [
     (b"[search]\nstal = 300\n", "unknown key search.stal; did you mean search.stall?"),
     (b"[serach]\nstall = 300\n", "unknown key serach; did you mean search?"),
     (b"[search]\nstall = \"300\"\n", "search.stall must be an integer, or false for off"),
-    (b"[search]\nmax_fragility = true\n", "search.max_fragility must be a number, or false for off"),
-    (b"[level1]\nsettle = 1\n", "level1.settle must be true or false"),
+    (b"[search]\nmax_doubt = true\n", "search.max_doubt must be a number, or false for off"),
+    (b"[level1]\nserial = 1\n", "level1.serial must be true or false"),
     (b"[level1]\nn_domains = 0\n", "the number of sampled domains, must be in 1..10,000"),
     (b"[search]\nresolution = 0.5\n", "duplicate grid must be more than 0 and at most 5 cm"),
     (b"search = 3\n", "search must be a table of keys"),
     (b"[search.stall]\nx = 1\n", "search.stall is a setting, not a table"),
     (b"[loop]\nstop_margin = 0.06\n", "stop margin (0.06 m) must be below the success tolerance"),
-    (b"[search]\ngreedy_h_unit = inf\n", "search.greedy_h_unit must be a finite number"),
+    (b"[verify]\neps = inf\n", "verify.eps must be a finite number"),
     (b"\xff\xfe[search]\n", "not UTF-8"),
     (b"[evaluation]\noracle_max_plans = 0\n", "oracle_max_plans must be a positive integer"),
     (b"[" * 5000, "not TOML"),
@@ -133,10 +133,9 @@ def test_validation_lives_with_the_fields():
                        (lambda: Level1Config(budget=0), "Level1Config.budget"),
                        (lambda: VerifyConfig(eps=0.0), "VerifyConfig.eps"),
                        (lambda: VerifyConfig(tau_verify=-1.0), "VerifyConfig.tau_verify"),
-                       (lambda: LoopConfig(on_course=0.0), "LoopConfig.on_course"),
-                       (lambda: LoopConfig(remember=0.0), "LoopConfig.remember"),
+                       (lambda: LoopConfig(stop_margin=-0.01), "LoopConfig.stop_margin"),
                        (lambda: LoopConfig(max_actions=0), "at least 1 action"),
-                       (lambda: KinematicsConfig(rest_within=0.0), "KinematicsConfig.rest_within"),
+                       (lambda: KinematicsConfig(max_refinements=0), "KinematicsConfig.max_refinements"),
                        (lambda: SearchConfig(resolution=0.0), "duplicate grid")):
         with pytest.raises(UserError, match=field):
             bad()

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from tamp.errors import UserError
+from tamp.planning import closed_loop, config, level1
 from tamp.planning.closed_loop import plan_closed_loop
 from tamp.planning.config import KinematicsConfig, Level1Config, LoopConfig, PlanConfig, VerifyConfig
 from tamp.planning.level1 import level1_scene
@@ -50,16 +51,13 @@ def test_verify_rolls_out_and_uses_the_per_object_max():
     assert good.verified and good.error < 1e-9
 
 
-PAPER = dict(alternatives=0)  # Algorithm 1's Level 1 exactly, without look-alike alternatives
-
-
 def with_level1(**fields) -> PlanConfig:
     """The default configuration with these Level-1 settings."""
     return PlanConfig(level1=Level1Config(**fields))
 
 
 def test_most_frequent_plan_fails_verification_and_the_next_verified_one_is_returned(domain):
-    result = plan("bilevel", models(domain), X_INIT, A_ON_B, with_level1(n_domains=100, seed=0, **PAPER))
+    result = plan("bilevel", models(domain), X_INIT, A_ON_B, with_level1(n_domains=100, seed=0))
     first, second = result.candidates[:2]
     # the setting: the most frequent symbolic plan is the bad one
     assert first.actions == ((0, 0, 1, 1),) and first.count > second.count
@@ -74,40 +72,6 @@ def test_most_frequent_plan_fails_verification_and_the_next_verified_one_is_retu
         base = plan(method, models(domain), X_INIT, A_ON_B, with_level1(n_domains=100, seed=0))
         assert base.plan == [(0, 0, 1, 1)] and base.candidates[0].verified is False
         assert goal_error(execute(X_INIT, base.plan), A_ON_B) > 0.05
-
-
-def test_an_alternative_through_the_same_symbols_is_verified_before_the_next_ranked_plan(domain):
-    # the most frequent plan (release at +1) fails; (0, 0, 1, 0) reaches the same symbolic states
-    # (it is an operator of the same pre-state with the same 'on' effect), so it is tried right after
-    result = plan("bilevel", models(domain), X_INIT, A_ON_B, with_level1(n_domains=100, seed=0))
-    first, alternative = result.candidates[:2]
-    assert first.actions == ((0, 0, 1, 1),) and first.verified is False and first.alternative_of is None
-    assert alternative.actions == ((0, 0, 1, 0),) and alternative.alternative_of == 0 and alternative.verified
-    assert result.level == 1 and result.plan == [(0, 0, 1, 0)]
-    assert goal_error(execute(X_INIT, result.plan), A_ON_B) < 0.05
-
-
-def test_refine_skeleton_finds_the_concrete_actions_the_symbols_cannot_tell_apart():
-    from tamp.planning.verify import refine_skeleton
-
-    stub = StubModel()
-    # one step "put 0 on 1" with every grasp and release offset: only (0, 0, 1, 0) lands centred
-    options = [[(0, g, 1, r) for g in (-1, 0, 1) for r in (-1, 0, 1)]]
-    checked, _ = refine_skeleton(stub, X_INIT, A_ON_B, options, width=4)
-    plans = [v.actions for v in checked]
-    assert plans[0] == ((0, 0, 1, 0),) and len(plans) == 4 and len(set(plans)) == 4
-    errors = [goal_error(execute(X_INIT, p), A_ON_B) for p in plans]
-    assert errors == sorted(errors) and errors[0] < 1e-9  # best first, by the verification measure
-    assert [v.error for v in checked] == pytest.approx(errors)  # the search's rollouts verify the plans
-    # two steps: first any move of 1 along its own y (shift), then 0 on 1; the goal has 1 shifted
-    goal = A_ON_B.copy()
-    goal[:, 1] += 0.075
-    options = [[(1, g, 1, r) for g in (-1, 0, 1) for r in (-1, 0, 1)], options[0]]
-    best = refine_skeleton(stub, X_INIT, goal, options, width=3)[0][0]
-    assert goal_error(execute(X_INIT, best.actions), goal) < 1e-9 and best.verified
-    assert refine_skeleton(stub, X_INIT, goal, [[], options[1]], width=3) == ([], None)  # a step nothing can take
-    _, own = refine_skeleton(stub, X_INIT, goal, options, width=3, also=[(1, 0, 1, 1), (0, 0, 1, 0)])
-    assert own is not None and own.error == pytest.approx(goal_error(execute(X_INIT, own.actions), goal))
 
 
 def test_a_verified_plan_predicted_to_miss_the_goal_waits_for_the_continuous_search(domain):
@@ -134,31 +98,6 @@ def test_a_verified_plan_predicted_to_miss_the_goal_waits_for_the_continuous_sea
         with_level1(wait_beyond=0.0)
 
 
-class _FragileStub(StubModel):
-    """The stub dynamics, but every action is predicted right only from exactly X_INIT: from inputs a
-    few millimetres off, the picked object lands 10 cm off along x (`verify.fragility` is 1)."""
-
-    def predict_effect(self, X, actions):
-        e = super().predict_effect(X, actions)
-        if 0 < np.abs(np.asarray(X)[:, :2] - X_INIT[:, :2]).max() < 0.05:
-            e[np.arange(len(e)), np.asarray(actions).reshape(-1, 4)[:, 0], 0] += 0.10
-        return e
-
-
-def test_a_fragile_verified_plan_waits_for_the_continuous_search(domain):
-    stub = _FragileStub()
-    fragile = Models(dynamics=stub, symbolic=stub, domain=domain)
-    ours = plan("bilevel", fragile, X_INIT, A_ON_B, with_level1(n_domains=100, seed=0))
-    assert any("perturbed rollouts" in r and "kept while level 2 searches" in r for r in ours.reasons)
-    # the continuous search's goal states are as fragile: it returns its best after looking on
-    assert ours.level == 2 and ours.search.fragility_checks >= 1 and "perturbed rollouts off it" in ours.search.reason
-    blind = plan("bilevel", fragile, X_INIT, A_ON_B, PlanConfig(level1=Level1Config(n_domains=100, seed=0),
-                                                                 search=SearchConfig(max_fragility=None)))
-    assert blind.level == 1 and blind.search is None
-    # the same plan with the exact stub: taken at level 1
-    assert plan("bilevel", models(domain), X_INIT, A_ON_B, with_level1(n_domains=100, seed=0)).level == 1
-
-
 def test_same_symbols_but_goal_elsewhere_falls_through_to_the_continuous_search():
     # a large bar shifted 15 cm along y: the same symbols before and after. Level 1's plan is the empty
     # one, as in the paper's Algorithm 1; it cannot verify (X_init is 15 cm from the goal), so Level 2
@@ -173,14 +112,10 @@ def test_same_symbols_but_goal_elsewhere_falls_through_to_the_continuous_search(
     assert goal_error(execute(X, ours.plan), goal) < 0.05
 
 
-def test_bilevel_alg1_never_returns_an_alternative(domain, monkeypatch):
-    def summary(result):
-        return result.plan, result.level, [(c.actions, c.verified, c.alternative_of) for c in result.candidates]
-
-    # where `bilevel` takes an alternative through the same symbols, Algorithm 1 verifies the ranked
-    # plans alone and takes the second ranked plan
+def test_bilevel_alg1_verifies_the_ranked_plans_in_order_and_searches_as_the_paper(domain, monkeypatch):
+    # the most frequent plan fails verification: Algorithm 1 takes the second ranked plan
     alg1 = plan("bilevel_alg1", models(domain), X_INIT, A_ON_B, with_level1(n_domains=100, seed=0))
-    assert alg1.method == "bilevel_alg1" and all(c.alternative_of is None for c in alg1.candidates)
+    assert alg1.method == "bilevel_alg1"
     assert alg1.level == 1 and alg1.plan == [(0, 0, 1, 0)] and alg1.candidates[1].count < alg1.candidates[0].count
     # where the symbols do not change, Algorithm 1 tries the empty plan and falls through
     shift = two_block_domain(shift=True)
@@ -197,12 +132,6 @@ def test_bilevel_alg1_never_returns_an_alternative(domain, monkeypatch):
     plan("bilevel_alg1", models(shift), X, goal, with_level1(n_domains=20))
     assert searched and all(not c.release_targets and c.look_on == 0 for c in searched)
     assert alg1_shift.level == 2  # Level 1's plan was not kept: alg1's rules are the paper's
-    monkeypatch.undo()
-    # whatever the configuration says, it is `bilevel` with both extensions off
-    for m, x, g, cfg in ((models(domain), X_INIT, A_ON_B, with_level1(n_domains=100, seed=0)),
-                         (models(shift), X, goal, with_level1(n_domains=20))):
-        paper = replace(cfg, level1=replace(cfg.level1, **PAPER))
-        assert summary(plan("bilevel_alg1", m, x, g, cfg)) == summary(plan("bilevel", m, x, g, paper))
 
 
 def test_symbolic_failure_falls_through_to_continuous_search(domain):
@@ -319,8 +248,8 @@ def test_a_kept_level1_plan_follows_its_symbolic_path(domain):
     assert not missed.solved and not missed.kept and missed.reasons[0].startswith("keep:")
 
 
-def test_a_plan_on_course_is_kept_whatever_a_swinging_rollout_of_its_rest_says(domain, capsys):
-    """The world did what the plan predicted (within LoopConfig.on_course): the rest is kept with the plan's
+def test_a_plan_on_course_is_kept_whatever_a_swinging_rollout_of_its_rest_says(domain, capsys, monkeypatch):
+    """The world did what the plan predicted (within closed_loop.ON_COURSE_M): the rest is kept with the plan's
     own prediction, although the model, given the observed state, predicts the rest far off."""
     from tamp.planning.closed_loop import keep_rest, off_course
     from tamp.planning.results import PlanResult
@@ -353,7 +282,9 @@ def test_a_plan_on_course_is_kept_whatever_a_swinging_rollout_of_its_rest_says(d
     assert np.array_equal(kept.predicted[0], observed(0.005)) and np.array_equal(kept.predicted[1], predicted[2])
     assert kept.predicted_error == pytest.approx(goal_errors(predicted[-1], goal).max())
     # without on_course: the rollout from the observed state decides, and it ends 20 cm off
-    blind = keep_rest(swinging, observed(0.005), goal, last, PlanConfig(loop=LoopConfig(on_course=None)))
+    with monkeypatch.context() as m:
+        m.setattr(closed_loop, "ON_COURSE_M", 0.0)
+        blind = keep_rest(swinging, observed(0.005), goal, last, PlanConfig())
     assert not blind.solved and blind.reasons[0].startswith("keep: the rest of the last plan is predicted 2")
     # 2.5 cm off the plan's prediction is off course: the rollout decides again
     off = keep_rest(swinging, observed(0.025), goal, last, PlanConfig())
@@ -369,8 +300,6 @@ def test_a_plan_on_course_is_kept_whatever_a_swinging_rollout_of_its_rest_says(d
     assert "kept the rest of the last plan: on course" in capsys.readouterr().out
     # a last plan without a prediction is never on course
     assert off_course(observed(0.0), PlanResult("cfs", last.plan, level=2)) == float("inf")
-    with pytest.raises(UserError, match="LoopConfig.on_course"):
-        PlanConfig(loop=LoopConfig(on_course=0.0))
 
 
 def test_unknown_method_is_a_clear_error(domain):
@@ -453,7 +382,7 @@ class StubKinematics:
 
 
 # both ranked plans verify (9 cm, 0 cm) and a verified plan is taken however close it is predicted
-LOOSE = PlanConfig(level1=Level1Config(n_domains=100, seed=0, wait_beyond=None, **PAPER),
+LOOSE = PlanConfig(level1=Level1Config(n_domains=100, seed=0, wait_beyond=None),
                    verify=VerifyConfig(tau_verify=0.1))
 
 
@@ -496,14 +425,17 @@ def test_refinement_failures_send_the_planner_to_level2_with_the_failing_pair_pr
     assert goal_error(execute(X_INIT, result.plan), A_ON_B) < 0.05
 
 
-def test_from_focus_from_blocks_on_level1_gives_up_at_its_own_budget(domain):
-    """`level1_focus_budget` bounds Level 1 from `focus_from` objects on (Level 2 then plans), and only
+def test_from_focus_from_blocks_on_level1_gives_up_at_its_own_budget(domain, monkeypatch):
+    """`FOCUS_BUDGET` bounds Level 1 from `focus_from` objects on (Level 2 then plans), and only
     there: the same budget leaves a four-block problem to Level 1, and the paper's Algorithm 1 never uses it."""
     far = np.array([[0.45, -0.3 + 0.12 * i, 0.025, 1, 0] for i in range(3)])
     stacked = far.copy()
     stacked[0, :3] = far[1, :3] + [0, 0, 0.05]
     X5, G5 = np.vstack([X_INIT, far]), np.vstack([A_ON_B, stacked])  # two blocks to stack: two actions
-    cfg = with_level1(n_domains=20, focus_from=5, focus_budget=1, serial=False)
+    default = PlanConfig()
+    assert default.level1.budget_for(6) == config.FOCUS_BUDGET < default.level1.budget_for(4)
+    monkeypatch.setattr(config, "FOCUS_BUDGET", 1)
+    cfg = with_level1(n_domains=20, focus_from=5, serial=False)
     assert cfg.level1.budget_for(4) == cfg.level1.budget and cfg.level1.budget_for(5) == 1
     five = plan("bilevel", models(domain), X5, G5, cfg)
     assert five.symbolic_stats["outcomes"] == {"timeout": 20} and not five.candidates
@@ -512,14 +444,10 @@ def test_from_focus_from_blocks_on_level1_gives_up_at_its_own_budget(domain):
     assert four.level == 1 and four.symbolic_stats["generated"] > 1
     alg1 = plan("bilevel_alg1", models(domain), X5, G5, cfg)
     assert alg1.symbolic_stats["outcomes"].get("timeout", 0) == 0 and alg1.level == 1
-    default = PlanConfig()
-    assert default.level1.budget_for(6) == default.level1.focus_budget < default.level1.budget_for(4)
-    with pytest.raises(UserError, match="Level1Config.focus_budget"):
-        with_level1(focus_budget=0)
 
 
-def test_from_focus_from_blocks_on_level1_plans_in_the_scene_of_the_objects_the_goal_involves(domain):
-    """`level1_objects`: Level 1 reads the symbols of the misplaced block and its targets only, and its plan
+def test_from_focus_from_blocks_on_level1_plans_in_the_scene_of_the_objects_the_goal_involves(domain, monkeypatch):
+    """`level1_scene`: Level 1 reads the symbols of the misplaced block and its targets only, and its plan
     names the whole scene's objects; with more objects involved than the limit, Level 2 plans at once."""
     far = np.array([[0.45, -0.3 + 0.12 * i, 0.025, 1, 0] for i in range(3)])
     stacked = far.copy()
@@ -533,17 +461,20 @@ def test_from_focus_from_blocks_on_level1_plans_in_the_scene_of_the_objects_the_
     assert [tuple(a)[::2] for a in sub.plan] == [(2, 3)] and goal_error(execute(X5, sub.plan), G5) < 0.05
     assert all(c.objects == (2, 3) for c in sub.candidates)
     assert sub.plan_scene == (2, 3) and len(sub.plan_states) == 2  # the per-step view reads the sub-scene
-    whole = plan("bilevel", models(domain), X5, G5, replace(cfg, level1=replace(cfg.level1, objects=None)))
+    with monkeypatch.context() as m:
+        m.setattr(level1, "level1_scene", lambda *args: None)  # Level 1 on the whole scene
+        whole = plan("bilevel", models(domain), X5, G5, cfg)
     assert whole.level == 1 and whole.symbolic_stats["objects"] is None and whole.plan_scene is None
     assert whole.plan_states is not None and whole.plan_states != sub.plan_states
     both = np.vstack([A_ON_B, stacked])  # two stacks to build: four objects involved
     assert level1_scene(X5, both, cfg.level1, cfg.verify) == (0, 1, 2, 3)
-    over = plan("bilevel", models(domain), X5, both, replace(cfg, level1=replace(cfg.level1, objects=3, serial=False)))
+    monkeypatch.setattr(level1, "SUBSCENE_OBJECTS", 3)
+    over = plan("bilevel", models(domain), X5, both, replace(cfg, level1=replace(cfg.level1, serial=False)))
     assert over.level == 2 and not over.candidates and "involves 4 objects" in over.reasons[0]
     assert goal_error(execute(X5, over.plan), both) < 0.05
 
 
-def test_level1_plans_one_block_at_a_time_when_the_whole_goal_gives_no_plan(domain):
+def test_level1_plans_one_block_at_a_time_when_the_whole_goal_gives_no_plan(domain, monkeypatch):
     """`level1_serial`: with more objects involved than Level 1's scenes hold, it places one misplaced
     block per stage (lowest goal first, each in its own sub-scene) and the joined plan, verified in the
     whole scene, is Level 1's; without it, or when a stage places no block, Level 2 plans."""
@@ -551,7 +482,8 @@ def test_level1_plans_one_block_at_a_time_when_the_whole_goal_gives_no_plan(doma
     stacked = far.copy()
     stacked[0, :3] = far[1, :3] + [0, 0, 0.05]
     X5, G5 = np.vstack([X_INIT, far]), np.vstack([A_ON_B, stacked])  # two stacks: four objects involved
-    cfg = with_level1(n_domains=20, focus_from=5, objects=3)
+    monkeypatch.setattr(level1, "SUBSCENE_OBJECTS", 3)
+    cfg = with_level1(n_domains=20, focus_from=5)
     serial = plan("bilevel", models(domain), X5, G5, cfg)
     assert serial.level == 1 and serial.symbolic_stats["serial"] == {"placed": [0, 2], "left": [], "error_m": 0.0}
     assert [tuple(a)[::2] for a in serial.plan] == [(0, 1), (2, 3)] and goal_error(execute(X5, serial.plan), G5) < 0.05
@@ -565,8 +497,6 @@ def test_level1_plans_one_block_at_a_time_when_the_whole_goal_gives_no_plan(doma
     assert any("one block at a time: no plan places any of blocks [2]" in r for r in stuck.reasons)
     alg1 = plan("bilevel_alg1", models(domain), X5, G5, cfg)
     assert alg1.level == 1 and alg1.symbolic_stats["objects"] is None
-    with pytest.raises(UserError, match="Level1Config.objects"):
-        with_level1(objects=1)
 
 
 def test_a_failed_keep_is_counted_in_the_round_that_plans_again(domain):
@@ -587,50 +517,3 @@ def test_a_failed_keep_is_counted_in_the_round_that_plans_again(domain):
     assert not second.kept and second.timings["keep"] > 0 and second.reasons[0].startswith("keep:")
     assert second.refinements[0]["plan"] == [list(rest)] and second.refinements[0]["failed_action"] == 0
     assert second.rejected[2]["refine_motion"] >= 1
-
-
-def test_on_course_settings():
-    from guarded import InputError
-    from guarded.config import parse_toml
-    from tamp.planning.config import overlay
-
-    def read(text: str) -> LoopConfig:
-        return overlay(PlanConfig(), parse_toml(f"[loop]\n{text}", "c.toml"), "c.toml").loop
-
-    assert read("").on_course == PlanConfig().loop.on_course == 0.015
-    assert read("on_course = 0.02").on_course == 0.02
-    assert read("on_course = false").on_course is None
-    with pytest.raises(InputError, match="LoopConfig.on_course must be positive"):
-        read("on_course = 0")
-
-
-def test_settled_plans_verified_during_the_search_give_algorithm_1s_plan_sooner(capsys):
-    """`Level1Config.settle`: Level 1 verifies the ranked plans whose place is final while the search runs
-    and ends it once one is taken. The plan is the one of the whole search and ranking (bundled regions
-    models, Drake problems); where the search ended early, the candidates are the settled plans and the
-    domains without a plan yet are counted as stopped."""
-    from tamp.app.plan_command import print_result
-    from tamp.app.problem import random_problem
-    from tamp.planning.models import load_models, pretrained_dir
-
-    models = load_models(pretrained_dir() / "regions")
-    base = PlanConfig(kinematics=KinematicsConfig(feasibility=False))
-    stopped = 0
-    for n, k, seed in ((3, 2, 1), (3, 3, 2), (4, 2, 3), (4, 1, 6)):
-        problem = random_problem(n, k, seed=seed)
-        runs = {}
-        for settle in (False, True):
-            cfg = replace(base, level1=replace(base.level1, settle=settle)).with_seed(problem.seed)
-            runs[settle] = plan("bilevel_alg1", models, problem.X_init, problem.X_goal, cfg)
-        whole, settled = runs[False], runs[True]
-        assert (settled.level, settled.plan) == (whole.level, whole.plan)
-        assert whole.symbolic_stats["settled"] is None and "stopped" not in whole.symbolic_stats["outcomes"]
-        if settled.symbolic_stats["settled"] is not None:
-            stopped += 1
-            assert settled.level == 1 and settled.symbolic_stats["outcomes"]["stopped"] > 0
-            first = [c.actions for c in whole.candidates][:len(settled.candidates)]
-            assert [c.actions for c in settled.candidates] == first
-            assert len(settled.candidates) == settled.symbolic_stats["settled"] < len(whole.candidates)
-            print_result(settled, 0.07)
-            assert "the symbolic search ended once the plan was taken" in capsys.readouterr().out
-    assert stopped >= 1

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from tamp.errors import UserError
+from tamp.planning import closed_loop, config
 from tamp.planning.closed_loop import plan_closed_loop
 from tamp.planning.config import LoopConfig, PlanConfig
 from tamp.planning.models import Models
@@ -41,14 +42,19 @@ def slipping_world(slips: int):
     return step
 
 
-def test_the_loop_goes_on_after_the_rounds_the_paper_would_give(models):
+def forget(monkeypatch) -> None:
+    """The loop trusts no miss it remembers (closed_loop.REMEMBER_ALIKE out of reach)."""
+    monkeypatch.setattr(closed_loop, "REMEMBER_ALIKE", 10**6)
+
+
+def test_the_loop_goes_on_after_the_rounds_the_paper_would_give(models, monkeypatch):
     # a goal of k = 1 action: the paper's loop has k - 1 = 0 rounds, one plan executed to its end
     paper = plan_closed_loop("bilevel", models, X_INIT, A_ON_B, slipping_world(2), rounds=0)
     assert not paper.success and paper.stop == "rounds" and len(paper.executed) == 1
     # (the two slips alike would be trusted as what the world does: `test_experience` has that; here the world
     #   does as predicted the third time)
-    forgetful = PlanConfig(loop=LoopConfig(remember=None))
-    goal = plan_closed_loop("bilevel", models, X_INIT, A_ON_B, slipping_world(2), rounds=None, cfg=forgetful)
+    forget(monkeypatch)
+    goal = plan_closed_loop("bilevel", models, X_INIT, A_ON_B, slipping_world(2), rounds=None)
     assert goal.success and goal.stop == "goal" and len(goal.executed) == 3
     assert len(goal.rounds) == 3  # one action per round: a plan that ended short is followed by a round
 
@@ -60,9 +66,10 @@ def test_the_loop_stops_at_its_action_budget(models):
     assert "4 actions sent" in out.reason
 
 
-def test_the_action_budget_does_not_steer_the_loop_before_it_is_reached(models):
+def test_the_action_budget_does_not_steer_the_loop_before_it_is_reached(models, monkeypatch):
     # --max-actions is a user's bound: a loop that reaches the goal within it acts and reasons as with any larger one
-    forgetful = LoopConfig(remember=None)
+    forget(monkeypatch)
+    forgetful = LoopConfig()
     runs = {cap: plan_closed_loop("bilevel", models, X_INIT, A_ON_B, slipping_world(2), rounds=None,
                                   cfg=PlanConfig(loop=replace(forgetful, max_actions=cap))) for cap in (3, 4, 30)}
     assert all(r.success and r.stop == "goal" for r in runs.values())
@@ -73,20 +80,20 @@ def test_the_action_budget_does_not_steer_the_loop_before_it_is_reached(models):
     assert short.stop == "budget" and short.executed == runs[30].executed[:2]
 
 
-def test_the_loop_stops_when_its_rounds_have_spent_its_search_budget(models):
+def test_the_loop_stops_when_its_rounds_have_spent_its_search_budget(models, monkeypatch):
     cfg = PlanConfig(loop=LoopConfig(search_budget=3))
     out = plan_closed_loop("cfs", models, X_INIT, A_ON_B, slipping_world(100), rounds=None, cfg=cfg)
     spent = sum(r.search.expanded for r in out.rounds)
     assert out.stop == "budget" and "search budget" in out.reason and spent >= 3 and len(out.executed) < 12
     assert all(r.search.expanded <= 3 for r in out.rounds)  # no round searches past what the budget had left
-    # from the search's greedy_from blocks on, greedy_search_budget is the budget instead
+    # from the search's greedy_from blocks on, GREEDY_SEARCH_BUDGET is the budget instead (if smaller)
+    assert LoopConfig().search_budget_for(5, 5) == config.GREEDY_SEARCH_BUDGET < LoopConfig().search_budget
+    monkeypatch.setattr(config, "GREEDY_SEARCH_BUDGET", 3)
     greedy = PlanConfig(search=replace(PlanConfig().search, greedy_from=len(X_INIT)),
-                        loop=LoopConfig(search_budget=1000, greedy_search_budget=3))
+                        loop=LoopConfig(search_budget=1000))
     out = plan_closed_loop("cfs", models, X_INIT, A_ON_B, slipping_world(100), rounds=None, cfg=greedy)
     assert out.stop == "budget" and all(r.search.expanded <= 3 for r in out.rounds)
-    assert LoopConfig(greedy_search_budget=3).search_budget_for(len(X_INIT), len(X_INIT) + 1) == 3000
-    with pytest.raises(UserError, match="greedy_search_budget"):
-        LoopConfig(greedy_search_budget=0)
+    assert LoopConfig().search_budget_for(len(X_INIT), len(X_INIT) + 1) == 3000
 
 
 def test_a_round_without_a_plan_widens_the_search_to_every_action(models):

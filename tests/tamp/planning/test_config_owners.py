@@ -19,7 +19,7 @@ def test_no_setting_is_defined_in_two_parts_of_the_configuration():
     for part in fields(PlanConfig):
         for field in fields(getattr(PlanConfig(), part.name)):
             owners.setdefault(field.name, []).append(part.name)
-    assert owners["eps"] == ["verify"] and owners["confident"] == ["verify"] and owners["misplaced"] == ["verify"]
+    assert owners["eps"] == ["verify"] and owners["confident"] == ["verify"]
     assert {name for name, parts in owners.items() if len(parts) > 1} == SHARED_ON_PURPOSE
 
 

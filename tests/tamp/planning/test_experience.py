@@ -3,8 +3,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from tamp.planning import closed_loop
 from tamp.planning.closed_loop import plan_closed_loop
-from tamp.planning.config import LoopConfig, PlanConfig
 from tamp.planning.experience import Experience, Experienced, remembers
 from tamp.planning.models import Models
 from tests.planning_stubs import StubModel, world_step
@@ -115,10 +115,11 @@ def test_a_plan_on_course_is_no_longer_kept_by_its_own_prediction_through_a_reme
     assert not remembers(stub, trajectory, [A_ON_MIDDLE])  # a model without experience
 
 
-def test_the_loop_does_not_try_a_missed_action_again_while_another_way_reaches_the_goal():
+def test_the_loop_does_not_try_a_missed_action_again_while_another_way_reaches_the_goal(monkeypatch):
     models = Models(dynamics=StubModel())
-    forgetful = plan_closed_loop("cfs", models, X0, GOAL, sliding_world(), rounds=None, kinematics=AcceptAll(),
-                                 cfg=PlanConfig(loop=LoopConfig(remember=None)))
+    with monkeypatch.context() as m:
+        m.setattr(closed_loop, "REMEMBER_ALIKE", 10**6)  # no miss trusted
+        forgetful = plan_closed_loop("cfs", models, X0, GOAL, sliding_world(), rounds=None, kinematics=AcceptAll())
     # without experience: back on the middle from each new place of A, until the actions run out
     assert not forgetful.success and [tuple(a) for a in forgetful.executed].count(A_ON_MIDDLE) >= 4
     out = plan_closed_loop("cfs", models, X0, GOAL, sliding_world(), rounds=None, kinematics=AcceptAll())

@@ -1,14 +1,13 @@
 """Continuous forward search: pruning, batched vs unbatched successor prediction, limits."""
 from __future__ import annotations
 
-from dataclasses import replace
-
 import numpy as np
 import pytest
 
 from tamp.errors import UserError
+from tamp.planning import search
 from tamp.planning.config import PlanConfig
-from tamp.planning.pruning import blockers, goal_oriented_actions
+from tamp.planning.pruning import goal_oriented_actions
 from tamp.planning.search import SearchConfig, continuous_search
 from tamp.planning.verify import VerifyConfig, goal_error, rollout
 from tests.planning_stubs import StubModel, world_step
@@ -92,8 +91,7 @@ def test_search_finds_plans_that_reach_the_goal(plan):
 def test_batched_and_unbatched_prediction_give_the_same_search():
     G = goal_after([(2, 0, 0, 1), (1, 0, 2, 0), (0, 1, 0, -1)])
     stubs = {True: StubModel(), False: StubModel()}
-    # (the fragility test's rollouts are the same either way, and not successor predictions)
-    out = {b: continuous_search(stubs[b], X, G, SearchConfig(batched=b, max_fragility=None)) for b in (True, False)}
+    out = {b: continuous_search(stubs[b], X, G, batched=b) for b in (True, False)}
     assert out[True].solved
     for f in ("plan", "status", "expanded", "generated", "duplicates"):
         assert getattr(out[True], f) == getattr(out[False], f), f
@@ -111,7 +109,7 @@ def test_batched_equals_unbatched_with_a_real_effect_model():
     model = EffectModel(ModelConfig(n_max=4)).eval()
     G = rollout(model, X, [(1, 0, 2, 0), (0, 0, 0, 1)])[-1]  # reachable under this model
     cfg = SearchConfig(max_expansions=200)
-    a, b = (continuous_search(model, X, G, replace(cfg, batched=m)) for m in (True, False))
+    a, b = (continuous_search(model, X, G, cfg, batched=m) for m in (True, False))
     assert a.solved and a.plan == b.plan and a.expanded == b.expanded and a.generated == b.generated
     assert np.allclose(a.trajectory, b.trajectory, atol=1e-6)
 
@@ -195,45 +193,6 @@ def test_goal_states_reached_only_by_rejected_actions_are_counted_and_said():
     assert free.solved and free.goals_rejected == 0
 
 
-def test_the_blockers_of_an_action_are_the_neighbours_of_its_pick_and_of_its_place():
-    # bar 0; cube 1 with cube 2 touching it (5 mm apart along y)
-    Y = np.array([[0.55, -0.15, 0.025, 0, 1], [0.7, 0.1, 0.025, 1, 0], [0.7, 0.155, 0.025, 1, 0]])
-    assert blockers(Y, (1, 0, 1, -1), np.array([0.7, 0.025])).tolist() == [2]  # beside the pick
-    assert blockers(Y, (2, 0, 2, 1), np.array([0.7, 0.23])).tolist() == [1]
-    free = Y.copy()
-    free[2, :2] = (0.9, 0.4)
-    assert blockers(free, (1, 0, 1, -1), np.array([0.7, 0.025])).tolist() == []
-    # a bar's length counts: a cube 17 cm along y from the bar's centre is beside its end, 19 cm is not
-    assert blockers(free, (2, 0, 0, 0), np.array([0.55, 0.02])).tolist() == []  # placed on the bar: not in the way
-    assert blockers(free, (2, 0, 2, 0), np.array([0.55, 0.02])).tolist() == [0]
-    assert blockers(free, (2, 0, 2, 0), np.array([0.55, 0.04])).tolist() == []
-
-
-def test_a_block_in_the_way_at_its_own_goal_moves_first():
-    """Cube 1's goal is 7.5 cm along -y; cube 2 touches it along x and stands at its goal. The goal-oriented
-    actions move only cube 1, and the kinematic check rejects every move of it while cube 2 is beside it (as it
-    would with a bar resting on its end). The search moves cube 2 out of the way, then cube 1, then cube 2 back."""
-    Y = np.array([[0.55, -0.15, 0.025, 0, 1], [0.7, 0.1, 0.025, 1, 0], [0.755, 0.1, 0.025, 1, 0]])
-    G = world_step(Y, (1, 0, 1, -1))
-
-    def moves(X_pred, action, i):
-        return np.abs(world_step(X_pred, action)[i, :2] - X_pred[i, :2]).max() > 1e-6
-
-    def feasible(X_pred, action):  # cube 1's lift hits cube 2 while they are within 1 cm
-        gap = np.abs(X_pred[2, :2] - X_pred[1, :2]) - 0.05
-        return "collision" if moves(X_pred, action, 1) and (gap < 0.01).all() else None
-
-    config = SearchConfig(max_expansions=200)
-    stuck = continuous_search(StubModel(), Y, G, replace(config, clear_blockers=False), feasible=feasible)
-    assert not stuck.solved and stuck.goals_rejected >= 1 and stuck.clearing == 0
-    out = continuous_search(StubModel(), Y, G, config, feasible=feasible)
-    assert out.solved and out.clearing > 0
-    states = rollout(StubModel(), Y, out.plan)
-    assert moves(Y, out.plan[0], 2) and not moves(Y, out.plan[0], 1)  # cube 2 out of the way first
-    assert goal_error(states[-1], G) < out_eps()
-    assert all(feasible(X_t, a) is None for X_t, a in zip(states, out.plan))
-
-
 def out_eps() -> float:
     return VerifyConfig().eps
 
@@ -284,68 +243,6 @@ def test_the_papers_pruning_rule_is_a_setting():
     assert not overlay(PlanConfig(), parse_toml("[search]\nrelease_targets = false", "c"), "c").search.release_targets
 
 
-class FragileModel(StubModel):
-    """The stub dynamics, but `fragile` actions taken in the scene X are predicted right only from
-    exactly X: from inputs a few millimetres off, the picked object lands 10 cm off along x (a block
-    released at an edge, say: the outcome flips with the input)."""
-
-    def __init__(self, fragile):
-        super().__init__()
-        self.fragile = {tuple(a) for a in fragile}
-
-    def predict_effect(self, X_, actions):
-        e = super().predict_effect(X_, actions)
-        shift = np.abs(np.asarray(X_)[:, :2] - X[:, :2]).max()
-        if 0 < shift < 0.05:
-            for b, a in enumerate(np.asarray(actions).reshape(-1, 4).tolist()):
-                if tuple(a) in self.fragile:
-                    e[b, 0, 0] += 0.10
-        return e
-
-
-def test_fragility_counts_the_perturbed_rollouts_that_miss_the_goal():
-    from tamp.planning.verify import fragility
-
-    G = goal_after([(0, 0, 0, 1)])
-    model = FragileModel([(0, -1, 0, 0)])
-    assert goal_error(rollout(model, X, [(0, -1, 0, 0)])[-1], G) < 1e-9  # its prediction is exact
-    assert fragility(model, X, G, [(0, -1, 0, 0)]) == 1.0
-    assert fragility(model, X, G, [(0, 0, 0, 1)]) == 0.0
-    # noise far below the goal tolerance does not move a robust plan off it; the same seed, the same value
-    assert fragility(StubModel(), X, G, [(0, 0, 0, 1)], noise=0.001) == 0.0
-    assert fragility(model, X, G, [(0, -1, 0, 0)], seed=3) == fragility(model, X, G, [(0, -1, 0, 0)], seed=3)
-
-
-def test_a_fragile_goal_state_waits_for_a_robust_one():
-    G = goal_after([(0, 0, 0, 1)])
-    model = FragileModel([(0, -1, 0, 0)])  # generated first and exact, but fragile
-    blind = continuous_search(model, X, G, SearchConfig(max_fragility=None))
-    assert blind.plan == [(0, -1, 0, 0)] and blind.fragility_checks == 0
-    robust = continuous_search(model, X, G)
-    assert robust.solved and robust.plan == [(0, 0, 0, 1)] and robust.fragility_checks == 2
-    # when every goal state is fragile, the search still returns the best of them after looking on
-    only = continuous_search(FragileModel([(0, g, j, r) for g in (-1, 0, 1) for j in range(3) for r in (-1, 0, 1)]),
-                             X, G, SearchConfig(max_depth=1))
-    assert only.solved and len(only.plan) == 1 and "perturbed rollouts off it" in only.reason
-    with pytest.raises(ValueError, match="max_fragility"):
-        SearchConfig(max_fragility=1.0)
-
-
-def test_fragility_settings():
-    from guarded import InputError
-    from guarded.config import parse_toml
-    from tamp.planning.config import overlay
-
-    def read(text: str) -> SearchConfig:
-        return overlay(PlanConfig(), parse_toml(f"[search]\n{text}", "c.toml"), "c.toml").search
-
-    assert read("").max_fragility == SearchConfig().max_fragility == 0.3
-    assert read("max_fragility = 0.1").max_fragility == 0.1
-    assert read("max_fragility = false").max_fragility is None
-    with pytest.raises(InputError, match="c.toml: the continuous search needs 0 <= max_fragility < 1"):
-        read("max_fragility = 1")
-
-
 class DoubtfulModel(StubModel):
     """The stub dynamics as an ensemble that doubts `doubtful` actions: there its predicted variance is
     (5 cm)^2 per axis (`learned.ensemble.distribution_of` reads `predict_gaussian`)."""
@@ -372,13 +269,13 @@ def test_a_goal_state_the_model_doubts_waits_for_one_it_does_not():
     states = rollout(model, X, [(0, -1, 0, 0)])
     assert doubt(model, states, [(0, -1, 0, 0)]) > 0.1 and doubt(model, states, [(0, 0, 0, 1)]) == 0.0
     assert doubt(StubModel(), states, [(0, -1, 0, 0)]) == 0.0  # a model without spread doubts nothing
-    blind = continuous_search(model, X, G, SearchConfig(max_fragility=None))
+    blind = continuous_search(model, X, G, SearchConfig())
     assert blind.plan == [(0, -1, 0, 0)]
-    sure = continuous_search(model, X, G, SearchConfig(max_fragility=None, max_doubt=0.03))
+    sure = continuous_search(model, X, G, SearchConfig(max_doubt=0.03))
     assert sure.solved and sure.plan == [(0, 0, 0, 1)]
     # when the model doubts every goal state, the search still returns the best of them after looking on
     every = DoubtfulModel([(0, g, j, r) for g in (-1, 0, 1) for j in range(3) for r in (-1, 0, 1)])
-    only = continuous_search(every, X, G, SearchConfig(max_depth=1, max_fragility=None, max_doubt=0.03))
+    only = continuous_search(every, X, G, SearchConfig(max_depth=1, max_doubt=0.03))
     assert only.solved and len(only.plan) == 1 and "95 % bound" in only.reason
     with pytest.raises(ValueError, match="max_doubt"):
         SearchConfig(max_doubt=0.0)
@@ -404,27 +301,23 @@ def test_actions_whose_grasp_cannot_hold_the_block_are_never_predicted():
                              graspable=np.zeros((3, 3), dtype=bool)).plan is None
 
 
-def test_from_greedy_from_blocks_on_h_counts_in_its_own_unit():
+def test_from_greedy_from_blocks_on_h_counts_in_its_own_unit(monkeypatch):
     """With many blocks a search in the paper's units (h in metres) is nearly breadth-first: counting h in
-    decimetres from `greedy_from` blocks on reaches a deep goal after fewer expansions; below it, nothing changes."""
+    half metres from `greedy_from` blocks on reaches a deep goal after fewer expansions; below it, nothing changes."""
     X5 = np.array([[0.5, -0.2, 0.025, 1, 0], [0.6, 0.1, 0.025, 1, 0], [0.7, -0.1, 0.025, 1, 0],
                    [0.8, 0.2, 0.025, 1, 0], [0.55, 0.3, 0.025, 0, 1]])
     G = X5
     for action in [(0, 0, 1, 0), (2, 0, 3, 0), (4, 0, 4, 1)]:
         G = world_step(G, action)
-    paper = continuous_search(StubModel(), X5, G, SearchConfig(max_fragility=None, greedy_from=None))
-    below = continuous_search(StubModel(), X5, G, SearchConfig(max_fragility=None, greedy_from=6, greedy_h_unit=0.1))
-    greedy = continuous_search(StubModel(), X5, G, SearchConfig(max_fragility=None, greedy_from=5, greedy_h_unit=0.1))
+    paper = continuous_search(StubModel(), X5, G, SearchConfig(greedy_from=None))
+    below = continuous_search(StubModel(), X5, G, SearchConfig(greedy_from=6))
+    greedy = continuous_search(StubModel(), X5, G, SearchConfig(greedy_from=5))
     assert paper.solved and greedy.solved
     assert (below.plan, below.expanded) == (paper.plan, paper.expanded)
     assert greedy.expanded < paper.expanded
     # counting the blocks still off their goal too: at most as many expansions as the distance alone
-    counted = continuous_search(StubModel(), X5, G, SearchConfig(max_fragility=None, greedy_from=5, greedy_h_unit=0.1,
-                                                                  greedy_per_misplaced=1.0))
-    alone = continuous_search(StubModel(), X5, G, SearchConfig(max_fragility=None, greedy_from=5, greedy_h_unit=0.1,
-                                                                greedy_per_misplaced=0.0))
-    assert counted.solved and counted.expanded <= alone.expanded
-    with pytest.raises(UserError, match="unit of h"):
+    monkeypatch.setattr(search, "GREEDY_PER_MISPLACED", 0.0)
+    alone = continuous_search(StubModel(), X5, G, SearchConfig(greedy_from=5))
+    assert greedy.expanded <= alone.expanded
+    with pytest.raises(UserError, match="greedy_from"):
         SearchConfig(greedy_from=0)
-    with pytest.raises(UserError, match="greedy_per_misplaced"):
-        SearchConfig(greedy_per_misplaced=-1.0)

@@ -16,29 +16,33 @@ from tests.paths import DATA
 
 pytestmark = [pytest.mark.sim, pytest.mark.slow]
 
-# four problems of a strict set of seed 4242 (tests/data/tail-problems.jsonl): Level-2 plans found after 215-340
-# expansions, and a search that finds none (the stall cut ends it after about 1,000 expansions instead of 1,500), on
-# the 1 cm duplicate grid they were chosen with
-FINE = replace(PlanConfig(), search=replace(PlanConfig().search, resolution=0.01))
+# four problems of a strict set of seed 4242 (tests/data/tail-problems.jsonl): Level-2 plans found after 86-273
+# expansions, and a search that finds none within 800 (a stall cut of 300 ends it after about 360), on the 1 cm
+# duplicate grid they were chosen with
+FINE = replace(PlanConfig(), search=replace(PlanConfig().search, resolution=0.01, max_expansions=800))
 PROBLEMS = DATA / "tail-problems.jsonl"
 NAMES = ("n4-k4-000", "n3-k5-001", "n2-k5-008", "n2-k3-005")
+
+
+def planned(models, problem, cfg: PlanConfig, checker: FeasibilityChecker):
+    """`bilevel`'s plan for `problem` under `cfg`, with the kinematic check `checker` from its initial scene."""
+    checker.reset(problem.X_init)
+    return plan("bilevel", models, problem.X_init, problem.X_goal, cfg.with_seed(problem.seed), kinematics=checker)
 
 
 def test_the_search_finds_the_plans_it_found_without_its_shortcuts():
     problems = {p.name: p for p in read_problem_set(PROBLEMS)}
     models = load_models(pretrained_dir() / "paper")
     new = FeasibilityChecker()
-    stalling = replace(FINE, search=replace(FINE.search, stall=700))
-    setups = ((FINE, FeasibilityChecker(world=new.world, shortcuts=False)), (FINE, new), (stalling, new))
+    stalling = replace(FINE, search=replace(FINE.search, stall=300))
+    old = FeasibilityChecker(world=new.world, shortcuts=False)
     left_out = 0
     for name in NAMES:
         problem = problems[name]
-        results = []
-        for cfg, checker in setups:
-            checker.reset(problem.X_init)
-            results.append(plan("bilevel", models, problem.X_init, problem.X_goal, cfg.with_seed(problem.seed),
-                                kinematics=checker))
-        before, after, stalled = results
+        before, stalled = planned(models, problem, FINE, old), planned(models, problem, stalling, new)
+        # a search the stall cut did not end is the one without the cut (the cut only ends a search)
+        cut = stalled.search is not None and stalled.search.status == "stalled"
+        after = planned(models, problem, FINE, new) if cut else stalled
         assert before.plan == after.plan == stalled.plan, name
         assert before.level == after.level == (None if name == "n2-k3-005" else 2), name
         # grasps that cannot hold are never generated, so a state one of them reached first may be kept
@@ -61,18 +65,20 @@ GREEDY_PROBLEMS = DATA / "tail-problems-5-6.jsonl"
 def test_from_5_blocks_on_the_greedy_stall_cut_keeps_the_plans_and_ends_the_search_that_finds_none():
     models = load_models(pretrained_dir() / "random")
     checker = FeasibilityChecker()
-    to_the_budget = replace(PlanConfig(), search=replace(PlanConfig().search, greedy_stall=None))
+    cut = PlanConfig()
+    to_the_budget = replace(cut, search=replace(cut.search, greedy_stall=None))
+    uncut = 0
     for problem in read_problem_set(GREEDY_PROBLEMS):
-        results = []
-        for cfg in (to_the_budget, PlanConfig()):
-            checker.reset(problem.X_init)
-            results.append(plan("bilevel", models, problem.X_init, problem.X_goal, cfg.with_seed(problem.seed),
-                                kinematics=checker))
-        before, after = results
+        after = planned(models, problem, cut, checker)
+        if after.solved and after.search is not None and after.search.status == "solved":
+            uncut += 1  # the cut did not end it: the search without the cut is this one, expansion for expansion
+            continue
+        before = planned(models, problem, to_the_budget, checker)
         assert before.plan == after.plan, problem.name
         if before.solved:
             assert before.search.expanded == after.search.expanded, problem.name
         else:
             assert before.search.status == "node_limit" and before.search.expanded == 1500, problem.name
             assert after.search.status == "stalled" and after.search.expanded < 1500, problem.name
+    assert uncut == 3  # the three plans, found as without the cut
     assert PlanConfig().search.greedy_stall == 800  # the cut these problems were chosen against
