@@ -18,6 +18,7 @@ Backends:
 
 from __future__ import annotations
 
+import functools
 import os
 import time
 from collections import Counter
@@ -63,10 +64,14 @@ class SymbolicPlanner:
         self.ops, self.backend, self.search, self.time_limit = ops, backend, search, time_limit
         self.scope, self.budget = scope, budget  # states generated per search (python backend)
         self.workers = workers or os.cpu_count() or 1
-        self.writer = DomainWriter(ops)
         self.sampler = EffectSampler(ops)  # cumulative effect tables, once per operator set
         self._tasks: dict[int, LiftedTask] = {}
         self._restricted: dict[tuple[int, tuple[int, ...]], LiftedTask] = {}  # (n, movable) -> task
+
+    @functools.cached_property
+    def writer(self) -> DomainWriter:
+        """The domain's PDDL text, rendered when a Fast Downward backend first asks (the in-process search never)."""
+        return DomainWriter(self.ops)
 
     # ---- helpers -------------------------------------------------------------------------------
     def task(self, n: int, movable: tuple[int, ...] | None = None) -> LiftedTask:
