@@ -10,6 +10,7 @@ import math
 import os
 import shutil
 import subprocess
+from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
@@ -35,21 +36,32 @@ def tree(root: Path) -> list[tuple[str, bytes | None]]:
 @pytest.fixture
 def full_disk(tmp_path):
     """A folder on a tmpfs of 256 kB filled to the last byte (ENOSPC on the next write)."""
-    mount = tmp_path / "full"
+    with tmpfs(tmp_path / "full") as mount:
+        fill(mount)
+        yield mount
+
+
+@contextmanager
+def tmpfs(mount: Path, options: str = "size=256k"):
+    """A tmpfs mounted at the new folder `mount` for the block (the test is skipped without root)."""
     mount.mkdir()
-    if os.geteuid() != 0 or subprocess.run(["mount", "-t", "tmpfs", "-o", "size=256k", "tmpfs", str(mount)],
+    if os.geteuid() != 0 or subprocess.run(["mount", "-t", "tmpfs", "-o", options, "tmpfs", str(mount)],
                                            capture_output=True).returncode != 0:
         pytest.skip("mounting a tmpfs needs root")
     try:
-        with open(mount / ".filler", "wb", buffering=0) as f:
-            try:
-                while f.write(b"\0" * 4096):
-                    pass
-            except OSError as error:
-                assert error.errno == errno.ENOSPC
         yield mount
     finally:
         subprocess.run(["umount", "-l", str(mount)], check=False)
+
+
+def fill(mount: Path) -> None:
+    """Fill the file system of `mount` to the last byte (ENOSPC on the next write)."""
+    with open(mount / ".filler", "wb", buffering=0) as f:
+        try:
+            while f.write(b"\0" * 4096):
+                pass
+        except OSError as error:
+            assert error.errno == errno.ENOSPC
 
 
 @pytest.fixture(scope="module")
@@ -194,17 +206,10 @@ def test_an_unmakeable_or_read_only_path_is_one_line_naming_it(tmp_path):
 
 
 def test_a_read_only_file_system_is_one_line_naming_the_path(tmp_path):
-    mount = tmp_path / "ro"
-    mount.mkdir()
-    if os.geteuid() != 0 or subprocess.run(["mount", "-t", "tmpfs", "-o", "size=64k,ro", "tmpfs", str(mount)],
-                                           capture_output=True).returncode != 0:
-        pytest.skip("mounting a tmpfs needs root")
-    try:
+    with tmpfs(tmp_path / "ro", "size=64k,ro") as mount:
         with pytest.raises(OutputError, match=rf"cannot write {mount}/new/v\.json: Read-only file system"):
             atomic_write_json(mount / "new" / "v.json", 1)
         assert main(["pddl", "--out", str(mount / "pddl")]) == 2
-    finally:
-        subprocess.run(["umount", "-l", str(mount)], check=False)
 
 
 @CASES

@@ -76,24 +76,10 @@ def test_full_disk_collect(capsys, full_disk):
 
 def test_full_disk_report(capsys, tmp_path, results):
     """The report writes into the results directory: fill a copy of it on a small disk."""
-    import subprocess
-
-    mount = tmp_path / "disk"
-    mount.mkdir()
-    if subprocess.run(["mount", "-t", "tmpfs", "-o", "size=256k", "tmpfs", str(mount)],
-                      capture_output=True).returncode != 0:
-        pytest.skip("mounting a tmpfs needs root")
-    try:
+    with shared.tmpfs(tmp_path / "disk") as mount:
         shutil.copytree(results, mount / "ev")
-        with open(mount / ".filler", "wb", buffering=0) as f:
-            try:
-                while f.write(b"\0" * 4096):
-                    pass
-            except OSError:
-                pass
+        shared.fill(mount)
         refused_on_full_disk(capsys, mount, ["report", str(mount / "ev")])
-    finally:
-        subprocess.run(["umount", "-l", str(mount)], check=False)
 
 
 @pytest.mark.slow
