@@ -10,6 +10,7 @@ import math
 import os
 import shutil
 import subprocess
+from collections.abc import Callable
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -159,6 +160,20 @@ def failing_open(room: int):
     return fake
 
 
+def written_on_a_small_disk(monkeypatch, room: int, write: Callable[[], object], path: Path) -> bool:
+    """Run `write` with every file it opens for writing full after `room` bytes (ENOSPC): whether it wrote. A
+    write that did not fit is one error naming `path`."""
+    monkeypatch.setattr("builtins.open", failing_open(room))
+    try:
+        write()
+        return True
+    except OutputError as error:
+        assert str(error) == f"cannot write {path}: No space left on device"
+        return False
+    finally:
+        monkeypatch.undo()
+
+
 JSON = st.recursive(st.none() | st.booleans() | st.integers(-2**53, 2**53) | st.text(max_size=20)
                     | st.floats(allow_nan=False, allow_infinity=False, width=64),
                     lambda inner: st.lists(inner, max_size=5) | st.dictionaries(st.text(max_size=8), inner, max_size=5),
@@ -185,15 +200,7 @@ def test_an_interrupted_write_leaves_the_old_file_and_nothing_else(tmp_path, mon
         with open(tmp, "wb") as f:
             f.write(text.encode())
 
-    monkeypatch.setattr("builtins.open", failing_open(room))
-    try:
-        atomic_write(path, write)
-        wrote = True
-    except OutputError as error:
-        assert str(error) == f"cannot write {path}: No space left on device"
-        wrote = False
-    finally:
-        monkeypatch.undo()
+    wrote = written_on_a_small_disk(monkeypatch, room, lambda: atomic_write(path, write), path)
     assert sorted(p.name for p in folder.iterdir()) == ["v.json"]
     assert read_json(path, "file") == (new if wrote else old)
 

@@ -11,10 +11,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from evaluation.problems import write_problems
-from guarded import OutputError
 from tamp.app.problem import Problem, load_problem, read_problem_set, save_problem
 from tests.paths import ROOT
-from tests.test_no_data_loss import failing_open
+from tests.test_no_data_loss import written_on_a_small_disk
 
 HELD_OUT = read_problem_set(ROOT / "results" / "problems" / "strict-n2-4-s781.jsonl.gz")  # valid scenes, n = 2-4
 CASES = settings(max_examples=int(os.environ.get("TAMP_FUZZ_EXAMPLES", "60")), deadline=None, derandomize=True,
@@ -54,15 +53,7 @@ def test_a_problem_write_cut_short_leaves_the_old_file(tmp_path, monkeypatch, pr
     folder.mkdir(exist_ok=True)
     path = folder / "p.json"
     save_problem(path, problem)
-    monkeypatch.setattr("builtins.open", failing_open(room))
-    try:
-        save_problem(path, new)
-        wrote = True
-    except OutputError as error:
-        assert str(error) == f"cannot write {path}: No space left on device"
-        wrote = False
-    finally:
-        monkeypatch.undo()
+    wrote = written_on_a_small_disk(monkeypatch, room, lambda: save_problem(path, new), path)
     assert sorted(p.name for p in folder.iterdir()) == ["p.json"]
     assert same(load_problem(path), new if wrote else problem)
 
@@ -103,15 +94,7 @@ def test_a_trajectory_reads_back_equal_and_a_write_cut_short_leaves_the_old_file
     path = folder / "t.json"
     old = b"{}\n"  # whatever was there
     path.write_bytes(old)
-    monkeypatch.setattr("builtins.open", failing_open(room))
-    try:
-        write_trajectory(path, plan)
-        wrote = True
-    except OutputError as error:
-        assert str(error) == f"cannot write {path}: No space left on device"
-        wrote = False
-    finally:
-        monkeypatch.undo()
+    wrote = written_on_a_small_disk(monkeypatch, room, lambda: write_trajectory(path, plan), path)
     assert sorted(p.name for p in folder.iterdir()) == ["t.json"]
     assert wrote == (trajectory_file.stat().st_size <= room)
     assert path.read_bytes() == (trajectory_file.read_bytes() if wrote else old)
