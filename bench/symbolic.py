@@ -128,7 +128,7 @@ def main() -> None:
                   f"{time.perf_counter() - t0:.1f} s (once per n)", flush=True)
             old[n] = []
             for p in batch:
-                sp = symbolic_problem(models, p.X_init, p.X_goal, cfg)
+                sp = symbolic_problem(models, p.X_init, p.X_goal, cfg.level1, cfg.verify)
                 init, goal = problem_states(sp)
                 out = plan_each_domain(models.domain, ground, init, goal, cfg.level1.n_domains, p.seed, sp.nonempty)
                 old[n].append(out["sampling"] + out["search"])
