@@ -19,12 +19,11 @@ the one-off costs per block count paid before anything is timed. Printed per n:
   is faster).
 
 --rows FILE also writes every row (`tamp evaluate`'s row format) as JSON lines, for `tamp report`-style
-digging; nothing else is written.
+digging, written whole or not at all; nothing else is written.
 """
 from __future__ import annotations
 
 import argparse
-import json
 import statistics
 import sys
 import time
@@ -106,9 +105,10 @@ def main() -> None:
     from evaluation.configuration import EvalConfig
     from evaluation.methods import load_method_models
     from evaluation.problems import generate_problems
-    from evaluation.run import Evaluator
+    from evaluation.run import Evaluator, row_line
     from tamp.app.problem import read_problem_set
     from tamp.app.settings import load_settings
+    from tamp.records import atomic_write_text
 
     torch.set_num_threads(1)
     if args.problems is not None:
@@ -132,7 +132,7 @@ def main() -> None:
     print(f"# {source}; models {args.models}; configuration {args.config or 'the defaults'}")
     print(report(rows))
     if args.rows is not None:
-        args.rows.write_text("".join(json.dumps(r) + "\n" for r in rows))
+        atomic_write_text(args.rows, "".join(row_line(r) for r in rows))
 
 
 if __name__ == "__main__":
