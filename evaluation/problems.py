@@ -27,6 +27,7 @@ from tamp.app.problem import MAX_K, PROTOCOLS, Problem, StuckScene, random_probl
 from tamp.app.problem import read_problem_set as read_problems  # noqa: F401 (the set reader, here by its old name)
 from tamp.errors import UserError
 from tamp.inputs import SEED_LIMIT
+from tamp.planning.validate import MAX_OBJECTS
 from tamp.records import atomic_write_text
 
 MAX_ATTEMPTS = 10  # scenes drawn per problem before giving up (see `generate_problems`)
@@ -83,7 +84,7 @@ def generate_problems(ns: Sequence[int] = (2, 3, 4), ks: Sequence[int] = (1, 2, 
     share the cells; the problems do not depend on how many."""
     from tqdm import tqdm
 
-    ns, ks = _counts(ns, "--objects", 1, 6), _counts(ks, "--actions", 1, MAX_K)
+    ns, ks = _counts(ns, "--objects", 1, MAX_OBJECTS), _counts(ks, "--actions", 1, MAX_K)
     if per_cell < 1:
         raise UserError(f"--per-cell must be a positive integer, got {per_cell}")
     if runs < 1:

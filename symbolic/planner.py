@@ -22,6 +22,7 @@ import functools
 import os
 import time
 from collections import Counter
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
@@ -31,7 +32,7 @@ from symbolic.grounding import check_problem, problem_states, steps_to_actions
 from symbolic.lifted import LiftedTask
 from symbolic.pddl import DomainWriter, problem_pddl
 from symbolic.sampling import DomainSet, EffectSampler, dedup_choices
-from symbolic.search import SearchOutcome, search_domains
+from symbolic.search import Decided, SearchOutcome, search_domains
 from symbolic.structs import (
     OperatorSet,
     PlannerResult,
@@ -119,13 +120,16 @@ class SymbolicPlanner:
 
     # ---- probabilistic -------------------------------------------------------------------------
     def plan_probabilistic(self, problem: SymbolicProblem, n_domains: int = 100, seed: int = 0,
-                           time_budget: float | None = None, budget: int | None = None) -> ProbabilisticPlanResult:
+                           time_budget: float | None = None, budget: int | None = None,
+                           decided: Callable[[list[RankedPlan]], bool] | None = None) -> ProbabilisticPlanResult:
         """Plan in N sampled domains and rank the plans by frequency. Python backend: with `budget`
         (states the shared search may generate; machine-independent, default the planner's) or
-        `time_budget` (seconds), the domains without a plan when either runs out count as timed out."""
+        `time_budget` (seconds), the domains without a plan when either runs out count as timed out; with
+        `decided`, called between depth bounds with the head of the ranking no later plan can overtake
+        (`symbolic.search`), the search stops when it returns True (a caller took one of those plans)."""
         check_problem(self.ops, problem)
         if self.backend == "python":
-            return self._probabilistic_python(problem, n_domains, seed, time_budget, budget)
+            return self._probabilistic_python(problem, n_domains, seed, time_budget, budget, decided)
         t0 = time.perf_counter()
         choices = self.sampler.choices(n_domains, seed)
         timings = {"sampling": time.perf_counter() - t0}
@@ -140,23 +144,33 @@ class SymbolicPlanner:
         return ProbabilisticPlanResult(ranked, n_domains, n_unique, n_searches, dict(statuses), timings)
 
     def _search(self, problem: SymbolicProblem, domains: DomainSet, budget: int,
-                deadline: float) -> SearchOutcome:
+                deadline: float, decided: Decided | None = None) -> SearchOutcome:
         """The one search for all `domains`, until `budget` generated states or `deadline` (time.perf_counter s)."""
         task = self.task(problem.n, problem.movable)
         init, goal = problem_states(problem)
         try:
-            return search_domains(task, domains, init, goal, budget, deadline, problem.nonempty)
+            return search_domains(task, domains, init, goal, budget, deadline, problem.nonempty, decided)
         finally:  # expansions are not kept between problems (honest per-problem cost, bounded memory)
             task.clear_cache()
 
     def _probabilistic_python(self, problem: SymbolicProblem, n_domains: int, seed: int,
-                              time_budget: float | None, budget: int | None) -> ProbabilisticPlanResult:
+                              time_budget: float | None, budget: int | None,
+                              decided: Callable[[list[RankedPlan]], bool] | None) -> ProbabilisticPlanResult:
         start = time.perf_counter()
         deadline = None if time_budget is None else start + time_budget
         deadline = min(deadline or np.inf, start + self.time_limit)
         domains = DomainSet.sampled(self.sampler, n_domains, seed)
         task = self.task(problem.n, problem.movable)  # the search's ground action numbers
-        out = self._search(problem, domains, self.budget if budget is None else budget, deadline)
+
+        def head(out: SearchOutcome, searching: int) -> bool:
+            """`decided` on the found plans with a count of at least the domains still searching: no plan to
+            come outranks them (it would be longer, and a tie goes to the shorter)."""
+            ranked = _ranked(_found(task, out, n_domains))
+            ahead = [p for p in ranked if p.count >= searching.bit_count()]
+            return bool(ahead) and decided(ahead)
+
+        out = self._search(problem, domains, self.budget if budget is None else budget, deadline,
+                           None if decided is None else head)
         searched = time.perf_counter() - start
         t0 = time.perf_counter()
         ranked = _ranked(_found(task, out, n_domains))

@@ -176,6 +176,7 @@ class PlannerStatus(enum.Enum):
     UNSOLVABLE = "unsolvable"
     TIMEOUT = "timeout"
     CRASHED = "crashed"
+    STOPPED = "stopped"  # the shared search stopped once a plan ranked ahead of any it could still find was taken
 
 
 PlanStep = tuple[str, tuple[str, ...]]  # (operator name, argument object names)

@@ -12,7 +12,7 @@ time (`level1_serial`); kinematics (`feas`) before a verified plan is taken.
 """
 from __future__ import annotations
 
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 
@@ -41,7 +41,8 @@ def level1(models: Models, X_init, X_goal, config: Level1Config, goal: VerifyCon
                               f"{SUBSCENE_OBJECTS} of the scenes it plans in")
         return record
     verifier = Verifier(models, X_init, X_goal, goal, clock, feas, record)
-    verifier.ranked = symbolic_plans(models, X_init, X_goal, config, goal, clock, record, objects=objects)  # 5-7
+    verifier.ranked = symbolic_plans(models, X_init, X_goal, config, goal, clock, record, objects=objects,  # 5-7
+                                     decided=verifier.check_decided)
     verifier.run()  # line 9: in decreasing order of probability, lines 10-12
     verifier.finish()
     return record
@@ -66,11 +67,13 @@ def symbolic_problem(models: Models, X_init: np.ndarray, X_goal: np.ndarray, con
 
 
 def symbolic_plans(models: Models, X_init, X_goal, config: Level1Config, goal: VerifyConfig, clock: Clock,
-                   record: Level1Result, probabilistic: bool = True,
-                   objects: tuple[int, ...] | None = None) -> list[Candidate]:
+                   record: Level1Result, probabilistic: bool = True, objects: tuple[int, ...] | None = None,
+                   decided: Callable[[list[Candidate]], bool] | None = None) -> list[Candidate]:
     """Symbolic candidates, best first, their actions on the whole scene (planned in the sub-scene of
     `objects` if given); the planner's figures go to record.symbolic_stats, failures to record.reasons
-    (prefixed 'level 1')."""
+    (prefixed 'level 1'). `decided` (python backend): asked, while the planner searches, about the head of
+    the ranking that no later plan can overtake; True (one of them was taken) stops the search. The same
+    Candidate object stands for a plan in every head and in the list returned."""
     with clock.stage("symbols"):
         try:
             planner = models.symbolic_planner(config.backend)
@@ -79,13 +82,21 @@ def symbolic_plans(models: Models, X_init, X_goal, config: Level1Config, goal: V
             record.reasons.append(f"level 1: {error}")
             return []
 
+    made: dict[tuple, Candidate] = {}
+
     def candidate(p) -> Candidate:
-        return Candidate(in_scene(p.actions, objects), p.count, p.probability, states=p.states, objects=objects)
+        if p.actions not in made:
+            made[p.actions] = Candidate(in_scene(p.actions, objects), p.count, p.probability, states=p.states,
+                                        objects=objects)
+        made[p.actions].probability = p.probability  # the share of the domains that have a plan so far
+        return made[p.actions]
 
     if probabilistic:
         with clock.stage("symbolic"):
             out = planner.plan_probabilistic(problem, n_domains=config.n_domains, seed=config.seed,
-                                             budget=config.budget_for(len(X_init)))
+                                             budget=config.budget_for(len(X_init)),
+                                             decided=None if decided is None else
+                                             lambda head: decided([candidate(p) for p in head]))
         record.symbolic_stats = {"n_domains": out.n_domains, "unique_plans": len(out.plans),
                                  "outcomes": dict(out.statuses), "expanded": out.expanded,
                                  "generated": out.generated, "movable": problem.movable,
@@ -112,6 +123,9 @@ def symbolic_plans(models: Models, X_init, X_goal, config: Level1Config, goal: V
 class Verifier:
     """Verification of Level 1's ranked plans (Alg. 1, lines 9-14), into `record`.
 
+    - Verification starts while the symbolic search runs (`check_decided`): the ranking's head that no
+      later plan can overtake is checked between the search's depth bounds, and a plan taken there ends
+      the search. The plan taken is the full ranking's first verified plan, found sooner.
     - The ranked plans' rollouts are computed in growing chunks (1, 2, 4, ... plans), all prefixes
       of one length in one forward pass (`verify_many`): the same numbers as one plan at a time.
     - Kinematics (`feas`, our extension): a verified plan is taken only if it passes the check and refines.
@@ -128,6 +142,12 @@ class Verifier:
         self._rollouts: dict[int, Verification] = {}
         self._done = 0  # ranked plans checked
         self._ended = False  # a plan taken, or no refinement left
+
+    def check_decided(self, head: list[Candidate]) -> bool:
+        """Check the plans of `head`, the ranking's decided head while the symbolic search goes on (its order is
+        final: `symbolic_plans`); True when one is taken (or no refinement is left): the search may stop."""
+        self.ranked = head
+        return self.run()
 
     def run(self) -> bool:
         """Check the ranked plans not checked yet, in order, until one is taken (Alg. 1, line 12) or no

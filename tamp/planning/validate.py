@@ -24,7 +24,7 @@ import numpy as np
 from tamp.errors import UserError
 from tamp.planning.vocabulary import BLOCK_SIZES
 
-MAX_OBJECTS = 6  # blocks the world builds plants for
+MAX_OBJECTS = 8  # blocks the world builds plants for
 TABLE_TOP_Z_M = 0.0  # the world frame is the table top (drake_models/table.sdf)
 TABLE_X, TABLE_Y = (-0.5, 1.9), (-1.2, 1.2)  # table top extent (drake_models/table.sdf), metres
 BASE_CLEARANCE = 0.15  # metres: no block centre this close to the arm's base axis

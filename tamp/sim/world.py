@@ -42,6 +42,7 @@ from tamp.sim.trajectory import RefinedPlan, refined_action
 from tamp.sim.world_types import StepInfo, StepStatus, WorldConfig
 
 MOTIONS = ("approach", "descend", "liftoff", "lift", "transfer", "lower", "retreat")
+LAYOUT_ATTEMPTS = 20  # random layouts tried before a crowded scene is refused (8 bars rarely fit the workspace)
 
 
 @dataclass
@@ -131,19 +132,30 @@ class World:
         self.q = np.array(q, dtype=float)
 
     def _random_layout(self, n: int) -> tuple[np.ndarray, np.ndarray]:
+        """Random block types and resting positions: blocks placed one by one where they overlap none placed
+        so far; a layout in which a block finds no place starts again (crowded scenes: 7-8 blocks, many bars)."""
         cfg = self.config
         types = (self.rng.random(n) < cfg.p_large).astype(int)
         half = np.array([BLOCK_SIZES[int(t)][:2] for t in types]) / 2 + cfg.min_separation / 2
-        positions = np.zeros((n, 3))
-        for i in range(n):
+        for _ in range(LAYOUT_ATTEMPTS):
+            positions = self._placed(types, half)
+            if positions is not None:
+                return types, positions
+        raise UserError(f"could not place {n} blocks ({int(types.sum())} bars) in the workspace without overlap in "
+                        f"{LAYOUT_ATTEMPTS} layouts: ask for fewer blocks or fewer bars (WorldConfig.p_large)")
+
+    def _placed(self, types: np.ndarray, half: np.ndarray) -> np.ndarray | None:
+        """(n, 3) positions of blocks with footprints `half` (n, 2) placed in turn, or None if one finds no place."""
+        cfg, positions = self.config, np.zeros((len(types), 3))
+        for i in range(len(types)):
             for _ in range(10_000):
                 xy = np.array([self.rng.uniform(*cfg.workspace_x), self.rng.uniform(*cfg.workspace_y)])
                 if all(np.any(np.abs(xy - positions[j, :2]) >= half[i] + half[j]) for j in range(i)):
                     break
             else:
-                raise RuntimeError(f"could not place {n} blocks in the workspace without overlap")
+                return None
             positions[i] = [xy[0], xy[1], BLOCK_SIZES[int(types[i])][2] / 2]
-        return types, positions
+        return positions
 
     def _layout(self, types: np.ndarray) -> tuple[MotionPlanner, BlockPhysics]:
         key = tuple(int(t) for t in types)

@@ -53,8 +53,12 @@ def _problem(entry: dict, ops) -> SymbolicProblem:
                         nonempty=entry["nonempty"])
 
 
+def _ranked_plans(plans) -> list:
+    return [[[list(a) for a in p.actions], p.count] for p in plans]
+
+
 def _ranked(result) -> list:
-    return [[[list(a) for a in p.actions], p.count] for p in result.plans]
+    return _ranked_plans(result.plans)
 
 
 def test_ranked_plans_of_the_bundled_domain_are_unchanged(bundled, golden):
@@ -155,6 +159,33 @@ def test_sampled_domains_do_not_depend_on_n_and_masks_match_choices(bundled):
         assert sum(masks) == domains.full  # every domain takes exactly one effect
         for j, m in enumerate(masks):
             assert [k for k in range(100) if m >> k & 1] == np.flatnonzero(a[:, o] == j).tolist()
+
+
+def test_a_search_stopped_on_its_decided_head_gives_the_full_rankings_plan(bundled, golden):
+    """`decided`: each head offered is a prefix of the full search's ranking, with its final counts; taking the
+    k-th plan of a head stops the search (the domains left STOPPED) with fewer states generated."""
+    planner = SymbolicPlanner(bundled)
+    stopped = 0
+    for entry in golden["problems"]:
+        problem = _problem(entry, bundled)
+        full = planner.plan_probabilistic(problem, golden["n_domains"], entry["seed"])
+        heads: list[list] = []
+
+        def take_second(head) -> bool:
+            heads.append(_ranked_plans(head))
+            return len(head) >= 2
+
+        early = planner.plan_probabilistic(problem, golden["n_domains"], entry["seed"], decided=take_second)
+        for head in heads:
+            assert head == _ranked(full)[:len(head)]
+        if early.statuses.get("stopped", 0):
+            stopped += 1
+            assert len(heads[-1]) >= 2 and early.generated < full.generated
+            assert _ranked(early)[:2] == _ranked(full)[:2]
+            assert sum(early.statuses.values()) == golden["n_domains"]
+        else:
+            assert _ranked(early) == _ranked(full) and early.statuses == full.statuses
+    assert stopped >= 3
 
 
 def test_the_budget_decides_and_no_state_is_kept(bundled, golden):
