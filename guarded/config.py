@@ -4,7 +4,8 @@
     cfg = build(PlanConfig, table, str(path))   # unknown keys, wrong types: InputError in one line
 
 Every key of the file names a field; a table names a dataclass field (a section). A value must have the
-field's type: `true`/`false` for a bool, an integer for an int, a number for a float, a string for a str.
+field's type: `true`/`false` for a bool, an integer for an int, a number for a float, a string for a str,
+an array of as many items for a fixed-length tuple (`tuple[float, float, float]`, a position).
 TOML has no null, so an optional field (`int | None`, an option that can be off) is switched off with
 `false`. An unknown key is refused with the nearest known key; a value of the wrong type names the key
 and the type it takes; a value out of range is refused by the dataclass's own checks (`__post_init__`),
@@ -73,6 +74,12 @@ def _value(value: Any, tp: Any, key: str, where: str) -> Any:
     inner, optional = _optional(tp)
     if optional and value is False and inner is not bool:
         return None
+    if typing.get_origin(inner) is tuple:  # a fixed-length array, e.g. a position: each item of its own type
+        items = typing.get_args(inner)
+        if not isinstance(value, list) or len(value) != len(items):
+            raise InputError(f"{where}: {key} must be an array of {len(items)} items, "
+                             f"each {_type_name(items[0], False)}")
+        return tuple(_value(v, t, f"{key}[{i}]", where) for i, (v, t) in enumerate(zip(value, items)))
     ok = (isinstance(value, bool) if inner is bool
           else isinstance(value, int) and not isinstance(value, bool) if inner is int
           else isinstance(value, (int, float)) and not isinstance(value, bool) if inner is float
@@ -171,7 +178,7 @@ def render(obj: Any, section: str = "") -> str:
     for f in dataclasses.fields(obj):
         value = getattr(obj, f.name)
         if dataclasses.is_dataclass(value):
-            tables.append(render(value, f"{section}{f.name}"))
+            tables.append(render(value, f"{section}.{f.name}" if section else f.name))
             continue
         line = f"{f.name} = {_toml_value(value)}"
         scalars.append(f"{line}  # {comments[f.name]}" if f.name in comments else line)

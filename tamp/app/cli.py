@@ -6,7 +6,15 @@ import gc
 import os
 import sys
 
-from tamp.app import commands_data, commands_learning, commands_planning, commands_symbolic, commands_world, settings
+from tamp.app import (
+    commands_data,
+    commands_learning,
+    commands_planning,
+    commands_symbolic,
+    commands_world,
+    perceive_command,
+    settings,
+)
 from tamp.app.args import Count
 from tamp.errors import is_user_error
 
@@ -23,6 +31,7 @@ def build_parser() -> argparse.ArgumentParser:
     commands_data.add_collect(sub)
     commands_data.add_dataset_stats(sub)
     commands_world.add_view(sub)
+    perceive_command.add_perceive(sub)
     commands_learning.add_train(sub)
     commands_learning.add_ablate_activations(sub)
     commands_symbolic.add_domain(sub)

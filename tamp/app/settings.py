@@ -4,9 +4,10 @@
     print(render_settings(settings))                                    # `tamp config show`
 
 The file's tables are the planner's parts (`[level1]`, `[verify]`, `[search]`, `[kinematics]`, `[loop]`,
-`tamp.planning.config`) and `[evaluation]`; a key absent keeps its default, `false` switches an option
-off. Every command that plans takes `--config FILE` and `--preset NAME` (`add_config_arguments`), and
-every output it writes records the resolved configuration (`settings_record`).
+`tamp.planning.config`), `[evaluation]` and `[perception]` (the camera rig, `tamp.sim.perception_config`); a
+key absent keeps its default, `false` switches an option off. Every command that plans takes `--config FILE`
+and `--preset NAME` (`add_config_arguments`), and every output it writes records the resolved configuration
+(`settings_record`).
 """
 from __future__ import annotations
 
@@ -18,8 +19,10 @@ from typing import Any
 
 from guarded.config import build, read_toml, render
 from tamp.planning.config import PLAN_SECTIONS, PlanConfig, overlay, preset_path, presets
+from tamp.sim.perception_config import PerceptionConfig
 
 FORMAT = "tamp-config/1"  # the version of the recorded configuration
+OTHER_SECTIONS = ("evaluation", "perception")  # the file's tables beside the planner's
 
 
 @dataclass(frozen=True)
@@ -35,10 +38,11 @@ class EvaluationSettings:
 
 @dataclass(frozen=True)
 class Settings:
-    """The resolved configuration of a command: the planner's and the evaluation's."""
+    """The resolved configuration of a command: the planner's, the evaluation's and the camera rig's."""
 
     planner: PlanConfig = PlanConfig()
     evaluation: EvaluationSettings = EvaluationSettings()
+    perception: PerceptionConfig = PerceptionConfig()
 
 
 def load_settings(preset: str | None = None, config: Path | None = None) -> Settings:
@@ -46,24 +50,27 @@ def load_settings(preset: str | None = None, config: Path | None = None) -> Sett
     settings = Settings()
     for path in ([preset_path(preset)] if preset is not None else []) + ([config] if config is not None else []):
         table = read_toml(path, "configuration file")
-        planner = overlay(settings.planner, table, str(path), also=("evaluation",))
+        planner = overlay(settings.planner, table, str(path), also=OTHER_SECTIONS)
         evaluation = build(EvaluationSettings, table.get("evaluation", {}), str(path), settings.evaluation,
                            "evaluation.")
-        settings = Settings(planner, evaluation)
+        perception = build(PerceptionConfig, table.get("perception", {}), str(path), settings.perception,
+                           "perception.")
+        settings = Settings(planner, evaluation, perception)
     return settings
 
 
 def render_settings(settings: Settings, source: str = "the defaults") -> str:
     """`settings` as the TOML file that gives it back, each field with its one-line comment."""
     tables = [render(getattr(settings.planner, part), part) for part in PLAN_SECTIONS]
-    tables.append(render(settings.evaluation, "evaluation"))
+    tables += [render(settings.evaluation, "evaluation"), render(settings.perception, "perception")]
     return f"# tamp configuration ({source}); an option that is off is false\n\n" + "\n\n".join(tables) + "\n"
 
 
 def settings_record(settings: Settings) -> dict[str, Any]:
     """The resolved configuration as JSON-ready data, for every output that records what made it."""
     return {"format": FORMAT, **{part: dataclasses.asdict(getattr(settings.planner, part)) for part in PLAN_SECTIONS},
-            "evaluation": dataclasses.asdict(settings.evaluation)}
+            "evaluation": dataclasses.asdict(settings.evaluation),
+            "perception": dataclasses.asdict(settings.perception)}
 
 
 def add_config_arguments(p: argparse.ArgumentParser) -> None:

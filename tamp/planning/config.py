@@ -189,7 +189,7 @@ def _preset_table(name: str) -> dict[str, Any]:
 
 def paper_config(cfg: PlanConfig) -> PlanConfig:
     """`cfg` as the paper's Algorithm 1 plans (`bilevel_alg1`): the `paper` preset's settings over it."""
-    return overlay(cfg, _preset_table("paper"), str(preset_path("paper")), also=("evaluation",))
+    return overlay(cfg, _preset_table("paper"), str(preset_path("paper")), also=("evaluation", "perception"))
 
 
 __all__ = ["KinematicsConfig", "Level1Config", "LoopConfig", "PLAN_SECTIONS", "PlanConfig", "SYMBOLIC_BACKENDS",

@@ -22,6 +22,7 @@ from tamp.planning.config import (
     paper_config,
 )
 from tamp.planning.search import SearchConfig
+from tamp.sim.perception_config import CameraConfig, DepthNoise, PerceptionConfig
 
 PARTS = [f.name for f in dataclasses.fields(PlanConfig)]
 
@@ -38,7 +39,8 @@ def test_plan_config_is_composed_of_small_frozen_parts():
 
 
 def test_every_field_has_a_one_line_comment():
-    for cls in (*(type(getattr(PlanConfig(), part)) for part in PARTS), EvaluationSettings):
+    for cls in (*(type(getattr(PlanConfig(), part)) for part in PARTS), EvaluationSettings, PerceptionConfig,
+                CameraConfig, DepthNoise):
         comments = field_comments(cls)
         missing = [f.name for f in dataclasses.fields(cls) if not comments.get(f.name)]
         assert not missing, (cls.__name__, missing)
@@ -85,7 +87,8 @@ def test_the_record_holds_every_field():
     record = settings_record(Settings())
     assert record["format"] == "tamp-config/1"
     assert record["search"] == dataclasses.asdict(SearchConfig()) and record["evaluation"] == {"oracle_max_plans": 20}
-    assert set(record) == {"format", *PARTS, "evaluation"}
+    assert set(record) == {"format", *PARTS, "evaluation", "perception"}
+    assert record["perception"]["above"]["width"] == 640 and record["perception"]["noise"]["on"] is True
 
 
 DAMAGED = [

@@ -1,0 +1,389 @@
+"""Perception: the blocks of a scene from depth images alone (no label image), as the planner's state.
+
+    seen = perceive(views, PerceptionConfig(), previous=X_before)
+    seen.X          # (n, 5): block centres (m) and one-hot types, in the order of `previous`
+    seen.failures   # what was not explained: a block missing, merged blocks, points that fit no block
+
+The pipeline (numpy and scipy, no renderer; `tamp.sim.cameras` renders the views):
+1. each camera's depth image back-projected to the world frame and fused; cropped to the table's workspace and
+   the table removed by its known height (z = 0); averaged in voxel_m cubes; normals from each point's nearest
+   neighbours (PCA);
+2. top faces: the upward-facing points split into connected patches, the highest first. Each patch proposes
+   upright blocks (a cube, or a bar along the patch, its ends at either end of the patch: a block on top may hide
+   part of it), each fitted to the points of the block's height slab (`box_fit.fit_box` over x, y, yaw; the
+   height from the face). A hypothesis that a camera saw through (`box_fit.seen_through`) is dropped; of the
+   others the one that explains most points (less those seen inside it) is kept, and its points leave the cloud;
+   a bar most of whose top is hidden waits for step 3, since what hides it may lean on it. Blocks side by side at one
+   height share a patch: what a block leaves of it is a patch again;
+3. what is left (leaning and toppled blocks) is clustered and fitted with all six degrees of freedom, its axes
+   started from the points' dominant normals;
+4. identities: the estimates assigned to `previous` (the last estimates, or the problem's scene) by
+   `scipy.optimize.linear_sum_assignment` on distance and type, since goals name blocks. A block of `previous`
+   with no estimate is said to be missing, an estimate with none an extra; points no block explains are said.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import StrEnum
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
+
+from tamp.planning.vocabulary import BLOCK_HEIGHT, BLOCK_SIZES, LARGE, SMALL, TYPE_NAMES
+from tamp.sim.box_fit import box_sdf, fit_box, half_size, min_area_rectangle, pose, seen_through
+from tamp.sim.perception_config import PerceptionConfig
+
+CROP_M = ((0.1, 1.3), (-0.75, 0.75), (0.006, 0.6))  # metres, world x, y, z: the table's workspace; z > 6 mm
+#   (4 sigma of the noise on the table at 1.1 m) removes the table
+UP_COS = 0.97  # a point whose normal is within 14 degrees of vertical belongs to a top face
+EXPLAINED_M = 0.005  # metres: a point this close to (or inside) an accepted box is that block's
+MAX_SEEN_THROUGH = 0.12  # share of a hypothesis' face samples the cameras may have seen through
+MIN_PATCH = 12  # points of a top face worth a hypothesis (a 5 cm face holds about 150 at 4 mm)
+MIN_CLUSTER = 40  # points of a left-over cluster worth a block (fewer: speckle, said as unexplained)
+MIN_EXPLAINED = 0.7  # a left-over block's fit must explain this share of the points within _VICINITY_M of it
+_TIE = 0.93  # a smaller box whose score is within this factor of a larger one's is preferred (a cube over a bar)
+_NEIGHBOURS = 10  # points of a normal's neighbourhood
+_FITTED = 4  # hypotheses fitted per patch or cluster, those that explain most before the fit
+_INSIDE_WEIGHT = 3  # a point seen inside a hypothesis' box counts against it this many times what one on it counts for
+_HIDDEN_BAR_M = 0.15  # metres: a bar whose top face shows less of its length than this is left to step 3
+_UNDER_TABLE_M = 0.01  # metres: a box reaching farther into the table is no block
+_LEVEL_M = 0.008  # metres: a block resting flat has its top face this close to a whole number of block heights
+_FLAT_QUALITY = 0.5  # a block resting flat must explain this share of the points within _VICINITY_M of it
+_VICINITY_M = 0.01  # metres: the points a left-over block's fit is judged on
+_FIT_REACH_M = 0.02  # metres: a hypothesis is fitted to the points this close to its starting box
+
+
+@dataclass(frozen=True)
+class DepthView:
+    """One camera's depth image and where it was taken from."""
+
+    name: str
+    depth: np.ndarray  # (H, W) float, metres along the optical axis; inf or 0 where nothing returned
+    intrinsics: tuple[float, float, float, float]  # fx, fy, cx, cy in pixels
+    X_WC: np.ndarray  # (4, 4) Drake camera frame in the world: +z forward, +x right, +y down the image
+
+
+class Failure(StrEnum):
+    """What perception could not explain; never silent."""
+
+    MISSING = "missing"  # a block of `previous` has no estimate
+    EXTRA = "extra"  # an estimate that matches no block of `previous` (a ghost, or a block split in two)
+    MERGED = "merged"  # a top face wider than any block, or side by side blocks no known box shape separates
+    UNEXPLAINED = "unexplained"  # points that fit no block (a block half seen, two blocks touching at a tilt)
+
+
+@dataclass(frozen=True)
+class PerceptionFailure:
+    kind: Failure
+    reason: str  # in words, with where (metres)
+    block: int = -1  # the block of `previous` it concerns (-1: none)
+
+
+@dataclass(frozen=True)
+class BlockEstimate:
+    """One perceived block: its type and pose, with the points that explain it."""
+
+    type: int  # SMALL or LARGE
+    X_WB: np.ndarray  # (4, 4) pose in the world
+    points: int  # fused points its box explains
+    upright: bool  # fitted as resting flat (x, y, yaw), else with six degrees of freedom
+
+    @property
+    def position(self) -> np.ndarray:
+        return self.X_WB[:3, 3]
+
+    @property
+    def tilt(self) -> float:
+        """Radians between the world's z and the block axis nearest it (0 for a block resting flat)."""
+        return float(np.arccos(np.clip(np.abs(self.X_WB[2, :3]).max(), 0.0, 1.0)))
+
+    @property
+    def yaw(self) -> float:
+        """Heading (radians) of the block's y axis (a bar's long axis) projected on the table, in [-pi/2, pi/2)."""
+        y = self.X_WB[:2, 1]
+        return float(np.mod(np.arctan2(y[1], y[0]) + np.pi / 2, np.pi) - np.pi / 2)
+
+
+@dataclass
+class Perception:
+    """The blocks seen, in the order of `previous` where it was given."""
+
+    blocks: list[BlockEstimate]
+    identity: list[int]  # each block's index in `previous` (-1: an extra); without `previous`, 0, 1, ...
+    failures: list[PerceptionFailure] = field(default_factory=list)
+    points: int = 0  # fused points above the table
+
+    @property
+    def X(self) -> np.ndarray:
+        """The planner's state (n, 5): positions (m) and one-hot types."""
+        X = np.zeros((len(self.blocks), 5))
+        for i, block in enumerate(self.blocks):
+            X[i, :3], X[i, 3 + block.type] = block.position, 1.0
+        return X
+
+    @property
+    def ok(self) -> bool:
+        return not self.failures
+
+
+def world_points(view: DepthView) -> np.ndarray:
+    """The view's returns as points in the world (k, 3), inside CROP_M. The height is computed first, for every
+    pixel, so that only the few pixels above the table are back-projected in full."""
+    fx, fy, cx, cy = view.intrinsics
+    h, w = view.depth.shape
+    R, t = view.X_WC[:3, :3], view.X_WC[:3, 3]
+    x_ray = ((np.arange(w) - cx) / fx).astype(np.float32)
+    y_ray = ((np.arange(h) - cy) / fy).astype(np.float32)
+    with np.errstate(invalid="ignore"):  # inf * 0 where a ray is level
+        height = view.depth * (R[2, 0] * x_ray[None, :] + R[2, 1] * y_ray[:, None] + R[2, 2]) + t[2]
+    v, u = np.nonzero((height > CROP_M[2][0]) & (height < CROP_M[2][1]) & (view.depth > 0))
+    z = view.depth[v, u].astype(float)
+    p_W = np.column_stack([x_ray[u] * z, y_ray[v] * z, z]) @ R.T + t
+    inside = np.all([(p_W[:, k] > lo) & (p_W[:, k] < hi) for k, (lo, hi) in enumerate(CROP_M)], axis=0)
+    return p_W[inside]
+
+
+def fused_cloud(views: list[DepthView], voxel_m: float) -> np.ndarray:
+    """Every view's points above the table, averaged per voxel_m cube (N, 3)."""
+    p = np.concatenate([world_points(v) for v in views] or [np.zeros((0, 3))])
+    if not len(p):
+        return p
+    keys = np.floor(p / voxel_m).astype(np.int64)
+    keys -= keys.min(axis=0)
+    span = keys.max(axis=0) + 1
+    _, voxel, counts = np.unique((keys[:, 0] * span[1] + keys[:, 1]) * span[2] + keys[:, 2], return_inverse=True,
+                                 return_counts=True)
+    return np.stack([np.bincount(voxel, p[:, k]) for k in range(3)], axis=1) / counts[:, None]
+
+
+def normals(p: np.ndarray, tree: cKDTree, which: np.ndarray) -> np.ndarray:
+    """Unit normals (k, 3) of the local planes at the points p[which] (PCA of each one's nearest neighbours among all
+    of `p`, whose tree is `tree`), sign arbitrary."""
+    if not len(which):
+        return np.zeros((0, 3))
+    _, near = tree.query(p[which], k=min(_NEIGHBOURS, len(p)))
+    local = p[near] - p[near].mean(axis=1, keepdims=True)
+    _, vectors = np.linalg.eigh(np.swapaxes(local, 1, 2) @ local)
+    return vectors[:, :, 0]
+
+
+def components(p: np.ndarray, radius: float) -> list[np.ndarray]:
+    """Indices of the points' connected components (points within `radius` are connected), largest first."""
+    if not len(p):
+        return []
+    pairs = cKDTree(p).query_pairs(radius, output_type="ndarray")
+    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(p), len(p)))
+    _, labels = connected_components(graph, directed=False)
+    groups = np.split(np.argsort(labels, kind="stable"), np.cumsum(np.bincount(labels))[:-1])
+    return sorted(groups, key=len, reverse=True)
+
+
+def _face_hypotheses(face: np.ndarray, normal: np.ndarray, depth: float) -> list[tuple[int, np.ndarray]]:
+    """(type, initial pose) of the blocks whose face `face` (points) may be, seen from outside along `normal`, the
+    box `depth` behind the face's plane along it: a cube at either end or the middle of the face, a bar along it (or
+    across a square one) with an end at either end of the face or centred on it (a block on top may hide part of
+    it). The block's z axis is `normal`, its y axis a bar's long axis."""
+    e1 = np.cross(normal, [0.0, 1.0, 0.0] if abs(normal[1]) < 0.9 else [1.0, 0.0, 0.0])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(normal, e1)
+    rectangle = min_area_rectangle(np.column_stack([face @ e1, face @ e2]))
+    if rectangle is None:
+        return []
+    (c1, c2), (u1, u2), sizes = rectangle
+    centre = c1 * e1 + c2 * e2 + (float(np.median(face @ normal)) - depth) * normal
+    long_axis = u1 * e1 + u2 * e2
+    hypotheses = []
+    for axis, extent in [(long_axis, sizes[1])] + ([(np.cross(normal, long_axis), sizes[0])] if sizes[1] < 0.065
+                                                    else []):
+        R = np.column_stack([np.cross(axis, normal), axis, normal])  # block y along `axis`, z along `normal`
+        for block_type in (SMALL, LARGE) if axis is long_axis else (LARGE,):
+            length = BLOCK_SIZES[block_type][1]
+            if abs(extent - length) < 0.015:  # the face is the block's whole face
+                offsets = {0.0}
+            else:  # an end of the block at either end of the face, or (a longer block partly hidden) centred
+                ends = {round((extent - length) / 2, 3), round((length - extent) / 2, 3)}
+                offsets = ends | {0.0} if extent < length else ends
+            hypotheses += [(block_type, pose(R, centre + s * axis)) for s in offsets]
+    return hypotheses
+
+
+def _footprint_hypotheses(points: np.ndarray) -> list[tuple[int, np.ndarray]]:
+    """Upright blocks whose sides `points` may be (a block whose top face a block on it hides), a layer of blocks at a
+    time: the footprint is the outline on the table of the points between two whole numbers of block heights. Where
+    the cameras saw one side only (an outline narrower than a block), the block stands behind it, on either side."""
+    up = np.array([0.0, 0.0, 1.0])
+    hypotheses = []
+    for layer in range(1, int(np.ceil(float(points[:, 2].max()) / BLOCK_HEIGHT)) + 1):
+        top = layer * BLOCK_HEIGHT
+        outline = points[(points[:, 2] > top - BLOCK_HEIGHT + 0.006) & (points[:, 2] < top + 0.006)]
+        if len(outline) < MIN_PATCH:
+            continue
+        outline = np.column_stack([outline[:, :2], np.full(len(outline), top)])
+        rectangle = min_area_rectangle(outline[:, :2])
+        if rectangle is None or rectangle[2][0] >= 0.04:
+            hypotheses += _face_hypotheses(outline, up, BLOCK_HEIGHT / 2)
+            continue
+        across = np.array([-rectangle[1][1], rectangle[1][0], 0.0]) * (BLOCK_SIZES[SMALL][0] - rectangle[2][0])
+        hypotheses += [h for sign in (-1.0, 1.0)
+                       for h in _face_hypotheses(np.vstack([outline, outline + sign * across]), up, BLOCK_HEIGHT / 2)]
+    return hypotheses
+
+
+def _score(distance: np.ndarray) -> int:
+    """A box's support from the points at these signed distances: those on its surface, less _INSIDE_WEIGHT for each
+    one inside it (a surface the cameras saw inside a solid box is evidence against it)."""
+    on = int(np.count_nonzero(np.abs(distance) < EXPLAINED_M))
+    return on - _INSIDE_WEIGHT * int(np.count_nonzero(distance <= -EXPLAINED_M))
+
+
+def _best_box(points: np.ndarray, candidates: np.ndarray, hypotheses, views, quality: float = 0.0):
+    """(points explained, estimate, which of `candidates` it explains) of the fitted hypothesis (type, initial pose,
+    upright) that explains most of `candidates` and that no camera saw through (a smaller box wins a near tie), of
+    those whose points within _VICINITY_M lie on its surface for at least the share `quality`; None when there is
+    none. Only the _FITTED hypotheses that explain most before the fit are fitted (a fit costs milliseconds)."""
+    ranked = []
+    for block_type, X0, upright in hypotheses:
+        if seen_through(X0, block_type, views) <= 2 * MAX_SEEN_THROUGH:  # far off: most wrong ones end here
+            ranked.append((_score(box_sdf(X0, half_size(block_type), candidates)), block_type, X0, upright))
+    ranked.sort(key=lambda r: r[0], reverse=True)
+    best = None
+    for _, block_type, X0, upright in ranked[:_FITTED]:
+        half = half_size(block_type)
+        X = fit_box(points[box_sdf(X0, half, points) < _FIT_REACH_M], half, X0, upright)
+        if X[2, 3] - np.abs(X[2, :3]) @ half < -_UNDER_TABLE_M or seen_through(X, block_type, views) > MAX_SEEN_THROUGH:
+            continue  # through the table (where no camera sees), or seen through
+        distance = box_sdf(X, half, candidates)
+        explained = distance < EXPLAINED_M
+        score = _score(distance)
+        if score < quality * np.count_nonzero(np.abs(distance) < _VICINITY_M):
+            continue
+        volume = float(np.prod(half))
+        if best is None or (score > best[0] / _TIE if volume > best[3] else score >= best[0] * _TIE):
+            best = (score, BlockEstimate(block_type, X, score, upright), explained, volume)
+    return None if best is None else best[:3]
+
+
+def _carries(block: BlockEstimate, found: list[BlockEstimate]) -> bool:
+    """Whether one of the blocks `found` rests flat on `block`'s top face (its centre above the face)."""
+    half = half_size(block.type)
+    for other in found:
+        bottom = other.position - [0.0, 0.0, BLOCK_HEIGHT / 2]
+        if other.upright and box_sdf(block.X_WB, half, bottom[None])[0] < EXPLAINED_M:
+            return True
+    return False
+
+
+def _top_faces(p: np.ndarray, tree: cKDTree, free: np.ndarray, views, voxel: float, found: list,
+               failures: list) -> None:
+    """Step 2 of the pipeline: upright blocks from the top face patches, the highest first."""
+    high = np.flatnonzero(free & (p[:, 2] > BLOCK_HEIGHT - 0.01))
+    up = high[np.abs(normals(p, tree, high)[:, 2]) > UP_COS]
+    queue = [up[c] for c in components(p[up], 2.5 * voxel) if len(c) >= MIN_PATCH]
+    while queue:
+        queue.sort(key=lambda c: float(np.median(p[c, 2])))
+        patch = queue.pop()
+        patch = patch[free[patch]]
+        if len(patch) < MIN_PATCH:
+            continue
+        top = float(np.median(p[patch, 2]))
+        if abs(top - BLOCK_HEIGHT * round(top / BLOCK_HEIGHT)) > _LEVEL_M:
+            continue  # no block resting flat on the table or on flat blocks has its top there: left to step 3
+        near = np.flatnonzero(free & (np.linalg.norm(p[:, :2] - p[patch, :2].mean(axis=0), axis=1) < 0.3))
+        slab = near[(p[near, 2] > top - BLOCK_HEIGHT + 0.006) & (p[near, 2] < top + 0.006)]
+        hypotheses = _face_hypotheses(p[patch], np.array([0.0, 0.0, 1.0]), BLOCK_HEIGHT / 2)
+        best = _best_box(p[slab], p[near], [(t, X0, True) for t, X0 in hypotheses], views, quality=_FLAT_QUALITY)
+        if best is None:  # not a block resting flat (a leaning one's top, or blocks merged): left to step 3
+            continue
+        _, block, explained = best
+        if block.type == LARGE and np.ptp(p[patch] @ block.X_WB[:3, 1]) < _HIDDEN_BAR_M and not _carries(block, found):
+            continue  # most of the bar's top unseen, and no block found on it: what hides it may lean on it (step 3)
+        found.append(block)
+        free[near[explained]] = False
+        rest = patch[free[patch]]
+        queue.extend(rest[c] for c in components(p[rest], 2.5 * voxel) if len(c) >= MIN_PATCH)
+
+
+def _tilted_face(p: np.ndarray, tree: cKDTree, cluster: np.ndarray, voxel: float) -> tuple[np.ndarray, np.ndarray]:
+    """The largest face of a cluster that looks up at all (a leaning block's top): its points and outward normal."""
+    n = normals(p, tree, cluster)
+    n *= np.where(n[:, 2] < 0, -1.0, 1.0)[:, None]
+    upward = np.flatnonzero(n[:, 2] > 0.3)
+    if len(upward) < MIN_PATCH:
+        return np.zeros((0, 3)), np.array([0.0, 0.0, 1.0])
+    sample = upward[:: max(1, len(upward) // 200)]
+    normal = n[sample[np.argmax((n[sample] @ n[sample].T > 0.97).sum(axis=1))]]
+    on_face = cluster[n @ normal > 0.95]
+    face = on_face[components(p[on_face], 2.5 * voxel)[0]] if len(on_face) else on_face
+    return p[face], normal
+
+
+def _left_over(p: np.ndarray, tree: cKDTree, free: np.ndarray, views, voxel: float, found: list,
+               failures: list) -> None:
+    """Step 3 of the pipeline: the clusters left, as blocks whose top face is hidden (upright, from their sides'
+    outline) or that lean (six degrees of freedom, from their largest upward face)."""
+    left = np.flatnonzero(free)
+    for cluster in components(p[left], 2.5 * voxel):
+        cluster = left[cluster]
+        while len(cluster) >= MIN_CLUSTER:
+            face, normal = _tilted_face(p, tree, cluster, voxel)
+            hypotheses = [(t, X0, True) for t, X0 in _footprint_hypotheses(p[cluster])]
+            if len(face) >= MIN_PATCH:
+                hypotheses += [(t, X0, False) for t, X0 in _face_hypotheses(face, normal, BLOCK_HEIGHT / 2)]
+            best = _best_box(p[cluster], p[cluster], hypotheses, views, quality=MIN_EXPLAINED)
+            if best is None or best[0] < MIN_CLUSTER:
+                break
+            found.append(best[1])
+            free[cluster[best[2]]] = False
+            cluster = cluster[~best[2]]
+        if len(cluster) >= MIN_CLUSTER:
+            x, y, z = p[cluster].mean(axis=0)
+            failures.append(PerceptionFailure(Failure.UNEXPLAINED, f"{len(cluster)} points about ({x:.3f}, {y:.3f}, "
+                                              f"{z:.3f}) m fit no block"))
+
+
+def assign(blocks: list[BlockEstimate], previous: np.ndarray) -> tuple[list[BlockEstimate], list[int],
+                                                                        list[PerceptionFailure]]:
+    """The estimates in the order of the blocks of `previous` (n, 5), by the assignment of least total distance (a
+    block of another type costs 1 m more), the estimates left over after them; each one's block of `previous` (-1
+    for one left over); the blocks missing and the estimates left over, said."""
+    cost = np.zeros((len(previous), len(blocks)))
+    if cost.size:
+        cost = np.linalg.norm(previous[:, None, :3] - np.array([b.position for b in blocks])[None], axis=2)
+        cost += np.argmax(previous[:, 3:], axis=1)[:, None] != np.array([b.type for b in blocks])[None]
+    rows, cols = linear_sum_assignment(cost)
+    matched = dict(zip(cols.tolist(), rows.tolist()))
+    order = sorted(range(len(blocks)), key=lambda c: matched.get(c, len(previous) + c))
+    failures = [PerceptionFailure(Failure.MISSING, f"block {i} ({TYPE_NAMES[int(np.argmax(previous[i, 3:]))]}, "
+                                  f"last at {_at_xyz(previous[i, :3])} m) not seen", i)
+                for i in range(len(previous)) if i not in set(rows.tolist())]
+    failures += [PerceptionFailure(Failure.EXTRA, f"a {TYPE_NAMES[blocks[c].type]} at {_at_xyz(blocks[c].position)} m "
+                                   "matches no block") for c in order if c not in matched]
+    return [blocks[c] for c in order], [matched.get(c, -1) for c in order], failures
+
+
+def _at_xyz(p: np.ndarray) -> str:
+    return f"({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f})"
+
+
+def perceive(views: list[DepthView], config: PerceptionConfig, previous: np.ndarray | None = None) -> Perception:
+    """The blocks the depth `views` show (see the module docstring); with `previous` (n, 5) in its order."""
+    p = fused_cloud(views, config.voxel_m)
+    free = np.ones(len(p), dtype=bool)
+    found: list[BlockEstimate] = []
+    failures: list[PerceptionFailure] = []
+    if len(p) >= _NEIGHBOURS:
+        tree = cKDTree(p)
+        _top_faces(p, tree, free, views, config.voxel_m, found, failures)
+        _left_over(p, tree, free, views, config.voxel_m, found, failures)
+    identity = list(range(len(found)))
+    if previous is not None:
+        found, identity, said = assign(found, np.asarray(previous, dtype=float))
+        failures += said
+    return Perception(found, identity, failures, len(p))
+
+
+__all__ = ["BlockEstimate", "DepthView", "Failure", "Perception", "PerceptionFailure", "assign", "fused_cloud",
+           "perceive"]

@@ -1,0 +1,155 @@
+"""Perception from the camera rig: known poses recovered from depth images, stacks separated, a block hidden from
+one camera found by another, a missing block said, identities kept; the sensor noise model; the configuration."""
+import numpy as np
+import pytest
+from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
+
+from guarded import InputError
+from tamp.app.settings import load_settings
+from tamp.planning.vocabulary import LARGE, SMALL
+from tamp.sim.box_fit import orientation_error
+from tamp.sim.cameras import CameraRig, noisy_depth
+from tamp.sim.perception import Failure, perceive
+from tamp.sim.perception_check import check, observe
+from tamp.sim.perception_config import CameraConfig, DepthNoise, PerceptionConfig
+from tamp.sim.skill import Scene
+
+pytestmark = pytest.mark.sim  # every test here renders with Drake
+
+
+@pytest.fixture(scope="module")
+def rig():
+    """One warm rig for the module: four cameras, noise on (`render` gives the depth without it)."""
+    return CameraRig(PerceptionConfig())
+
+
+def scene(*blocks) -> Scene:
+    """A scene of (type, (x, y, z), yaw degrees[, roll degrees]) blocks, posed exactly (no physics)."""
+    types = np.array([b[0] for b in blocks])
+    poses = [RigidTransform(RollPitchYaw(np.radians(b[3]) if len(b) > 3 else 0.0, 0.0, np.radians(b[2])), b[1])
+             for b in blocks]
+    return Scene(types, poses)
+
+
+TWO = scene((SMALL, (0.58, 0.14, 0.025), 20.0), (LARGE, (0.72, -0.12, 0.025), -35.0))
+
+
+def errors(checks):
+    """(position error m, orientation error deg, type right) of each true block's estimate."""
+    assert all(c.found for c in checks), checks
+    return [(c.position_error_m, np.degrees(c.orientation_error_rad), c.type_right) for c in checks]
+
+
+def test_known_poses_are_recovered_from_noisy_depth(rig):
+    seen = observe(rig, TWO, np.random.default_rng(3))
+    assert seen.count_right and seen.seen.ok, seen.seen.failures
+    for position, angle, type_right in errors(seen.checks):
+        assert position < 0.003 and angle < 2.0 and type_right
+    assert 0.0 < seen.render_s < 1.0 and 0.0 < seen.perceive_s < 2.0
+
+
+def test_without_noise_the_poses_are_near_exact(rig):
+    seen = perceive(rig.render(TWO), rig.config, previous=TWO.X())
+    for position, angle, type_right in errors(check(TWO, seen)):
+        assert position < 0.0005 and angle < 0.3 and type_right
+    assert seen.blocks[0].yaw == pytest.approx(np.radians(20.0), abs=0.005)
+    assert all(block.upright and block.tilt < 1e-6 for block in seen.blocks)
+
+
+def test_a_stack_of_three_is_separated(rig):
+    stack = scene((LARGE, (0.66, 0.05, 0.025), 10.0), (SMALL, (0.66, 0.05, 0.075), 10.0),
+                  (SMALL, (0.66, 0.05, 0.125), 40.0), (SMALL, (0.52, -0.2, 0.025), 0.0))
+    seen = observe(rig, stack, np.random.default_rng(4))
+    assert seen.count_right and seen.seen.ok, seen.seen.failures
+    assert [c.kind for c in seen.checks] == ["table", "stack", "stack", "table"]
+    for position, angle, type_right in errors(seen.checks):
+        assert position < 0.003 and angle < 2.0 and type_right
+    heights = sorted(b.position[2] for b in seen.seen.blocks)
+    np.testing.assert_allclose(heights, [0.025, 0.025, 0.075, 0.125], atol=0.002)
+
+
+def test_a_leaning_block_is_fitted_with_its_tilt(rig):
+    # a bar with one end on the table, leaning on the top edge of a cube
+    leaning = scene((SMALL, (0.62, 0.0, 0.025), 0.0), (LARGE, (0.62, 0.14, 0.05), 0.0, -12.0))
+    seen = observe(rig, leaning, np.random.default_rng(5))
+    assert seen.count_right, seen.seen.failures
+    assert seen.checks[1].kind == "leaning"
+    for position, angle, type_right in errors(seen.checks):
+        assert position < 0.005 and angle < 3.0 and type_right
+    bar = seen.seen.blocks[1]
+    assert not bar.upright and np.degrees(bar.tilt) == pytest.approx(12.0, abs=2.0)
+
+
+def test_a_block_hidden_from_one_camera_is_found_by_another(rig):
+    """A tower of three cubes stands between the front camera and a cube behind it."""
+    hidden = scene((SMALL, (0.60, 0.0, 0.025), 0.0), (SMALL, (0.70, 0.0, 0.025), 0.0), (SMALL, (0.70, 0.0, 0.075), 0.0),
+                   (SMALL, (0.70, 0.0, 0.125), 0.0))
+    views = rig.render(hidden)
+    front = [v for v in views if v.name == "front"]
+    alone = perceive(front, rig.config, previous=hidden.X())
+    assert [f.block for f in alone.failures if f.kind == Failure.MISSING] == [0]  # said, not silent
+    seen = perceive(views, rig.config, previous=hidden.X())
+    assert seen.ok and len(seen.blocks) == 4
+    assert np.linalg.norm(seen.blocks[0].position - [0.60, 0.0, 0.025]) < 0.001
+
+
+def test_a_missing_block_and_an_extra_are_said(rig):
+    views = rig.render(TWO)
+    expected = np.vstack([TWO.X(), [[0.5, 0.3, 0.025, 1.0, 0.0]]])  # a third block the cameras do not see
+    seen = perceive(views, rig.config, previous=expected)
+    assert [(f.kind, f.block) for f in seen.failures] == [(Failure.MISSING, 2)]
+    assert "block 2 (small, last at (0.500, 0.300, 0.025) m) not seen" in seen.failures[0].reason
+    fewer = perceive(views, rig.config, previous=TWO.X()[1:])  # one block more than expected
+    assert [f.kind for f in fewer.failures] == [Failure.EXTRA] and fewer.identity == [0, -1]
+    assert fewer.blocks[0].type == LARGE and len(fewer.X) == 2
+
+
+def test_identities_follow_the_previous_estimates(rig):
+    views = rig.render(TWO)
+    swapped = TWO.X()[::-1].copy()
+    swapped[:, :2] += 0.03  # the blocks moved a little since: still the nearest of their type
+    seen = perceive(views, rig.config, previous=swapped)
+    assert seen.ok and [b.type for b in seen.blocks] == [LARGE, SMALL]
+    np.testing.assert_allclose(seen.X[:, :3], TWO.X()[::-1, :3], atol=0.001)
+
+
+def test_the_noise_grows_with_range_drops_edges_and_is_seeded():
+    depth = np.full((60, 80), 1.0, dtype=np.float32)
+    depth[:, 40:] = 2.0  # a depth edge down the middle
+    noise, intrinsics = DepthNoise(), (80.0, 80.0, 39.5, 29.5)
+    a = noisy_depth(depth, intrinsics, noise, np.random.default_rng(0))
+    assert np.array_equal(a, noisy_depth(depth, intrinsics, noise, np.random.default_rng(0)))
+    near, far = a[:, 5:35], a[:, 45:75]
+    assert np.std(near[np.isfinite(near)]) == pytest.approx(0.0015, rel=0.2)
+    assert np.std(far[np.isfinite(far)]) == pytest.approx(0.0015 * 4, rel=0.2)
+    edge = a[:, 39:41]
+    assert np.mean(~np.isfinite(edge)) > 0.3 and np.all(np.isfinite(a[:, 10:30]))  # flat: all returned
+    slanted = np.tile(np.linspace(0.5, 3.0, 80, dtype=np.float32), (60, 1)) ** 3  # seen at a grazing angle
+    assert np.mean(~np.isfinite(noisy_depth(slanted, intrinsics, noise, np.random.default_rng(1)))) > 0.5
+
+
+def test_the_rig_is_configured_from_the_file(tmp_path):
+    path = tmp_path / "rig.toml"
+    path.write_text("[perception]\nvoxel_m = 0.005\n\n[perception.noise]\non = false\n\n"
+                    "[perception.left]\non = false\n\n[perception.front]\nposition = [1.3, 0.1, 0.9]\n")
+    config = load_settings(config=path).perception
+    assert config.voxel_m == 0.005 and not config.noise.on and config.front.position == (1.3, 0.1, 0.9)
+    assert [name for name, _ in config.cameras()] == ["above", "front", "right"]
+    assert config.with_cameras("left").left == CameraConfig(position=(0.65, 0.85, 0.75))
+    for text, message in (("[perception.above]\nposition = [1, 2]\n", "perception.above.position must be an array "
+                                                                       "of 3 items"),
+                          ("[perception.above]\nfov_y_deg = 200.0\n", "fov_y_deg must be in"),
+                          ("[perception.noise]\nsigma = 0.1\n", "unknown key perception.noise.sigma")):
+        path.write_text(text)
+        with pytest.raises((InputError, ValueError), match=message):
+            load_settings(config=path)
+    with pytest.raises(ValueError, match="at least one camera"):
+        PerceptionConfig().with_cameras()
+
+
+def test_orientation_errors_count_the_box_symmetries():
+    R = RotationMatrix.MakeZRotation(0.3).matrix()
+    turned = R @ RotationMatrix.MakeZRotation(np.pi / 2).matrix()
+    assert orientation_error(turned, R, SMALL) == pytest.approx(0.0, abs=1e-9)  # a cube turned a quarter is itself
+    assert orientation_error(turned, R, LARGE) == pytest.approx(np.pi / 2)  # a bar is not
+    assert orientation_error(R @ RotationMatrix.MakeZRotation(np.pi).matrix(), R, LARGE) == pytest.approx(0.0, abs=1e-9)
