@@ -100,7 +100,8 @@ class PracticeConfig:
         from tamp.app.problem import MAX_K, PROTOCOLS
         from tamp.planning.validate import MAX_OBJECTS
 
-        _counts(self.objects, "--objects", 1, MAX_OBJECTS)  # as `generate_problems` checks them, before anything is written
+        # as `generate_problems` checks them, before anything is written
+        _counts(self.objects, "--objects", 1, MAX_OBJECTS)
         _counts(self.actions, "--actions", 1, MAX_K)
         if not self.protocols or any(p not in PROTOCOLS for p in self.protocols):
             raise UserError(f"protocols must be among {', '.join(PROTOCOLS)}, got {self.protocols!r}")

@@ -167,6 +167,7 @@ class SymbolicPlanner:
             come outranks them (it would be longer, and a tie goes to the shorter)."""
             ranked = _ranked(_found(task, out, n_domains))
             ahead = [p for p in ranked if p.count >= searching.bit_count()]
+            assert decided is not None  # head is passed only with it
             return bool(ahead) and decided(ahead)
 
         out = self._search(problem, domains, self.budget if budget is None else budget, deadline,

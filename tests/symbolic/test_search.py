@@ -171,7 +171,7 @@ def test_a_search_stopped_on_its_decided_head_gives_the_full_rankings_plan(bundl
         full = planner.plan_probabilistic(problem, golden["n_domains"], entry["seed"])
         heads: list[list] = []
 
-        def take_second(head) -> bool:
+        def take_second(head, heads=heads) -> bool:
             heads.append(_ranked_plans(head))
             return len(head) >= 2
 
