@@ -75,8 +75,8 @@ def test_object_count_within_the_models():
     check_scene(X)
     with pytest.raises(ValueError, match="5 blocks, but the models were trained for 1..4"):
         check_problem(X, X, n_max=4)
-    with pytest.raises(ValueError, match="7 blocks, but the world holds 1..6"):
-        check_scene(np.vstack([X, [[0.5, -0.2, 0.025, 1, 0], [0.7, -0.2, 0.025, 1, 0]]]))
+    with pytest.raises(ValueError, match="9 blocks, but the world holds 1..8"):
+        check_scene(np.vstack([X, [[0.5 + 0.1 * i, -0.2, 0.025, 1, 0] for i in range(4)]]))
 
 
 def test_tilted_and_standing_blocks_after_physics_are_accepted():

@@ -312,7 +312,7 @@ def test_practice_never_replaces_a_models_folder_of_the_users(tmp_path, dataset)
     assert (out / "models").resolve() == (pretrained_dir() / "paper").resolve()
 
 
-@pytest.mark.parametrize("flags", [["--objects", "7"], ["--objects", "2,2"], ["--objects", "0"]])
+@pytest.mark.parametrize("flags", [["--objects", "9"], ["--objects", "2,2"], ["--objects", "0"]])
 def test_practice_checks_its_flags_before_writing_anything(tmp_path, capsys, dataset, flags):
     out = tmp_path / "practice"
     assert main(["practice", "--data", str(dataset), "--out", str(out), "--quiet", *flags]) == 2

@@ -34,7 +34,7 @@ def test_simulate_json_is_reproducible(capsys):
 
 @pytest.mark.sim
 @pytest.mark.parametrize("argv, message", [
-    (["simulate", "--objects", "9"], "n_objects must be an integer in 1..6"),
+    (["simulate", "--objects", "9"], "n_objects must be an integer in 1..8"),
 ])
 def test_simulate_user_errors_exit_2_without_traceback(argv, message, capsys):
     assert main(argv) == 2

@@ -164,7 +164,7 @@ def test_corrupt_and_truncated_shards_are_named_skipped_and_recollected(referenc
 
 
 @pytest.mark.parametrize("argv, message", [
-    (["collect", "--samples", "10", "--objects", "2,7"], "object counts must be in 1..6, got 7"),
+    (["collect", "--samples", "10", "--objects", "2,9"], "object counts must be in 1..8, got 9"),
     (["collect", "--samples", "0"], "--samples must be a positive integer, got 0"),
     (["collect", "--samples", "10", "--address", "auto"], "--address joins a Ray cluster; use it with --backend ray"),
 ])
