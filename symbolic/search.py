@@ -34,8 +34,8 @@ runs out are TIMEOUT; a domain whose bounded search was not cut anywhere has no 
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 
