@@ -84,7 +84,7 @@ def main() -> None:
 
     from symbolic.grounding import problem_states
     from symbolic.reference import GroundTask, plan_each_domain
-    from tamp.planning.config import FOCUS_BUDGET, KinematicsConfig, PlanConfig
+    from tamp.planning.config import KinematicsConfig, PlanConfig
     from tamp.planning.level1 import symbolic_problem
     from tamp.planning.models import load_models, pretrained_dir
     from tamp.planning.planners import plan
@@ -100,7 +100,7 @@ def main() -> None:
                      search=SearchConfig(max_expansions=1))
     level1 = cfg.level1
     print(f"domain: {len(models.domain)} operators; N = {level1.n_domains}; Level-1 budget {level1.budget} "
-          f"generated states ({FOCUS_BUDGET} from {level1.focus_from} objects on); {len(problems)} problems")
+          f"generated states; {len(problems)} problems")
     rows: dict[int, list[dict]] = {}
     old: dict[int, list[float]] = {}
     for n in sorted({p.n for p in problems}):

@@ -37,7 +37,6 @@ def symbolic_backend_help(default: str) -> str:
 
 PRESETS_DIR = Path(__file__).resolve().parents[1] / "presets"  # NAME.toml: the shipped presets
 
-FOCUS_BUDGET = 25_000  # symbolic states from focus_from objects on, `budget`'s stand-in: later plans rarely verify
 SUBSCENE_OBJECTS = 4  # from focus_from on, Level 1 plans in the goal's sub-scene of at most this many objects
 #   (the Symbolic Model's training size; more: one block at a time, `Level1Config.serial`)
 GREEDY_SEARCH_BUDGET = 1500  # the closed loop's search budget from search.greedy_from blocks on: a plan comes soon
@@ -80,12 +79,6 @@ class Level1Config:
     def focused(self, n_objects: int) -> bool:
         """Whether Level 1 focuses on the blocks off their goal in a scene of `n_objects` blocks."""
         return self.focus_from is not None and n_objects >= self.focus_from
-
-    def budget_for(self, n_objects: int) -> int | None:
-        """Level 1's budget (generated symbolic states) in a scene of `n_objects` blocks."""
-        if not self.focused(n_objects):
-            return self.budget
-        return min(FOCUS_BUDGET, self.budget or FOCUS_BUDGET)
 
 
 @dataclass(frozen=True)

@@ -94,7 +94,7 @@ def symbolic_plans(models: Models, X_init, X_goal, config: Level1Config, goal: V
     if probabilistic:
         with clock.stage("symbolic"):
             out = planner.plan_probabilistic(problem, n_domains=config.n_domains, seed=config.seed,
-                                             budget=config.budget_for(len(X_init)),
+                                             budget=config.budget,
                                              decided=None if decided is None else
                                              lambda head: decided([candidate(p) for p in head]))
         record.symbolic_stats = {"n_domains": out.n_domains, "unique_plans": len(out.plans),

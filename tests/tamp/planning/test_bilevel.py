@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from tamp.errors import UserError
-from tamp.planning import closed_loop, config, level1
+from tamp.planning import closed_loop, level1
 from tamp.planning.closed_loop import plan_closed_loop
 from tamp.planning.config import KinematicsConfig, Level1Config, LoopConfig, PlanConfig, VerifyConfig
 from tamp.planning.level1 import level1_scene
@@ -425,25 +425,18 @@ def test_refinement_failures_send_the_planner_to_level2_with_the_failing_pair_pr
     assert goal_error(execute(X_INIT, result.plan), A_ON_B) < 0.05
 
 
-def test_from_focus_from_blocks_on_level1_gives_up_at_its_own_budget(domain, monkeypatch):
-    """`FOCUS_BUDGET` bounds Level 1 from `focus_from` objects on (Level 2 then plans), and only
-    there: the same budget leaves a four-block problem to Level 1, and the paper's Algorithm 1 never uses it."""
+def test_level1_that_runs_out_of_its_budget_leaves_the_plan_to_level2(domain):
+    """`[level1] budget` bounds the symbolic search in generated states: every domain that has no plan by then
+    ends as a timeout, and the continuous search plans; a budget that suffices leaves the problem to Level 1."""
     far = np.array([[0.45, -0.3 + 0.12 * i, 0.025, 1, 0] for i in range(3)])
     stacked = far.copy()
     stacked[0, :3] = far[1, :3] + [0, 0, 0.05]
     X5, G5 = np.vstack([X_INIT, far]), np.vstack([A_ON_B, stacked])  # two blocks to stack: two actions
-    default = PlanConfig()
-    assert default.level1.budget_for(6) == config.FOCUS_BUDGET <= default.level1.budget_for(4)
-    monkeypatch.setattr(config, "FOCUS_BUDGET", 1)
-    cfg = with_level1(n_domains=20, focus_from=5, serial=False)
-    assert cfg.level1.budget_for(4) == cfg.level1.budget and cfg.level1.budget_for(5) == 1
-    five = plan("bilevel", models(domain), X5, G5, cfg)
-    assert five.symbolic_stats["outcomes"] == {"timeout": 20} and not five.candidates
-    assert five.level == 2 and goal_error(execute(X5, five.plan), G5) < 0.05
-    four = plan("bilevel", models(domain), X5[:4], G5[:4], cfg)
+    starved = plan("bilevel", models(domain), X5, G5, with_level1(n_domains=20, focus_from=5, serial=False, budget=1))
+    assert starved.symbolic_stats["outcomes"] == {"timeout": 20} and not starved.candidates
+    assert starved.level == 2 and goal_error(execute(X5, starved.plan), G5) < 0.05
+    four = plan("bilevel", models(domain), X5[:4], G5[:4], with_level1(n_domains=20, focus_from=5, serial=False))
     assert four.level == 1 and four.symbolic_stats["generated"] > 1
-    alg1 = plan("bilevel_alg1", models(domain), X5, G5, cfg)
-    assert alg1.symbolic_stats["outcomes"].get("timeout", 0) == 0 and alg1.level == 1
 
 
 def test_from_focus_from_blocks_on_level1_plans_in_the_scene_of_the_objects_the_goal_involves(domain, monkeypatch):
