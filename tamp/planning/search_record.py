@@ -76,49 +76,50 @@ def level1_record(result: PlanResult, facts: Facts | None) -> dict:
 def tree_record(tree: Tree, searches: int, result: PlanResult, max_bytes: int = MAX_TREE_BYTES) -> dict:
     """The continuous search's tree (see the module docstring): nodes with id, parent, expansion order, action,
     g, h, predicted positions (None for the successors left out), verdict and reason."""
-    nodes = tree.nodes
-    P = np.stack([node[0] for node in nodes] + [out[4] for out in tree.left_out])
-    h = tree.heuristic(P, np.linalg.norm(P - tree.goal[None], axis=2)).round(4).tolist()
-    X = np.round(P, 3).tolist()
+    nodes, left_out = tree.nodes, tree.left_out
+    P = np.stack([node[0] for node in nodes] + [out[4] for out in left_out])
+    h = tree.heuristic(P, np.linalg.norm(P - tree.goal[None], axis=2)).round(4)
     order = {index: k for k, index in enumerate(tree.order)}
+    kept, truncated = _bounded(nodes, h, {*order, *tree.path, *tree.closest, *tree.verdicts}, len(left_out),
+                               P.shape[1], max_bytes)
+    hs, Xs = h[kept].tolist(), np.round(P[kept], 3).tolist()  # at once: per node, numpy's calls cost more
     rows: list[dict] = []
-    for i, (_, parent, action, g) in enumerate(nodes):
+    for i, h_i, X_i in zip(kept, hs, Xs):
+        if i >= len(nodes):
+            parent, action, verdict, reason, _ = left_out[i - len(nodes)]
+            rows.append({"id": i, "parent": parent, "order": None, "action": list(action), "g": nodes[parent][3] + 1,
+                         "h": h_i, "X": None, "verdict": verdict, "reason": reason})
+            continue
+        _, parent, action, g = nodes[i]
         verdict = tree.verdicts.get(i, "ok")
         rows.append({"id": i, "parent": None if parent < 0 else parent, "order": order.get(i),
-                     "action": None if action is None else list(action), "g": g, "h": h[i], "X": X[i],
+                     "action": None if action is None else list(action), "g": g, "h": h_i, "X": X_i,
                      "verdict": verdict, "reason": None if verdict == "ok" else REFINED_REASON})
         if i in tree.duplicates:
             rows[-1]["duplicates"] = tree.duplicates[i]
-    for j, (parent, action, verdict, reason, _) in enumerate(tree.left_out):
-        rows.append({"id": len(nodes) + j, "parent": parent, "order": None, "action": list(action),
-                     "g": nodes[parent][3] + 1, "h": h[len(nodes) + j], "X": None, "verdict": verdict,
-                     "reason": reason})
-    kept, truncated = _bounded(rows, set(tree.path) | set(tree.closest), P.shape[1], max_bytes)
     search = result.search
     return {"status": str(search.status) if search is not None else "unknown",
             "reason": search.reason if search is not None else "",
             "expanded": len(tree.order), "generated": tree.generated, "truncated": truncated,
-            "searches": searches, "omitted": len(rows) - len(kept), "nodes": kept, "path": list(tree.path),
-            "closest": list(tree.closest)}
+            "searches": searches, "omitted": len(nodes) + len(left_out) - len(rows), "nodes": rows,
+            "path": list(tree.path), "closest": list(tree.closest)}
 
 
-def _bounded(rows: list[dict], path: set[int], n: int, max_bytes: int) -> tuple[list[dict], bool]:
-    """`rows` within about `max_bytes` of JSON: expanded nodes, the path and rejected successors first, then the
-    nodes never expanded, least h first; whether any were left out."""
-    def size(row: dict) -> int:
-        return NODE_BYTES + (0 if row["X"] is None else POSITION_BYTES * n)
-
-    first = [r for r in rows if r["order"] is not None or r["id"] in path or r["verdict"] != "ok"]
-    total = sum(size(r) for r in first)
-    rest = sorted((r for r in rows if not (r["order"] is not None or r["id"] in path or r["verdict"] != "ok")),
-                  key=lambda r: r["h"])
-    keep = {r["id"] for r in first}
-    for r in rest:
-        total += size(r)
-        if total > max_bytes:
-            break
-        keep.add(r["id"])
-    return [r for r in rows if r["id"] in keep], len(keep) < len(rows)
+def _bounded(nodes: list, h: np.ndarray, first: set[int], left_out: int, n: int, max_bytes: int
+             ) -> tuple[list[int], bool]:
+    """The ids of the nodes to record within about `max_bytes` of JSON: `first` (expanded, on the path, rejected)
+    and the `left_out` successors after the nodes, then the nodes never expanded, least h first; whether any
+    were left out."""
+    scene = NODE_BYTES + POSITION_BYTES * n
+    keep = first | set(range(len(nodes), len(nodes) + left_out))
+    room = (max_bytes - scene * len(first) - NODE_BYTES * left_out) // scene
+    never = np.ones(len(nodes), dtype=bool)
+    never[[i for i in first if i < len(nodes)]] = False
+    rest = np.flatnonzero(never)
+    if len(rest) > room:
+        rest = rest[np.argsort(h[rest], kind="stable")[:max(room, 0)]]
+    keep.update(rest.tolist())
+    return sorted(keep), len(keep) < len(nodes) + left_out
 
 
 def why_record(result: PlanResult) -> str:
