@@ -8,10 +8,9 @@ kinematics, as `tamp plan` plans it, once without a record and once with one (a 
 round built, `tamp.planning.search_record.round_record`, as `tamp plan --search` does; writing the file is not
 counted), the order alternating from problem to problem, each call with a fresh kinematic checker. Prints the
 median planning time of each, the ratio of the medians and the median of the per-problem ratios (target:
-at most 1.10), and the record's JSON size for the largest search met. Then the size of the record of large
-searches: `cfs` (the continuous search alone, no kinematics, so that nothing prunes its tree) on the first
---size-count problems of --size-problems, with expansions and bytes (target: at most 2 MB for 1,500
-expansions).
+at most 1.10), and the record's JSON size for the largest search met. Then the size of the record of searches
+that run to the 1,500-node budget (`_sizes`: --size-count problems with the most blocks, a goal out of reach),
+target at most 2 MB, and the time to build it.
 """
 from __future__ import annotations
 
@@ -32,9 +31,8 @@ def main() -> None:
     ap.add_argument("--problems", type=Path, default=ROOT / "results/problems/strict-n2-4-s781.jsonl.gz",
                     help="problem set (default: the held-out strict-n2-4-s781)")
     ap.add_argument("--every", type=int, default=5, help="plan every N-th problem of the set (default 5: 30 of 150)")
-    ap.add_argument("--size-problems", type=Path, default=ROOT / "results/problems/strict-n5-6-s21.jsonl.gz",
-                    help="problem set for the large searches (default strict-n5-6-s21)")
-    ap.add_argument("--size-count", type=int, default=3, help="large searches measured (default 3)")
+    ap.add_argument("--size-count", type=int, default=2,
+                    help="searches to the node budget measured for the record's size (default 2)")
     args = ap.parse_args()
 
     import torch
@@ -88,28 +86,34 @@ def main() -> None:
           f"ratios {statistics.median(ratios):.3f} (target <= 1.10)")
     print(f"largest search met: {largest['name']}, {largest['expanded']} expansions, record round "
           f"{largest['bytes'] / 1e6:.2f} MB")
-    _sizes(args, models)
+    _sizes(problems, args.size_count, models)
 
 
-def _sizes(args: argparse.Namespace, models) -> None:
-    """The record's size for the large searches of `cfs` without kinematics."""
-    from tamp.app.problem import read_problem_set
-    from tamp.planning.config import PlanConfig
-    from tamp.planning.planners import plan
+def _sizes(problems: list, count: int, models) -> None:
+    """The record's size for searches that run to the node budget: the continuous search alone (no kinematics,
+    so nothing prunes its tree) toward the goal of `count` of `problems` with block 0's goal lifted 30 cm
+    (out of reach: the search expands its 1,500 nodes)."""
+    from tamp.planning.results import PlanResult
+    from tamp.planning.search import SearchConfig, continuous_search
     from tamp.planning.search_record import round_record
     from tamp.planning.search_trace import Recorder, recording
 
-    print("| problem | expansions | nodes generated | nodes kept | truncated | record (MB) |")
-    print("|---|---|---|---|---|---|")
-    for p in read_problem_set(args.size_problems)[-args.size_count:]:
+    print("| problem (goal out of reach) | n | expansions | successors generated | nodes kept | truncated | "
+          "record (MB) | search (s) | record built (s) |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for p in sorted(problems, key=lambda p: -p.n)[:count]:
+        goal = p.X_goal.copy()
+        goal[0, 2] += 0.3
         recorder = Recorder()
+        t = time.perf_counter()
         with recording(recorder):
-            result = plan("cfs", models, p.X_init, p.X_goal, PlanConfig().with_seed(p.seed))
-        round_ = round_record(0, result, recorder, p.X_init)
-        tree = round_["level2"]
-        size = len(json.dumps(round_, separators=(",", ":")))
-        print(f"| {p.name} | {tree['expanded']} | {tree['generated']} | {len(tree['nodes'])} | {tree['truncated']} | "
-              f"{size / 1e6:.2f} |")
+            out = continuous_search(models.require_dynamics(), p.X_init, goal, SearchConfig())
+        t_search = time.perf_counter() - t
+        round_ = round_record(0, PlanResult("cfs", None, search=out), recorder, p.X_init)
+        t_built = time.perf_counter() - t - t_search
+        tree, size = round_["level2"], len(json.dumps(round_, separators=(",", ":")))
+        print(f"| {p.name} | {p.n} | {tree['expanded']} | {tree['generated']} | {len(tree['nodes'])} | "
+              f"{tree['truncated']} | {size / 1e6:.2f} | {t_search:.1f} | {t_built:.2f} |", flush=True)
 
 
 if __name__ == "__main__":
