@@ -11,14 +11,15 @@ schema are `tamp.app.search_record`'s.
 """
 from __future__ import annotations
 
-from typing import Callable, Sequence
+from typing import TYPE_CHECKING, Callable, Sequence
 
 import numpy as np
 
-from learned.interpret import BitNames
 from tamp.planning.results import Candidate, PlanResult
 from tamp.planning.search_trace import Recorder, Tree
-from tamp.planning.steps import Symbols, named_facts
+
+if TYPE_CHECKING:  # `learned` loads torch: a reader of record files does without it
+    from learned.interpret import BitNames
 
 FORMAT, VERSION = "tamp-search-record", 1
 MAX_TREE_BYTES = 1_800_000  # a tree's nodes in JSON: a search of 1,500 expansions stays under 2 MB with the rest
@@ -41,6 +42,7 @@ def facts_reader(n_unary: int, n_relations: int, names: BitNames, n: int) -> Fac
     """The facts (as `tamp symbols` names the bits) of each packed symbolic state of a candidate in a scene of
     `n` objects (or its sub-scene `Candidate.objects`)."""
     from symbolic.atoms import unpack_state
+    from tamp.planning.steps import Symbols, named_facts
 
     def facts(candidate: Candidate) -> list[list[str]]:
         if candidate.states is None:
