@@ -252,10 +252,9 @@ def run_plan(problem_path: Path, models_dir: Path, options: PlanOptions) -> int:
         raise UserError("--replan executes actions and observes the world; it needs --execute fast or full")
     if options.replay is not None and options.execute == "none":
         raise UserError("--replay needs an execution (--execute fast or full)")
-    if options.replay is not None:
-        check_output_file(options.replay, "--replay")
-    if options.search is not None:
-        check_output_file(options.search, "--search")
+    for path, flag in ((options.replay, "--replay"), (options.search, "--search")):
+        if path is not None:
+            check_output_file(path, flag)
     steps_file = options.steps
     if steps_file is None and options.replay is not None:
         from tamp.app.step_report import steps_path
@@ -287,8 +286,7 @@ def run_plan(problem_path: Path, models_dir: Path, options: PlanOptions) -> int:
     search = None if options.search is None else \
         search_recording(problem, which, models, names, settings_record(replace(options.settings, planner=cfg)))
     code, records, episode = runner(problem, models, options, cfg, timeline, names, search)
-    if search is not None:
-        assert options.search is not None  # the recording is made for it
+    if search is not None and options.search is not None:
         search.write(options.search)
     if steps_file is not None and records:
         from tamp.app.step_report import steps_document, write_steps
