@@ -5,12 +5,12 @@
 
 Paired and interleaved: each problem of --problems (every --every-th) is planned by `bilevel` with
 kinematics, as `tamp plan` plans it, once without a record and once with one (a `Recorder` active and the
-round built, `tamp.planning.search_record.round_record`, as `tamp plan --search` does; writing the file is not
-counted), the order alternating from problem to problem, each call with a fresh kinematic checker. Prints the
-median planning time of each, the ratio of the medians and the median of the per-problem ratios (target:
-at most 1.10), and the record's JSON size for the largest search met. Then the size of the record of searches
-that run to the 1,500-node budget (`_sizes`: --size-count problems with the most blocks, a goal out of reach),
-target at most 2 MB, and the time to build it.
+round built with its candidates' facts, `tamp.planning.search_record.round_record`, as `tamp plan --search`
+does; writing the file is not counted), the order alternating from problem to problem, each call with a
+fresh kinematic checker. Prints the median planning time of each, the ratio of the medians and the median of
+the per-problem ratios (target: at most 1.10), and the record's JSON size for the largest search met. Then the
+size of the record of searches that run to the 1,500-node budget (`_sizes`: --size-count problems with the most
+blocks, a goal out of reach), target at most 2 MB, and the time to build it.
 """
 from __future__ import annotations
 
@@ -40,13 +40,15 @@ def main() -> None:
     from tamp.app.problem import read_problem_set
     from tamp.app.runner import kinematics_for
     from tamp.planning.config import PlanConfig
-    from tamp.planning.models import load_models, pretrained_dir
+    from tamp.planning.models import load_bit_names, load_models, pretrained_dir
     from tamp.planning.planners import plan
-    from tamp.planning.search_record import round_record
+    from tamp.planning.search_record import facts_reader, round_record
     from tamp.planning.search_trace import Recorder, recording
 
     torch.set_num_threads(1)
     models = load_models(pretrained_dir(), need_symbolic=True)
+    names = load_bit_names(pretrained_dir())
+    assert models.domain is not None  # need_symbolic
     problems = read_problem_set(args.problems)[::args.every]
     off: list[float] = []
     on: list[float] = []
@@ -62,7 +64,8 @@ def main() -> None:
         with recording(recorder):
             result = plan("bilevel", models, p.X_init, p.X_goal, cfg, kinematics=kinematics)
         if recorder is not None:
-            round_ = round_record(0, result, recorder, p.X_init)
+            facts = facts_reader(models.domain.n_unary, models.domain.n_relations, names, p.n)
+            round_ = round_record(0, result, recorder, p.X_init, facts)
         seconds = time.perf_counter() - t
         if recorder is not None and recorder.tree is not None and len(recorder.tree.order) > largest["expanded"]:
             largest.update(expanded=len(recorder.tree.order), name=p.name,

@@ -109,3 +109,26 @@ def test_the_search_flag_is_checked_before_any_work(tmp_path, capsys):
     with pytest.raises(SystemExit) as info:
         main(["plan", "--problem", str(problem), "--search", str(tmp_path / "s.txt")])
     assert info.value.code == 2 and "ending in .json" in capsys.readouterr().err
+
+
+@pytest.mark.sim
+@pytest.mark.slow
+def test_tamp_plan_writes_the_record_of_every_round_of_its_closed_loop(tmp_path, capsys):
+    from tests.paths import ROOT
+
+    problems, path = ROOT / "results/problems/strict-n2-4-s781.jsonl.gz", tmp_path / "out/search.json"
+    code = main(["plan", "--problem", str(problems), "--name", "n3-k4-000", "--replan", "--search", str(path)])
+    out = capsys.readouterr().out
+    record = read_search_record(path)
+    assert code in (0, 1) and f"search record written to {path}" in out
+    rounds = record["rounds"]
+    assert len(rounds) == out.count("\nround ") + out.startswith("round ") >= 1
+    assert record["problem"]["name"] == "n3-k4-000" and record["symbols"]["names"]
+    first = rounds[0]
+    assert first["level"] == 1 and sum(c["chosen"] for c in first["level1"]["candidates"]) == 1
+    chosen = next(c for c in first["level1"]["candidates"] if c["chosen"])
+    assert chosen["facts"] and all(k["verdict"] == "ok" for k in chosen["kinematics"])  # checked and refined
+    assert first["refinements"] and first["refinements"][-1]["outcome"] == "refined"
+    assert all(a["ik_branch"] for a in first["refinements"][-1]["actions"])
+    executed = [r["executed"] for r in rounds if r["executed"] is not None]
+    assert executed and all(e["miss_m"] >= 0 for e in executed)
