@@ -238,3 +238,28 @@ def test_trajectory_files(tmp_path):
     ex = execute_plan([(0, 0, 1, 0)], np.array(INIT, float), np.array(GOAL, float), "fast")
     base = write_trajectory(tmp_path / "valid.json", executed_trajectory(ex, "fuzz")).read_bytes()
     _fuzz(read_trajectory, base, tmp_path / "t.json")
+
+
+def test_search_records(tmp_path):
+    from tamp.app.search_record import read_search_record, write_search_record
+
+    node = {"id": 0, "parent": None, "order": 0, "action": None, "g": 0, "h": 0.5, "X": [[0.6, 0.15, 0.025]] * 2,
+            "verdict": "ok", "reason": None}
+    leaf = {**node, "id": 1, "parent": 0, "order": None, "action": [0, 0, 1, 0], "g": 1, "X": None,
+            "verdict": "no_grasp", "reason": "rejected"}
+    candidate = {"rank": 1, "actions": [[0, 0, 1, 0]], "count": 3, "probability": 1.0, "error_m": 0.01,
+                 "verified": True, "chosen": True, "facts": [["o0 on o1"]], "predicted": [[[0.6, 0.15, 0.025]] * 2],
+                 "kinematics": [{"verdict": "ok"}]}
+    round_ = {"index": 0, "X_observed": INIT, "origin": "planned", "why": "level 1", "method": "bilevel", "level": 1,
+              "plan": [[0, 0, 1, 0]], "timings_s": {"total": 0.1}, "reasons": [],
+              "level1": {"candidates": [candidate], "stats": {}},
+              "level2": {"status": "solved", "expanded": 1, "generated": 1, "truncated": False, "nodes": [node, leaf],
+                         "path": [0]},
+              "refinements": [{"level": 1, "plan": [[0, 0, 1, 0]], "outcome": "refined",
+                               "actions": [{"ik_branch": "up", "planner": "direct", "time_s": 0.1, "failure": None}]}],
+              "executed": {"action": [0, 0, 1, 0], "predicted": [[0.6, 0.15, 0.025]] * 2,
+                           "observed": [[0.6, 0.15, 0.025]] * 2, "miss_m": 0.0}}
+    record = {"format": "tamp-search-record", "version": 1, "config": {}, "symbols": {"names": {"u0": "on o1"}},
+              "problem": {"name": None, "X_init": INIT, "X_goal": GOAL}, "rounds": [round_]}
+    write_search_record(record, tmp_path / "valid.json")
+    _fuzz(read_search_record, (tmp_path / "valid.json").read_bytes(), tmp_path / "s.json")

@@ -36,11 +36,12 @@ def cmd_demo(args: argparse.Namespace) -> int:
     if args.open_loop and args.max_actions is not None:
         raise UserError("--max-actions sets the closed loop; --open-loop executes one plan")
     planner = settings_of(args).planner
-    if args.trajectory is not None:
-        check_output_file(args.trajectory, "--trajectory")
+    for path, flag in ((args.trajectory, "--trajectory"), (args.search, "--search")):
+        if path is not None:
+            check_output_file(path, flag)
     cfg = DemoConfig(seed=args.seed, objects=args.objects, actions=args.actions, models=args.models,
                      fidelity=args.fidelity, replay=args.replay, candidates=args.candidates,
-                     replan=not args.open_loop, trajectory=args.trajectory, planner=planner)
+                     replan=not args.open_loop, trajectory=args.trajectory, planner=planner, search=args.search)
     return 0 if run_demo(cfg).success else 1
 
 
@@ -67,7 +68,7 @@ def add_plan(sub) -> None:
 
 def add_demo(sub) -> None:
     """`tamp demo`."""
-    from tamp.app.plan_command import add_max_actions_argument, add_trajectory_argument
+    from tamp.app.plan_command import add_max_actions_argument, add_search_argument, add_trajectory_argument
     from tamp.app.settings import add_config_arguments
 
     p = sub.add_parser(
@@ -102,6 +103,7 @@ def add_demo(sub) -> None:
     p.add_argument("--candidates", type=Count(0, 10_000), default=0, metavar="N",
                    help="also execute the first N symbolic candidates that failed verification and write "
                    "a replay of each (OUT.candidateI.html, I their number in the candidate list)")
+    add_search_argument(p)
     add_trajectory_argument(p)
     add_max_actions_argument(p, "closed loop")
     add_config_arguments(p)

@@ -16,10 +16,11 @@ from pathlib import Path
 
 import numpy as np
 
-from tamp.app.plan_command import LEVELS, print_cause, print_result, write_executed_trajectory
+from tamp.app.plan_command import LEVELS, print_cause, print_result, search_recording, write_executed_trajectory
 from tamp.app.plan_file import fmt_action
 from tamp.app.problem import Problem, random_problem
 from tamp.app.runner import ClosedLoopRun, Episode, Execution, execute_plan, kinematics_for, run_episode
+from tamp.app.search_record import SearchRecording
 from tamp.app.settings import Settings, settings_record
 from tamp.app.step_report import (
     closed_loop_steps,
@@ -36,6 +37,7 @@ from tamp.planning.closed_loop import ClosedLoopResult
 from tamp.planning.config import PlanConfig
 from tamp.planning.planners import plan
 from tamp.planning.results import PlanResult
+from tamp.planning.search_trace import recording
 from tamp.planning.steps import dynamics_errors
 from tamp.planning.verify import goal_error, goal_errors, rollout
 from tamp.planning.vocabulary import TYPE_NAMES, Outcome, PickPlace
@@ -61,6 +63,7 @@ class DemoConfig:
     #   one plan, executed open loop
     trajectory: Path | None = None  # write the executed arm motion here (docs/trajectories.md)
     planner: PlanConfig = PlanConfig()  # the planner's settings, `tamp plan`'s (its seed is the demo's)
+    search: Path | None = None  # write the search record here (docs/search-record.md)
 
 
 @dataclass
@@ -74,6 +77,7 @@ class DemoResult:
     loop_run: ClosedLoopRun | None = None  # closed loop: the run in the world (its steps and motion)
     step_times: list[tuple[float, float]] = field(default_factory=list)  # closed loop: (refine, execute) s
     steps: list[dict] = field(default_factory=list)  # per executed step (tamp.app.step_report records)
+    search: SearchRecording | None = None  # the search record being made (cfg.search)
 
     @property
     def episode(self) -> Episode:
@@ -116,9 +120,13 @@ def run_demo(cfg: DemoConfig = DemoConfig()) -> DemoResult:
     print(f"\nplanning (bilevel, {plan_cfg.level1.n_domains} sampled domains):", flush=True)
     if kinematics is not None:
         kinematics.reset(problem.X_init)
-    result = plan("bilevel", models, problem.X_init, problem.X_goal, plan_cfg, kinematics=kinematics)
+    search = None if cfg.search is None else search_recording(problem, _source(cfg), models, names, _record(cfg))
+    with recording(None if search is None else search.recorder):
+        result = plan("bilevel", models, problem.X_init, problem.X_goal, plan_cfg, kinematics=kinematics)
+    if search is not None and not cfg.replan:
+        search.planned(result, problem.X_init)  # the closed loop's first round takes it from the recorder
     print_result(result, plan_cfg.verify.tau_verify, indent="  ")
-    out = DemoResult(problem, result, None, plan_cfg.verify.eps)
+    out = DemoResult(problem, result, None, plan_cfg.verify.eps, search=search)
 
     timeline = Timeline() if cfg.replay is not None else None
     episode = _closed_loop_episode if cfg.replan else _open_loop_episode
@@ -127,6 +135,9 @@ def run_demo(cfg: DemoConfig = DemoConfig()) -> DemoResult:
         _replay_candidates(out, models, cfg)
     if cfg.trajectory is not None:
         write_executed_trajectory(out.episode.motion, cfg.trajectory, _source(cfg), _record(cfg))
+    if search is not None:
+        assert cfg.search is not None  # the recording is made for it
+        search.write(cfg.search)
     return out
 
 
@@ -135,7 +146,9 @@ def _closed_loop_episode(out: DemoResult, models, names, plan_cfg: PlanConfig, k
     """Execute, observe and plan again until the goal (`_closed_loop`), then the steps, the summary, the
     cause of a failure and the replay."""
     problem = out.problem
-    run = _closed_loop(problem, models, plan_cfg, kinematics, cfg, out.result, timeline, out.step_times)
+    with recording(None if out.search is None else out.search.recorder):
+        run = _closed_loop(problem, models, plan_cfg, kinematics, cfg, out.result, timeline, out.step_times,
+                           out.search)
     out.loop, out.loop_run, out.steps = run.loop, run, closed_loop_steps(models, run, names)
     print_steps(out.steps, blank_line=True)
     _print_loop_summary(out, cfg)
@@ -317,7 +330,7 @@ def _print_summary(out: DemoResult, cfg: DemoConfig) -> None:
 
 def _closed_loop(problem: Problem, models, plan_cfg: PlanConfig, kinematics: FeasibilityChecker | None,
                  cfg: DemoConfig, first: PlanResult, timeline: Timeline | None,
-                 step_times: list[tuple[float, float]]) -> ClosedLoopRun:
+                 step_times: list[tuple[float, float]], search: SearchRecording | None = None) -> ClosedLoopRun:
     """Execute the first action of the plan, observe the scene, plan again from it until the goal is
     reached or the loop's action budget is spent (a round keeps the rest of the last plan while it is
     on course, and widens its search when it finds no plan), in a World of the demo's fidelity: each
@@ -334,6 +347,8 @@ def _closed_loop(problem: Problem, models, plan_cfg: PlanConfig, kinematics: Fea
 
     def on_round(r: int, result: PlanResult) -> None:  # every round, planned anew or kept
         planned.append((len(executed), result))
+        if search is not None:
+            search.planned(result)
         if r > 0:
             how = "kept the rest of the last plan" if result.kept else \
                 "searched over every action from the observed scene" if result.widened else \
@@ -343,6 +358,8 @@ def _closed_loop(problem: Problem, models, plan_cfg: PlanConfig, kinematics: Fea
 
     def show_step(action: PickPlace, X: np.ndarray, info, seconds: float) -> None:
         executed.append(action)
+        if search is not None:
+            search.executed(action, X)
         why = f" ({info.reason})" if info.status != "ok" and info.reason else ""
         print(f"  executed {fmt_action(action)}: {info.status}{why}; blocks {goal_error(X, problem.X_goal) * 100:.1f} "
               f"cm from the goal, {seconds:.1f} s", flush=True)

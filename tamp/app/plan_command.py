@@ -23,12 +23,15 @@ from tamp.app.args import (
 )
 from tamp.app.faults import Faults, add_fault_arguments, faults_of
 from tamp.app.plan_file import fmt_action
+from tamp.app.search_record import SearchRecording
 from tamp.app.settings import Settings, add_config_arguments, settings_of, settings_record
 from tamp.errors import UserError
 from tamp.planning.causes import cause_of, stop_record
 from tamp.planning.config import PlanConfig
 from tamp.planning.planners import METHODS, plan
 from tamp.planning.results import PlanResult
+from tamp.planning.search_record import facts_reader
+from tamp.planning.search_trace import recording
 from tamp.planning.steps import dynamics_errors
 from tamp.planning.verify import goal_error
 from tamp.planning.vocabulary import Outcome
@@ -65,6 +68,7 @@ class PlanOptions:
     trajectory: Path | None = None  # the executed joint trajectory (docs/trajectories.md)
     faults: Faults = Faults()  # with replan: observation noise and a push, drawn from the problem's seed
     name: str | None = None  # the problem of a problem set (`tamp problems`) to plan
+    search: Path | None = None  # the search record (docs/search-record.md)
 
 
 def _ms(t: float) -> str:
@@ -119,14 +123,18 @@ def print_result(result: PlanResult, tau: float, indent: str = "") -> None:
 
 # Each runner returns (exit code, per-step records, the Episode: None when nothing was executed).
 
-def _open_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timeline, names) -> tuple[int, list[dict], Any]:
+def _open_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timeline, names,
+               search: SearchRecording | None = None) -> tuple[int, list[dict], Any]:
     from tamp.app.runner import kinematics_for, run_episode
     from tamp.app.step_report import open_loop_steps
 
     kinematics = kinematics_for(options.method, cfg)
     if kinematics is not None:
         kinematics.reset(problem.X_init)
-    result = plan(options.method, models, problem.X_init, problem.X_goal, cfg, kinematics=kinematics)
+    with recording(None if search is None else search.recorder):
+        result = plan(options.method, models, problem.X_init, problem.X_goal, cfg, kinematics=kinematics)
+    if search is not None:
+        search.planned(result, problem.X_init)
     print_result(result, cfg.verify.tau_verify)
     if not result.solved:
         print_cause("no_plan", None, stop_record(None, result), None)
@@ -171,8 +179,8 @@ def _print_steps(records: list[dict]) -> None:
     print_steps(records)
 
 
-def _closed_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timeline,
-                 names) -> tuple[int, list[dict], Any]:
+def _closed_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timeline, names,
+                 search: SearchRecording | None = None) -> tuple[int, list[dict], Any]:
     from tamp.app.runner import kinematics_for, run_episode
     from tamp.app.step_report import closed_loop_steps
 
@@ -182,8 +190,12 @@ def _closed_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timelin
     def show_step(action, X, info, seconds) -> None:
         print(f"  executed {fmt_action(action)}: {info.status}{': ' + info.reason if info.reason else ''}; "
               f"now {goal_error(X, problem.X_goal) * 100:.1f} cm from the goal{seen}")
+        if search is not None:
+            search.executed(action, X)
 
     def show_round(r: int, result: PlanResult) -> None:
+        if search is not None:
+            search.planned(result)
         print(f"round {r}:")
         print_result(result, cfg.verify.tau_verify, indent="  ")
 
@@ -195,10 +207,11 @@ def _closed_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timelin
               f"{options.execute} world")
     if faults is not None:
         print(f"faults (drawn from the problem's seed, as `tamp evaluate` draws them): {faults.describe()}")
-    episode = run_episode(options.method, models, problem.X_init, problem.X_goal, cfg, options.execute,
-                          closed_loop=True, rounds=options.rounds, kinematics=kinematics_for(options.method, cfg),
-                          timeline=timeline, on_round=show_round, on_step=show_step, faults=faults,
-                          fault_seed=problem.seed)
+    with recording(None if search is None else search.recorder):
+        episode = run_episode(options.method, models, problem.X_init, problem.X_goal, cfg, options.execute,
+                              closed_loop=True, rounds=options.rounds, kinematics=kinematics_for(options.method, cfg),
+                              timeline=timeline, on_round=show_round, on_step=show_step, faults=faults,
+                              fault_seed=problem.seed)
     run = episode.run
     assert run is not None  # a closed loop
     out = run.loop
@@ -239,8 +252,9 @@ def run_plan(problem_path: Path, models_dir: Path, options: PlanOptions) -> int:
         raise UserError("--replan executes actions and observes the world; it needs --execute fast or full")
     if options.replay is not None and options.execute == "none":
         raise UserError("--replay needs an execution (--execute fast or full)")
-    if options.replay is not None:
-        check_output_file(options.replay, "--replay")
+    for path, flag in ((options.replay, "--replay"), (options.search, "--search")):
+        if path is not None:
+            check_output_file(path, flag)
     steps_file = options.steps
     if steps_file is None and options.replay is not None:
         from tamp.app.step_report import steps_path
@@ -269,7 +283,11 @@ def run_plan(problem_path: Path, models_dir: Path, options: PlanOptions) -> int:
 
         timeline = Timeline()
     runner = _closed_loop if options.replan else _open_loop
-    code, records, episode = runner(problem, models, options, cfg, timeline, names)
+    search = None if options.search is None else \
+        search_recording(problem, which, models, names, settings_record(replace(options.settings, planner=cfg)))
+    code, records, episode = runner(problem, models, options, cfg, timeline, names, search)
+    if search is not None and options.search is not None:
+        search.write(options.search)
     if steps_file is not None and records:
         from tamp.app.step_report import steps_document, write_steps
 
@@ -292,6 +310,14 @@ def run_plan(problem_path: Path, models_dir: Path, options: PlanOptions) -> int:
         write_executed_trajectory(None if episode is None else episode.motion, options.trajectory, source,
                                   settings_record(replace(options.settings, planner=cfg)))
     return code
+
+
+def search_recording(problem, source: str, models, names, configuration: dict) -> SearchRecording:
+    """The search record of a run of `problem` (`source`: how the run named it)."""
+    facts = None if models.domain is None else \
+        facts_reader(models.domain.n_unary, models.domain.n_relations, names, problem.n)
+    return SearchRecording({"name": problem.name, "X_init": problem.X_init, "X_goal": problem.X_goal,
+                            "source": source}, configuration, names, facts)
 
 
 def write_executed_trajectory(executed, path: Path, source: str, configuration: dict) -> None:
@@ -343,6 +369,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    "OUT.steps.json")
     p.add_argument("--steps", type=Path, default=None, metavar="OUT.json",
                    help="write the per-step record as JSON (default: beside the replay, if any)")
+    add_search_argument(p)
     add_trajectory_argument(p)
     add_fault_arguments(p, "with --replan")
     add_max_actions_argument(p, "with --replan")
@@ -354,6 +381,13 @@ def add_max_actions_argument(p: argparse.ArgumentParser, which: str) -> None:
     p.add_argument("--max-actions", type=positive_int, default=None, metavar="N",
                    help=f"{which}: give up after sending N actions (default: loop.max_actions of "
                    "the configuration, 30: a goal of k <= 5 random actions needs 5, the rest is room for detours)")
+
+
+def add_search_argument(p: argparse.ArgumentParser) -> None:
+    """--search of `tamp plan` and `tamp demo`."""
+    p.add_argument("--search", type=json_path, default=None, metavar="OUT.json",
+                   help="write the search record: what each planning call considered (Level 1's candidates, the "
+                   "continuous search's tree, refinements, the closed loop's rounds; docs/search-record.md)")
 
 
 def add_trajectory_argument(p: argparse.ArgumentParser) -> None:
@@ -375,4 +409,5 @@ def options_from_args(args: argparse.Namespace) -> PlanOptions:
     planner = replace(settings.planner, loop=faults.known_to(settings.planner.loop))  # the loop knows its noise
     settings = replace(settings, planner=planner)
     return PlanOptions(args.method, args.execute, args.replan, args.rounds, args.replay, planner,
-                       args.max_actions is not None, settings, args.steps, args.trajectory, faults, args.name)
+                       args.max_actions is not None, settings, args.steps, args.trajectory, faults, args.name,
+                       args.search)

@@ -63,6 +63,16 @@ class Feasibility:
                 return reason
         return None
 
+    def verdicts(self, trajectory: np.ndarray, actions) -> tuple[str, ...]:
+        """What the check and refinement found so far for each action of a plan on its predicted states: "ok", the
+        reason it failed, or "unchecked" (nothing is checked here: the search record reads it)."""
+        out = []
+        for X, a in zip(trajectory, actions):
+            key = (state_key(X, self.resolution), tuple(int(v) for v in a))
+            out.append("unchecked" if key not in self.cache else "ok" if self.cache[key] is None
+                       else str(self.cache[key]))
+        return tuple(out)
+
     @property
     def refinements_left(self) -> int:
         return self.config.max_refinements - len(self.refinements)
@@ -74,7 +84,7 @@ class Feasibility:
         self.refinements.append({"level": level, "plan": [list(map(int, a)) for a in actions],
                                         "failed_action": outcome.action_index,
                                         "reason": None if outcome.reason is None else outcome.reason.value,
-                                        "message": outcome.message})
+                                        "message": outcome.message, "actions": list(outcome.steps)})
         if not outcome.success:
             k = outcome.action_index
             key = (state_key(trajectory[k], self.resolution), tuple(int(v) for v in actions[k]))

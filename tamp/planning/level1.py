@@ -21,6 +21,7 @@ from tamp.planning.kinematic_check import Feasibility, feasible_choice
 from tamp.planning.models import Models
 from tamp.planning.pruning import goal_oriented_actions, misplaced_objects
 from tamp.planning.results import Candidate, Clock, Level1Result, reasons_json
+from tamp.planning.search_trace import active
 from tamp.planning.verify import Verification, VerifyConfig, verify, verify_many
 
 
@@ -142,6 +143,7 @@ class Verifier:
         self._rollouts: dict[int, Verification] = {}
         self._done = 0  # ranked plans checked
         self._ended = False  # a plan taken, or no refinement left
+        self.recording = active() is not None  # keep each rollout and kinematic verdict (the search record)
 
     def check_decided(self, head: list[Candidate]) -> bool:
         """Check the plans of `head`, the ranking's decided head while the symbolic search goes on (its order is
@@ -183,6 +185,8 @@ class Verifier:
         self.any_verified = self.any_verified or v.verified
         if self.record.chosen is None and v.verified:
             self.record.chosen = feasible_choice([v], self.feas)
+        if self.recording:
+            kept(candidate, v, self.feas)
 
     def finish(self) -> None:
         """Record the candidates (checked ones, then the rest) and, without a chosen plan, why."""
@@ -199,10 +203,18 @@ class Verifier:
                               f"{best * 100:.1f} cm, tau {self.goal.tau_verify * 100:g} cm)")
 
 
+def kept(candidate: Candidate, v: Verification, feas: Feasibility | None) -> None:
+    """The search record's view of a checked candidate: its rollout, and each action's kinematic verdict."""
+    candidate.predicted = v.trajectory
+    candidate.kinematics = ("unchecked",) * len(v.actions) if feas is None else feas.verdicts(v.trajectory, v.actions)
+
+
 def verify_candidate(models: Models, X_init, X_goal, candidate: Candidate, goal: VerifyConfig) -> Verification:
     """Verify one candidate alone (its error and verdict recorded on it); the baselines report it."""
     v = verify(models.require_dynamics(), X_init, X_goal, candidate.actions, goal.tau_verify)
     candidate.error, candidate.verified = v.error, v.verified
+    if active() is not None:
+        kept(candidate, v, None)
     return v
 
 
@@ -271,12 +283,15 @@ def level1_serial(models: Models, X_init, X_goal, config: Level1Config, goal: Ve
     with clock.stage("verify"):
         whole = verify(models.require_dynamics(), X_init, X_goal, actions, goal.tau_verify)
     record.symbolic_stats["serial"] = {"placed": stages, "left": [], "error_m": round(whole.error, 6)}
-    record.candidates.append(Candidate(whole.actions, 0, 0.0, whole.error, whole.verified, stages=tuple(stages)))
+    joined = Candidate(whole.actions, 0, 0.0, whole.error, whole.verified, stages=tuple(stages))
+    record.candidates.append(joined)
     if not whole.verified:
         record.reasons.append(f"level 1, one block at a time: the joined plan is predicted {whole.error * 100:.1f} "
                               f"cm from the goal (tau {goal.tau_verify * 100:g} cm)")
         return
     record.chosen = feasible_choice([whole], feas)
+    if active() is not None:
+        kept(joined, whole, feas)
     if record.chosen is None:
         record.reasons.append("level 1, one block at a time: the joined plan is not kinematically feasible")
 

@@ -79,6 +79,10 @@ class Candidate:
     #   indices (`level1_scene`); None: all objects
     stages: tuple[int, ...] | None = None  # a plan joined one block at a time (`level1_serial`): the blocks
     #   its stages placed, in order (count 0: no sampled domain gave it whole)
+    # recorded only inside `search_trace.recording` (the search record): the Dynamics Model rollout it was verified
+    #   by ((len(actions) + 1, n, 5)) and the kinematic verdict of each action ("ok", a reason, "unchecked")
+    predicted: np.ndarray | None = field(default=None, repr=False)
+    kinematics: tuple[str, ...] | None = None
 
 
 @dataclass

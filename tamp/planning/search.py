@@ -45,6 +45,7 @@ import numpy as np
 
 from tamp.errors import UserError
 from tamp.planning.pruning import all_actions, goal_oriented_actions
+from tamp.planning.search_trace import active
 from tamp.planning.verify import DynamicsModel, VerifyConfig, doubt, states_pair
 
 WEIGHT = 1.5  # w in f = g + w h (the paper's)
@@ -202,6 +203,8 @@ class ContinuousSearch:
         self.closest = (h0, 0)  # (h, node index) of the expanded state closest to the goal
         self.closer_at = 0  # expansions when the closest state last came closer
         self.every = all_actions(len(self.X_init))
+        recorder = active()  # the search record's (`tamp.planning.search_trace`); None: not recording
+        self.tree = None if recorder is None else recorder.new_tree(self.nodes, self.goal, self.heuristic)
 
     # --- states, keys, paths --------------------------------------------------------------------
     def full(self, P: np.ndarray) -> np.ndarray:
@@ -235,15 +238,15 @@ class ContinuousSearch:
         return h
 
     # --- the checks on a node -------------------------------------------------------------------
-    def infeasible(self, index: int) -> bool:
-        """Whether the action into node `index` fails the check in its parent's state (counted)."""
+    def infeasible(self, index: int) -> Hashable | None:
+        """Why the action into node `index` fails the check in its parent's state (counted); None: it passes."""
         _, parent, action, _ = self.nodes[index]
         if self.feasible is None or action is None:
-            return False
+            return None
         reason = self.feasible(self.full(self.nodes[parent][0]), action)
         if reason is not None:
             self.out.rejected[reason] += 1
-        return reason is not None
+        return reason
 
     def doubtful(self, index: int) -> bool:
         """Whether a step of the plan into node `index` may miss by more than config.max_doubt (`verify.doubt`)."""
@@ -262,6 +265,8 @@ class ContinuousSearch:
         elif self.closest[1] > 0:
             plan, states = self.path(self.closest[1])
             out.closest_plan, out.closest_trajectory = plan, np.stack(states)
+        if self.tree is not None:
+            self.tree.end(index, self.closest[1], out.generated)
         return out
 
     def stop(self, status: SearchStatus, reason: str) -> SearchResult:
@@ -317,13 +322,19 @@ class ContinuousSearch:
             P, _, _, g = self.nodes[index]
             if self.best_g.get(self.key(P), -1) < g or g >= self.config.max_depth:
                 continue  # reached again with fewer actions since it was pushed / too deep
-            if self.infeasible(index):
+            why = self.infeasible(index)
+            if why is not None:
                 del self.best_g[self.key(P)]  # the state may still be reached by a feasible action
+                if self.tree is not None:
+                    self.tree.verdicts[index] = str(why)
                 continue
             self.out.expanded += 1
             if h_here < self.closest[0]:
                 self.closest, self.closer_at = (h_here, index), self.out.expanded
+            duplicates = self.out.duplicates
             solved = self.expand(index)
+            if self.tree is not None:
+                self.tree.expanded(index, self.out.duplicates - duplicates)
             if solved is not None:
                 return solved
         cfg, out = self.config, self.out
@@ -375,10 +386,16 @@ class ContinuousSearch:
                 continue
             if pruned and (here, tuple(action)) in pruned:
                 out.pruned += 1
+                if self.tree is not None:
+                    self.tree.left_out.append((index, tuple(action), "pruned", "known to fail refinement here, or "
+                                               "taken from here before by the closed loop", succ[b]))
                 continue
             nodes.append((succ[b], index, tuple(action), g + 1))
-            if reached[b] and self.infeasible(len(nodes) - 1):
+            if reached[b] and (why := self.infeasible(len(nodes) - 1)) is not None:
                 nodes.pop()
+                if self.tree is not None:
+                    self.tree.left_out.append((index, tuple(action), str(why), "a goal state whose action the "
+                                               "kinematic check rejects", succ[b]))
                 out.goals_rejected += 1
                 out.rejected_goal_error = min(out.rejected_goal_error, float(worst[b]))
                 continue

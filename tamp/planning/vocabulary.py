@@ -60,6 +60,8 @@ class RefinementOutcome:
     action_index: int | None = None  # first action that failed
     reason: Infeasible | None = None
     message: str = ""
+    steps: tuple[dict, ...] = ()  # per action refined or tried: "ik_branch", "planner" (per motion), "time_s",
+    #   "failure" (None: it refined); the search record's
 
     @property
     def success(self) -> bool:

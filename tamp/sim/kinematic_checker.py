@@ -29,7 +29,7 @@ from pydrake.math import RigidTransform
 
 from tamp.planning.search import SearchConfig, state_key
 from tamp.planning.vocabulary import OFFSETS, Infeasible, PickPlace, RefinementOutcome
-from tamp.sim.kinematics import Q_HOME, solve_chain
+from tamp.sim.kinematics import BRANCH, Q_HOME, solve_chain
 from tamp.sim.motion import MotionPlanner
 from tamp.sim.plants import build_motion_scene
 from tamp.sim.refine import step_failure
@@ -48,7 +48,7 @@ from tamp.sim.skill import (
     pick_waypoints,
 )
 from tamp.sim.world import World
-from tamp.sim.world_types import WorldConfig
+from tamp.sim.world_types import StepInfo, WorldConfig
 
 # Collision set-up of each waypoint configuration, as `World.step` plans the motions through it.
 WITH_ALL_BLOCKS = ("pregrasp", "grasp")  # jaws open around the picked block
@@ -289,24 +289,35 @@ class FeasibilityChecker:
         if trajectory is not None and len(trajectory) < len(plan):
             raise ValueError(f"a trajectory of {len(trajectory)} states for {len(plan)} actions")
         scene, q = self.scene, self.q
+        steps: list[dict] = []
         for k, action in enumerate(plan):
             if k > 0 and trajectory is not None:
                 scene = self.predicted_scene(trajectory[k])
             known = (_grid_key(scene, grid_m), tuple(action), k)
             if known in self._failed_refinements:
                 reason, message = self._failed_refinements[known]
-                return RefinementOutcome(k, reason, message)
+                steps.append({"ik_branch": None, "planner": None, "time_s": None, "failure": message + " (known)"})
+                return RefinementOutcome(k, reason, message, tuple(steps))
             self.world.set_scene(scene, q, motion_seed=k)
             _, info = self.world.step(action, settle=False)
             failure = step_failure(info)
+            steps.append(refined_step(info, None if failure is None else f"{failure[0]} [{failure[1]}]: {failure[2]}"))
             if failure is not None:
                 stage, where, why = failure
-                outcome = RefinementOutcome(k, REFINE_REASONS[stage], f"{stage} [{where}]: {why}")
+                outcome = RefinementOutcome(k, REFINE_REASONS[stage], f"{stage} [{where}]: {why}", tuple(steps))
                 _remember(self._failed_refinements, known, (outcome.reason, outcome.message), _MAX_SCENES)
                 return outcome
             assert self.world.scene is not None  # set_scene above
             scene, q = self.world.scene, self.world.q
-        return RefinementOutcome()
+        return RefinementOutcome(steps=tuple(steps))
+
+
+def refined_step(info: StepInfo, failure: str | None) -> dict:
+    """One action's refinement as the search record has it: IK branch, planner per motion, seconds, failure."""
+    planners = ", ".join(f"{name} {planner}" for name, planner in info.motion_planner.items())
+    return {"ik_branch": BRANCH, "planner": planners or None,
+            "time_s": round(sum(info.motion_seconds.values()), 4), "failure": failure}
 
 
 __all__ = ["FeasibilityChecker"]
+
