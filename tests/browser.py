@@ -4,8 +4,10 @@ Debian's `chromium` only (the project's rule: never a browser a package download
 from __future__ import annotations
 
 import base64
+import fcntl
 import json
 import os
+import select
 import shutil
 import subprocess
 import tempfile
@@ -17,6 +19,13 @@ CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 FLAGS = ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
          "--disable-background-networking", "--disable-component-update", "--disable-sync",
          "--hide-scrollbars", "--remote-debugging-pipe")
+
+
+def _above_4(fd: int) -> int:
+    """`fd` moved to a number above 4 (the one given is closed)."""
+    moved = fcntl.fcntl(fd, fcntl.F_DUPFD, 5)
+    os.close(fd)
+    return moved
 
 
 class BrowserError(RuntimeError):
@@ -33,9 +42,12 @@ class Browser:
         self.profile = tempfile.mkdtemp(prefix="tamp-chromium-")
         to_browser, self._write = os.pipe()
         self._read, from_browser = os.pipe()
-        # the protocol's pipe is the browser's fds 3 (it reads) and 4 (it writes); the shell puts them there
+        # above 4, so that putting one at 3 or 4 in the browser does not overwrite the other
+        to_browser, from_browser = (_above_4(fd) for fd in (to_browser, from_browser))
+        # the protocol's pipe is the browser's fds 3 (it reads) and 4 (it writes); bash puts them there (sh takes
+        # fds up to 9 only)
         self.process = subprocess.Popen(
-            ["sh", "-c", f'exec "$0" "$@" 3<&{to_browser} 4>&{from_browser}', CHROMIUM, *FLAGS,
+            ["bash", "-c", f'exec "$0" "$@" 3<&{to_browser} 4>&{from_browser}', CHROMIUM, *FLAGS,
              f"--user-data-dir={self.profile}", f"--window-size={width},{height}", "about:blank"],
             pass_fds=(to_browser, from_browser), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         os.close(to_browser)
@@ -75,7 +87,8 @@ class Browser:
     def _message(self) -> dict[str, Any]:
         deadline = time.monotonic() + self.timeout_s
         while b"\0" not in self._buffer:
-            if time.monotonic() > deadline:
+            left = deadline - time.monotonic()
+            if left <= 0 or not select.select([self._read], [], [], left)[0]:
                 raise BrowserError("the browser did not answer in time")
             chunk = os.read(self._read, 1 << 20)
             if not chunk:
@@ -112,10 +125,12 @@ class Browser:
             self.events.append(event)
 
     def open(self, path: Path, fragment: str = "") -> None:
-        """Load the file at `path` (with `#fragment`) and wait for its load event."""
-        self.events = [e for e in self.events if e.get("method") != "Page.loadEventFired"]
-        self.send("Page.navigate", session=True, url=Path(path).resolve().as_uri() + (f"#{fragment}" if fragment else ""))
-        self.wait_for("Page.loadEventFired")
+        """Load the file at `path` (with `#fragment`) afresh, and wait for its load event."""
+        # through a blank page: a URL that differs from the one open only in its fragment would not reload
+        for url in ("about:blank", Path(path).resolve().as_uri() + (f"#{fragment}" if fragment else "")):
+            self.events = [e for e in self.events if e.get("method") != "Page.loadEventFired"]
+            self.send("Page.navigate", session=True, url=url)
+            self.wait_for("Page.loadEventFired")
 
     def eval(self, expression: str) -> Any:
         """The value of a JavaScript expression in the page (awaited if a promise); BrowserError if it throws."""
@@ -156,7 +171,8 @@ class Browser:
         params: dict[str, Any] = {"format": "png"}
         if clip_selector is not None:
             rect = self.eval(f"(() => {{ const r = document.querySelector({json.dumps(clip_selector)})"
-                             ".getBoundingClientRect(); return [r.left + scrollX, r.top + scrollY, r.width, r.height]; })()")
+                             ".getBoundingClientRect();"
+                             " return [r.left + scrollX, r.top + scrollY, r.width, r.height]; })()")
             params["clip"] = {"x": rect[0], "y": rect[1], "width": rect[2], "height": rect[3], "scale": 1}
             params["captureBeyondViewport"] = True
         data = self.send("Page.captureScreenshot", session=True, **params)["data"]

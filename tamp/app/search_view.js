@@ -260,8 +260,11 @@ function bounds(scenes) {
     });
   });
   if (!isFinite(b.x[0])) return {x: [-0.3, 0.3], y: [-0.3, 0.3], z: [0, 0.2]};
-  const pad = 0.04;
-  b.x = [b.x[0] - pad, b.x[1] + pad]; b.y = [b.y[0] - pad, b.y[1] + pad]; b.z = [0, Math.max(b.z[1] + pad, 0.15)];
+  const widen = function (r, least) {   // padded, and at least `least` metres wide about its middle
+    const mid = (r[0] + r[1]) / 2, half = Math.max((r[1] - r[0]) / 2 + 0.04, least / 2);
+    return [mid - half, mid + half];
+  };
+  b.x = widen(b.x, 0.35); b.y = widen(b.y, 0.35); b.z = [0, Math.max(b.z[1] + 0.04, 0.2)];
   return b;
 }
 function view(X, ghost, b, side) {   // side: y across, z up; top: x across, y up (seen from above)
@@ -361,7 +364,8 @@ function renderScene() {
   const b = bounds([predicted, goal, observed]);
   const kids = [el("h2", {text: "Scenes"}),
     el("p", {cls: "muted", text: "Top view (x across, y up) above the side view (y across, z up). Coloured boxes are " +
-      "blocks, numbered as in the problem; dashed outlines mark each block's goal."})];
+      "blocks, numbered as in the problem. Dashed outlines: in the predicted scene, each block's goal; in the " +
+      "observed scene, where the prediction put the block."})];
   if (!s) kids.push(el("p", {cls: "empty", text: "Click a Level 1 candidate, a Level 2 node or the executed step " +
                                                    "to draw its predicted scene here."}));
   else kids.push(el("p", {cls: "caption", id: "scene-caption", text: s.caption}));
@@ -377,7 +381,7 @@ function renderScene() {
     sceneColumn(s ? s.title : "predicted", predicted, goal, b,
                 distance === null ? null : "largest distance to the goal: " + cm(distance), "predicted"),
     sceneColumn("goal", goal, null, b, null, "goal"),
-    sceneColumn(s ? s.observedTitle : "observed (round start)", observed, goal, b,
+    sceneColumn(s ? s.observedTitle : "observed (round start)", observed, predicted || goal, b,
                 s && predicted && observed ? "largest distance to the prediction: " + cm(worst(predicted, observed))
                   : null, "observed"),
   ]));

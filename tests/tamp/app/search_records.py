@@ -3,7 +3,10 @@ a closed loop of rounds, Level 1 candidates, a Level 2 tree of any size and a re
 from __future__ import annotations
 
 import random
+from pathlib import Path
 from typing import Any
+
+from guarded import InputError, read_json
 
 X_INIT = [[0.55, -0.20, 0.025, 1, 0], [0.60, 0.10, 0.025, 0, 1], [0.45, 0.25, 0.025, 1, 0]]
 X_GOAL = [[0.60, 0.175, 0.075, 1, 0], [0.60, 0.10, 0.025, 0, 1], [0.60, 0.025, 0.075, 1, 0]]
@@ -17,7 +20,7 @@ def _scene(rng: random.Random, near: list[list[float]]) -> list[list[float]]:
 
 def level2_tree(n_nodes: int, seed: int = 0) -> dict[str, Any]:
     """A Level 2 search of `n_nodes` nodes: expanded best-first (about a third of them), every expansion generating
-    a few successors, a quarter of which are rejected with a reason; the path runs to the last expanded node."""
+    a few successors, a quarter of which are rejected with a reason; the path runs to the deepest expanded node."""
     rng = random.Random(seed)
     nodes = [{"id": 0, "parent": None, "order": 0, "action": None, "g": 0.0, "h": 3.0, "X": _scene(rng, X_INIT),
               "verdict": "ok", "reason": None}]
@@ -38,7 +41,7 @@ def level2_tree(n_nodes: int, seed: int = 0) -> dict[str, Any]:
             nodes.append(node)
             if not bad:
                 frontier.append(node["id"])
-    path, node = [], max((n for n in nodes if n["order"] is not None), key=lambda n: n["order"])
+    path, node = [], max((n for n in nodes if n["order"] is not None), key=lambda n: (n["g"], n["order"]))
     while node is not None:
         path.append(node["id"])
         node = nodes[node["parent"]] if node["parent"] is not None else None
@@ -85,4 +88,13 @@ def search_record(n_nodes: int = 40, rounds: int = 2, replay: str | None = None)
         })
     if replay is not None:
         record["replay"] = replay
+    return record
+
+
+def read_record(path: Path) -> dict[str, Any]:
+    """The tests' stand-in for `tamp.app.search_record.read_search_record` where this branch lacks it: the guarded
+    reader, and the format and version checked."""
+    record = read_json(path, "search record")
+    if not isinstance(record, dict) or record.get("format") != "tamp-search-record" or record.get("version") != 1:
+        raise InputError(f"{path}: not a search record (format tamp-search-record, version 1)")
     return record
