@@ -71,6 +71,25 @@ function factTitle(fact) {
   return NAMES[fact] || NAMES[key] || null;
 }
 function sameAction(a, b) { return JSON.stringify(a) === JSON.stringify(b); }
+function brief(v) {   // a number, string or small object as short text: {"solved": 99, "stopped": 1} -> solved 99, stopped 1
+  if (typeof v === "number") return Number.isInteger(v) ? String(v) : v.toFixed(3);
+  if (v === null || v === undefined) return "--";
+  if (typeof v === "object" && !Array.isArray(v)) {
+    const keys = Object.keys(v);
+    return keys.length ? keys.map(function (k) { return k + " " + brief(v[k]); }).join(", ") : "none";
+  }
+  return typeof v === "string" ? v : JSON.stringify(v);
+}
+function motions(planner) {   // "approach direct, descend direct, ..." -> "direct x7"; the full text is its title
+  if (typeof planner !== "string" || planner.indexOf(",") < 0) return planner || "--";
+  const counts = new Map();
+  for (const part of planner.split(",")) {
+    const words = part.trim().split(" ");
+    const name = words[words.length - 1];
+    counts.set(name, (counts.get(name) || 0) + 1);
+  }
+  return Array.from(counts).map(function (c) { return c[0] + " \u00d7" + c[1]; }).join(", ");
+}
 
 // ---------- the page's state, kept in its address ----------
 const S = {round: 0, select: null, filter: "all", t: null, state: null, expandAll: false};
@@ -114,11 +133,12 @@ function buildTree(level2) {
   const sequence = nodes.filter(function (n) { return key(n) !== Infinity; }).sort(byOrder);
   const rank = new Map();
   sequence.forEach(function (n, i) { rank.set(n.id, i); });
-  const path = new Set(Array.isArray(level2 && level2.path) ? level2.path : []);
+  const found = Array.isArray(level2 && level2.path) && level2.path.length;
+  const path = new Set(found ? level2.path : (Array.isArray(level2 && level2.closest) ? level2.closest : []));
   const reasons = new Map();
   for (const n of nodes) if (rejected(n)) reasons.set(n.verdict, (reasons.get(n.verdict) || 0) + 1);
   return {byId: byId, kids: kids, roots: roots, sequence: sequence, rank: rank, path: path, reasons: reasons,
-          T: sequence.length, level2: level2};
+          T: sequence.length, level2: level2, pathName: found ? "the path found" : "the path to the closest state"};
 }
 function rejected(n) { return n.verdict !== undefined && n.verdict !== null && n.verdict !== "ok"; }
 function generated(n) {   // made by one of the first S.t expansions (the timeline)
@@ -240,7 +260,7 @@ function play(button) {
   }, 40);
 }
 
-// ---------- scenes: top (x-y) and side (y-z) views in SVG ----------
+// ---------- scenes: top (x-y) and side (y-z) views in SVG, sharing y ----------
 const SVGNS = "http://www.w3.org/2000/svg";
 function svg(tag, attrs, kids) {
   const e = document.createElementNS(SVGNS, tag);
@@ -267,18 +287,18 @@ function bounds(scenes) {
   b.x = widen(b.x, 0.35); b.y = widen(b.y, 0.35); b.z = [0, Math.max(b.z[1] + 0.04, 0.2)];
   return b;
 }
-function view(X, ghost, b, side) {   // side: y across, z up; top: x across, y up (seen from above)
-  const H = [b[side ? "y" : "x"][0], b[side ? "y" : "x"][1]], V = side ? b.z : b.y;
-  const mm = 1000, w = (H[1] - H[0]) * mm, ht = (V[1] - V[0]) * mm;
-  const sx = function (p) { return (p - H[0]) * mm; }, sy = function (p) { return (V[1] - p) * mm; };
-  const axisH = side ? 1 : 0, axisV = side ? 2 : 1;
+function view(X, ghost, b, side) {
+  // Both views share the horizontal axis, y, drawn leftward (+y is the robot's left), as an engineering drawing
+  // does: the top view is seen from above with x (away from the robot) up, the side view seen from the robot, z up.
+  const axisV = side ? 2 : 0, V = side ? b.z : b.x;
+  const mm = 1000, w = (b.y[1] - b.y[0]) * mm, ht = (V[1] - V[0]) * mm;
+  const sx = function (y) { return (b.y[1] - y) * mm; }, sy = function (v) { return (V[1] - v) * mm; };
   const kids = [];
   if (side) kids.push(svg("line", {x1: 0, x2: w, y1: sy(0), y2: sy(0), stroke: "#999", "stroke-width": 3}));
   const box = function (p, i, style) {
-    const hw = extent(i, axisH), hh = extent(i, axisV);
-    const along = side ? p[1] : p[0], up = side ? p[2] : p[1];
-    return svg("rect", Object.assign({x: sx(along - hw), y: sy(up + hh), width: 2 * hw * mm, height: 2 * hh * mm,
-                                      rx: 3}, style));
+    const hw = extent(i, 1), hh = extent(i, axisV);
+    return svg("rect", Object.assign({x: sx(p[1] + hw), y: sy(p[axisV] + hh), width: 2 * hw * mm,
+                                      height: 2 * hh * mm, rx: 3}, style));
   };
   if (ghost) ghost.forEach(function (p, i) {
     kids.push(box(p, i, {fill: "none", stroke: COLORS[i % COLORS.length], "stroke-width": 4,
@@ -290,8 +310,8 @@ function view(X, ghost, b, side) {   // side: y across, z up; top: x across, y u
     for (const i of order) {
       const p = X[i];
       kids.push(box(p, i, {fill: COLORS[i % COLORS.length], stroke: "#222", "stroke-width": 2, "fill-opacity": 0.9}));
-      const t = svg("text", {x: sx(side ? p[1] : p[0]), y: sy(side ? p[2] : p[1]) + 12, "text-anchor": "middle",
-                             "font-size": 34, "font-weight": 700, fill: "#fff"});
+      const t = svg("text", {x: sx(p[1]), y: sy(p[axisV]) + 12, "text-anchor": "middle", "font-size": 34,
+                             "font-weight": 700, fill: "#fff"});
       t.textContent = String(i);
       kids.push(t);
     }
@@ -300,8 +320,9 @@ function view(X, ghost, b, side) {   // side: y across, z up; top: x across, y u
                             svg("text", {x: 60, y: ht - 20, "text-anchor": "middle", "font-size": 26, fill: "#444"})]);
   bar.lastChild.textContent = "10 cm";
   kids.push(bar);
-  return svg("svg", {viewBox: "0 0 " + w.toFixed(0) + " " + ht.toFixed(0), role: "img",
-                     "aria-label": side ? "side view (y across, z up)" : "top view (x across, y up)"}, kids);
+  return svg("svg", {viewBox: "0 0 " + w.toFixed(0) + " " + ht.toFixed(0), role: "img", "class": side ? "side" : "top",
+                     "aria-label": side ? "side view, seen from the robot: y to the left, z up"
+                       : "top view, seen from above: y to the left, x away from the robot (up)"}, kids);
 }
 function sceneColumn(title, X, ghost, b, caption, cls) {
   return el("div", {cls: "scene " + (cls || "")}, [
@@ -350,7 +371,9 @@ function selection() {   // {title, X, caption, facts, states, observed, observe
     return {title: "node #" + n.id + " predicted", X: xyz(n.X), observed: observed,
             observedTitle: "observed (round start)",
             caption: "Level 2 node #" + n.id + ": " + actionText(n.action) + "; g " + num(n.g, 2) + ", h " +
-                     num(n.h, 2) + "; " + verdict + (n.X ? "" : " (the record keeps no scene for this node)")};
+                     num(n.h, 2) + "; " + verdict +
+                     (n.duplicates ? "; " + n.duplicates + " of its successors reached scenes already seen" : "") +
+                     (n.X ? "" : " (the record keeps no scene for this node)")};
   }
   return null;
 }
@@ -363,9 +386,9 @@ function renderScene() {
   const predicted = s ? s.X : null;
   const b = bounds([predicted, goal, observed]);
   const kids = [el("h2", {text: "Scenes"}),
-    el("p", {cls: "muted", text: "Top view (x across, y up) above the side view (y across, z up). Coloured boxes are " +
-      "blocks, numbered as in the problem. Dashed outlines: in the predicted scene, each block's goal; in the " +
-      "observed scene, where the prediction put the block."})];
+    el("p", {cls: "muted", text: "Each scene from above (the robot below it, x away from it) over the same seen from the " +
+      "robot (z up); +y is the robot's left. Coloured boxes are blocks, numbered as in the problem; dashed outlines " +
+      "are, in the predicted scene, each block's goal and, in the observed scene, where the prediction put it."})];
   if (!s) kids.push(el("p", {cls: "empty", text: "Click a Level 1 candidate, a Level 2 node or the executed step " +
                                                    "to draw its predicted scene here."}));
   else kids.push(el("p", {cls: "caption", id: "scene-caption", text: s.caption}));
@@ -431,7 +454,11 @@ function header() {
       el("div", {}, ["blocks: 5 cm cubes and 5 \u00d7 25 cm bars along y; ", tip("miss", TIPS.miss)]),
     ])]);
   const facts = [["rounds", ROUNDS.length], ["blocks", X_INIT.length]];
-  for (const k of ["method", "n_domains", "sampled", "max_expansions"]) if (cfg[k] !== undefined) facts.push([k, cfg[k]]);
+  const l1cfg = cfg.level1 || cfg, l2cfg = cfg.search || cfg;
+  if (cfg.method !== undefined) facts.push(["method", cfg.method]);
+  if (l1cfg.n_domains !== undefined) facts.push(["sampled domains", l1cfg.n_domains]);
+  if (l2cfg.max_expansions !== undefined) facts.push(["Level 2 budget", l2cfg.max_expansions + " expansions"]);
+  if (PROBLEM.source) facts.push(["from", PROBLEM.source]);
   return el("header", {}, [
     el("h1", {text: "What the planner considered: " + name}),
     el("div", {cls: "kv sub"}, facts.map(function (f) { return el("span", {}, [f[0] + ": ", el("b", {text: String(f[1])})]); })),
@@ -462,6 +489,11 @@ function roundSummary(r) {
       return k + " " + num(r.timings_s[k], 2) + " s"; }).join(", ")}) : null,
   ])];
   if (r.why) kids.push(el("div", {text: "why: " + r.why}));
+  if (typeof r.predicted_error_m === "number") kids.push(el("div", {}, [tip("predicted to end", "where the Dynamics " +
+    "Model's rollout of the plan from the observed scene ends, against the goal (largest over blocks)"),
+    " " + cm(r.predicted_error_m) + " from the goal"]));
+  if (r.rejected && typeof r.rejected === "object") kids.push(el("div", {}, [tip("rejected by the kinematic check",
+    TIPS.kinematics), ": " + Object.keys(r.rejected).map(function (k) { return k + ": " + brief(r.rejected[k]); }).join("; ")]));
   if (Array.isArray(r.reasons) && r.reasons.length) kids.push(el("div", {cls: "muted", text: r.reasons.join("; ")}));
   if (e) kids.push(el("div", {id: "executed"}, ["executed step: ", el("b", {text: actionText(e.action)}), "; ",
     tip("landed " + cm(e.miss_m) + " from the prediction", TIPS.miss), " ",
@@ -473,10 +505,8 @@ function level1Panel(r) {
   const l1 = r.level1;
   const box = el("section", {cls: "card", id: "level1"}, [el("h2", {text: "Level 1: ranked symbolic plans"})]);
   if (!l1) { box.appendChild(el("p", {cls: "empty", text: "Level 1 did not run in this round."})); return box; }
-  if (l1.stats) box.appendChild(el("div", {cls: "kv muted"}, Object.keys(l1.stats).map(function (k) {
-    const v = l1.stats[k];
-    return el("span", {text: k + ": " + (typeof v === "number" ? (Number.isInteger(v) ? v : v.toFixed(3)) : JSON.stringify(v))});
-  })));
+  if (l1.stats) box.appendChild(el("div", {cls: "kv muted"}, Object.keys(l1.stats).filter(function (k) {
+    return l1.stats[k] !== null; }).map(function (k) { return el("span", {text: k.replace(/_/g, " ") + ": " + brief(l1.stats[k])}); })));
   const cands = Array.isArray(l1.candidates) ? l1.candidates : [];
   if (!cands.length) box.appendChild(el("p", {cls: "empty", text: "no symbolic plan was found."}));
   box.appendChild(el("div", {cls: "cands"}, cands.map(function (c, i) {
@@ -488,7 +518,11 @@ function level1Panel(r) {
       el("div", {cls: "head"}, [
         el("b", {text: "#" + (c.rank !== undefined ? c.rank : i + 1)}),
         c.chosen ? chip("chosen", "chosen", "the plan the round executed") : null,
-        c.verified ? chip("verified", "ok", TIPS.verified) : chip("not verified", "bad", TIPS.verified),
+        Array.isArray(c.stages) && c.stages.length ? el("span", {cls: "muted",
+          text: "joined one block at a time (blocks " + c.stages.join(", ") + ")"}) : null,
+        c.verified === true ? chip("verified", "ok", TIPS.verified) : c.verified === false
+          ? chip("not verified", "bad", TIPS.verified)
+          : chip("not tried", "none", "Level 1 verifies its plans in rank order and stops at the first that verifies"),
         el("span", {}, [tip("count", TIPS.count), " " + (c.count !== undefined ? c.count : "--")]),
         el("span", {}, [tip("p", TIPS.probability), " " + num(c.probability, 3)]),
         el("span", {}, [tip("error", TIPS.error), " " + cm(c.error_m)]),
@@ -496,7 +530,7 @@ function level1Panel(r) {
       el("ol", {}, (c.actions || []).map(function (a, k) {
         const v = kin[k] && kin[k].verdict;
         return el("li", {}, [el("span", {title: ACTION_TIP, text: actionText(a) + " "}),
-          v === undefined || v === null ? chip("not checked", "none", TIPS.kinematics)
+          v === undefined || v === null || v === "unchecked" ? chip("not checked", "none", TIPS.kinematics)
             : chip(String(v), v === "ok" ? "ok" : "bad", TIPS.kinematics)]);
       })),
       facts.length ? el("details", {}, [el("summary", {text: "its symbolic states (" + facts.length + ")"}),
@@ -512,15 +546,17 @@ function level2Panel(r) {
   const box = el("section", {cls: "card", id: "level2"}, [el("h2", {text: "Level 2: the continuous search's tree"})]);
   if (!l2) { box.appendChild(el("p", {cls: "empty", text: "Level 2 did not run in this round."})); return box; }
   box.appendChild(el("div", {cls: "kv muted"}, [
-    el("span", {text: "status: " + (l2.status || "--")}),
+    el("span", {title: l2.reason || null, text: "status: " + (l2.reason || l2.status || "--")}),
     el("span", {text: "expanded: " + (l2.expanded !== undefined ? l2.expanded : tree.T)}),
     el("span", {text: "generated: " + (l2.generated !== undefined ? l2.generated : tree.byId.size)}),
-    l2.truncated ? chip("record truncated", "warn", "the record keeps only part of a larger search") : null,
-    el("span", {text: "path: " + tree.path.size + " node(s)"}),
+    l2.truncated ? chip("record truncated" + (l2.omitted ? ": " + l2.omitted + " nodes left out" : ""), "warn",
+                        "the record keeps only part of a larger search") : null,
+    l2.searches > 1 ? el("span", {text: "searches: " + l2.searches}) : null,
+    el("span", {text: tree.pathName + ": " + tree.path.size + " node(s)"}),
   ]));
   const filter = el("select", {id: "filter", title: "which nodes the tree shows", onchange: function () {
     S.filter = this.value; applyFilter(); if (S.filter === "all") expanded = defaultExpanded(); renderTree(); writeHash(); }});
-  const options = [["all", "all nodes"], ["path", "only the path found"], ["rejected", "only the rejected successors"]];
+  const options = [["all", "all nodes"], ["path", "only " + tree.pathName], ["rejected", "only the rejected successors"]];
   for (const [reason, count] of tree.reasons) options.push(["reason:" + reason, "rejected for: " + reason + " (" + count + ")"]);
   for (const [v, label] of options) filter.appendChild(el("option", {value: v, selected: v === S.filter, text: label}));
   const slider = el("input", {type: "range", id: "timeline", min: 0, max: tree.T, value: S.t === null ? tree.T : S.t,
@@ -550,10 +586,14 @@ function refinementPanel(r) {
   if (!list.length) box.appendChild(el("p", {cls: "empty", text: "no refinement was recorded in this round."}));
   const executedBefore = ROUNDS.slice(0, S.round).filter(function (x) { return x.executed; }).length;
   const closedLoop = ROUNDS.some(function (x) { return x.executed; });
-  for (const f of list) {
-    const chosen = r.plan && f.plan && JSON.stringify(r.plan) === JSON.stringify(f.plan);
-    box.appendChild(el("h3", {}, ["Level " + (f.level || "?") + " plan: " + (f.outcome || "--") + " ",
-      chosen ? chip("chosen", "chosen", "the plan this round executed") : null]));
+  let last = -1;   // the chosen plan's refinement: the last one of the round's plan
+  list.forEach(function (f, i) { if (r.plan && f.plan && sameAction(r.plan, f.plan)) last = i; });
+  list.forEach(function (f, i) {
+    const chosen = i === last;
+    const failed = typeof f.failed_action === "number" ? "; action " + (f.failed_action + 1) + " failed" : "";
+    box.appendChild(el("h3", {}, [(i + 1) + ". Level " + (f.level || "?") + " plan of " + (f.plan || []).length +
+      " action(s): " + (f.outcome || "--") + failed + " ", chosen ? chip("chosen", "chosen", "the plan this round executed")
+      : null]));
     const rows = (f.actions || []).map(function (a, k) {
       const step = closedLoop ? (k === 0 && r.executed && sameAction(r.executed.action, (f.plan || [])[0])
                                  ? executedBefore + 1 : null) : k + 1;
@@ -563,14 +603,14 @@ function refinementPanel(r) {
       return el("tr", {cls: a.failure ? "failed" : null}, [
         el("td", {cls: "num", text: String(k + 1)}), el("td", {text: actionText((f.plan || [])[k])}),
         el("td", {text: a.ik_branch !== undefined && a.ik_branch !== null ? String(a.ik_branch) : "--"}),
-        el("td", {text: a.planner || "--"}), el("td", {cls: "num", text: num(a.time_s, 2)}),
+        el("td", {title: a.planner || null, text: motions(a.planner)}), el("td", {cls: "num", text: num(a.time_s, 2)}),
         el("td", {text: a.failure || ""}), el("td", {}, [link])]);
     });
     box.appendChild(el("table", {}, [el("thead", {}, [el("tr", {}, [el("th", {cls: "num", text: "#"}),
       el("th", {text: "action"}), el("th", {}, [tip("IK branch", TIPS.ik)]), el("th", {}, [tip("planner", TIPS.planner)]),
       el("th", {cls: "num", text: "time (s)"}), el("th", {text: "failure"}), el("th", {text: DATA.replay ? "replay" : ""})])]),
       el("tbody", {}, rows)]));
-  }
+  });
   return box;
 }
 function defaultSelection(r) {

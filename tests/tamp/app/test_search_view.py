@@ -153,7 +153,7 @@ def test_expanding_the_tree_and_clicking_a_node_draws_its_scene(browser, view):
     blocks = browser.eval("document.querySelectorAll('.scene.predicted svg rect[fill-opacity]').length")
     goals = browser.eval("document.querySelectorAll('.scene.predicted svg rect[stroke-dasharray]').length")
     assert blocks == 6 and goals == 6
-    xs = browser.eval("Array.from(document.querySelectorAll('.scene.predicted svg:first-of-type rect[fill-opacity]'))"
+    xs = browser.eval("Array.from(document.querySelectorAll('.scene.predicted svg.top rect[fill-opacity]'))"
                       ".map(r => +r.getAttribute('x'))")
     assert len(set(xs)) > 1
     # a Level 1 candidate draws its states, one at a time
