@@ -3,10 +3,7 @@ a closed loop of rounds, Level 1 candidates, a Level 2 tree of any size and a re
 from __future__ import annotations
 
 import random
-from pathlib import Path
 from typing import Any
-
-from guarded import InputError, read_json
 
 X_INIT = [[0.55, -0.20, 0.025, 1, 0], [0.60, 0.10, 0.025, 0, 1], [0.45, 0.25, 0.025, 1, 0]]
 X_GOAL = [[0.60, 0.175, 0.075, 1, 0], [0.60, 0.10, 0.025, 0, 1], [0.60, 0.025, 0.075, 1, 0]]
@@ -90,11 +87,3 @@ def search_record(n_nodes: int = 40, rounds: int = 2, replay: str | None = None)
         record["replay"] = replay
     return record
 
-
-def read_record(path: Path) -> dict[str, Any]:
-    """The tests' stand-in for `tamp.app.search_record.read_search_record` where this branch lacks it: the guarded
-    reader, and the format and version checked."""
-    record = read_json(path, "search record")
-    if not isinstance(record, dict) or record.get("format") != "tamp-search-record" or record.get("version") != 1:
-        raise InputError(f"{path}: not a search record (format tamp-search-record, version 1)")
-    return record

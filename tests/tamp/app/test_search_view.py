@@ -4,30 +4,15 @@ from __future__ import annotations
 
 import json
 import re
-import sys
-import types
 
 import pytest
 
 from tamp.app.cli import main
 from tamp.app.search_view import DATA_ID, page, write_search_view
 from tests.browser import CHROMIUM, Browser
-from tests.tamp.app import search_records
 from tests.tamp.app.search_records import search_record
 
 needs_chromium = pytest.mark.skipif(CHROMIUM is None, reason="needs Chromium (Debian: apt-get install chromium)")
-
-
-@pytest.fixture
-def reader(monkeypatch):
-    """`tamp.app.search_record.read_search_record`, the record's reader (made on the data side); where this branch
-    does not have it yet, the tests' stand-in (guarded JSON, its format checked)."""
-    try:
-        import tamp.app.search_record  # noqa: F401
-    except ImportError:
-        module = types.ModuleType("tamp.app.search_record")
-        module.read_search_record = search_records.read_record  # type: ignore[attr-defined]
-        monkeypatch.setitem(sys.modules, "tamp.app.search_record", module)
 
 
 def embedded(html: str) -> dict:
@@ -55,7 +40,7 @@ def test_the_replay_link_is_relative_to_the_page(tmp_path):
     assert embedded(page(search_record()))["replay"] is None
 
 
-def test_tamp_view_writes_the_page_of_a_record(tmp_path, capsys, reader):
+def test_tamp_view_writes_the_page_of_a_record(tmp_path, capsys):
     path = tmp_path / "run.search.json"
     path.write_text(json.dumps(search_record(n_nodes=30, rounds=2)))
     assert main(["view", "--search", str(path)]) == 0
@@ -70,7 +55,7 @@ def test_tamp_view_writes_the_page_of_a_record(tmp_path, capsys, reader):
     ('{"format": "tamp-search-record", "version": 1, "rounds": [' * 40 + "]}" * 40, "search record"),
     ('{"format": "tamp-steps", "version": 1}', "search record"),
 ])
-def test_tamp_view_refuses_a_bad_record_in_one_line(tmp_path, capsys, reader, content, said):
+def test_tamp_view_refuses_a_bad_record_in_one_line(tmp_path, capsys, content, said):
     path, out = tmp_path / "bad.json", tmp_path / "bad.html"
     path.write_text(content)
     assert main(["view", "--search", str(path), "--out", str(out)]) == 2
