@@ -64,6 +64,11 @@ function actionText(a) {
   if (!Array.isArray(a) || a.length < 4) return "start";
   return "pick " + a[0] + " at " + offset(a[1]) + " \u2192 place on " + a[2] + " at " + offset(a[3]);
 }
+function shortAction(a) {   // for the tree's rows: "pick 1 (+7.5) → on 0 (−7.5)"
+  if (!Array.isArray(a) || a.length < 4) return "start";
+  const o = function (k) { return k === 0 ? "0" : (k > 0 ? "+" : "\u2212") + Math.abs(k) * OFFSET_M * 100; };
+  return "pick " + a[0] + " (" + o(a[1]) + ") \u2192 on " + a[2] + " (" + o(a[3]) + ")";
+}
 const ACTION_TIP = "pick i at o: grasp block i at offset o along it; place on j at o: release it on block j " +
                    "at offset o (offsets are -7.5, 0 or +7.5 cm)";
 function factTitle(fact) {
@@ -189,7 +194,7 @@ function treeRow(n, depth) {
                                     text: open ? "\u25be" : "\u25b8"}) : el("span", {cls: "tg", text: "\u00b7"}),
     el("span", {cls: "id", text: "#" + n.id}),
     el("span", {cls: "ord", title: TIPS.order, text: rank === undefined ? "--" : "exp " + (rank + 1)}),
-    el("span", {cls: "act", text: actionText(n.action)}),
+    el("span", {cls: "act", title: actionText(n.action), text: shortAction(n.action)}),
     el("span", {cls: "gh", title: TIPS.g + "; " + TIPS.h, text: "g " + num(n.g, 2) + "  h " + num(n.h, 2)}),
     verdict,
   ]);
@@ -450,7 +455,8 @@ function header() {
       el("div", {}, [el("span", {style: "color:#b3261e", text: "red action"}), " a successor the search rejected, " +
                      "with its reason (hover the row)"]),
       el("div", {}, [tip("exp k", TIPS.order), ", ", tip("g", TIPS.g), ", ", tip("h", TIPS.h)]),
-      el("div", {}, [tip("pick i at o \u2192 place on j at o", ACTION_TIP)]),
+      el("div", {}, [tip("pick i at o \u2192 place on j at o", ACTION_TIP), "; in the tree ",
+                     tip("pick i (o) \u2192 on j (o)", ACTION_TIP), ", o in cm"]),
       el("div", {}, ["blocks: 5 cm cubes and 5 \u00d7 25 cm bars along y; ", tip("miss", TIPS.miss)]),
     ])]);
   const facts = [["rounds", ROUNDS.length], ["blocks", X_INIT.length]];
