@@ -1,6 +1,6 @@
 /* The search view's script (tamp/app/search_view.py inlines it). No library, no network: it reads the record
    from the page's JSON element and draws it with the DOM and SVG. Every text from the record goes in as text
-   (textContent, attributes), never as HTML. The page's state lives in its address (#round=1&select=n17&filter=path
+   (textContent, attributes), or escaped (`esc`) in the tree's rows, which are built as one HTML string for speed. The page's state lives in its address (#round=1&select=n17&filter=path
    &t=40&state=2&expand=all), so a view can be linked and a test or a screenshot can open it directly. */
 (function () {
 "use strict";
@@ -175,48 +175,48 @@ function applyFilter() {
   for (const n of tree.byId.values()) if (matches(n)) { shown.add(n.id); ancestors(n.id, shown); }
   for (const id of shown) ancestors(id, expanded);
 }
-function treeRow(n, depth) {
-  const children = tree.kids.get(n.id).filter(function (c) { return (!shown || shown.has(c.id)) && generated(c); });
+const ESCAPED = {"&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;", "'": "&#39;"};
+function esc(text) { return String(text).replace(/[&<>"']/g, function (c) { return ESCAPED[c]; }); }
+function treeRow(n, depth) {   // one row as HTML (a large tree builds faster as one string), every text escaped
+  let visible = 0;
+  for (const c of tree.kids.get(n.id)) if ((!shown || shown.has(c.id)) && generated(c)) visible++;
   const open = expanded.has(n.id);
-  const current = S.t !== null && S.t > 0 && S.t <= tree.T && tree.sequence[S.t - 1] === n;
   const classes = ["row"];
   if (tree.path.has(n.id)) classes.push("path");
   if (rejected(n)) classes.push("rejected");
-  if (current) classes.push("current");
+  if (S.t !== null && S.t > 0 && S.t <= tree.T && tree.sequence[S.t - 1] === n) classes.push("current");
   if (S.select === "n" + n.id) classes.push("selected");
-  const verdict = !rejected(n) ? chip("ok", "ok", "the edge to this node passed the kinematic check")
-    : chip(String(n.verdict), "bad", n.reason || "rejected: " + n.verdict);
   const rank = tree.rank.get(n.id);
-  return el("div", {cls: classes.join(" "), "data-id": String(n.id), style: "padding-left:" + (4 + depth * 16) + "px",
-                    title: n.reason || null}, [
-    children.length ? el("button", {cls: "tg", "data-toggle": "1", "aria-expanded": open ? "true" : "false",
-                                    title: (open ? "collapse" : "expand") + " its " + children.length + " successor(s)",
-                                    text: open ? "\u25be" : "\u25b8"}) : el("span", {cls: "tg", text: "\u00b7"}),
-    el("span", {cls: "id", text: "#" + n.id}),
-    el("span", {cls: "ord", title: TIPS.order, text: rank === undefined ? "--" : "exp " + (rank + 1)}),
-    el("span", {cls: "act", title: actionText(n.action), text: shortAction(n.action)}),
-    el("span", {cls: "gh", title: TIPS.g + "; " + TIPS.h, text: "g " + num(n.g, 2) + "  h " + num(n.h, 2)}),
-    verdict,
-  ]);
+  const toggle = visible ? '<button class="tg" data-toggle="1" aria-expanded="' + open + '" title="' +
+    (open ? "collapse" : "expand") + " its " + visible + ' successor(s)">' + (open ? "\u25be" : "\u25b8") + "</button>"
+    : '<span class="tg">\u00b7</span>';
+  const verdict = rejected(n)
+    ? '<span class="chip bad" title="' + esc(n.reason || "rejected: " + n.verdict) + '">' + esc(n.verdict) + "</span>"
+    : '<span class="chip ok" title="the edge to this node passed the kinematic check">ok</span>';
+  return '<div class="' + classes.join(" ") + '" data-id="' + esc(JSON.stringify(n.id)) + '" style="padding-left:' +
+    (4 + depth * 16) + 'px"' + (n.reason ? ' title="' + esc(n.reason) + '"' : "") + ">" + toggle +
+    '<span class="id">#' + esc(n.id) + '</span><span class="ord">' + (rank === undefined ? "--" : "exp " + (rank + 1)) +
+    '</span><span class="act" title="' + esc(actionText(n.action)) + '">' + esc(shortAction(n.action)) +
+    '</span><span class="gh">g ' + num(n.g, 2) + "  h " + num(n.h, 2) + "</span>" + verdict + "</div>";
 }
 function renderTree() {
   const box = document.getElementById("tree");
   if (!box || !tree) return;
-  const frag = document.createDocumentFragment();
+  const html = [];
   let rows = 0;
   const stack = [];
   for (let i = tree.roots.length - 1; i >= 0; i--) stack.push([tree.roots[i], 0]);
   while (stack.length) {
     const top = stack.pop(), n = top[0], depth = top[1];
     if ((shown && !shown.has(n.id)) || !generated(n)) continue;
-    frag.appendChild(treeRow(n, depth));
+    html.push(treeRow(n, depth));
     rows++;
     if (expanded.has(n.id)) {
       const list = tree.kids.get(n.id);
       for (let i = list.length - 1; i >= 0; i--) stack.push([list[i], depth + 1]);
     }
   }
-  box.replaceChildren(frag);
+  box.innerHTML = html.join("");
   if (!rows) box.appendChild(el("div", {cls: "empty", text: "no node matches the filter at this point of the timeline"}));
   const count = document.getElementById("tree-count");
   if (count) count.textContent = rows + " of " + tree.byId.size + " nodes in view";
@@ -576,6 +576,9 @@ function level2Panel(r) {
   box.appendChild(el("div", {cls: "controls"}, [tip("timeline", "replays the expansion order"), slider,
     el("button", {id: "play", text: "\u25b6 replay", onclick: function () { play(this); }}),
     el("span", {id: "timeline-label", cls: "muted"})]));
+  box.appendChild(el("div", {cls: "muted"}, ["each row: node id, ", tip("exp k", TIPS.order), ", the action into it, ",
+    tip("g", TIPS.g), " and ", tip("h", TIPS.h), ", and the kinematic verdict of its edge (hover a rejected one for " +
+    "the reason)"]));
   const list = el("div", {cls: "tree", id: "tree", role: "tree"});
   list.addEventListener("click", onTreeClick);
   box.appendChild(list);

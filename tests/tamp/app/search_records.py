@@ -7,7 +7,7 @@ from typing import Any
 
 X_INIT = [[0.55, -0.20, 0.025, 1, 0], [0.60, 0.10, 0.025, 0, 1], [0.45, 0.25, 0.025, 1, 0]]
 X_GOAL = [[0.60, 0.175, 0.075, 1, 0], [0.60, 0.10, 0.025, 0, 1], [0.60, 0.025, 0.075, 1, 0]]
-REASONS = ("no grasp", "IK", "collision", "motion failed to refine")
+REASONS = ("no grasp", "IK", "collision", "<i>blocked</i> & \"quoted\"")  # the last tests escaping
 
 
 def _scene(rng: random.Random, near: list[list[float]]) -> list[list[float]]:

@@ -10,6 +10,7 @@ import pytest
 from tamp.app.cli import main
 from tamp.app.search_view import DATA_ID, page, write_search_view
 from tests.browser import CHROMIUM, Browser
+from tests.tamp.app import search_records
 from tests.tamp.app.search_records import search_record
 
 needs_chromium = pytest.mark.skipif(CHROMIUM is None, reason="needs Chromium (Debian: apt-get install chromium)")
@@ -165,6 +166,10 @@ def test_the_filters_and_the_timeline_change_what_the_tree_shows(browser, view):
     ik = {r["id"] for r in rows(browser) if "rejected" in r["cls"]}
     assert ik == {n["id"] for n in level2["nodes"] if n["verdict"] == "IK"}
     assert browser.eval("location.hash") == "#round=0&select=n%s&filter=reason%%3AIK" % level2["path"][-1]
+    choose(browser, "#filter", "reason:" + search_records.REASONS[-1], "change")  # a reason that looks like HTML
+    chips = browser.eval("Array.from(document.querySelectorAll('#tree .chip.bad')).map(c => c.textContent)")
+    assert chips and set(chips) == {search_records.REASONS[-1]}
+    assert browser.eval("document.querySelectorAll('#tree i').length") == 0
     # the timeline: after 2 expansions only the root's and the 2nd expanded node's successors exist
     choose(browser, "#filter", "all", "change")
     choose(browser, "#timeline", "2", "input")
