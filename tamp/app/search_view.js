@@ -186,7 +186,8 @@ function treeRow(n, depth) {   // one row as HTML (a large tree builds faster as
   if (rejected(n)) classes.push("rejected");
   if (S.t !== null && S.t > 0 && S.t <= tree.T && tree.sequence[S.t - 1] === n) classes.push("current");
   if (S.select === "n" + n.id) classes.push("selected");
-  const rank = tree.rank.get(n.id);
+  let rank = tree.rank.get(n.id);
+  if (rank !== undefined && S.t !== null && rank >= S.t) rank = undefined;   // not yet expanded on the timeline
   const toggle = visible ? '<button class="tg" data-toggle="1" aria-expanded="' + open + '" title="' +
     (open ? "collapse" : "expand") + " its " + visible + ' successor(s)">' + (open ? "\u25be" : "\u25b8") + "</button>"
     : '<span class="tg">\u00b7</span>';
@@ -366,7 +367,8 @@ function selection() {   // {title, X, caption, facts, states, observed, observe
     return {title: "candidate " + (c.rank !== undefined ? c.rank : sel.slice(1)) + " predicted " +
                    (k === 0 ? "start" : "after action " + k),
             X: states ? xyz(states[k]) : null, observed: observed, observedTitle: "observed (round start)",
-            caption: "Level 1 candidate, state " + what, facts: Array.isArray(c.facts) ? c.facts[k] : null,
+            caption: "Level 1 candidate, state " + what + (states ? "" : " (no predicted scene: the Dynamics Model " +
+                     "did not roll this plan out)"), facts: Array.isArray(c.facts) ? c.facts[k] : null,
             states: n, k: k, candidate: c};
   }
   if (sel[0] === "n" && tree) {

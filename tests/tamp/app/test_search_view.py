@@ -177,6 +177,8 @@ def test_the_filters_and_the_timeline_change_what_the_tree_shows(browser, view):
     seen = {r["id"] for r in rows(browser)}
     assert seen <= {0} | {n["id"] for n in level2["nodes"] if n["parent"] in (0, second["id"])}
     assert [r["id"] for r in rows(browser) if "current" in r["cls"]] == [second["id"]]
+    orders = browser.eval("Array.from(document.querySelectorAll('#tree .row .ord')).map(o => o.textContent)")
+    assert set(orders) <= {"exp 1", "exp 2", "--"} and "exp 2" in orders
     assert browser.eval("document.getElementById('timeline-label').textContent") == \
         f"after expansion 2 of {level2['expanded']}"
     assert browser.errors() == []
