@@ -412,8 +412,8 @@ function renderScene() {
                 distance === null ? null : "largest distance to the goal: " + cm(distance), "predicted"),
     sceneColumn("goal", goal, null, b, null, "goal"),
     sceneColumn(s ? s.observedTitle : "observed (round start)", observed, predicted || goal, b,
-                S.select === "x" && predicted && observed ? "largest distance to the prediction: " +
-                  cm(worst(predicted, observed)) : null, "observed"),
+                S.select === "x" && rd.executed ? "largest distance to the prediction: " + cm(rd.executed.miss_m)
+                  : null, "observed"),
   ]));
   if (s && Array.isArray(s.facts)) {
     kids.push(el("h3", {text: "facts in this symbolic state"}));
