@@ -51,17 +51,25 @@ def test_tamp_view_writes_the_page_of_a_record(tmp_path, capsys):
     assert f"search view written to {written}" in out and embedded(written.read_text())["record"]["version"] == 1
 
 
+RECORD = json.dumps(search_record(n_nodes=20, rounds=1))
+MISSING = json.loads(RECORD)
+del MISSING["rounds"][0]["why"]
+
+
 @pytest.mark.parametrize("content, said", [
-    ("{not json", "search record"),
-    ('{"format": "tamp-search-record", "version": 1, "rounds": [' * 40 + "]}" * 40, "search record"),
-    ('{"format": "tamp-steps", "version": 1}', "search record"),
+    ("{not json", "not valid JSON"),
+    (RECORD[:len(RECORD) // 2], "not valid JSON"),  # truncated
+    ('{"format": "tamp-search-record", "version": 1, "rounds": ' + "[" * 40 + "]" * 40 + "}", "deep"),  # a bomb
+    ('{"format": "tamp-steps", "version": 1}', "not a tamp search record"),
+    (RECORD.replace('"version":1', '"version":7').replace('"version": 1', '"version": 7'), "version 7"),
+    (json.dumps(MISSING), "rounds[0]: missing field 'why'"),
 ])
 def test_tamp_view_refuses_a_bad_record_in_one_line(tmp_path, capsys, content, said):
     path, out = tmp_path / "bad.json", tmp_path / "bad.html"
     path.write_text(content)
     assert main(["view", "--search", str(path), "--out", str(out)]) == 2
     err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and err.startswith("tamp view: error:") and str(path) in err
+    assert len(err.splitlines()) == 1 and err.startswith(f"tamp view: error: {path}") and said in err
     assert not out.exists()
     assert main(["view", "--search", str(tmp_path / "absent.json")]) == 2
 
