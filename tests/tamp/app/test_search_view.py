@@ -109,6 +109,7 @@ def choose(browser, selector: str, value: str, event: str) -> None:
                  f" e.dispatchEvent(new Event({json.dumps(event)}, {{bubbles: true}})); }})()")
 
 
+@pytest.mark.slow
 @needs_chromium
 def test_the_page_loads_without_an_error_and_shows_each_round(browser, view):
     path, record = view
@@ -128,6 +129,7 @@ def test_the_page_loads_without_an_error_and_shows_each_round(browser, view):
     assert browser.errors() == []
 
 
+@pytest.mark.slow
 @needs_chromium
 def test_expanding_the_tree_and_clicking_a_node_draws_its_scene(browser, view):
     path, record = view
@@ -157,6 +159,7 @@ def test_expanding_the_tree_and_clicking_a_node_draws_its_scene(browser, view):
     assert browser.errors() == []
 
 
+@pytest.mark.slow
 @needs_chromium
 def test_the_filters_and_the_timeline_change_what_the_tree_shows(browser, view):
     path, record = view
@@ -189,9 +192,16 @@ def test_the_filters_and_the_timeline_change_what_the_tree_shows(browser, view):
     assert set(orders) <= {"exp 1", "exp 2", "--"} and "exp 2" in orders
     assert browser.eval("document.getElementById('timeline-label').textContent") == \
         f"after expansion 2 of {level2['expanded']}"
+    browser.click("#play")  # the replay runs the timeline on from the start to the end
+    browser.eval("new Promise(r => setTimeout(r, 120))")
+    assert browser.eval("document.getElementById('timeline-label').textContent").startswith("after expansion ")
+    browser.eval("new Promise(r => { const w = () => document.getElementById('timeline-label').textContent"
+                 ".startsWith('all') ? r() : setTimeout(w, 50); w(); })")
+    assert browser.eval("+document.getElementById('timeline').value") == level2["expanded"]
     assert browser.errors() == []
 
 
+@pytest.mark.slow
 @needs_chromium
 def test_a_1500_node_tree_opens_lazily(browser, tmp_path):
     """Collapsed successors are not in the page until expanded: 1,500 nodes open with a few rows in the DOM (the
