@@ -13,6 +13,13 @@ FORMAT, VERSION = "tamp-search-record", 1
 _NUMBER, _INT = {"type": "number"}, {"type": "integer"}
 _MAYBE_NUMBER, _MAYBE_INT, _MAYBE_STR = {"type": ["number", "null"]}, {"type": ["integer", "null"]}, \
     {"type": ["string", "null"]}
+
+
+def _nullable(schema: dict) -> dict:
+    """`schema` or null, one schema (not anyOf), so that a wrong field inside it is named in the message."""
+    return {**schema, "type": [schema["type"], "null"]}
+
+
 _POSITIONS = {"type": "array", "items": {"type": "array", "minItems": 3, "maxItems": 3, "items": _NUMBER}}
 _PLAN = {"type": "array", "items": ACTION}
 _STRINGS = {"type": "array", "items": {"type": "string"}}
@@ -21,14 +28,14 @@ _CANDIDATE = {"type": "object", "required": ["rank", "actions", "count", "probab
     "rank": {"type": "integer", "minimum": 1}, "actions": _PLAN, "count": {"type": "integer", "minimum": 0},
     "probability": _NUMBER, "error_m": _MAYBE_NUMBER, "verified": {"type": ["boolean", "null"]},
     "chosen": {"type": "boolean"}, "facts": {"type": "array", "items": _STRINGS},
-    "predicted": {"anyOf": [{"type": "null"}, {"type": "array", "items": _POSITIONS}]},
+    "predicted": {"type": ["array", "null"], "items": _POSITIONS},
     "kinematics": {"type": "array", "items": {"type": "object", "required": ["verdict"],
                                               "properties": {"verdict": {"type": "string"}}}},
     "stages": {"type": ["array", "null"], "items": _INT}}}
 _NODE = {"type": "object", "required": ["id", "parent", "order", "action", "g", "h", "X", "verdict", "reason"],
          "properties": {"id": {"type": "integer", "minimum": 0}, "parent": _MAYBE_INT, "order": _MAYBE_INT,
-                        "action": {"anyOf": [{"type": "null"}, ACTION]}, "g": _NUMBER, "h": _NUMBER,
-                        "X": {"anyOf": [{"type": "null"}, _POSITIONS]}, "verdict": {"type": "string"},
+                        "action": _nullable(ACTION), "g": _NUMBER, "h": _NUMBER, "X": _nullable(_POSITIONS),
+                        "verdict": {"type": "string"},
                         "reason": _MAYBE_STR, "duplicates": {"type": "integer", "minimum": 0}}}
 _LEVEL2 = {"type": "object", "required": ["status", "expanded", "generated", "truncated", "nodes", "path"],
            "properties": {"status": {"type": "string"}, "reason": {"type": "string"},
@@ -48,12 +55,12 @@ _ROUND = {"type": "object", "required": ["index", "X_observed", "origin", "why",
                                          "reasons", "level1", "level2", "refinements", "executed"], "properties": {
     "index": {"type": "integer", "minimum": 0}, "X_observed": SCENE, "origin": {"enum": ORIGINS},
     "why": {"type": "string"}, "method": {"type": "string"}, "level": {"enum": [1, 2, None]},
-    "plan": {"anyOf": [{"type": "null"}, _PLAN]}, "predicted_error_m": _MAYBE_NUMBER,
+    "plan": _nullable(_PLAN), "predicted_error_m": _MAYBE_NUMBER,
     "timings_s": {"type": "object", "additionalProperties": _NUMBER}, "reasons": _STRINGS,
     "level1": {"type": "object", "required": ["candidates", "stats"], "properties": {
         "candidates": {"type": "array", "items": _CANDIDATE}, "stats": {"type": "object"}}},
-    "level2": {"anyOf": [{"type": "null"}, _LEVEL2]}, "rejected": {"type": ["object", "null"]},
-    "refinements": {"type": "array", "items": _REFINEMENT}, "executed": {"anyOf": [{"type": "null"}, _EXECUTED]}}}
+    "level2": _nullable(_LEVEL2), "rejected": {"type": ["object", "null"]},
+    "refinements": {"type": "array", "items": _REFINEMENT}, "executed": _nullable(_EXECUTED)}}
 # a version-1 record, checked after its format and version
 SCHEMA = Schema({"type": "object", "required": ["format", "version", "config", "problem", "symbols", "rounds"],
                  "properties": {
@@ -62,7 +69,8 @@ SCHEMA = Schema({"type": "object", "required": ["format", "version", "config", "
         "name": _MAYBE_STR, "X_init": SCENE, "X_goal": SCENE, "source": {"type": "string"}}},
     "symbols": {"type": "object", "required": ["names"], "properties": {
         "names": {"type": "object", "additionalProperties": {"type": "string"}}}},
-    "rounds": {"type": "array", "items": _ROUND}, "replay": {"type": "string"}}})
+    "rounds": {"type": "array", "items": _ROUND},
+    "replay": {"type": "string"}}})  # the Meshcat replay of the run, which the search view links
 
 
 def check_search_record(doc: Any, where: str) -> dict:

@@ -53,7 +53,7 @@ def test_tamp_view_writes_the_page_of_a_record(tmp_path, capsys):
 
 RECORD = json.dumps(search_record(n_nodes=20, rounds=1))
 MISSING = json.loads(RECORD)
-del MISSING["rounds"][0]["why"]
+del MISSING["rounds"][0]["level2"]["nodes"][3]["g"]
 
 
 @pytest.mark.parametrize("content, said", [
@@ -62,7 +62,7 @@ del MISSING["rounds"][0]["why"]
     ('{"format": "tamp-search-record", "version": 1, "rounds": ' + "[" * 40 + "]" * 40 + "}", "deep"),  # a bomb
     ('{"format": "tamp-steps", "version": 1}', "not a tamp search record"),
     (RECORD.replace('"version":1', '"version":7').replace('"version": 1', '"version": 7'), "version 7"),
-    (json.dumps(MISSING), "rounds[0]: missing field 'why'"),
+    (json.dumps(MISSING), "rounds[0].level2.nodes[3]: missing field 'g'"),
 ])
 def test_tamp_view_refuses_a_bad_record_in_one_line(tmp_path, capsys, content, said):
     path, out = tmp_path / "bad.json", tmp_path / "bad.html"
