@@ -104,10 +104,9 @@ function readHash() {
   S.round = isFinite(r) && r >= 0 && r < ROUNDS.length ? r : 0;
   S.select = q.get("select");
   S.filter = q.get("filter") || "all";
-  const t = q.get("t");
-  S.t = t === null ? null : parseInt(t, 10);
-  const st = q.get("state");
-  S.state = st === null ? null : parseInt(st, 10);
+  const count = function (key) { const v = parseInt(q.get(key), 10); return v >= 0 ? v : null; };
+  S.t = count("t");
+  S.state = count("state");
   S.expandAll = q.get("expand") === "all";
 }
 function writeHash() {
@@ -152,9 +151,9 @@ function generated(n) {   // made by one of the first S.t expansions (the timeli
   const r = tree.rank.get(n.parent);
   return r !== undefined && r < S.t;
 }
-function ancestors(id, into) {
-  let n = tree.byId.get(id);
-  while (n && n.parent !== null && n.parent !== undefined && tree.byId.has(n.parent)) {
+function ancestors(id, into) {   // (a damaged record's cycle of parents ends after as many steps as nodes)
+  let n = tree.byId.get(id), steps = 0;
+  while (n && n.parent !== null && n.parent !== undefined && tree.byId.has(n.parent) && steps++ < tree.byId.size) {
     into.add(n.parent);
     n = tree.byId.get(n.parent);
   }
