@@ -125,12 +125,16 @@ class Browser:
             self.events.append(event)
 
     def open(self, path: Path, fragment: str = "") -> None:
-        """Load the file at `path` (with `#fragment`) afresh, and wait for its load event."""
+        """Load the file at `path` (with `#fragment`) afresh, and wait for its load event; `errors` then counts from
+        this page on."""
         # through a blank page: a URL that differs from the one open only in its fragment would not reload
         for url in ("about:blank", Path(path).resolve().as_uri() + (f"#{fragment}" if fragment else "")):
             self.events = [e for e in self.events if e.get("method") != "Page.loadEventFired"]
             self.send("Page.navigate", session=True, url=url)
             self.wait_for("Page.loadEventFired")
+            if url == "about:blank":
+                self.eval("0")
+                self.events = []
 
     def eval(self, expression: str) -> Any:
         """The value of a JavaScript expression in the page (awaited if a promise); BrowserError if it throws."""

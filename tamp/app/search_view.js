@@ -227,7 +227,7 @@ function renderTree() {
 function onTreeClick(event) {
   const row = event.target.closest(".row");
   if (!row) return;
-  const id = JSON.parse(row.getAttribute("data-id"));
+  const id = Number(row.getAttribute("data-id"));
   if (event.target.closest("[data-toggle]")) {
     if (expanded.has(id)) expanded.delete(id); else expanded.add(id);
     renderTree();
@@ -371,7 +371,7 @@ function selection() {   // {title, X, caption, facts, states, observed, observe
             states: n, k: k, candidate: c};
   }
   if (sel[0] === "n" && tree) {
-    const n = tree.byId.get(JSON.parse(sel.slice(1)));
+    const n = tree.byId.get(Number(sel.slice(1)));
     if (!n) return null;
     const verdict = rejected(n) ? "rejected: " + n.verdict + (n.reason ? " (" + n.reason + ")" : "") : "ok";
     return {title: "node #" + n.id + " predicted", X: xyz(n.X), observed: observed,
@@ -637,6 +637,9 @@ function renderRound() {
   if (tree) {
     expanded = S.expandAll ? new Set(Array.from(tree.kids.keys()).filter(function (id) { return tree.kids.get(id).length; }))
       : defaultExpanded();
+    const known = S.filter === "path" || S.filter === "rejected" ||
+      (S.filter.indexOf("reason:") === 0 && tree.reasons.has(S.filter.slice(7)));
+    if (!known) S.filter = "all";
     if (S.filter !== "all") applyFilter(); else shown = null;
   }
   if (!S.select) S.select = defaultSelection(r);

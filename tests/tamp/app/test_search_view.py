@@ -127,6 +127,10 @@ def test_the_page_loads_without_an_error_and_shows_each_round(browser, view):
     assert caption(browser) == ("executed pick 0 at centre \u2192 place on 1 at +7.5 cm; landed 2.0 cm from the "
                                 "prediction")
     assert browser.errors() == []
+    # an address that names nothing of the record opens the page as it opens without one
+    browser.open(path, "round=9&select=nabc&t=zz&filter=reason:nothing&state=-1")
+    assert browser.errors() == [] and browser.eval("location.hash") == "#round=0&select=nabc"
+    assert rows(browser) and browser.eval("document.getElementById('filter').value") == "all"
 
 
 @pytest.mark.slow
