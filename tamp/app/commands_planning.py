@@ -30,13 +30,15 @@ def cmd_plan(args: argparse.Namespace) -> int:
 def cmd_demo(args: argparse.Namespace) -> int:
     """A random problem planned, refined, executed under physics, summarised and replayed."""
     from tamp.app.demo import DemoConfig, run_demo
+    from tamp.app.search_record import view_path
     from tamp.app.settings import settings_of
 
     check_output_file(args.replay, "--replay")
     if args.open_loop and args.max_actions is not None:
         raise UserError("--max-actions sets the closed loop; --open-loop executes one plan")
     planner = settings_of(args).planner
-    for path, flag in ((args.trajectory, "--trajectory"), (args.search, "--search")):
+    views = () if args.search is None else ((view_path(args.search), "--search"),)
+    for path, flag in ((args.trajectory, "--trajectory"), (args.search, "--search"), *views):
         if path is not None:
             check_output_file(path, flag)
     cfg = DemoConfig(seed=args.seed, objects=args.objects, actions=args.actions, models=args.models,

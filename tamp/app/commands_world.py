@@ -63,18 +63,21 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
 def cmd_view(args: argparse.Namespace) -> int:
     """Refine a plan file, execute it with the arm under physics and write the replay; or execute
-    an exported trajectory file (--trajectory)."""
-    if (args.plan is None) == (args.trajectory is None):
-        raise UserError("give a plan file or --trajectory FILE (one of them)")
+    an exported trajectory file (--trajectory); or write the view of a search record (--search)."""
+    if sum(given is not None for given in (args.plan, args.trajectory, args.search)) != 1:
+        raise UserError("give a plan file, --trajectory FILE or --search FILE (one of them)")
+    if args.search is not None:
+        return view_search(args.search, args.out)
+    out = args.out or Path("replay.html")
     if args.trajectory is not None:
-        return view_trajectory(args.trajectory, args.out)
+        return view_trajectory(args.trajectory, out)
     from tamp.app.plan_file import load_plan_file
     from tamp.sim.execute import execute
     from tamp.sim.refine import refine
     from tamp.sim.replay import Timeline
 
     X, plan = load_plan_file(args.plan)
-    check_output_file(args.out, "--out")
+    check_output_file(out, "--out")
     refined = refine(plan, X)
     for k, step in enumerate(refined.steps):
         print(f"action {k} {tuple(step.action)}: refined in {step.refine_time * 1e3:.0f} ms, "
@@ -94,9 +97,25 @@ def cmd_view(args: argparse.Namespace) -> int:
     print("final scene:")
     for i, x in enumerate(result.X_final):
         print(f"  {i}: ({x[0]:.3f}, {x[1]:.3f}, {x[2]:.3f}) m")
-    path = timeline.write_html(args.out)
+    path = timeline.write_html(out)
     print(f"replay written to {path} ({path.stat().st_size / 1e6:.1f} MB)")
     return 0 if refined.failure is None else 1
+
+
+def view_search(path: Path, out: Path | None) -> int:
+    """`tamp view --search`: read a search record (`tamp plan --search`) through its schema and write its view,
+    one self-contained HTML page (default: the record's name with .html)."""
+    from tamp.app.search_record import read_search_record, view_path
+    from tamp.app.search_view import summary, write_search_view
+
+    if out is None:
+        out = view_path(path)
+    check_output_file(out, "--out")
+    record = read_search_record(path)
+    written = write_search_view(record, out)
+    print(f"{path}: {summary(record)}")
+    print(f"search view written to {written} ({written.stat().st_size / 1e3:.0f} kB); open it in a browser")
+    return 0
 
 
 def view_trajectory(path: Path, out: Path) -> int:
@@ -157,13 +176,16 @@ def add_view(sub) -> None:
     """`tamp view`."""
     p = sub.add_parser(
         "view",
-        help="execute a plan file or an exported trajectory with the full arm under physics, write a replay",
+        help="execute a plan file or an exported trajectory with the full arm under physics, write a replay; or "
+        "write the view of a search record",
         description="Refine a plan (JSON: {\"X\": [[x, y, z, small, large], ...], \"actions\": "
         "[[pick, grasp_offset, place, release_offset], ...]}) into collision-free joint "
         "trajectories, execute them with the arm under Drake physics, and write a self-contained "
         "Meshcat HTML replay. If an action cannot be refined, the actions before it are executed and "
         "the command exits with status 1. With --trajectory FILE (written by `tamp plan` or `tamp demo "
-        "--trajectory`), execute that file's motion instead, to check it before sending it to an arm.",
+        "--trajectory`), execute that file's motion instead, to check it before sending it to an arm. With --search "
+        "FILE (written by `tamp plan --search`), write the page that shows what the planner considered: Level 1's "
+        "ranked symbolic plans, Level 2's tree, their predicted scenes and the refinement of the chosen plan.",
     )
     p.add_argument("plan", nargs="?", type=Path, default=None, help="plan file (JSON)")
     p.add_argument("--trajectory", type=Path, default=None, metavar="FILE",
@@ -172,6 +194,11 @@ def add_view(sub) -> None:
                    "joint limits, continuity; a bad file is a one-line error, exit 2, nothing written), then "
                    "each action's and the final scene are compared with the recorded execution (exit 1 if a "
                    "grasp missed or, for a file recorded in the full world, a block ends over 2 mm away)")
-    p.add_argument("--out", type=_html_path, default=Path("replay.html"), metavar="OUT.html",
-                   help="replay file (default replay.html)")
+    p.add_argument("--search", type=Path, default=None, metavar="FILE",
+                   help="instead, write the view of a search record (`tamp plan --search FILE`): one self-contained "
+                   "HTML page that works offline, with the closed loop's rounds as tabs, Level 1's candidates, Level "
+                   "2's tree (filters, a timeline of the expansions) and each one's predicted scene; a bad record is "
+                   "a one-line error, exit 2, nothing written")
+    p.add_argument("--out", type=_html_path, default=None, metavar="OUT.html",
+                   help="the page to write (default replay.html; with --search, the record's name with .html)")
     p.set_defaults(func=cmd_view)

@@ -23,7 +23,7 @@ from tamp.app.args import (
 )
 from tamp.app.faults import Faults, add_fault_arguments, faults_of
 from tamp.app.plan_file import fmt_action
-from tamp.app.search_record import SearchRecording
+from tamp.app.search_record import SearchRecording, view_path
 from tamp.app.settings import Settings, add_config_arguments, settings_of, settings_record
 from tamp.errors import UserError
 from tamp.planning.causes import cause_of, stop_record
@@ -252,7 +252,8 @@ def run_plan(problem_path: Path, models_dir: Path, options: PlanOptions) -> int:
         raise UserError("--replan executes actions and observes the world; it needs --execute fast or full")
     if options.replay is not None and options.execute == "none":
         raise UserError("--replay needs an execution (--execute fast or full)")
-    for path, flag in ((options.replay, "--replay"), (options.search, "--search")):
+    views = () if options.search is None else (view_path(options.search),)
+    for path, flag in ((options.replay, "--replay"), (options.search, "--search"), *((v, "--search") for v in views)):
         if path is not None:
             check_output_file(path, flag)
     steps_file = options.steps
@@ -285,6 +286,8 @@ def run_plan(problem_path: Path, models_dir: Path, options: PlanOptions) -> int:
     runner = _closed_loop if options.replan else _open_loop
     search = None if options.search is None else \
         search_recording(problem, which, models, names, settings_record(replace(options.settings, planner=cfg)))
+    if search is not None:
+        search.replay = options.replay
     code, records, episode = runner(problem, models, options, cfg, timeline, names, search)
     if search is not None and options.search is not None:
         search.write(options.search)
@@ -387,7 +390,8 @@ def add_search_argument(p: argparse.ArgumentParser) -> None:
     """--search of `tamp plan` and `tamp demo`."""
     p.add_argument("--search", type=json_path, default=None, metavar="OUT.json",
                    help="write the search record: what each planning call considered (Level 1's candidates, the "
-                   "continuous search's tree, refinements, the closed loop's rounds; docs/search-record.md)")
+                   "continuous search's tree, refinements, the closed loop's rounds; docs/search-record.md) and "
+                   "its view beside it, OUT.html (one offline page; `tamp view --search` writes it again)")
 
 
 def add_trajectory_argument(p: argparse.ArgumentParser) -> None:

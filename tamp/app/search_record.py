@@ -80,7 +80,8 @@ SCHEMA = Schema({"type": "object", "required": ["format", "version", "config", "
         "name": _MAYBE_STR, "X_init": SCENE, "X_goal": SCENE, "source": {"type": "string"}}},
     "symbols": {"type": "object", "required": ["names"], "properties": {
         "names": {"type": "object", "additionalProperties": {"type": "string"}}}},
-    "rounds": {"type": "array", "items": _ROUND}}})
+    "rounds": {"type": "array", "items": _ROUND},
+    "replay": {"type": "string"}}})  # the Meshcat replay of the run (`--replay`), which the search view links
 
 
 def check_search_record(doc: Any, where: str) -> dict:
@@ -118,6 +119,7 @@ class SearchRecording:
     rounds: list[dict] = field(default_factory=list)
     _results: list[PlanResult] = field(default_factory=list)
     _X: np.ndarray | None = None  # the state the next round plans from
+    replay: Path | None = None  # the run's Meshcat replay, if it writes one: the view links each step to it
 
     def planned(self, result: PlanResult, X_observed: np.ndarray | None = None) -> None:
         """A round's planning call returned `result` (from the state observed last, or `X_observed`)."""
@@ -136,11 +138,25 @@ class SearchRecording:
         problem = {k: (np.asarray(v, dtype=float).round(6).tolist() if k.startswith("X_") else v)
                    for k, v in self.problem.items()}
         return {"format": FORMAT, "version": VERSION, "config": self.config, "problem": problem,
-                "symbols": {"names": symbol_names(self.names)}, "rounds": self.rounds}
+                "symbols": {"names": symbol_names(self.names)}, "rounds": self.rounds,
+                **({} if self.replay is None else {"replay": str(self.replay)})}
 
     def write(self, path: Path) -> None:
-        write_search_record(self.document(), path)
-        print(f"search record written to {path} ({len(self.rounds)} round(s), {path.stat().st_size / 1e3:.0f} kB)")
+        """The record at `path` and its view beside it (`path` with .html; `tamp view --search` writes it again)."""
+        from tamp.app.search_view import write_search_view
+
+        document = self.document()
+        write_search_record(document, path)
+        view = write_search_view(document, view_path(path))
+        print(f"search record written to {path} ({len(self.rounds)} round(s), {path.stat().st_size / 1e3:.0f} kB), "
+              f"its view to {view}")
 
 
-__all__ = ["SCHEMA", "SearchRecording", "check_search_record", "read_search_record", "write_search_record"]
+def view_path(record: Path) -> Path:
+    """Where the view of the search record at `record` goes by default: beside it, .json (.gz) replaced by .html."""
+    stem = record.name.removesuffix(".gz").removesuffix(".json")
+    return record.with_name(stem + ".html")
+
+
+__all__ = ["SCHEMA", "SearchRecording", "check_search_record", "read_search_record", "view_path",
+           "write_search_record"]

@@ -132,3 +132,5 @@ def test_tamp_plan_writes_the_record_of_every_round_of_its_closed_loop(tmp_path,
     assert all(a["ik_branch"] for a in first["refinements"][-1]["actions"])
     executed = [r["executed"] for r in rounds if r["executed"] is not None]
     assert executed and all(e["miss_m"] >= 0 for e in executed)
+    view = path.with_name("search.html")  # the view beside the record, with the record embedded
+    assert f"its view to {view}" in out and '"tamp-search-record"' in view.read_text()

@@ -221,7 +221,7 @@ def test_the_commands_offer_the_trajectory(capsys):
             main([command, "--help"])
         assert "--trajectory" in capsys.readouterr().out
     assert main(["view"]) == 2
-    assert "give a plan file or --trajectory FILE" in capsys.readouterr().err
+    assert "give a plan file, --trajectory FILE or --search FILE" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         main(["demo", "--trajectory", "out.txt"])
     assert "ending in .json" in capsys.readouterr().err
