@@ -12,6 +12,7 @@ time (`level1_serial`); kinematics (`feas`) before a verified plan is taken.
 """
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Callable, Sequence
 
 import numpy as np
@@ -255,7 +256,9 @@ def level1_serial(models: Models, X_init, X_goal, config: Level1Config, goal: Ve
     sub-goal is the stage's. The plans are joined and verified against X_goal in the whole scene,
     then checked and refined as one. No plan (with the reason) when a stage places no block or the
     joined plan does not verify. Each stage plans in a scene of two or three objects, where the
-    symbols the models learned on 2-4 blocks are reliable, however many objects the whole goal involves."""
+    symbols the models learned on 2-4 blocks are reliable, however many objects the whole goal involves.
+    All stages together generate at most config.budget symbolic states, less what Level 1's search in the whole
+    scene (`record`'s) generated: one budget bounds Level 1's symbolic search in a planning call."""
     X_init, X_goal = np.asarray(X_init, dtype=float), np.asarray(X_goal, dtype=float)
     left = sorted(misplaced_objects(X_init, X_goal, goal.misplaced, goal.eps).tolist(),
                   key=lambda i: (X_goal[i, 2], i))
@@ -264,11 +267,21 @@ def level1_serial(models: Models, X_init, X_goal, config: Level1Config, goal: Ve
     X = X_init
     actions: list[tuple[int, int, int, int]] = []
     stages: list[int] = []  # the blocks placed, in order
+    budget = None if config.budget is None else config.budget - record.symbolic_stats.get("generated", 0)
     while left:
         for block in left:
+            if budget is not None and budget <= 0:
+                record.reasons.append(f"level 1, one block at a time: its budget ({config.budget:,} symbolic states, "
+                                      f"the whole scene's search included) spent after {len(stages)} placed ({stages})")
+                record.symbolic_stats["serial"] = {"placed": stages, "left": left}
+                return
             sub_goal = X.copy()
             sub_goal[block, :3] = X_goal[block, :3]
-            v = level1(models, X, sub_goal, config, goal, clock, None, release_targets).chosen  # time counted
+            stage = level1(models, X, sub_goal, config if budget is None else replace(config, budget=budget), goal,
+                           clock, None, release_targets)  # time counted
+            if budget is not None:
+                budget -= stage.symbolic_stats.get("generated", 0)
+            v = stage.chosen
             if v is not None and v.error < goal.eps:
                 break
         else:

@@ -483,6 +483,9 @@ def test_level1_plans_one_block_at_a_time_when_the_whole_goal_gives_no_plan(doma
     assert serial.candidates[-1].verified and serial.candidates[-1].stages == (0, 2) and serial.plan_states is None
     assert serial.timings["symbolic"] > 0 and serial.timings["verify"] > 0  # both stages' Level-1 time
     assert plan("bilevel", models(domain), X5, G5, replace(cfg, level1=replace(cfg.level1, serial=False))).level == 2
+    starved = plan("bilevel", models(domain), X5, G5, replace(cfg, level1=replace(cfg.level1, budget=1)))
+    assert starved.level == 2 and starved.symbolic_stats["serial"] == {"placed": [0], "left": [2]}  # one budget:
+    assert any("its budget (1 symbolic states" in r for r in starved.reasons)  # block 0's stage spent it
     bad = G5.copy()
     bad[2, :3] = [0.75, -0.25, 0.025]  # block 2 elsewhere on the table: no learned operator moves it there
     stuck = plan("bilevel", models(domain), X5, bad, cfg)
