@@ -23,7 +23,7 @@ The pipeline (numpy and scipy, no renderer; `tamp.sim.cameras` renders the views
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from enum import StrEnum
 
 import numpy as np
@@ -53,6 +53,8 @@ _UNDER_TABLE_M = 0.01  # metres: a box reaching farther into the table is no blo
 _LEVEL_M = 0.008  # metres: a block resting flat has its top face this close to a whole number of block heights
 _FLAT_QUALITY = 0.5  # a block resting flat must explain this share of the points within _VICINITY_M of it
 _VICINITY_M = 0.01  # metres: the points a left-over block's fit is judged on
+_PRIOR_MIN = 20  # points that a block of a type the prior misses must explain (MIN_CLUSTER otherwise)
+_PRIOR_QUALITY = 0.5  # the share of its vicinity's points such a block must explain (MIN_EXPLAINED otherwise)
 _FIT_REACH_M = 0.02  # metres: a hypothesis is fitted to the points this close to its starting box
 
 
@@ -90,6 +92,7 @@ class BlockEstimate:
     X_WB: np.ndarray  # (4, 4) pose in the world
     points: int  # fused points its box explains
     upright: bool  # fitted as resting flat (x, y, yaw), else with six degrees of freedom
+    prior: bool = False  # found because `previous` named its type (a bar's hidden ends, a block half seen)
 
     @property
     def position(self) -> np.ndarray:
@@ -232,6 +235,40 @@ def _footprint_hypotheses(points: np.ndarray) -> list[tuple[int, np.ndarray]]:
     return hypotheses
 
 
+def _side_hypotheses(p: np.ndarray, n: np.ndarray, voxel: float) -> list[tuple[int, np.ndarray]]:
+    """Upright blocks behind the vertical faces among the points p (normals n, sign arbitrary): a block whose top
+    face is hidden (under a leaning bar, or an overhang) may show a single side. Each face (points whose horizontal
+    normals agree, connected) proposes, on either side of its plane (which side the cameras looked from is
+    unknown), a cube at either end or the middle of the face, a bar along it likewise, and a bar across it; the
+    block stands in the layer of the face's median height."""
+    side = np.flatnonzero(np.abs(n[:, 2]) < 0.2)
+    if len(side) < MIN_PATCH:
+        return []
+    heading = np.mod(np.arctan2(n[side, 1], n[side, 0]), np.pi)  # the face's direction, either sign
+    bins = np.round(heading / np.radians(5.0)).astype(int) % 36
+    hypotheses = []
+    for peak in np.argsort(np.bincount(bins, minlength=36))[::-1][:4]:
+        near = side[np.abs(np.mod(bins - peak + 18, 36) - 18) <= 1]
+        if len(near) < MIN_PATCH:
+            break
+        for face in components(p[near], 2.5 * voxel):
+            if len(face) < MIN_PATCH:
+                break
+            f = p[near[face]]
+            m = np.array([np.cos(peak * np.radians(5.0)), np.sin(peak * np.radians(5.0)), 0.0])
+            t = np.array([-m[1], m[0], 0.0])
+            plane, (lo, hi) = float(np.median(f @ m)), np.percentile(f @ t, [2.0, 98.0])
+            z = (np.floor(float(np.median(f[:, 2])) / BLOCK_HEIGHT) + 0.5) * BLOCK_HEIGHT
+            for sign in (-1.0, 1.0):
+                for block_type, axis, depth in ((SMALL, t, 0.025), (LARGE, t, 0.025), (LARGE, m, 0.125)):
+                    R = np.column_stack([np.cross(axis, [0.0, 0.0, 1.0]), axis, [0.0, 0.0, 1.0]])
+                    half = BLOCK_SIZES[block_type][1] / 2 if axis is t else 0.0
+                    along = {(lo + hi) / 2} | ({lo + half, hi - half} if half else set())
+                    hypotheses += [(block_type, pose(R, (plane - sign * depth) * m + s * t + [0.0, 0.0, z]))
+                                   for s in along]
+    return hypotheses
+
+
 def _score(distance: np.ndarray) -> int:
     """A box's support from the points at these signed distances: those on its surface, less _INSIDE_WEIGHT for each
     one inside it (a surface the cameras saw inside a solid box is evidence against it)."""
@@ -239,11 +276,20 @@ def _score(distance: np.ndarray) -> int:
     return on - _INSIDE_WEIGHT * int(np.count_nonzero(distance <= -EXPLAINED_M))
 
 
-def _best_box(points: np.ndarray, candidates: np.ndarray, hypotheses, views, quality: float = 0.0):
+def _overlaps(X_WB: np.ndarray, block_type: int, found: list[BlockEstimate]) -> bool:
+    """Whether the box at X_WB and one of the blocks `found` hold each other's centre (solid blocks cannot)."""
+    half = half_size(block_type)
+    return any(box_sdf(b.X_WB, half_size(b.type), X_WB[None, :3, 3])[0] < 0.0
+               or box_sdf(X_WB, half, b.position[None])[0] < 0.0 for b in found)
+
+
+def _best_box(points: np.ndarray, candidates: np.ndarray, hypotheses, views, quality: float = 0.0,
+              found: tuple | list = ()):
     """(points explained, estimate, which of `candidates` it explains) of the fitted hypothesis (type, initial pose,
     upright) that explains most of `candidates` and that no camera saw through (a smaller box wins a near tie), of
-    those whose points within _VICINITY_M lie on its surface for at least the share `quality`; None when there is
-    none. Only the _FITTED hypotheses that explain most before the fit are fitted (a fit costs milliseconds)."""
+    those whose points within _VICINITY_M lie on its surface for at least the share `quality` and that do not
+    overlap a block `found`; None when there is none. Only the _FITTED hypotheses that explain most before the fit
+    are fitted (a fit costs milliseconds)."""
     ranked = []
     for block_type, X0, upright in hypotheses:
         if seen_through(X0, block_type, views) <= 2 * MAX_SEEN_THROUGH:  # far off: most wrong ones end here
@@ -253,8 +299,9 @@ def _best_box(points: np.ndarray, candidates: np.ndarray, hypotheses, views, qua
     for _, block_type, X0, upright in ranked[:_FITTED]:
         half = half_size(block_type)
         X = fit_box(points[box_sdf(X0, half, points) < _FIT_REACH_M], half, X0, upright)
-        if X[2, 3] - np.abs(X[2, :3]) @ half < -_UNDER_TABLE_M or seen_through(X, block_type, views) > MAX_SEEN_THROUGH:
-            continue  # through the table (where no camera sees), or seen through
+        if (X[2, 3] - np.abs(X[2, :3]) @ half < -_UNDER_TABLE_M or seen_through(X, block_type, views) > MAX_SEEN_THROUGH
+                or _overlaps(X, block_type, found)):
+            continue  # through the table (where no camera sees), seen through, or inside a block found
         distance = box_sdf(X, half, candidates)
         explained = distance < EXPLAINED_M
         score = _score(distance)
@@ -294,7 +341,7 @@ def _top_faces(p: np.ndarray, tree: cKDTree, free: np.ndarray, views, voxel: flo
         near = np.flatnonzero(free & (np.linalg.norm(p[:, :2] - p[patch, :2].mean(axis=0), axis=1) < 0.3))
         slab = near[(p[near, 2] > top - BLOCK_HEIGHT + 0.006) & (p[near, 2] < top + 0.006)]
         hypotheses = _face_hypotheses(p[patch], np.array([0.0, 0.0, 1.0]), BLOCK_HEIGHT / 2)
-        best = _best_box(p[slab], p[near], [(t, X0, True) for t, X0 in hypotheses], views, quality=_FLAT_QUALITY)
+        best = _best_box(p[slab], p[near], [(t, X0, True) for t, X0 in hypotheses], views, _FLAT_QUALITY, found)
         if best is None:  # not a block resting flat (a leaning one's top, or blocks merged): left to step 3
             continue
         _, block, explained = best
@@ -320,28 +367,82 @@ def _tilted_face(p: np.ndarray, tree: cKDTree, cluster: np.ndarray, voxel: float
     return p[face], normal
 
 
-def _left_over(p: np.ndarray, tree: cKDTree, free: np.ndarray, views, voxel: float, found: list,
-               failures: list) -> None:
+def _cluster_hypotheses(p: np.ndarray, tree: cKDTree, cluster: np.ndarray, voxel: float) -> list:
+    """(type, initial pose, upright) of the blocks a cluster's points may be: upright blocks from its layers' outline
+    and its vertical faces, blocks with six degrees of freedom from its largest upward face."""
+    face, normal = _tilted_face(p, tree, cluster, voxel)
+    hypotheses = [(t, X0, True) for t, X0 in _footprint_hypotheses(p[cluster])]
+    hypotheses += [(t, X0, True) for t, X0 in _side_hypotheses(p[cluster], normals(p, tree, cluster), voxel)]
+    if len(face) >= MIN_PATCH:
+        hypotheses += [(t, X0, False) for t, X0 in _face_hypotheses(face, normal, BLOCK_HEIGHT / 2)]
+    return hypotheses
+
+
+def _left_over(p: np.ndarray, tree: cKDTree, free: np.ndarray, views, voxel: float, found: list) -> None:
     """Step 3 of the pipeline: the clusters left, as blocks whose top face is hidden (upright, from their sides'
     outline) or that lean (six degrees of freedom, from their largest upward face)."""
     left = np.flatnonzero(free)
     for cluster in components(p[left], 2.5 * voxel):
         cluster = left[cluster]
         while len(cluster) >= MIN_CLUSTER:
-            face, normal = _tilted_face(p, tree, cluster, voxel)
-            hypotheses = [(t, X0, True) for t, X0 in _footprint_hypotheses(p[cluster])]
-            if len(face) >= MIN_PATCH:
-                hypotheses += [(t, X0, False) for t, X0 in _face_hypotheses(face, normal, BLOCK_HEIGHT / 2)]
-            best = _best_box(p[cluster], p[cluster], hypotheses, views, quality=MIN_EXPLAINED)
+            hypotheses = _cluster_hypotheses(p, tree, cluster, voxel)
+            best = _best_box(p[cluster], p[cluster], hypotheses, views, quality=MIN_EXPLAINED, found=found)
             if best is None or best[0] < MIN_CLUSTER:
                 break
             found.append(best[1])
             free[cluster[best[2]]] = False
             cluster = cluster[~best[2]]
-        if len(cluster) >= MIN_CLUSTER:
-            x, y, z = p[cluster].mean(axis=0)
-            failures.append(PerceptionFailure(Failure.UNEXPLAINED, f"{len(cluster)} points about ({x:.3f}, {y:.3f}, "
-                                              f"{z:.3f}) m fit no block"))
+
+
+def _with_prior(p: np.ndarray, tree: cKDTree, free: np.ndarray, views, voxel: float, found: list,
+                prior_types: np.ndarray) -> None:
+    """Where the blocks found and the prior's types (`previous`) disagree, the explanations the prior names and the
+    points support: a bar for a cube fitted to a bar's visible middle (its ends hidden), and a block of a type the
+    prior has more of among the points left, to looser thresholds. These blocks are marked `prior`; what the
+    points do not resolve stays a disagreement, which `assign` says."""
+    want = np.bincount(prior_types, minlength=2)
+
+    def short(block_type: int) -> int:
+        return int(want[block_type]) - sum(b.type == block_type for b in found)
+
+    up = np.array([0.0, 0.0, 1.0])
+    for k in sorted([k for k, b in enumerate(found) if b.type == SMALL and b.upright], key=lambda k: found[k].points):
+        if short(LARGE) <= 0 or short(SMALL) >= 0:
+            break
+        cube = found[k]
+        mine = box_sdf(cube.X_WB, half_size(SMALL), p) < EXPLAINED_M
+        near = np.flatnonzero((free | mine) & (np.linalg.norm(p[:, :2] - cube.position[:2], axis=1) < 0.2)
+                              & (np.abs(p[:, 2] - cube.position[2]) < BLOCK_HEIGHT / 2 + 0.006))
+        hypotheses = [(LARGE, pose(np.column_stack([np.cross(axis, up), axis, up]), cube.position + s * axis), True)
+                      for axis in (cube.X_WB[:3, 0], cube.X_WB[:3, 1]) for s in (-0.1, 0.0, 0.1)]
+        best = _best_box(p[near], p[near], hypotheses, views, _FLAT_QUALITY, found[:k] + found[k + 1:])
+        if best is not None and best[0] >= cube.points:
+            found[k] = replace(best[1], prior=True)
+            free[near[best[2]]] = False
+    left = np.flatnonzero(free)
+    for cluster in components(p[left], 2.5 * voxel):
+        cluster = left[cluster]
+        while len(cluster) >= _PRIOR_MIN and max(short(SMALL), short(LARGE)) > 0:
+            hypotheses = [h for h in _cluster_hypotheses(p, tree, cluster, voxel) if short(h[0]) > 0]
+            best = _best_box(p[cluster], p[cluster], hypotheses, views, _PRIOR_QUALITY, found)
+            if best is None or best[0] < _PRIOR_MIN:
+                break
+            found.append(replace(best[1], prior=True))
+            free[cluster[best[2]]] = False
+            cluster = cluster[~best[2]]
+
+
+def _unexplained(p: np.ndarray, free: np.ndarray, voxel: float) -> list[PerceptionFailure]:
+    """The clusters of points no block explains, said."""
+    left = np.flatnonzero(free)
+    said = []
+    for cluster in components(p[left], 2.5 * voxel):
+        if len(cluster) < MIN_CLUSTER:
+            break
+        x, y, z = p[left[cluster]].mean(axis=0)
+        said.append(PerceptionFailure(Failure.UNEXPLAINED, f"{len(cluster)} points about ({x:.3f}, {y:.3f}, {z:.3f}) m "
+                                      "fit no block"))
+    return said
 
 
 def assign(blocks: list[BlockEstimate], previous: np.ndarray) -> tuple[list[BlockEstimate], list[int],
@@ -377,7 +478,10 @@ def perceive(views: list[DepthView], config: PerceptionConfig, previous: np.ndar
     if len(p) >= _NEIGHBOURS:
         tree = cKDTree(p)
         _top_faces(p, tree, free, views, config.voxel_m, found, failures)
-        _left_over(p, tree, free, views, config.voxel_m, found, failures)
+        _left_over(p, tree, free, views, config.voxel_m, found)
+        if previous is not None:
+            _with_prior(p, tree, free, views, config.voxel_m, found, np.argmax(np.asarray(previous)[:, 3:], axis=1))
+        failures += _unexplained(p, free, config.voxel_m)
     identity = list(range(len(found)))
     if previous is not None:
         found, identity, said = assign(found, np.asarray(previous, dtype=float))
