@@ -288,15 +288,18 @@ def _best_box(points: np.ndarray, candidates: np.ndarray, hypotheses, views, qua
     """(points explained, estimate, which of `candidates` it explains) of the fitted hypothesis (type, initial pose,
     upright) that explains most of `candidates` and that no camera saw through (a smaller box wins a near tie), of
     those whose points within _VICINITY_M lie on its surface for at least the share `quality` and that do not
-    overlap a block `found`; None when there is none. Only the _FITTED hypotheses that explain most before the fit
-    are fitted (a fit costs milliseconds)."""
+    overlap a block `found`; None when there is none. Only the _FITTED hypotheses of each family (an optional fourth
+    item) that explain most before the fit are fitted (a fit costs milliseconds; one family's many near misses must
+    not crowd out another's right guess)."""
     ranked = []
-    for block_type, X0, upright in hypotheses:
+    for block_type, X0, upright, *family in hypotheses:
         if seen_through(X0, block_type, views) <= 2 * MAX_SEEN_THROUGH:  # far off: most wrong ones end here
-            ranked.append((_score(box_sdf(X0, half_size(block_type), candidates)), block_type, X0, upright))
+            score = _score(box_sdf(X0, half_size(block_type), candidates))
+            ranked.append((score, block_type, X0, upright, family[0] if family else 0))
     ranked.sort(key=lambda r: r[0], reverse=True)
+    chosen = [r for f in {r[4] for r in ranked} for r in [r for r in ranked if r[4] == f][:_FITTED]]
     best = None
-    for _, block_type, X0, upright in ranked[:_FITTED]:
+    for _, block_type, X0, upright, _ in chosen:
         half = half_size(block_type)
         X = fit_box(points[box_sdf(X0, half, points) < _FIT_REACH_M], half, X0, upright)
         if (X[2, 3] - np.abs(X[2, :3]) @ half < -_UNDER_TABLE_M or seen_through(X, block_type, views) > MAX_SEEN_THROUGH
@@ -330,7 +333,8 @@ def _top_faces(p: np.ndarray, tree: cKDTree, free: np.ndarray, views, voxel: flo
     up = high[np.abs(normals(p, tree, high)[:, 2]) > UP_COS]
     queue = [up[c] for c in components(p[up], 2.5 * voxel) if len(c) >= MIN_PATCH]
     while queue:
-        queue.sort(key=lambda c: float(np.median(p[c, 2])))
+        queue.sort(key=lambda c: (round(float(np.median(p[c, 2])) / BLOCK_HEIGHT), len(c)))  # the highest layer, its
+        #   largest patch first: a bar's end piece proposes the bar that a piece between blocks on it cannot
         patch = queue.pop()
         patch = patch[free[patch]]
         if len(patch) < MIN_PATCH:
@@ -368,13 +372,14 @@ def _tilted_face(p: np.ndarray, tree: cKDTree, cluster: np.ndarray, voxel: float
 
 
 def _cluster_hypotheses(p: np.ndarray, tree: cKDTree, cluster: np.ndarray, voxel: float) -> list:
-    """(type, initial pose, upright) of the blocks a cluster's points may be: upright blocks from its layers' outline
-    and its vertical faces, blocks with six degrees of freedom from its largest upward face."""
+    """(type, initial pose, upright, family) of the blocks a cluster's points may be, in three families: upright
+    blocks from its layers' outline, upright blocks from its vertical faces, blocks with six degrees of freedom from
+    its largest upward face."""
     face, normal = _tilted_face(p, tree, cluster, voxel)
-    hypotheses = [(t, X0, True) for t, X0 in _footprint_hypotheses(p[cluster])]
-    hypotheses += [(t, X0, True) for t, X0 in _side_hypotheses(p[cluster], normals(p, tree, cluster), voxel)]
+    hypotheses = [(t, X0, True, 0) for t, X0 in _footprint_hypotheses(p[cluster])]
+    hypotheses += [(t, X0, True, 1) for t, X0 in _side_hypotheses(p[cluster], normals(p, tree, cluster), voxel)]
     if len(face) >= MIN_PATCH:
-        hypotheses += [(t, X0, False) for t, X0 in _face_hypotheses(face, normal, BLOCK_HEIGHT / 2)]
+        hypotheses += [(t, X0, False, 2) for t, X0 in _face_hypotheses(face, normal, BLOCK_HEIGHT / 2)]
     return hypotheses
 
 
@@ -406,18 +411,23 @@ def _with_prior(p: np.ndarray, tree: cKDTree, free: np.ndarray, views, voxel: fl
         return int(want[block_type]) - sum(b.type == block_type for b in found)
 
     up = np.array([0.0, 0.0, 1.0])
-    for k in sorted([k for k, b in enumerate(found) if b.type == SMALL and b.upright], key=lambda k: found[k].points):
-        if short(LARGE) <= 0 or short(SMALL) >= 0:
-            break
-        cube = found[k]
-        mine = box_sdf(cube.X_WB, half_size(SMALL), p) < EXPLAINED_M
+    for cube in sorted([b for b in found if b.type == SMALL and b.upright], key=lambda b: b.points):
+        if short(LARGE) <= 0 or short(SMALL) >= 0 or not any(b is cube for b in found):
+            continue
+        layer = [b for b in found if b.type == SMALL and b.upright and abs(b.position[2] - cube.position[2]) < 0.01]
+        mine = np.any([box_sdf(b.X_WB, half_size(SMALL), p) < EXPLAINED_M for b in layer], axis=0)
         near = np.flatnonzero((free | mine) & (np.linalg.norm(p[:, :2] - cube.position[:2], axis=1) < 0.2)
                               & (np.abs(p[:, 2] - cube.position[2]) < BLOCK_HEIGHT / 2 + 0.006))
         hypotheses = [(LARGE, pose(np.column_stack([np.cross(axis, up), axis, up]), cube.position + s * axis), True)
                       for axis in (cube.X_WB[:3, 0], cube.X_WB[:3, 1]) for s in (-0.1, 0.0, 0.1)]
-        best = _best_box(p[near], p[near], hypotheses, views, _FLAT_QUALITY, found[:k] + found[k + 1:])
-        if best is not None and best[0] >= cube.points:
-            found[k] = replace(best[1], prior=True)
+        others = [b for b in found if not any(b is c for c in layer)]
+        best = _best_box(p[near], p[near], hypotheses, views, _FLAT_QUALITY, others)
+        if best is None:
+            continue
+        bar = best[1]  # it replaces the cubes of the layer whose centres it holds (pieces of its visible top)
+        pieces = [b for b in layer if box_sdf(bar.X_WB, half_size(LARGE), b.position[None])[0] < 0.0]
+        if best[0] >= _TIE * sum(b.points for b in pieces):
+            found[:] = [b for b in found if not any(b is c for c in pieces)] + [replace(bar, prior=True)]
             free[near[best[2]]] = False
     left = np.flatnonzero(free)
     for cluster in components(p[left], 2.5 * voxel):
