@@ -15,8 +15,8 @@ four cameras at 640x480, noise on). Each observation's depth images are perceive
   every later one is perceived with `previous` = the last estimates that perception vouched for (no failure
   said). Those are from before the action: the moved block's position is stale, the count and types are not.
 
-Printed, for both: per class of the true block (on the table, in a stack, leaning) the position error median and p95 (mm),
-the orientation error median (deg; the yaw for a block resting flat) and the share of right types; over the
+Printed, for both: per class of the true block (on the table, in a stack, leaning) the position error median and
+p95 (mm), the orientation error median (deg; the yaw for a block resting flat) and the share of right types; over the
 observations the share with the right count (every block found, nothing extra), how many failures were said,
 and the time per observation, median and p95 (ms): rendering (Drake), perception, their sum, and the sensor
 noise model's share (a simulator's cost that no real camera has), against the issue's targets.

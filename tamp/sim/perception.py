@@ -23,17 +23,27 @@ The pipeline (numpy and scipy, no renderer; `tamp.sim.cameras` renders the views
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from enum import StrEnum
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from tamp.planning.vocabulary import BLOCK_HEIGHT, BLOCK_SIZES, LARGE, SMALL, TYPE_NAMES
-from tamp.sim.box_fit import box_sdf, fit_box, half_size, min_area_rectangle, pose, seen_through
+from tamp.planning.vocabulary import BLOCK_HEIGHT, LARGE, SMALL, TYPE_NAMES
+from tamp.sim.box_fit import (
+    MIN_PATCH,
+    box_sdf,
+    components,
+    face_hypotheses,
+    fit_box,
+    footprint_hypotheses,
+    half_size,
+    pose,
+    seen_through,
+    side_hypotheses,
+)
 from tamp.sim.perception_config import PerceptionConfig
 
 CROP_M = ((0.1, 1.3), (-0.75, 0.75), (0.006, 0.6))  # metres, world x, y, z: the table's workspace; z > 6 mm
@@ -41,7 +51,6 @@ CROP_M = ((0.1, 1.3), (-0.75, 0.75), (0.006, 0.6))  # metres, world x, y, z: the
 UP_COS = 0.97  # a point whose normal is within 14 degrees of vertical belongs to a top face
 EXPLAINED_M = 0.005  # metres: a point this close to (or inside) an accepted box is that block's
 MAX_SEEN_THROUGH = 0.12  # share of a hypothesis' face samples the cameras may have seen through
-MIN_PATCH = 12  # points of a top face worth a hypothesis (a 5 cm face holds about 150 at 4 mm)
 MIN_CLUSTER = 40  # points of a left-over cluster worth a block (fewer: speckle, said as unexplained)
 MIN_EXPLAINED = 0.7  # a left-over block's fit must explain this share of the points within _VICINITY_M of it
 _TIE = 0.93  # a smaller box whose score is within this factor of a larger one's is preferred (a cube over a bar)
@@ -173,102 +182,6 @@ def normals(p: np.ndarray, tree: cKDTree, which: np.ndarray) -> np.ndarray:
     return vectors[:, :, 0]
 
 
-def components(p: np.ndarray, radius: float) -> list[np.ndarray]:
-    """Indices of the points' connected components (points within `radius` are connected), largest first."""
-    if not len(p):
-        return []
-    pairs = cKDTree(p).query_pairs(radius, output_type="ndarray")
-    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(p), len(p)))
-    _, labels = connected_components(graph, directed=False)
-    groups = np.split(np.argsort(labels, kind="stable"), np.cumsum(np.bincount(labels))[:-1])
-    return sorted(groups, key=len, reverse=True)
-
-
-def _face_hypotheses(face: np.ndarray, normal: np.ndarray, depth: float) -> list[tuple[int, np.ndarray]]:
-    """(type, initial pose) of the blocks whose face `face` (points) may be, seen from outside along `normal`, the
-    box `depth` behind the face's plane along it: a cube at either end or the middle of the face, a bar along it (or
-    across a square one) with an end at either end of the face or centred on it (a block on top may hide part of
-    it). The block's z axis is `normal`, its y axis a bar's long axis."""
-    e1 = np.cross(normal, [0.0, 1.0, 0.0] if abs(normal[1]) < 0.9 else [1.0, 0.0, 0.0])
-    e1 /= np.linalg.norm(e1)
-    e2 = np.cross(normal, e1)
-    rectangle = min_area_rectangle(np.column_stack([face @ e1, face @ e2]))
-    if rectangle is None:
-        return []
-    (c1, c2), (u1, u2), sizes = rectangle
-    centre = c1 * e1 + c2 * e2 + (float(np.median(face @ normal)) - depth) * normal
-    long_axis = u1 * e1 + u2 * e2
-    hypotheses = []
-    for axis, extent in [(long_axis, sizes[1])] + ([(np.cross(normal, long_axis), sizes[0])] if sizes[1] < 0.065
-                                                    else []):
-        R = np.column_stack([np.cross(axis, normal), axis, normal])  # block y along `axis`, z along `normal`
-        for block_type in (SMALL, LARGE) if axis is long_axis else (LARGE,):
-            length = BLOCK_SIZES[block_type][1]
-            if abs(extent - length) < 0.015:  # the face is the block's whole face
-                offsets = {0.0}
-            else:  # an end of the block at either end of the face, or (a longer block partly hidden) centred
-                ends = {round((extent - length) / 2, 3), round((length - extent) / 2, 3)}
-                offsets = ends | {0.0} if extent < length else ends
-            hypotheses += [(block_type, pose(R, centre + s * axis)) for s in offsets]
-    return hypotheses
-
-
-def _footprint_hypotheses(points: np.ndarray) -> list[tuple[int, np.ndarray]]:
-    """Upright blocks whose sides `points` may be (a block whose top face a block on it hides), a layer of blocks at a
-    time: the footprint is the outline on the table of the points between two whole numbers of block heights. Where
-    the cameras saw one side only (an outline narrower than a block), the block stands behind it, on either side."""
-    up = np.array([0.0, 0.0, 1.0])
-    hypotheses = []
-    for layer in range(1, int(np.ceil(float(points[:, 2].max()) / BLOCK_HEIGHT)) + 1):
-        top = layer * BLOCK_HEIGHT
-        outline = points[(points[:, 2] > top - BLOCK_HEIGHT + 0.006) & (points[:, 2] < top + 0.006)]
-        if len(outline) < MIN_PATCH:
-            continue
-        outline = np.column_stack([outline[:, :2], np.full(len(outline), top)])
-        rectangle = min_area_rectangle(outline[:, :2])
-        if rectangle is None or rectangle[2][0] >= 0.04:
-            hypotheses += _face_hypotheses(outline, up, BLOCK_HEIGHT / 2)
-            continue
-        across = np.array([-rectangle[1][1], rectangle[1][0], 0.0]) * (BLOCK_SIZES[SMALL][0] - rectangle[2][0])
-        hypotheses += [h for sign in (-1.0, 1.0)
-                       for h in _face_hypotheses(np.vstack([outline, outline + sign * across]), up, BLOCK_HEIGHT / 2)]
-    return hypotheses
-
-
-def _side_hypotheses(p: np.ndarray, n: np.ndarray, voxel: float) -> list[tuple[int, np.ndarray]]:
-    """Upright blocks behind the vertical faces among the points p (normals n, sign arbitrary): a block whose top
-    face is hidden (under a leaning bar, or an overhang) may show a single side. Each face (points whose horizontal
-    normals agree, connected) proposes, on either side of its plane (which side the cameras looked from is
-    unknown), a cube at either end or the middle of the face, a bar along it likewise, and a bar across it; the
-    block stands in the layer of the face's median height."""
-    side = np.flatnonzero(np.abs(n[:, 2]) < 0.2)
-    if len(side) < MIN_PATCH:
-        return []
-    heading = np.mod(np.arctan2(n[side, 1], n[side, 0]), np.pi)  # the face's direction, either sign
-    bins = np.round(heading / np.radians(5.0)).astype(int) % 36
-    hypotheses = []
-    for peak in np.argsort(np.bincount(bins, minlength=36))[::-1][:4]:
-        near = side[np.abs(np.mod(bins - peak + 18, 36) - 18) <= 1]
-        if len(near) < MIN_PATCH:
-            break
-        for face in components(p[near], 2.5 * voxel):
-            if len(face) < MIN_PATCH:
-                break
-            f = p[near[face]]
-            m = np.array([np.cos(peak * np.radians(5.0)), np.sin(peak * np.radians(5.0)), 0.0])
-            t = np.array([-m[1], m[0], 0.0])
-            plane, (lo, hi) = float(np.median(f @ m)), np.percentile(f @ t, [2.0, 98.0])
-            z = (np.floor(float(np.median(f[:, 2])) / BLOCK_HEIGHT) + 0.5) * BLOCK_HEIGHT
-            for sign in (-1.0, 1.0):
-                for block_type, axis, depth in ((SMALL, t, 0.025), (LARGE, t, 0.025), (LARGE, m, 0.125)):
-                    R = np.column_stack([np.cross(axis, [0.0, 0.0, 1.0]), axis, [0.0, 0.0, 1.0]])
-                    half = BLOCK_SIZES[block_type][1] / 2 if axis is t else 0.0
-                    along = {(lo + hi) / 2} | ({lo + half, hi - half} if half else set())
-                    hypotheses += [(block_type, pose(R, (plane - sign * depth) * m + s * t + [0.0, 0.0, z]))
-                                   for s in along]
-    return hypotheses
-
-
 def _score(distance: np.ndarray) -> int:
     """A box's support from the points at these signed distances: those on its surface, less _INSIDE_WEIGHT for each
     one inside it (a surface the cameras saw inside a solid box is evidence against it)."""
@@ -276,7 +189,7 @@ def _score(distance: np.ndarray) -> int:
     return on - _INSIDE_WEIGHT * int(np.count_nonzero(distance <= -EXPLAINED_M))
 
 
-def _overlaps(X_WB: np.ndarray, block_type: int, found: list[BlockEstimate]) -> bool:
+def _overlaps(X_WB: np.ndarray, block_type: int, found: Sequence[BlockEstimate]) -> bool:
     """Whether the box at X_WB and one of the blocks `found` hold each other's centre (solid blocks cannot)."""
     half = half_size(block_type)
     return any(box_sdf(b.X_WB, half_size(b.type), X_WB[None, :3, 3])[0] < 0.0
@@ -284,7 +197,7 @@ def _overlaps(X_WB: np.ndarray, block_type: int, found: list[BlockEstimate]) -> 
 
 
 def _best_box(points: np.ndarray, candidates: np.ndarray, hypotheses, views, quality: float = 0.0,
-              found: tuple | list = ()):
+              found: Sequence[BlockEstimate] = ()):
     """(points explained, estimate, which of `candidates` it explains) of the fitted hypothesis (type, initial pose,
     upright) that explains most of `candidates` and that no camera saw through (a smaller box wins a near tie), of
     those whose points within _VICINITY_M lie on its surface for at least the share `quality` and that do not
@@ -344,7 +257,7 @@ def _top_faces(p: np.ndarray, tree: cKDTree, free: np.ndarray, views, voxel: flo
             continue  # no block resting flat on the table or on flat blocks has its top there: left to step 3
         near = np.flatnonzero(free & (np.linalg.norm(p[:, :2] - p[patch, :2].mean(axis=0), axis=1) < 0.3))
         slab = near[(p[near, 2] > top - BLOCK_HEIGHT + 0.006) & (p[near, 2] < top + 0.006)]
-        hypotheses = _face_hypotheses(p[patch], np.array([0.0, 0.0, 1.0]), BLOCK_HEIGHT / 2)
+        hypotheses = face_hypotheses(p[patch], np.array([0.0, 0.0, 1.0]), BLOCK_HEIGHT / 2)
         best = _best_box(p[slab], p[near], [(t, X0, True) for t, X0 in hypotheses], views, _FLAT_QUALITY, found)
         if best is None:  # not a block resting flat (a leaning one's top, or blocks merged): left to step 3
             continue
@@ -376,10 +289,10 @@ def _cluster_hypotheses(p: np.ndarray, tree: cKDTree, cluster: np.ndarray, voxel
     blocks from its layers' outline, upright blocks from its vertical faces, blocks with six degrees of freedom from
     its largest upward face."""
     face, normal = _tilted_face(p, tree, cluster, voxel)
-    hypotheses = [(t, X0, True, 0) for t, X0 in _footprint_hypotheses(p[cluster])]
-    hypotheses += [(t, X0, True, 1) for t, X0 in _side_hypotheses(p[cluster], normals(p, tree, cluster), voxel)]
+    hypotheses = [(t, X0, True, 0) for t, X0 in footprint_hypotheses(p[cluster])]
+    hypotheses += [(t, X0, True, 1) for t, X0 in side_hypotheses(p[cluster], normals(p, tree, cluster), voxel)]
     if len(face) >= MIN_PATCH:
-        hypotheses += [(t, X0, False, 2) for t, X0 in _face_hypotheses(face, normal, BLOCK_HEIGHT / 2)]
+        hypotheses += [(t, X0, False, 2) for t, X0 in face_hypotheses(face, normal, BLOCK_HEIGHT / 2)]
     return hypotheses
 
 
