@@ -8,16 +8,25 @@ The pipeline (numpy and scipy, no renderer; `tamp.sim.cameras` renders the views
 1. each camera's depth image back-projected to the world frame and fused; cropped to the table's workspace and
    the table removed by its known height (z = 0); averaged in voxel_m cubes; normals from each point's nearest
    neighbours (PCA);
-2. top faces: the upward-facing points split into connected patches, the highest first. Each patch proposes
-   upright blocks (a cube, or a bar along the patch, its ends at either end of the patch: a block on top may hide
-   part of it), each fitted to the points of the block's height slab (`box_fit.fit_box` over x, y, yaw; the
-   height from the face). A hypothesis that a camera saw through (`box_fit.seen_through`) is dropped; of the
-   others the one that explains most points (less those seen inside it) is kept, and its points leave the cloud;
-   a bar most of whose top is hidden waits for step 3, since what hides it may lean on it. Blocks side by side at one
-   height share a patch: what a block leaves of it is a patch again;
-3. what is left (leaning and toppled blocks) is clustered and fitted with all six degrees of freedom, its axes
-   started from the points' dominant normals;
-4. identities: the estimates assigned to `previous` (the last estimates, or the problem's scene) by
+2. top faces: the upward-facing points split into connected patches, the highest layer first and in it the
+   largest patch (a bar's end piece proposes the whole bar; a piece between the blocks on it cannot). Each patch
+   proposes upright blocks (a cube, or a bar along the patch, its ends at either end of the patch: a block on top
+   may hide part of it), each fitted to the points of the block's height slab (`box_fit.fit_box` over x, y, yaw;
+   the height from the face). A hypothesis that a camera saw through (`box_fit.seen_through`), or that holds the
+   centre of a block found (or whose centre a block found holds), is dropped; of the others the one that explains
+   most points (less those seen inside it) is kept, and its points leave the cloud; a bar most of whose top is
+   hidden waits for step 3, since what hides it may lean on it. Blocks side by side at one height share a patch:
+   what a block leaves of it is a patch again;
+3. what is left is clustered, and each cluster fitted in turn from three families of proposals: upright blocks
+   from a layer's outline and from each single side face (a block whose top a leaning bar or an overhang hides),
+   and blocks with six degrees of freedom from the largest upward face (leaning and toppled blocks);
+4. with `previous`, its count and types (a closed loop knows them; positions may be stale, since a block moved):
+   where the blocks found disagree with them, the explanations they name are tried on the points, to looser
+   thresholds, and kept only where the points support them (not seen through, no overlap): a bar for the cubes
+   fitted to pieces of its top (its ends hidden), a block of a type still missing among the points left. Such
+   blocks are marked `prior`. What the points do not resolve stays a disagreement and is said in step 5; the
+   prior never adds a block the points do not show;
+5. identities: the estimates assigned to `previous` (the last estimates, or the problem's scene) by
    `scipy.optimize.linear_sum_assignment` on distance and type, since goals name blocks. A block of `previous`
    with no estimate is said to be missing, an estimate with none an extra; points no block explains are said.
 """
