@@ -1,5 +1,6 @@
-"""Fitting the known block boxes to points: a box's signed distance, its least-squares pose, the free space the
-cameras saw through it, its orientation error up to the box's symmetries. numpy and scipy only.
+"""Fitting the known block boxes to points: where a fit may start (blocks proposed from a face, a layer's outline or
+a side seen alone), a box's signed distance, its least-squares pose, the free space the cameras saw through it, its
+orientation error up to the box's symmetries. numpy and scipy only.
 
 Poses are (4, 4) homogeneous matrices X_WB (block B in the world W), lengths metres, angles radians.
 """
@@ -9,16 +10,19 @@ from functools import cache
 from itertools import permutations, product
 
 import numpy as np
-from scipy.spatial import ConvexHull
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import ConvexHull, cKDTree
 from scipy.spatial.transform import Rotation
 
-from tamp.planning.vocabulary import BLOCK_SIZES
+from tamp.planning.vocabulary import BLOCK_HEIGHT, BLOCK_SIZES, LARGE, SMALL
 
 FIT_SCALE_M = 0.002  # metres: residuals beyond this weigh less and less (Cauchy), so neighbours' points do not pull
 FIT_POINTS = 250  # points a fit uses at most (an even subsample): enough for sub-millimetre poses, and fast
 SEEN_THROUGH_M = 0.008  # metres: a camera that measured this much farther than a box's surface saw through it
 _FACE_INSET_M = 0.004  # metres: free-space samples keep this far inside a face's edges (pose errors at silhouettes)
 _SAMPLE_STEP_M = 0.01  # metres between free-space samples on a box's faces
+MIN_PATCH = 12  # points of a face worth a hypothesis (a 5 cm face holds about 150 at 4 mm)
 _GRAZING_COS = 0.34  # a face seen more obliquely than 70 degrees by a camera is not checked against it
 
 
@@ -150,6 +154,102 @@ def min_area_rectangle(xy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarr
     return centre, axes[long], np.array([sizes[1 - long], sizes[long]])
 
 
+def components(p: np.ndarray, radius: float) -> list[np.ndarray]:
+    """Indices of the points' connected components (points within `radius` are connected), largest first."""
+    if not len(p):
+        return []
+    pairs = cKDTree(p).query_pairs(radius, output_type="ndarray")
+    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(p), len(p)))
+    _, labels = connected_components(graph, directed=False)
+    groups = np.split(np.argsort(labels, kind="stable"), np.cumsum(np.bincount(labels))[:-1])
+    return sorted(groups, key=len, reverse=True)
+
+
+def face_hypotheses(face: np.ndarray, normal: np.ndarray, depth: float) -> list[tuple[int, np.ndarray]]:
+    """(type, initial pose) of the blocks whose face `face` (points) may be, seen from outside along `normal`, the
+    box `depth` behind the face's plane along it: a cube at either end or the middle of the face, a bar along it (or
+    across a square one) with an end at either end of the face or centred on it (a block on top may hide part of
+    it). The block's z axis is `normal`, its y axis a bar's long axis."""
+    e1 = np.cross(normal, [0.0, 1.0, 0.0] if abs(normal[1]) < 0.9 else [1.0, 0.0, 0.0])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(normal, e1)
+    rectangle = min_area_rectangle(np.column_stack([face @ e1, face @ e2]))
+    if rectangle is None:
+        return []
+    (c1, c2), (u1, u2), sizes = rectangle
+    centre = c1 * e1 + c2 * e2 + (float(np.median(face @ normal)) - depth) * normal
+    long_axis = u1 * e1 + u2 * e2
+    hypotheses = []
+    for axis, extent in [(long_axis, sizes[1])] + ([(np.cross(normal, long_axis), sizes[0])] if sizes[1] < 0.065
+                                                    else []):
+        R = np.column_stack([np.cross(axis, normal), axis, normal])  # block y along `axis`, z along `normal`
+        for block_type in (SMALL, LARGE) if axis is long_axis else (LARGE,):
+            length = BLOCK_SIZES[block_type][1]
+            if abs(extent - length) < 0.015:  # the face is the block's whole face
+                offsets = {0.0}
+            else:  # an end of the block at either end of the face, or (a longer block partly hidden) centred
+                ends = {round((extent - length) / 2, 3), round((length - extent) / 2, 3)}
+                offsets = ends | {0.0} if extent < length else ends
+            hypotheses += [(block_type, pose(R, centre + s * axis)) for s in offsets]
+    return hypotheses
+
+
+def footprint_hypotheses(points: np.ndarray) -> list[tuple[int, np.ndarray]]:
+    """Upright blocks whose sides `points` may be (a block whose top face a block on it hides), a layer of blocks at a
+    time: the footprint is the outline on the table of the points between two whole numbers of block heights. Where
+    the cameras saw one side only (an outline narrower than a block), the block stands behind it, on either side."""
+    up = np.array([0.0, 0.0, 1.0])
+    hypotheses = []
+    for layer in range(1, int(np.ceil(float(points[:, 2].max()) / BLOCK_HEIGHT)) + 1):
+        top = layer * BLOCK_HEIGHT
+        outline = points[(points[:, 2] > top - BLOCK_HEIGHT + 0.006) & (points[:, 2] < top + 0.006)]
+        if len(outline) < MIN_PATCH:
+            continue
+        outline = np.column_stack([outline[:, :2], np.full(len(outline), top)])
+        rectangle = min_area_rectangle(outline[:, :2])
+        if rectangle is None or rectangle[2][0] >= 0.04:
+            hypotheses += face_hypotheses(outline, up, BLOCK_HEIGHT / 2)
+            continue
+        across = np.array([-rectangle[1][1], rectangle[1][0], 0.0]) * (BLOCK_SIZES[SMALL][0] - rectangle[2][0])
+        hypotheses += [h for sign in (-1.0, 1.0)
+                       for h in face_hypotheses(np.vstack([outline, outline + sign * across]), up, BLOCK_HEIGHT / 2)]
+    return hypotheses
+
+
+def side_hypotheses(p: np.ndarray, n: np.ndarray, voxel: float) -> list[tuple[int, np.ndarray]]:
+    """Upright blocks behind the vertical faces among the points p (normals n, sign arbitrary): a block whose top
+    face is hidden (under a leaning bar, or an overhang) may show a single side. Each face (points whose horizontal
+    normals agree, connected) proposes, on either side of its plane (which side the cameras looked from is
+    unknown), a cube at either end or the middle of the face, a bar along it likewise, and a bar across it; the
+    block stands in the layer of the face's median height."""
+    side = np.flatnonzero(np.abs(n[:, 2]) < 0.2)
+    if len(side) < MIN_PATCH:
+        return []
+    heading = np.mod(np.arctan2(n[side, 1], n[side, 0]), np.pi)  # the face's direction, either sign
+    bins = np.round(heading / np.radians(5.0)).astype(int) % 36
+    hypotheses = []
+    for peak in np.argsort(np.bincount(bins, minlength=36))[::-1][:4]:
+        near = side[np.abs(np.mod(bins - peak + 18, 36) - 18) <= 1]
+        if len(near) < MIN_PATCH:
+            break
+        for face in components(p[near], 2.5 * voxel):
+            if len(face) < MIN_PATCH:
+                break
+            f = p[near[face]]
+            m = np.array([np.cos(peak * np.radians(5.0)), np.sin(peak * np.radians(5.0)), 0.0])
+            t = np.array([-m[1], m[0], 0.0])
+            plane, (lo, hi) = float(np.median(f @ m)), np.percentile(f @ t, [2.0, 98.0])
+            z = (np.floor(float(np.median(f[:, 2])) / BLOCK_HEIGHT) + 0.5) * BLOCK_HEIGHT
+            for sign in (-1.0, 1.0):
+                for block_type, axis, depth in ((SMALL, t, 0.025), (LARGE, t, 0.025), (LARGE, m, 0.125)):
+                    R = np.column_stack([np.cross(axis, [0.0, 0.0, 1.0]), axis, [0.0, 0.0, 1.0]])
+                    half = BLOCK_SIZES[block_type][1] / 2 if axis is t else 0.0
+                    along = {(lo + hi) / 2} | ({lo + half, hi - half} if half else set())
+                    hypotheses += [(block_type, pose(R, (plane - sign * depth) * m + s * t + [0.0, 0.0, z]))
+                                   for s in along]
+    return hypotheses
+
+
 @cache
 def symmetries(block_type: int) -> np.ndarray:
     """(k, 3, 3) rotations that map block_type's box onto itself (24 for a cube, 8 for a bar)."""
@@ -170,5 +270,5 @@ def orientation_error(R_est: np.ndarray, R_true: np.ndarray, block_type: int) ->
     return float(np.arccos(np.clip((traces.max() - 1.0) / 2.0, -1.0, 1.0)))
 
 
-__all__ = ["box_sdf", "fit_box", "half_size", "min_area_rectangle", "orientation_error", "pose", "seen_through",
-           "symmetries"]
+__all__ = ["MIN_PATCH", "box_sdf", "components", "face_hypotheses", "fit_box", "footprint_hypotheses", "half_size",
+           "min_area_rectangle", "orientation_error", "pose", "seen_through", "side_hypotheses", "symmetries"]

@@ -8,32 +8,51 @@ The pipeline (numpy and scipy, no renderer; `tamp.sim.cameras` renders the views
 1. each camera's depth image back-projected to the world frame and fused; cropped to the table's workspace and
    the table removed by its known height (z = 0); averaged in voxel_m cubes; normals from each point's nearest
    neighbours (PCA);
-2. top faces: the upward-facing points split into connected patches, the highest first. Each patch proposes
-   upright blocks (a cube, or a bar along the patch, its ends at either end of the patch: a block on top may hide
-   part of it), each fitted to the points of the block's height slab (`box_fit.fit_box` over x, y, yaw; the
-   height from the face). A hypothesis that a camera saw through (`box_fit.seen_through`) is dropped; of the
-   others the one that explains most points (less those seen inside it) is kept, and its points leave the cloud;
-   a bar most of whose top is hidden waits for step 3, since what hides it may lean on it. Blocks side by side at one
-   height share a patch: what a block leaves of it is a patch again;
-3. what is left (leaning and toppled blocks) is clustered and fitted with all six degrees of freedom, its axes
-   started from the points' dominant normals;
-4. identities: the estimates assigned to `previous` (the last estimates, or the problem's scene) by
+2. top faces: the upward-facing points split into connected patches, the highest layer first and in it the
+   largest patch (a bar's end piece proposes the whole bar; a piece between the blocks on it cannot). Each patch
+   proposes upright blocks (a cube, or a bar along the patch, its ends at either end of the patch: a block on top
+   may hide part of it), each fitted to the points of the block's height slab (`box_fit.fit_box` over x, y, yaw;
+   the height from the face). A hypothesis that a camera saw through (`box_fit.seen_through`), or that holds the
+   centre of a block found (or whose centre a block found holds), is dropped; of the others the one that explains
+   most points (less those seen inside it) is kept, and its points leave the cloud; a bar most of whose top is
+   hidden waits for step 3, since what hides it may lean on it. Blocks side by side at one height share a patch:
+   what a block leaves of it is a patch again;
+3. what is left is clustered, and each cluster fitted in turn from three families of proposals: upright blocks
+   from a layer's outline and from each single side face (a block whose top a leaning bar or an overhang hides),
+   and blocks with six degrees of freedom from the largest upward face (leaning and toppled blocks);
+4. with `previous`, its count and types (a closed loop knows them; positions may be stale, since a block moved):
+   where the blocks found disagree with them, the explanations they name are tried on the points, to looser
+   thresholds, and kept only where the points support them (not seen through, no overlap): a bar for the cubes
+   fitted to pieces of its top (its ends hidden), a block of a type still missing among the points left. Such
+   blocks are marked `prior`. What the points do not resolve stays a disagreement and is said in step 5; the
+   prior never adds a block the points do not show;
+5. identities: the estimates assigned to `previous` (the last estimates, or the problem's scene) by
    `scipy.optimize.linear_sum_assignment` on distance and type, since goals name blocks. A block of `previous`
    with no estimate is said to be missing, an estimate with none an extra; points no block explains are said.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
 from enum import StrEnum
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from tamp.planning.vocabulary import BLOCK_HEIGHT, BLOCK_SIZES, LARGE, SMALL, TYPE_NAMES
-from tamp.sim.box_fit import box_sdf, fit_box, half_size, min_area_rectangle, pose, seen_through
+from tamp.planning.vocabulary import BLOCK_HEIGHT, LARGE, SMALL, TYPE_NAMES
+from tamp.sim.box_fit import (
+    MIN_PATCH,
+    box_sdf,
+    components,
+    face_hypotheses,
+    fit_box,
+    footprint_hypotheses,
+    half_size,
+    pose,
+    seen_through,
+    side_hypotheses,
+)
 from tamp.sim.perception_config import PerceptionConfig
 
 CROP_M = ((0.1, 1.3), (-0.75, 0.75), (0.006, 0.6))  # metres, world x, y, z: the table's workspace; z > 6 mm
@@ -41,7 +60,6 @@ CROP_M = ((0.1, 1.3), (-0.75, 0.75), (0.006, 0.6))  # metres, world x, y, z: the
 UP_COS = 0.97  # a point whose normal is within 14 degrees of vertical belongs to a top face
 EXPLAINED_M = 0.005  # metres: a point this close to (or inside) an accepted box is that block's
 MAX_SEEN_THROUGH = 0.12  # share of a hypothesis' face samples the cameras may have seen through
-MIN_PATCH = 12  # points of a top face worth a hypothesis (a 5 cm face holds about 150 at 4 mm)
 MIN_CLUSTER = 40  # points of a left-over cluster worth a block (fewer: speckle, said as unexplained)
 MIN_EXPLAINED = 0.7  # a left-over block's fit must explain this share of the points within _VICINITY_M of it
 _TIE = 0.93  # a smaller box whose score is within this factor of a larger one's is preferred (a cube over a bar)
@@ -53,6 +71,8 @@ _UNDER_TABLE_M = 0.01  # metres: a box reaching farther into the table is no blo
 _LEVEL_M = 0.008  # metres: a block resting flat has its top face this close to a whole number of block heights
 _FLAT_QUALITY = 0.5  # a block resting flat must explain this share of the points within _VICINITY_M of it
 _VICINITY_M = 0.01  # metres: the points a left-over block's fit is judged on
+_PRIOR_MIN = 20  # points that a block of a type the prior misses must explain (MIN_CLUSTER otherwise)
+_PRIOR_QUALITY = 0.5  # the share of its vicinity's points such a block must explain (MIN_EXPLAINED otherwise)
 _FIT_REACH_M = 0.02  # metres: a hypothesis is fitted to the points this close to its starting box
 
 
@@ -90,6 +110,7 @@ class BlockEstimate:
     X_WB: np.ndarray  # (4, 4) pose in the world
     points: int  # fused points its box explains
     upright: bool  # fitted as resting flat (x, y, yaw), else with six degrees of freedom
+    prior: bool = False  # found because `previous` named its type (a bar's hidden ends, a block half seen)
 
     @property
     def position(self) -> np.ndarray:
@@ -170,68 +191,6 @@ def normals(p: np.ndarray, tree: cKDTree, which: np.ndarray) -> np.ndarray:
     return vectors[:, :, 0]
 
 
-def components(p: np.ndarray, radius: float) -> list[np.ndarray]:
-    """Indices of the points' connected components (points within `radius` are connected), largest first."""
-    if not len(p):
-        return []
-    pairs = cKDTree(p).query_pairs(radius, output_type="ndarray")
-    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(p), len(p)))
-    _, labels = connected_components(graph, directed=False)
-    groups = np.split(np.argsort(labels, kind="stable"), np.cumsum(np.bincount(labels))[:-1])
-    return sorted(groups, key=len, reverse=True)
-
-
-def _face_hypotheses(face: np.ndarray, normal: np.ndarray, depth: float) -> list[tuple[int, np.ndarray]]:
-    """(type, initial pose) of the blocks whose face `face` (points) may be, seen from outside along `normal`, the
-    box `depth` behind the face's plane along it: a cube at either end or the middle of the face, a bar along it (or
-    across a square one) with an end at either end of the face or centred on it (a block on top may hide part of
-    it). The block's z axis is `normal`, its y axis a bar's long axis."""
-    e1 = np.cross(normal, [0.0, 1.0, 0.0] if abs(normal[1]) < 0.9 else [1.0, 0.0, 0.0])
-    e1 /= np.linalg.norm(e1)
-    e2 = np.cross(normal, e1)
-    rectangle = min_area_rectangle(np.column_stack([face @ e1, face @ e2]))
-    if rectangle is None:
-        return []
-    (c1, c2), (u1, u2), sizes = rectangle
-    centre = c1 * e1 + c2 * e2 + (float(np.median(face @ normal)) - depth) * normal
-    long_axis = u1 * e1 + u2 * e2
-    hypotheses = []
-    for axis, extent in [(long_axis, sizes[1])] + ([(np.cross(normal, long_axis), sizes[0])] if sizes[1] < 0.065
-                                                    else []):
-        R = np.column_stack([np.cross(axis, normal), axis, normal])  # block y along `axis`, z along `normal`
-        for block_type in (SMALL, LARGE) if axis is long_axis else (LARGE,):
-            length = BLOCK_SIZES[block_type][1]
-            if abs(extent - length) < 0.015:  # the face is the block's whole face
-                offsets = {0.0}
-            else:  # an end of the block at either end of the face, or (a longer block partly hidden) centred
-                ends = {round((extent - length) / 2, 3), round((length - extent) / 2, 3)}
-                offsets = ends | {0.0} if extent < length else ends
-            hypotheses += [(block_type, pose(R, centre + s * axis)) for s in offsets]
-    return hypotheses
-
-
-def _footprint_hypotheses(points: np.ndarray) -> list[tuple[int, np.ndarray]]:
-    """Upright blocks whose sides `points` may be (a block whose top face a block on it hides), a layer of blocks at a
-    time: the footprint is the outline on the table of the points between two whole numbers of block heights. Where
-    the cameras saw one side only (an outline narrower than a block), the block stands behind it, on either side."""
-    up = np.array([0.0, 0.0, 1.0])
-    hypotheses = []
-    for layer in range(1, int(np.ceil(float(points[:, 2].max()) / BLOCK_HEIGHT)) + 1):
-        top = layer * BLOCK_HEIGHT
-        outline = points[(points[:, 2] > top - BLOCK_HEIGHT + 0.006) & (points[:, 2] < top + 0.006)]
-        if len(outline) < MIN_PATCH:
-            continue
-        outline = np.column_stack([outline[:, :2], np.full(len(outline), top)])
-        rectangle = min_area_rectangle(outline[:, :2])
-        if rectangle is None or rectangle[2][0] >= 0.04:
-            hypotheses += _face_hypotheses(outline, up, BLOCK_HEIGHT / 2)
-            continue
-        across = np.array([-rectangle[1][1], rectangle[1][0], 0.0]) * (BLOCK_SIZES[SMALL][0] - rectangle[2][0])
-        hypotheses += [h for sign in (-1.0, 1.0)
-                       for h in _face_hypotheses(np.vstack([outline, outline + sign * across]), up, BLOCK_HEIGHT / 2)]
-    return hypotheses
-
-
 def _score(distance: np.ndarray) -> int:
     """A box's support from the points at these signed distances: those on its surface, less _INSIDE_WEIGHT for each
     one inside it (a surface the cameras saw inside a solid box is evidence against it)."""
@@ -239,22 +198,35 @@ def _score(distance: np.ndarray) -> int:
     return on - _INSIDE_WEIGHT * int(np.count_nonzero(distance <= -EXPLAINED_M))
 
 
-def _best_box(points: np.ndarray, candidates: np.ndarray, hypotheses, views, quality: float = 0.0):
+def _overlaps(X_WB: np.ndarray, block_type: int, found: Sequence[BlockEstimate]) -> bool:
+    """Whether the box at X_WB and one of the blocks `found` hold each other's centre (solid blocks cannot)."""
+    half = half_size(block_type)
+    return any(box_sdf(b.X_WB, half_size(b.type), X_WB[None, :3, 3])[0] < 0.0
+               or box_sdf(X_WB, half, b.position[None])[0] < 0.0 for b in found)
+
+
+def _best_box(points: np.ndarray, candidates: np.ndarray, hypotheses, views, quality: float = 0.0,
+              found: Sequence[BlockEstimate] = ()):
     """(points explained, estimate, which of `candidates` it explains) of the fitted hypothesis (type, initial pose,
     upright) that explains most of `candidates` and that no camera saw through (a smaller box wins a near tie), of
-    those whose points within _VICINITY_M lie on its surface for at least the share `quality`; None when there is
-    none. Only the _FITTED hypotheses that explain most before the fit are fitted (a fit costs milliseconds)."""
+    those whose points within _VICINITY_M lie on its surface for at least the share `quality` and that do not
+    overlap a block `found`; None when there is none. Only the _FITTED hypotheses of each family (an optional fourth
+    item) that explain most before the fit are fitted (a fit costs milliseconds; one family's many near misses must
+    not crowd out another's right guess)."""
     ranked = []
-    for block_type, X0, upright in hypotheses:
+    for block_type, X0, upright, *family in hypotheses:
         if seen_through(X0, block_type, views) <= 2 * MAX_SEEN_THROUGH:  # far off: most wrong ones end here
-            ranked.append((_score(box_sdf(X0, half_size(block_type), candidates)), block_type, X0, upright))
+            score = _score(box_sdf(X0, half_size(block_type), candidates))
+            ranked.append((score, block_type, X0, upright, family[0] if family else 0))
     ranked.sort(key=lambda r: r[0], reverse=True)
+    chosen = [r for f in {r[4] for r in ranked} for r in [r for r in ranked if r[4] == f][:_FITTED]]
     best = None
-    for _, block_type, X0, upright in ranked[:_FITTED]:
+    for _, block_type, X0, upright, _ in chosen:
         half = half_size(block_type)
         X = fit_box(points[box_sdf(X0, half, points) < _FIT_REACH_M], half, X0, upright)
-        if X[2, 3] - np.abs(X[2, :3]) @ half < -_UNDER_TABLE_M or seen_through(X, block_type, views) > MAX_SEEN_THROUGH:
-            continue  # through the table (where no camera sees), or seen through
+        if (X[2, 3] - np.abs(X[2, :3]) @ half < -_UNDER_TABLE_M or seen_through(X, block_type, views) > MAX_SEEN_THROUGH
+                or _overlaps(X, block_type, found)):
+            continue  # through the table (where no camera sees), seen through, or inside a block found
         distance = box_sdf(X, half, candidates)
         explained = distance < EXPLAINED_M
         score = _score(distance)
@@ -283,7 +255,8 @@ def _top_faces(p: np.ndarray, tree: cKDTree, free: np.ndarray, views, voxel: flo
     up = high[np.abs(normals(p, tree, high)[:, 2]) > UP_COS]
     queue = [up[c] for c in components(p[up], 2.5 * voxel) if len(c) >= MIN_PATCH]
     while queue:
-        queue.sort(key=lambda c: float(np.median(p[c, 2])))
+        queue.sort(key=lambda c: (round(float(np.median(p[c, 2])) / BLOCK_HEIGHT), len(c)))  # the highest layer, its
+        #   largest patch first: a bar's end piece proposes the bar that a piece between blocks on it cannot
         patch = queue.pop()
         patch = patch[free[patch]]
         if len(patch) < MIN_PATCH:
@@ -293,8 +266,8 @@ def _top_faces(p: np.ndarray, tree: cKDTree, free: np.ndarray, views, voxel: flo
             continue  # no block resting flat on the table or on flat blocks has its top there: left to step 3
         near = np.flatnonzero(free & (np.linalg.norm(p[:, :2] - p[patch, :2].mean(axis=0), axis=1) < 0.3))
         slab = near[(p[near, 2] > top - BLOCK_HEIGHT + 0.006) & (p[near, 2] < top + 0.006)]
-        hypotheses = _face_hypotheses(p[patch], np.array([0.0, 0.0, 1.0]), BLOCK_HEIGHT / 2)
-        best = _best_box(p[slab], p[near], [(t, X0, True) for t, X0 in hypotheses], views, quality=_FLAT_QUALITY)
+        hypotheses = face_hypotheses(p[patch], np.array([0.0, 0.0, 1.0]), BLOCK_HEIGHT / 2)
+        best = _best_box(p[slab], p[near], [(t, X0, True) for t, X0 in hypotheses], views, _FLAT_QUALITY, found)
         if best is None:  # not a block resting flat (a leaning one's top, or blocks merged): left to step 3
             continue
         _, block, explained = best
@@ -320,28 +293,88 @@ def _tilted_face(p: np.ndarray, tree: cKDTree, cluster: np.ndarray, voxel: float
     return p[face], normal
 
 
-def _left_over(p: np.ndarray, tree: cKDTree, free: np.ndarray, views, voxel: float, found: list,
-               failures: list) -> None:
+def _cluster_hypotheses(p: np.ndarray, tree: cKDTree, cluster: np.ndarray, voxel: float) -> list:
+    """(type, initial pose, upright, family) of the blocks a cluster's points may be, in three families: upright
+    blocks from its layers' outline, upright blocks from its vertical faces, blocks with six degrees of freedom from
+    its largest upward face."""
+    face, normal = _tilted_face(p, tree, cluster, voxel)
+    hypotheses = [(t, X0, True, 0) for t, X0 in footprint_hypotheses(p[cluster])]
+    hypotheses += [(t, X0, True, 1) for t, X0 in side_hypotheses(p[cluster], normals(p, tree, cluster), voxel)]
+    if len(face) >= MIN_PATCH:
+        hypotheses += [(t, X0, False, 2) for t, X0 in face_hypotheses(face, normal, BLOCK_HEIGHT / 2)]
+    return hypotheses
+
+
+def _left_over(p: np.ndarray, tree: cKDTree, free: np.ndarray, views, voxel: float, found: list) -> None:
     """Step 3 of the pipeline: the clusters left, as blocks whose top face is hidden (upright, from their sides'
     outline) or that lean (six degrees of freedom, from their largest upward face)."""
     left = np.flatnonzero(free)
     for cluster in components(p[left], 2.5 * voxel):
         cluster = left[cluster]
         while len(cluster) >= MIN_CLUSTER:
-            face, normal = _tilted_face(p, tree, cluster, voxel)
-            hypotheses = [(t, X0, True) for t, X0 in _footprint_hypotheses(p[cluster])]
-            if len(face) >= MIN_PATCH:
-                hypotheses += [(t, X0, False) for t, X0 in _face_hypotheses(face, normal, BLOCK_HEIGHT / 2)]
-            best = _best_box(p[cluster], p[cluster], hypotheses, views, quality=MIN_EXPLAINED)
+            hypotheses = _cluster_hypotheses(p, tree, cluster, voxel)
+            best = _best_box(p[cluster], p[cluster], hypotheses, views, quality=MIN_EXPLAINED, found=found)
             if best is None or best[0] < MIN_CLUSTER:
                 break
             found.append(best[1])
             free[cluster[best[2]]] = False
             cluster = cluster[~best[2]]
-        if len(cluster) >= MIN_CLUSTER:
-            x, y, z = p[cluster].mean(axis=0)
-            failures.append(PerceptionFailure(Failure.UNEXPLAINED, f"{len(cluster)} points about ({x:.3f}, {y:.3f}, "
-                                              f"{z:.3f}) m fit no block"))
+
+
+def _with_prior(p: np.ndarray, tree: cKDTree, free: np.ndarray, views, voxel: float, found: list,
+                prior_types: np.ndarray) -> None:
+    """Where the blocks found and the prior's types (`previous`) disagree, the explanations the prior names and the
+    points support: a bar for a cube fitted to a bar's visible middle (its ends hidden), and a block of a type the
+    prior has more of among the points left, to looser thresholds. These blocks are marked `prior`; what the
+    points do not resolve stays a disagreement, which `assign` says."""
+    want = np.bincount(prior_types, minlength=2)
+
+    def short(block_type: int) -> int:
+        return int(want[block_type]) - sum(b.type == block_type for b in found)
+
+    up = np.array([0.0, 0.0, 1.0])
+    for cube in sorted([b for b in found if b.type == SMALL and b.upright], key=lambda b: b.points):
+        if short(LARGE) <= 0 or short(SMALL) >= 0 or not any(b is cube for b in found):
+            continue
+        layer = [b for b in found if b.type == SMALL and b.upright and abs(b.position[2] - cube.position[2]) < 0.01]
+        mine = np.any([box_sdf(b.X_WB, half_size(SMALL), p) < EXPLAINED_M for b in layer], axis=0)
+        near = np.flatnonzero((free | mine) & (np.linalg.norm(p[:, :2] - cube.position[:2], axis=1) < 0.2)
+                              & (np.abs(p[:, 2] - cube.position[2]) < BLOCK_HEIGHT / 2 + 0.006))
+        hypotheses = [(LARGE, pose(np.column_stack([np.cross(axis, up), axis, up]), cube.position + s * axis), True)
+                      for axis in (cube.X_WB[:3, 0], cube.X_WB[:3, 1]) for s in (-0.1, 0.0, 0.1)]
+        others = [b for b in found if not any(b is c for c in layer)]
+        best = _best_box(p[near], p[near], hypotheses, views, _FLAT_QUALITY, others)
+        if best is None:
+            continue
+        bar = best[1]  # it replaces the cubes of the layer whose centres it holds (pieces of its visible top)
+        pieces = [b for b in layer if box_sdf(bar.X_WB, half_size(LARGE), b.position[None])[0] < 0.0]
+        if best[0] >= _TIE * sum(b.points for b in pieces):
+            found[:] = [b for b in found if not any(b is c for c in pieces)] + [replace(bar, prior=True)]
+            free[near[best[2]]] = False
+    left = np.flatnonzero(free)
+    for cluster in components(p[left], 2.5 * voxel):
+        cluster = left[cluster]
+        while len(cluster) >= _PRIOR_MIN and max(short(SMALL), short(LARGE)) > 0:
+            hypotheses = [h for h in _cluster_hypotheses(p, tree, cluster, voxel) if short(h[0]) > 0]
+            best = _best_box(p[cluster], p[cluster], hypotheses, views, _PRIOR_QUALITY, found)
+            if best is None or best[0] < _PRIOR_MIN:
+                break
+            found.append(replace(best[1], prior=True))
+            free[cluster[best[2]]] = False
+            cluster = cluster[~best[2]]
+
+
+def _unexplained(p: np.ndarray, free: np.ndarray, voxel: float) -> list[PerceptionFailure]:
+    """The clusters of points no block explains, said."""
+    left = np.flatnonzero(free)
+    said = []
+    for cluster in components(p[left], 2.5 * voxel):
+        if len(cluster) < MIN_CLUSTER:
+            break
+        x, y, z = p[left[cluster]].mean(axis=0)
+        said.append(PerceptionFailure(Failure.UNEXPLAINED, f"{len(cluster)} points about ({x:.3f}, {y:.3f}, {z:.3f}) m "
+                                      "fit no block"))
+    return said
 
 
 def assign(blocks: list[BlockEstimate], previous: np.ndarray) -> tuple[list[BlockEstimate], list[int],
@@ -377,7 +410,10 @@ def perceive(views: list[DepthView], config: PerceptionConfig, previous: np.ndar
     if len(p) >= _NEIGHBOURS:
         tree = cKDTree(p)
         _top_faces(p, tree, free, views, config.voxel_m, found, failures)
-        _left_over(p, tree, free, views, config.voxel_m, found, failures)
+        _left_over(p, tree, free, views, config.voxel_m, found)
+        if previous is not None:
+            _with_prior(p, tree, free, views, config.voxel_m, found, np.argmax(np.asarray(previous)[:, 3:], axis=1))
+        failures += _unexplained(p, free, config.voxel_m)
     identity = list(range(len(found)))
     if previous is not None:
         found, identity, said = assign(found, np.asarray(previous, dtype=float))

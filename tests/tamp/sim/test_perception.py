@@ -93,11 +93,37 @@ def test_a_block_hidden_from_one_camera_is_found_by_another(rig):
     assert np.linalg.norm(seen.blocks[0].position - [0.60, 0.0, 0.025]) < 0.001
 
 
+def test_a_cube_seen_by_its_sides_only_is_found(rig):
+    """A bar leans over a cube and hides its top face: the cameras see the cube's sides alone (without the
+    proposals from single side faces, its points were said unexplained and the cube missing)."""
+    hidden_top = scene((SMALL, (0.6683, -0.0777, 0.025), 0.0), (LARGE, (0.6683, 0.0023, 0.0593), 0.0, -16.53))
+    views = rig.measured(rig.render(hidden_top), np.random.default_rng(7))
+    for previous in (None, hidden_top.X()):
+        seen = perceive(views, rig.config, previous=previous)
+        assert seen.ok and sorted(b.type for b in seen.blocks) == [SMALL, LARGE], seen.failures
+        cube = next(b for b in seen.blocks if b.type == SMALL)
+        assert np.linalg.norm(cube.position - [0.6683, -0.0777, 0.025]) < 0.003
+
+
+def test_a_bar_under_two_cubes_is_one_bar_not_a_row_of_cubes(rig):
+    """Two cubes on a bar split its visible top in three pieces; the pieces between and beside the cubes are not
+    cubes of their own (they were, for some noise seeds: a wrong count, unsaid without a prior)."""
+    carried = scene((LARGE, (0.6131, 0.1855, 0.025), 0.0), (SMALL, (0.6131, 0.1855, 0.075), 0.0),
+                    (SMALL, (0.6126, 0.1104, 0.075), 0.0))
+    rendered = rig.render(carried)
+    for seed in (5, 8):
+        seen = perceive(rig.measured(rendered, np.random.default_rng(seed)), rig.config)
+        assert seen.ok and sorted(b.type for b in seen.blocks) == [SMALL, SMALL, LARGE], seen.failures
+        bar = next(b for b in seen.blocks if b.type == LARGE)
+        assert np.linalg.norm(bar.position - [0.6131, 0.1855, 0.025]) < 0.003
+
+
 def test_a_missing_block_and_an_extra_are_said(rig):
     views = rig.render(TWO)
     expected = np.vstack([TWO.X(), [[0.5, 0.3, 0.025, 1.0, 0.0]]])  # a third block the cameras do not see
     seen = perceive(views, rig.config, previous=expected)
-    assert [(f.kind, f.block) for f in seen.failures] == [(Failure.MISSING, 2)]
+    assert [(f.kind, f.block) for f in seen.failures] == [(Failure.MISSING, 2)]  # the prior forces no block
+    assert not any(block.prior for block in seen.blocks)
     assert "block 2 (small, last at (0.500, 0.300, 0.025) m) not seen" in seen.failures[0].reason
     fewer = perceive(views, rig.config, previous=TWO.X()[1:])  # one block more than expected
     assert [f.kind for f in fewer.failures] == [Failure.EXTRA] and fewer.identity == [0, -1]
