@@ -120,9 +120,8 @@ def run_demo(cfg: DemoConfig = DemoConfig()) -> DemoResult:
     print(f"\nplanning (bilevel, {plan_cfg.level1.n_domains} sampled domains):", flush=True)
     if kinematics is not None:
         kinematics.reset(problem.X_init)
-    search = None if cfg.search is None else search_recording(problem, _source(cfg), models, names, _record(cfg))
-    if search is not None:
-        search.replay = cfg.replay
+    search = None if cfg.search is None else search_recording(problem, _source(cfg), models, names, _record(cfg),
+                                                              cfg.replay)
     with recording(None if search is None else search.recorder):
         result = plan("bilevel", models, problem.X_init, problem.X_goal, plan_cfg, kinematics=kinematics)
     if search is not None and not cfg.replan:

@@ -284,10 +284,8 @@ def run_plan(problem_path: Path, models_dir: Path, options: PlanOptions) -> int:
 
         timeline = Timeline()
     runner = _closed_loop if options.replan else _open_loop
-    search = None if options.search is None else \
-        search_recording(problem, which, models, names, settings_record(replace(options.settings, planner=cfg)))
-    if search is not None:
-        search.replay = options.replay
+    search = None if options.search is None else search_recording(
+        problem, which, models, names, settings_record(replace(options.settings, planner=cfg)), options.replay)
     code, records, episode = runner(problem, models, options, cfg, timeline, names, search)
     if search is not None and options.search is not None:
         search.write(options.search)
@@ -315,12 +313,13 @@ def run_plan(problem_path: Path, models_dir: Path, options: PlanOptions) -> int:
     return code
 
 
-def search_recording(problem, source: str, models, names, configuration: dict) -> SearchRecording:
-    """The search record of a run of `problem` (`source`: how the run named it)."""
+def search_recording(problem, source: str, models, names, configuration: dict,
+                     replay: Path | None = None) -> SearchRecording:
+    """The search record of a run of `problem` (`source`: how the run named it; `replay`: its Meshcat replay)."""
     facts = None if models.domain is None else \
         facts_reader(models.domain.n_unary, models.domain.n_relations, names, problem.n)
     return SearchRecording({"name": problem.name, "X_init": problem.X_init, "X_goal": problem.X_goal,
-                            "source": source}, configuration, names, facts)
+                            "source": source}, configuration, names, facts, replay=replay)
 
 
 def write_executed_trajectory(executed, path: Path, source: str, configuration: dict) -> None:
