@@ -88,6 +88,7 @@ class Evaluator:
         self._worlds: dict[str, Any] = {}
         self._checker: FeasibilityChecker | None = None
         self._warm_layouts: set[tuple[int, ...]] = set()
+        self._rig: Any = None  # the camera rig, when the closed loops observe through it (built once: VTK warms up)
 
     def checker(self, problem: Problem):
         """This worker's kinematic feasibility checker (its own fast world), having observed the scene
@@ -106,6 +107,16 @@ class Evaluator:
             checker.check(problem.X_init, all_actions(problem.n))
             self._warm_layouts.add(layout)
         return checker
+
+    def cameras(self):
+        """This worker's camera rig, if the closed loops observe through the cameras (`perception.observe`)."""
+        if not self.config.perception.cameras_on:
+            return None
+        if self._rig is None:
+            from tamp.sim.cameras import CameraRig
+
+            self._rig = CameraRig(self.config.perception)
+        return self._rig
 
     def world(self, fidelity: str):
         """This worker's World of a fidelity (paths simplified: they are executed), reseeded as a new
@@ -232,7 +243,7 @@ class Evaluator:
                           self.config.plan_config(problem.seed, method.feasibility), self.config.fidelity,
                           closed_loop=True, rounds=rounds, world=self.world(self.config.fidelity),
                           kinematics=kinematics, faults=self.config.faults if self.config.faults.any else None,
-                          fault_seed=problem.seed).run
+                          fault_seed=problem.seed, cameras=self.cameras()).run
         assert run is not None  # a closed loop
         out = run.loop
         first = out.rounds[0] if out.rounds else None
@@ -256,6 +267,7 @@ class Evaluator:
                 "step_miss_m": rounded_all(dynamics_errors(models, out.states, out.executed, worst=True)),
                 "stop": {**stop_record(out.stop, out.rounds[-1] if out.rounds else None),
                          **({"faults": run.faults} if run.faults else {}),
+                         **({"perception": perception} if (perception := run.perception_record()) else {}),
                          **({"remembered": len(out.experience.trusted)} if out.experience is not None else {})},
                 "steps": self._loop_steps(problem, models, run, errors or []),
                 "predictions": expected_misses(prediction_records(models, out.states, out.executed), out),

@@ -1,0 +1,215 @@
+"""What a closed loop observes: the simulator's truth, or the blocks the camera rig perceives.
+
+    observer = TruthObserver(faults, rng)                    # today's default: the world's X (with `faults`' noise)
+    observer = CameraObserver(rig, rng, X_init, predict)     # the blocks perceived from the rig's depth images
+    seen = observer.first(world.scene)                       # the initial scene
+    seen = observer.after(world.scene, action)               # after an executed action
+    seen = observer.again(world.scene)                       # the same scene observed again (the loop's look)
+
+An observation (`Observed`) is all the planner, the kinematic check and the skill are given: the state X (n, 5)
+in the blocks' identities, and with the cameras the blocks' perceived poses (`Observed.scene`, orientations
+included). The world executes in its own truth; the observer is handed the true scene only to render it.
+
+The camera observer keeps the blocks' identities by assigning each perception to its last estimates
+(`tamp.sim.perception.perceive`'s `previous`), and never passes a failure silently:
+- a block not found, two blocks merged into one estimate, a ghost, a block of the wrong type or points no block
+  explains are said (`Observed.said`), and the rig observes again, up to `LOOKS` more times (new sensor noise);
+- if the count is still wrong, the loop plans with n blocks and says so: a block not seen is planned at where the
+  Dynamics Model predicts it after the action (its last estimate when nothing moved it), an estimate left over
+  is left out.
+
+It also learns its own error from what it measures, not from an assumed sigma: a block the action did not pick
+or place (or a scene observed twice) should be seen where it was seen before, so the difference of the two
+estimates, over such blocks within `SAME_BLOCK_M`, carries twice the variance of one observation's error
+(`sigma_m`). The first observation looks twice to start the estimate. The loop stops `stop_margin` inside eps,
+as it does with noise of a known sigma (`tamp.app.faults`).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Callable
+
+import numpy as np
+
+from tamp.app.faults import STOP_MARGIN_SIGMAS, Faults
+from tamp.planning.vocabulary import TYPE_NAMES, PickPlace
+
+if TYPE_CHECKING:  # Drake loads when a loop runs
+    from tamp.sim.cameras import CameraRig
+    from tamp.sim.perception import Perception
+    from tamp.sim.replay import Timeline
+    from tamp.sim.skill import Scene
+
+LOOKS = 2  # observations again when a perception said a failure, before the loop plans with what it has
+SAME_BLOCK_M = 0.01  # metres: two estimates of a block nothing moved that differ more are a failure, not noise
+MARGIN_OF_EPS = 0.5  # the learned stop margin stays below this share of eps (a loop that sees badly still stops)
+
+Predict = Callable[[np.ndarray, PickPlace], np.ndarray]  # the (n, 5) state predicted after an action from X
+
+
+@dataclass
+class Observed:
+    """One observation, as the planner, the kinematic check and the skill take it."""
+
+    X: np.ndarray  # (n, 5) block centres (m) and one-hot types, in the problem's block order
+    scene: Scene | None = None  # the blocks' observed poses (orientations included); None: the world's own (truth)
+    said: list[str] = field(default_factory=list)  # what perception could not explain, in words (empty: nothing)
+    looks: int = 1  # renderings of the rig this observation took
+    errors_m: list[float] = field(default_factory=list)  # per block, metres from the truth (a record; never used)
+
+
+class TruthObserver:
+    """The world's own X, with `faults`' observation noise if given (`Faults.observe`, drawn from `rng`)."""
+
+    cameras = False
+
+    def __init__(self, faults: Faults | None, rng: np.random.Generator) -> None:
+        self.faults, self.rng = faults, rng
+        self.observations: list[Observed] = []
+
+    def observe(self, scene: Scene) -> Observed:
+        X = scene.X()
+        seen = Observed(X if self.faults is None else self.faults.observe(X, self.rng, scene))
+        self.observations.append(seen)
+        return seen
+
+    def first(self, scene: Scene) -> Observed:
+        return self.observe(scene)
+
+    def after(self, scene: Scene, action: PickPlace) -> Observed:
+        return self.observe(scene)
+
+    def again(self, scene: Scene) -> Observed:
+        return self.observe(scene)
+
+    def stop_margin(self) -> float:
+        """Metres inside eps the loop stops: the noise is known (`Faults.known_to` sets it in the configuration)."""
+        return 0.0 if self.faults is None else STOP_MARGIN_SIGMAS * self.faults.noise_m
+
+
+class CameraObserver:
+    """The blocks perceived from `rig`'s depth images of the true scene (see the module docstring). `X_init`: the
+    problem's initial scene, which names the blocks (their identities and types); `predict`: the Dynamics Model,
+    where a block not seen is planned; `timeline`: a replay that shows each observation's cloud and boxes."""
+
+    cameras = True
+
+    def __init__(self, rig: CameraRig, rng: np.random.Generator, X_init: np.ndarray, predict: Predict | None = None,
+                 timeline: Timeline | None = None, looks: int = LOOKS) -> None:
+        self.rig, self.rng, self.predict, self.timeline, self.looks = rig, rng, predict, timeline, looks
+        self.last = np.array(X_init, dtype=float)  # the last estimates: identities are assigned to them
+        self.types = np.argmax(self.last[:, 3:], axis=1)  # the problem names each block's type
+        self.scene: Scene | None = None  # the last observed poses
+        self.unseen: set[int] = set()  # the blocks the last observation did not see (filled in)
+        self.residuals: list[np.ndarray] = []  # (dx, dy) between two estimates of a block nothing moved, metres
+        self.observations: list[Observed] = []
+
+    @property
+    def sigma_m(self) -> float | None:
+        """Metres: the learned standard deviation of an observed x or y (None before two estimates of a block)."""
+        if not self.residuals:
+            return None
+        d = np.array(self.residuals)
+        return float(np.sqrt(np.mean(d ** 2) / 2))  # a difference of two estimates has twice one's variance
+
+    def stop_margin(self) -> float:
+        """Metres inside eps the loop stops: `STOP_MARGIN_SIGMAS` learned sigmas (`sigma_m`)."""
+        return STOP_MARGIN_SIGMAS * (self.sigma_m or 0.0)
+
+    def first(self, scene: Scene) -> Observed:
+        """The initial scene, observed twice: the second observation starts the estimate of the error."""
+        self._observe(scene, self.last)
+        return self.again(scene)
+
+    def after(self, scene: Scene, action: PickPlace) -> Observed:
+        """The scene after `action`: the blocks it picked or placed are not expected where they were seen."""
+        expected = self.last if self.predict is None else self.predict(self.last, action)
+        return self._observe(scene, expected, moved={action.pick, action.place})
+
+    def again(self, scene: Scene) -> Observed:
+        """The same scene observed again (nothing moved)."""
+        return self._observe(scene, self.last)
+
+    def _observe(self, scene: Scene, expected: np.ndarray, moved: frozenset[int] | set[int] = frozenset()) -> Observed:
+        """Render, perceive (identities from the last estimates), look again while perception says a failure, and
+        fill in what is still missing from `expected` (the state predicted after the action), saying so."""
+        from tamp.sim.perception import perceive
+
+        said: list[str] = []
+        best: tuple[int, Perception] | None = None
+        for look in range(1 + self.looks):
+            views = self.rig.observe(scene, self.rng)
+            seen = perceive(views, self.rig.config, previous=self.last)
+            problems = [f.reason for f in seen.failures] + self._wrong_types(seen)
+            self._show(views, seen)
+            if best is None or len(problems) < best[0]:
+                best = (len(problems), seen)
+            if not problems:
+                break
+            said.append(f"look {look + 1}: " + "; ".join(problems))
+        assert best is not None  # one look at least
+        X, poses, unseen, filled = self._state(best[1], expected)
+        if filled:
+            said.append(f"after {look + 1} look(s), planned with every block: " + "; ".join(filled))
+        from pydrake.math import RigidTransform
+
+        from tamp.sim.skill import Scene
+
+        observed = Scene(self.types.copy(), [RigidTransform(p) for p in poses])  # type: ignore[arg-type]  # stubs
+        self._learn(X, set(moved) | unseen | self.unseen)
+        self.last, self.scene, self.unseen = X, observed, unseen
+        truth = scene.X()
+        seen_now = Observed(X, observed, said, look + 1, np.linalg.norm(X[:, :3] - truth[:, :3], axis=1).tolist())
+        self.observations.append(seen_now)
+        return seen_now
+
+    def _wrong_types(self, seen: Perception) -> list[str]:
+        """A block seen as the other type: said (the problem names every block's type)."""
+        return [f"block {i} ({TYPE_NAMES[int(self.types[i])]}) seen as a {TYPE_NAMES[b.type]}"
+                for b, i in zip(seen.blocks, seen.identity) if i >= 0 and b.type != self.types[i]]
+
+    def _state(self, seen: Perception, expected: np.ndarray) -> tuple[np.ndarray, list[np.ndarray], set[int],
+                                                                        list[str]]:
+        """X (n, 5), each block's pose (4, 4), the blocks not seen and what was filled in, in words: every block
+        perceived with its own type, the others where `expected` has them (orientation: as last seen); estimates
+        left over are left out."""
+        n = len(self.types)
+        X = np.array(expected, dtype=float)
+        X[:, 3:] = np.eye(2)[self.types]
+        poses: list[np.ndarray | None] = [None] * n
+        for block, i in zip(seen.blocks, seen.identity):
+            if i >= 0 and block.type == self.types[i]:
+                X[i, :3], poses[i] = block.position, block.X_WB
+        unseen = {i for i in range(n) if poses[i] is None}
+        filled = []
+        for i in sorted(unseen):
+            R = np.eye(3) if self.scene is None else self.scene.X_WB[i].rotation().matrix()
+            pose = np.eye(4)
+            pose[:3, :3], pose[:3, 3] = R, X[i, :3]
+            poses[i] = pose
+            x, y, z = X[i, :3]
+            filled.append(f"block {i} ({TYPE_NAMES[int(self.types[i])]}) not seen, taken at ({x:.3f}, {y:.3f}, "
+                          f"{z:.3f}) m as predicted")
+        left = sum(1 for i in seen.identity if i < 0)
+        if left:
+            filled.append(f"{left} estimate(s) matching no block left out")
+        return X, [p for p in poses if p is not None], unseen, filled
+
+    def _learn(self, X: np.ndarray, moved: set[int]) -> None:
+        """Add the differences to the last estimates of the blocks nothing moved and both observations saw."""
+        d = X[:, :2] - self.last[:, :2]
+        for i in range(len(X)):
+            if i not in moved and np.linalg.norm(d[i]) < SAME_BLOCK_M:
+                self.residuals.append(d[i])
+
+    def _show(self, views, seen: Perception) -> None:
+        """The fused cloud and the estimated boxes in the replay, at the replay's current time."""
+        if self.timeline is None:
+            return
+        from tamp.sim.perception import fused_cloud
+
+        cloud = fused_cloud(views, self.rig.config.voxel_m)
+        self.timeline.observed(cloud, [(b.type, b.X_WB) for b in seen.blocks])
+
+
+__all__ = ["CameraObserver", "LOOKS", "Observed", "TruthObserver"]
