@@ -88,7 +88,6 @@ class Evaluator:
         self._worlds: dict[str, Any] = {}
         self._checker: FeasibilityChecker | None = None
         self._warm_layouts: set[tuple[int, ...]] = set()
-        self._rig: Any = None  # the camera rig, when the closed loops observe through it (built once: VTK warms up)
 
     def checker(self, problem: Problem):
         """This worker's kinematic feasibility checker (its own fast world), having observed the scene
@@ -107,16 +106,6 @@ class Evaluator:
             checker.check(problem.X_init, all_actions(problem.n))
             self._warm_layouts.add(layout)
         return checker
-
-    def cameras(self):
-        """This worker's camera rig, if the closed loops observe through the cameras (`perception.observe`)."""
-        if not self.config.perception.cameras_on:
-            return None
-        if self._rig is None:
-            from tamp.sim.cameras import CameraRig
-
-            self._rig = CameraRig(self.config.perception)
-        return self._rig
 
     def world(self, fidelity: str):
         """This worker's World of a fidelity (paths simplified: they are executed), reseeded as a new
@@ -234,6 +223,7 @@ class Evaluator:
                 "transitions": transition_records(states, actions, ex.refined.infos)}
 
     def _closed_loop(self, problem: Problem, method: Method, models) -> dict:
+        from tamp.app.observation import rig_for
         from tamp.app.runner import run_episode
         from tamp.planning.closed_loop import replan_rounds
 
@@ -243,7 +233,7 @@ class Evaluator:
                           self.config.plan_config(problem.seed, method.feasibility), self.config.fidelity,
                           closed_loop=True, rounds=rounds, world=self.world(self.config.fidelity),
                           kinematics=kinematics, faults=self.config.faults if self.config.faults.any else None,
-                          fault_seed=problem.seed, cameras=self.cameras()).run
+                          fault_seed=problem.seed, cameras=rig_for(self.config.perception)).run
         assert run is not None  # a closed loop
         out = run.loop
         first = out.rounds[0] if out.rounds else None

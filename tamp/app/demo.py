@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from tamp.app.observation import rig_for
 from tamp.app.plan_command import (
     LEVELS,
     print_cause,
@@ -346,11 +347,7 @@ def _closed_loop(problem: Problem, models, plan_cfg: PlanConfig, kinematics: Fea
     action is refined and executed there, an action that cannot be refined changes nothing and the
     loop goes on. The first round reuses the plan already printed (`first`; None: it plans). The replay shows
     each round's prediction of the action it executed, and with the cameras what they saw."""
-    cameras = None
-    if cfg.perception.cameras_on:
-        from tamp.sim.cameras import CameraRig
-
-        cameras = CameraRig(cfg.perception)
+    cameras = rig_for(cfg.perception)
     observing = f"observing through {len(cfg.perception.cameras())} cameras" if cameras is not None else \
         "observing the simulator's truth"
     print(f"\nclosed loop ({cfg.fidelity} world, {observing}): execute, observe, plan again until the goal; at "

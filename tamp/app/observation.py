@@ -37,6 +37,7 @@ from tamp.planning.vocabulary import TYPE_NAMES, PickPlace
 if TYPE_CHECKING:  # Drake loads when a loop runs
     from tamp.sim.cameras import CameraRig
     from tamp.sim.perception import Perception
+    from tamp.sim.perception_config import PerceptionConfig
     from tamp.sim.replay import Timeline
     from tamp.sim.skill import Scene
 
@@ -45,6 +46,19 @@ SAME_BLOCK_M = 0.01  # metres: two estimates of a block nothing moved that diffe
 MARGIN_OF_EPS = 0.5  # the learned stop margin stays below this share of eps (a loop that sees badly still stops)
 
 Predict = Callable[[np.ndarray, PickPlace], np.ndarray]  # the (n, 5) state predicted after an action from X
+_RIGS: dict[PerceptionConfig, CameraRig] = {}  # one warm rig per configuration in a process (VTK starts slowly)
+
+
+def rig_for(config: PerceptionConfig) -> CameraRig | None:
+    """The camera rig the closed loops observe through when `config.observe` is "cameras" (None: the truth),
+    built once per process and configuration."""
+    if not config.cameras_on:
+        return None
+    if config not in _RIGS:
+        from tamp.sim.cameras import CameraRig
+
+        _RIGS[config] = CameraRig(config)
+    return _RIGS[config]
 
 
 @dataclass
@@ -212,4 +226,4 @@ class CameraObserver:
         self.timeline.observed(cloud, [(b.type, b.X_WB) for b in seen.blocks])
 
 
-__all__ = ["CameraObserver", "LOOKS", "Observed", "TruthObserver"]
+__all__ = ["CameraObserver", "LOOKS", "Observed", "TruthObserver", "rig_for"]

@@ -200,11 +200,9 @@ def _closed_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timelin
     from tamp.app.step_report import closed_loop_steps
 
     faults = options.faults if options.faults.any else None
-    cameras = None
-    if options.settings.perception.cameras_on:
-        from tamp.sim.cameras import CameraRig
+    from tamp.app.observation import rig_for
 
-        cameras = CameraRig(options.settings.perception)
+    cameras = rig_for(options.settings.perception)
     seen = " (observed)" if cameras is not None or (faults is not None and faults.noise_m > 0) else ""
 
     def show_step(action, X, info, seconds) -> None:
