@@ -12,8 +12,9 @@ included). The world executes in its own truth; the observer is handed the true 
 
 The camera observer keeps the blocks' identities by assigning each perception to its last estimates
 (`tamp.sim.perception.perceive`'s `previous`), and never passes a failure silently:
-- a block not found, two blocks merged into one estimate, a ghost, a block of the wrong type or points no block
-  explains are said (`Observed.said`), and the rig observes again, up to `LOOKS` more times (new sensor noise);
+- a block not found, two blocks merged into one estimate, a ghost, a block of the wrong type, points no block
+  explains or a block seen `SURPRISE_M` from where the action should have left it are said (`Observed.said`), and
+  the rig observes again, up to `LOOKS` more times (new sensor noise);
 - if the count is still wrong, the loop plans with n blocks and says so: a block not seen is planned at where the
   Dynamics Model predicts it after the action (its last estimate when nothing moved it), an estimate left over
   is left out.
@@ -42,6 +43,9 @@ if TYPE_CHECKING:  # Drake loads when a loop runs
     from tamp.sim.skill import Scene
 
 LOOKS = 2  # observations again when a perception said a failure, before the loop plans with what it has
+SURPRISE_M = 0.05  # metres: a block seen this far from where it was expected is said (a step that far off the
+#   Dynamics Model's prediction is rarer than a split of blocks that touch end to end the wrong way, which depth
+#   alone cannot tell apart)
 SAME_BLOCK_M = 0.01  # metres: two estimates of a block nothing moved that differ more are a failure, not noise
 MARGIN_OF_EPS = 0.5  # the learned stop margin stays below this share of eps (a loop that sees badly still stops)
 
@@ -146,25 +150,34 @@ class CameraObserver:
 
     def _observe(self, scene: Scene, expected: np.ndarray, moved: frozenset[int] | set[int] = frozenset()) -> Observed:
         """Render, perceive (identities from the last estimates), look again while perception says a failure, and
-        fill in what is still missing from `expected` (the state predicted after the action), saying so."""
+        fill in what is still missing from `expected` (the state predicted after the action), saying so. A scene
+        the planner would refuse (`check_scene`: blocks in each other, floating, out of reach) is said too; if every
+        look gives one, the loop plans from `expected`, else from its last observation."""
         from tamp.sim.perception import perceive
 
         said: list[str] = []
-        best: tuple[int, Perception] | None = None
+        best: tuple[int, Perception, list[str]] | None = None
         for look in range(1 + self.looks):
             views = self.rig.observe(scene, self.rng)
             seen = perceive(views, self.rig.config, previous=self.last)
-            problems = [f.reason for f in seen.failures] + self._wrong_types(seen)
+            problems = [f.reason for f in seen.failures] + self._wrong_types(seen) + self._surprises(seen, expected)
+            refused = _refused(self._state(seen, expected)[0])
             self._show(views, seen)
-            if best is None or len(problems) < best[0]:
-                best = (len(problems), seen)
-            if not problems:
+            if best is None or (refused is None, -len(problems)) > (not best[2], -best[0]):
+                best = (len(problems), seen, [] if refused is None else [refused])
+            if not problems and refused is None:
                 break
-            said.append(f"look {look + 1}: " + "; ".join(problems))
+            said.append(f"look {look + 1}: " + "; ".join(problems + ([] if refused is None else [refused])))
         assert best is not None  # one look at least
         X, poses, unseen, filled = self._state(best[1], expected)
         if filled:
             said.append(f"after {look + 1} look(s), planned with every block: " + "; ".join(filled))
+        if best[2]:  # every look gave a scene the planner refuses
+            fallback = "the prediction after the action" if _refused(expected) is None else "the last observation"
+            X = np.array(expected if _refused(expected) is None else self.last, dtype=float)
+            poses = [self._pose(i, X[i, :3]) for i in range(len(X))]
+            unseen = set(range(len(X)))
+            said.append(f"after {look + 1} look(s), no scene the planner accepts: planned from {fallback}")
         from pydrake.math import RigidTransform
 
         from tamp.sim.skill import Scene
@@ -177,10 +190,28 @@ class CameraObserver:
         self.observations.append(seen_now)
         return seen_now
 
+    def _pose(self, i: int, position: np.ndarray) -> np.ndarray:
+        """A (4, 4) pose of block i at `position`, turned as it was last seen (upright before it was seen)."""
+        pose = np.eye(4)
+        pose[:3, :3] = np.eye(3) if self.scene is None else self.scene.X_WB[i].rotation().matrix()
+        pose[:3, 3] = position
+        return pose
+
     def _wrong_types(self, seen: Perception) -> list[str]:
         """A block seen as the other type: said (the problem names every block's type)."""
         return [f"block {i} ({TYPE_NAMES[int(self.types[i])]}) seen as a {TYPE_NAMES[b.type]}"
                 for b, i in zip(seen.blocks, seen.identity) if i >= 0 and b.type != self.types[i]]
+
+    def _surprises(self, seen: Perception, expected: np.ndarray) -> list[str]:
+        """A block seen `SURPRISE_M` or farther from where `expected` (the prediction after the action) has it: said."""
+        out = []
+        for b, i in zip(seen.blocks, seen.identity):
+            off = np.linalg.norm(b.position - expected[i, :3]) if i >= 0 else 0.0
+            if off >= SURPRISE_M:
+                x, y, z = b.position
+                out.append(f"block {i} seen at ({x:.3f}, {y:.3f}, {z:.3f}) m, {off * 100:.0f} cm from where it was "
+                           "expected")
+        return out
 
     def _state(self, seen: Perception, expected: np.ndarray) -> tuple[np.ndarray, list[np.ndarray], set[int],
                                                                         list[str]]:
@@ -197,10 +228,7 @@ class CameraObserver:
         unseen = {i for i in range(n) if poses[i] is None}
         filled = []
         for i in sorted(unseen):
-            R = np.eye(3) if self.scene is None else self.scene.X_WB[i].rotation().matrix()
-            pose = np.eye(4)
-            pose[:3, :3], pose[:3, 3] = R, X[i, :3]
-            poses[i] = pose
+            poses[i] = self._pose(i, X[i, :3])
             x, y, z = X[i, :3]
             filled.append(f"block {i} ({TYPE_NAMES[int(self.types[i])]}) not seen, taken at ({x:.3f}, {y:.3f}, "
                           f"{z:.3f}) m as predicted")
@@ -224,6 +252,18 @@ class CameraObserver:
 
         cloud = fused_cloud(views, self.rig.config.voxel_m)
         self.timeline.observed(cloud, [(b.type, b.X_WB) for b in seen.blocks])
+
+
+def _refused(X: np.ndarray) -> str | None:
+    """Why the planner would refuse the observed scene X (`plan()` checks its X_init so), or None."""
+    from tamp.errors import UserError
+    from tamp.planning.validate import check_scene
+
+    try:
+        check_scene(X, where="the scene seen", upright=False)
+    except UserError as error:
+        return str(error)
+    return None
 
 
 __all__ = ["CameraObserver", "LOOKS", "Observed", "TruthObserver", "rig_for"]

@@ -62,9 +62,7 @@ class DepthNoise:
 class PerceptionConfig:
     """What the closed loops observe; the camera rig, its sensors' noise and the point cloud's resolution."""
 
-    # what the closed loops (tamp plan --replan, tamp demo, tamp evaluate) observe: "truth" (the simulator's poses)
-    # or "cameras" (the blocks perceived from this rig's depth images; the world executes in its own truth)
-    observe: str = "truth"
+    observe: str = "truth"  # what the closed loops observe: "truth" (the simulator's poses) or "cameras" (this rig)
     voxel_m: float = 0.004  # metres: the fused cloud is averaged in cubes of this size (bounds the pipeline's time)
     noise: DepthNoise = DepthNoise()  # every camera's sensor errors
     above: CameraConfig = CameraConfig()  # 1.1 m over the middle of the workspace, looking straight down
