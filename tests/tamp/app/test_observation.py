@@ -76,6 +76,7 @@ class Hiding:
         return self.rig.observe(scene, rng)
 
 
+@pytest.mark.slow  # a whole loop of 3 blocks and its replay: about 30 s
 def test_the_loop_with_cameras_reaches_the_goal_and_the_replay_shows_what_was_seen(rig, models, tmp_path):
     problem = random_problem(3, 2, seed=1)
     timeline = Timeline()
