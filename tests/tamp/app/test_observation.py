@@ -151,3 +151,20 @@ def test_the_cameras_refuse_added_noise_and_leave_the_margin_to_be_learned():
     assert loop.stop_margin is None and loop.looks == 2
     with pytest.raises(ValueError, match="camera rig, whose noise is its own"):
         Faults(noise_m=0.005).known_to(LoopConfig(), cameras=True)
+
+
+def test_a_block_seen_far_from_the_prediction_is_said_and_kept_where_it_is_seen(rig):
+    X_init = np.array([[0.6, 0.15, 0.025, 1, 0], [0.75, -0.1, 0.025, 0, 1]], dtype=float)
+    world = World()
+    world.reset(X=X_init)
+
+    def predict(X, action):  # a Dynamics Model that missed by 12 cm: the world put the cube elsewhere
+        out = np.array(X)
+        out[0, 1] -= 0.12
+        return out
+
+    observer = CameraObserver(rig, np.random.default_rng(0), X_init, predict)
+    seen = observer.after(world.scene, PickPlace(0, 0, 0, 0))
+    assert seen.looks == 3 and all("block 0 seen at (0.600, 0.150" in s and "12 cm from where it was expected" in s
+                                   for s in seen.said)
+    assert np.abs(seen.X[:, :3] - world.X[:, :3]).max() < 0.005  # no points where it was expected: kept as seen
