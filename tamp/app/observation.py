@@ -243,6 +243,19 @@ class CameraObserver:
             total += float(np.minimum(diff[seen], 0.05).mean())
         return total / len(views)
 
+    def _turned_as_before(self, i: int, X_WB: np.ndarray) -> np.ndarray:
+        """X_WB with its rotation the one of the box's symmetric equivalents (`box_fit.symmetries`: a cube's axes can
+        be named 24 ways, a bar's 8) nearest the rotation block i was last seen with (upright, axis-aligned before it
+        was seen, as a problem places its blocks): the skill's grasp heading and offset axis follow the names of the
+        axes, which no camera sees, so they are kept from one observation to the next."""
+        from tamp.sim.box_fit import symmetries
+
+        before = np.eye(3) if self.scene is None else self.scene.X_WB[i].rotation().matrix()
+        turned = X_WB[:3, :3] @ symmetries(int(self.types[i]))
+        pose = np.array(X_WB, dtype=float)
+        pose[:3, :3] = turned[int(np.argmin(np.linalg.norm(turned - before, axis=(1, 2))))]
+        return pose
+
     def _wrong_types(self, seen: Perception) -> list[str]:
         """A block seen as the other type: said (the problem names every block's type)."""
         return [f"block {i} ({TYPE_NAMES[int(self.types[i])]}) seen as a {TYPE_NAMES[b.type]}"
@@ -270,7 +283,7 @@ class CameraObserver:
         poses: list[np.ndarray | None] = [None] * n
         for block, i in zip(seen.blocks, seen.identity):
             if i >= 0 and block.type == self.types[i]:
-                X[i, :3], poses[i] = block.position, block.X_WB
+                X[i, :3], poses[i] = block.position, self._turned_as_before(i, block.X_WB)
         unseen = {i for i in range(n) if poses[i] is None}
         filled = []
         for i in sorted(unseen):
