@@ -9,7 +9,7 @@ import re
 
 import numpy as np
 import pytest
-from pydrake.math import RigidTransform
+from pydrake.math import RigidTransform, RotationMatrix
 
 from tamp.app.faults import Faults
 from tamp.app.observation import CameraObserver
@@ -168,3 +168,15 @@ def test_a_block_seen_far_from_the_prediction_is_said_and_kept_where_it_is_seen(
     assert seen.looks == 3 and all("block 0 seen at (0.600, 0.150" in s and "12 cm from where it was expected" in s
                                    for s in seen.said)
     assert np.abs(seen.X[:, :3] - world.X[:, :3]).max() < 0.005  # no points where it was expected: kept as seen
+
+
+def test_a_cube_seen_with_its_axes_named_otherwise_keeps_the_names_it_had(rig):
+    """A cube's box fits its points with its axes named any of 24 ways; the skill turns a bar placed beside it by
+    the cube's yaw, so the observer keeps the naming nearest the last one (axis-aligned at first)."""
+    observer = CameraObserver(rig, np.random.default_rng(0), np.array([[0.6, 0.15, 0.025, 1, 0]], dtype=float))
+    swapped = np.eye(4)
+    swapped[:3, :3] = RotationMatrix.MakeZRotation(np.radians(90.4)).matrix()  # x and y swapped, 0.4 degrees off
+    kept = observer._turned_as_before(0, swapped)
+    assert np.degrees(np.arctan2(kept[1, 0], kept[0, 0])) == pytest.approx(0.4, abs=1e-6)
+    assert Scene(np.array([SMALL]), [RigidTransform(RotationMatrix(kept[:3, :3]), [0.6, 0.15, 0.025])]).yaw(0) == \
+        pytest.approx(np.radians(0.4), abs=1e-6)
