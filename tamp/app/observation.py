@@ -47,6 +47,8 @@ SURPRISE_M = 0.05  # metres: a block seen this far from where it was expected is
 #   Dynamics Model's prediction is rarer than a split of blocks that touch end to end the wrong way, which depth
 #   alone cannot tell apart)
 AS_WELL = 1.02  # the prediction's scene explains the depth as well as the one seen when its residual is this close
+REFIT_M = 0.02  # metres: a block seen this far from the prediction is fitted again from it in `_as_expected`
+#   (a cube split off a bar's far end shifts the bar by the cube's length)
 MIN_POINTS = 30  # fused points near where a block is expected, for it to be fitted there (a 5 cm face holds ~150)
 SAME_BLOCK_M = 0.01  # metres: two estimates of a block nothing moved that differ more are a failure, not noise
 MARGIN_OF_EPS = 0.5  # the learned stop margin stays below this share of eps (a loop that sees badly still stops)
@@ -203,7 +205,7 @@ class CameraObserver:
         return pose
 
     def _as_expected(self, views, X: np.ndarray, poses: list[np.ndarray], unseen: set[int], expected: np.ndarray):
-        """(X, poses, unseen, what was done, in words) with each block not seen or seen `SURPRISE_M` from `expected`
+        """(X, poses, unseen, what was done, in words) with each block not seen or seen `REFIT_M` from `expected`
         fitted to the cloud from where `expected` has it (`box_fit.fit_box`), if that scene explains the depth
         images as well as the one seen (`_depth_residual_m`, within `AS_WELL`): a cube and a bar lying end to end
         look alike however they are split, and the prediction says which split the action made. None otherwise."""
@@ -211,7 +213,7 @@ class CameraObserver:
         from tamp.sim.perception import fused_cloud
 
         off = np.linalg.norm(X[:, :3] - expected[:, :3], axis=1)
-        odd = sorted(i for i in range(len(X)) if i in unseen or off[i] >= SURPRISE_M)
+        odd = sorted(i for i in range(len(X)) if i in unseen or off[i] >= REFIT_M)
         cloud = fused_cloud(views, self.rig.config.voxel_m)
         X_alt, poses_alt = X.copy(), list(poses)
         for i in odd:
