@@ -4,6 +4,7 @@
     .venv/bin/python bench/demo_seeds.py --seeds 0-19 --objects 5 --actions 4
     .venv/bin/python bench/demo_seeds.py --seeds 0-49 --open-loop     # the baseline: one plan, no loop
     .venv/bin/python bench/demo_seeds.py --seeds 0-49 --models M      # another models directory
+    .venv/bin/python bench/demo_seeds.py --seeds 0-99 --preset cameras  # observing through the camera rig
 
 Each seed runs `tamp demo` in its own process (no replay written: --replay goes to a temporary
 directory) and is judged by its exit status; the printed cause is the demo's own `cause:` line.
@@ -37,6 +38,7 @@ def main() -> int:
     p.add_argument("--fidelity", choices=("full", "fast"), default="full")
     p.add_argument("--open-loop", action="store_true")
     p.add_argument("--models", type=Path, default=None, help="models directory (default: the bundled models)")
+    p.add_argument("--preset", default=None, help="a shipped configuration, e.g. cameras (default: the defaults)")
     args = p.parse_args()
     tamp = str(Path(sys.executable).with_name("tamp"))
     reached, times = 0, []
@@ -46,6 +48,7 @@ def main() -> int:
                        str(args.actions), "--fidelity", args.fidelity, "--replay", f"{tmp}/replay.html"]
             command += ["--open-loop"] if args.open_loop else []
             command += ["--models", str(args.models)] if args.models is not None else []
+            command += ["--preset", args.preset] if args.preset is not None else []
             t = time.perf_counter()
             run = subprocess.run(command, capture_output=True, text=True)
             times.append(time.perf_counter() - t)

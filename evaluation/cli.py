@@ -67,10 +67,12 @@ def _eval_config(args: argparse.Namespace):
         raise UserError(f"--max-actions sets the loop that runs until the goal (bilevel_loop); none of the methods "
                         f"({', '.join(args.methods)}) runs it")
     faults, settings = faults_of(args), settings_of(args)
-    planner = replace(settings.planner, loop=faults.known_to(settings.planner.loop))  # the loop knows its noise
+    cameras = settings.perception.cameras_on  # the closed loops observe through the camera rig
+    planner = replace(settings.planner, loop=faults.known_to(settings.planner.loop, cameras))  # it knows its noise
     return EvalConfig(planner=planner, fidelity=args.fidelity, workers=args.workers,
                       backend=args.backend, address=args.address,
-                      oracle_max_plans=settings.evaluation.oracle_max_plans, progress=not args.quiet, faults=faults)
+                      oracle_max_plans=settings.evaluation.oracle_max_plans, progress=not args.quiet, faults=faults,
+                      perception=settings.perception)
 
 
 def _add_run_arguments(p: argparse.ArgumentParser, models_help: str, out_help: str, methods_default,

@@ -10,6 +10,7 @@ from tamp.app.parallel import BACKENDS
 from tamp.app.settings import EvaluationSettings, Settings, settings_record
 from tamp.errors import UserError
 from tamp.planning.config import PlanConfig
+from tamp.sim.perception_config import PerceptionConfig
 from tamp.sim.world_types import fidelity_of
 
 
@@ -26,6 +27,7 @@ class EvalConfig:
     address: str | None = None  # with backend "ray": the cluster to join (None: start a local one)
     progress: bool = True  # progress bar on stderr
     faults: Faults = Faults()  # closed loops: observation noise and a push (`tamp.app.faults`); none by default
+    perception: PerceptionConfig = PerceptionConfig()  # what the closed loops observe: the truth or the cameras
 
     def __post_init__(self) -> None:
         fidelity_of(self.fidelity, "--fidelity")
@@ -51,7 +53,7 @@ class EvalConfig:
     def defining(self) -> dict[str, Any]:
         """What rows depend on (a results directory holds rows of one configuration only): the resolved
         configuration (`tamp config show`), the execution's fidelity and the faults."""
-        settings = Settings(self.planner, EvaluationSettings(self.oracle_max_plans))
+        settings = Settings(self.planner, EvaluationSettings(self.oracle_max_plans), self.perception)
         return {**settings_record(settings), "fidelity": self.fidelity,
                 "faults": {"noise_m": self.faults.noise_m, "push_m": self.faults.push_m}}
 

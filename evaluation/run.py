@@ -223,6 +223,7 @@ class Evaluator:
                 "transitions": transition_records(states, actions, ex.refined.infos)}
 
     def _closed_loop(self, problem: Problem, method: Method, models) -> dict:
+        from tamp.app.observation import rig_for
         from tamp.app.runner import run_episode
         from tamp.planning.closed_loop import replan_rounds
 
@@ -232,7 +233,7 @@ class Evaluator:
                           self.config.plan_config(problem.seed, method.feasibility), self.config.fidelity,
                           closed_loop=True, rounds=rounds, world=self.world(self.config.fidelity),
                           kinematics=kinematics, faults=self.config.faults if self.config.faults.any else None,
-                          fault_seed=problem.seed).run
+                          fault_seed=problem.seed, cameras=rig_for(self.config.perception)).run
         assert run is not None  # a closed loop
         out = run.loop
         first = out.rounds[0] if out.rounds else None
@@ -256,6 +257,7 @@ class Evaluator:
                 "step_miss_m": rounded_all(dynamics_errors(models, out.states, out.executed, worst=True)),
                 "stop": {**stop_record(out.stop, out.rounds[-1] if out.rounds else None),
                          **({"faults": run.faults} if run.faults else {}),
+                         **({"perception": perception} if (perception := run.perception_record()) else {}),
                          **({"remembered": len(out.experience.trusted)} if out.experience is not None else {})},
                 "steps": self._loop_steps(problem, models, run, errors or []),
                 "predictions": expected_misses(prediction_records(models, out.states, out.executed), out),

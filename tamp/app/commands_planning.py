@@ -29,21 +29,28 @@ def cmd_plan(args: argparse.Namespace) -> int:
 
 def cmd_demo(args: argparse.Namespace) -> int:
     """A random problem planned, refined, executed under physics, summarised and replayed."""
+    from dataclasses import replace
+
     from tamp.app.demo import DemoConfig, run_demo
+    from tamp.app.faults import Faults
     from tamp.app.search_record import view_path
     from tamp.app.settings import settings_of
 
     check_output_file(args.replay, "--replay")
     if args.open_loop and args.max_actions is not None:
         raise UserError("--max-actions sets the closed loop; --open-loop executes one plan")
-    planner = settings_of(args).planner
+    settings = settings_of(args)
+    planner = settings.planner
+    if settings.perception.cameras_on:  # the closed loop learns the cameras' error and looks again after a failure
+        planner = replace(planner, loop=Faults().known_to(planner.loop, cameras=True))
     views = () if args.search is None else ((view_path(args.search), "--search"),)
     for path, flag in ((args.trajectory, "--trajectory"), (args.search, "--search"), *views):
         if path is not None:
             check_output_file(path, flag)
     cfg = DemoConfig(seed=args.seed, objects=args.objects, actions=args.actions, models=args.models,
                      fidelity=args.fidelity, replay=args.replay, candidates=args.candidates,
-                     replan=not args.open_loop, trajectory=args.trajectory, planner=planner, search=args.search)
+                     replan=not args.open_loop, trajectory=args.trajectory, planner=planner, search=args.search,
+                     perception=settings.perception)
     return 0 if run_demo(cfg).success else 1
 
 

@@ -16,7 +16,16 @@ from pathlib import Path
 
 import numpy as np
 
-from tamp.app.plan_command import LEVELS, print_cause, print_result, search_recording, write_executed_trajectory
+from tamp.app.observation import rig_for
+from tamp.app.plan_command import (
+    LEVELS,
+    print_cause,
+    print_perception,
+    print_result,
+    print_seen,
+    search_recording,
+    write_executed_trajectory,
+)
 from tamp.app.plan_file import fmt_action
 from tamp.app.problem import Problem, random_problem
 from tamp.app.runner import ClosedLoopRun, Episode, Execution, execute_plan, kinematics_for, run_episode
@@ -42,6 +51,7 @@ from tamp.planning.steps import dynamics_errors
 from tamp.planning.verify import goal_error, goal_errors, rollout
 from tamp.planning.vocabulary import TYPE_NAMES, Outcome, PickPlace
 from tamp.sim.kinematic_checker import FeasibilityChecker
+from tamp.sim.perception_config import PerceptionConfig
 from tamp.sim.replay import Timeline
 from tamp.sim.world_types import WorldConfig, fidelity_of
 
@@ -63,13 +73,14 @@ class DemoConfig:
     #   one plan, executed open loop
     trajectory: Path | None = None  # write the executed arm motion here (docs/trajectories.md)
     planner: PlanConfig = PlanConfig()  # the planner's settings, `tamp plan`'s (its seed is the demo's)
+    perception: PerceptionConfig = PerceptionConfig()  # what the closed loop observes: the truth or the cameras
     search: Path | None = None  # write the search record here (docs/search-record.md)
 
 
 @dataclass
 class DemoResult:
     problem: Problem
-    result: PlanResult
+    result: PlanResult | None  # the first plan (None: the closed loop observing through the cameras planned none)
     execution: Execution | None  # None: no plan
     eps: float  # metres
     replays: list[Path] = field(default_factory=list)
@@ -117,16 +128,21 @@ def run_demo(cfg: DemoConfig = DemoConfig()) -> DemoResult:
 
     problem = random_problem(cfg.objects, cfg.actions, cfg.seed)
     _print_problem(problem, models_dir)
-    print(f"\nplanning (bilevel, {plan_cfg.level1.n_domains} sampled domains):", flush=True)
-    if kinematics is not None:
-        kinematics.reset(problem.X_init)
+    result = None
     search = None if cfg.search is None else search_recording(problem, _source(cfg), models, names, _record(cfg),
                                                               cfg.replay)
-    with recording(None if search is None else search.recorder):
-        result = plan("bilevel", models, problem.X_init, problem.X_goal, plan_cfg, kinematics=kinematics)
-    if search is not None and not cfg.replan:
-        search.planned(result, problem.X_init)  # the closed loop's first round takes it from the recorder
-    print_result(result, plan_cfg.verify.tau_verify, indent="  ")
+    if cfg.replan and cfg.perception.cameras_on:  # the first plan too is made from what the cameras see
+        print(f"\nplanning (bilevel, {plan_cfg.level1.n_domains} sampled domains) from what the cameras see: "
+              "round 0 of the closed loop", flush=True)
+    else:
+        print(f"\nplanning (bilevel, {plan_cfg.level1.n_domains} sampled domains):", flush=True)
+        if kinematics is not None:
+            kinematics.reset(problem.X_init)
+        with recording(None if search is None else search.recorder):
+            result = plan("bilevel", models, problem.X_init, problem.X_goal, plan_cfg, kinematics=kinematics)
+        if search is not None and not cfg.replan:
+            search.planned(result, problem.X_init)  # the closed loop's first round takes it from the recorder
+        print_result(result, plan_cfg.verify.tau_verify, indent="  ")
     out = DemoResult(problem, result, None, plan_cfg.verify.eps, search=search)
 
     timeline = Timeline() if cfg.replay is not None else None
@@ -151,6 +167,8 @@ def _closed_loop_episode(out: DemoResult, models, names, plan_cfg: PlanConfig, k
         run = _closed_loop(problem, models, plan_cfg, kinematics, cfg, out.result, timeline, out.step_times,
                            out.search)
     out.loop, out.loop_run, out.steps = run.loop, run, closed_loop_steps(models, run, names)
+    if out.result is None and run.loop.rounds:
+        out.result = run.loop.rounds[0]
     print_steps(out.steps, blank_line=True)
     _print_loop_summary(out, cfg)
     print_cause(out.outcome, dynamics_errors(models, run.loop.states, run.loop.executed, worst=True),
@@ -171,6 +189,7 @@ def _open_loop_episode(out: DemoResult, models, names, plan_cfg: PlanConfig, kin
                        cfg: DemoConfig, timeline: Timeline | None) -> None:
     """Refine and execute the one plan (if any), then the steps, the summary and the replay."""
     problem, result = out.problem, out.result
+    assert result is not None  # open loop: planned before
     if result.solved:
         assert result.plan is not None  # solved
         what = "the arm under physics" if cfg.fidelity == "full" else "the fast world"
@@ -205,15 +224,16 @@ def _source(cfg: DemoConfig) -> str:
 
 def _record(cfg: DemoConfig) -> dict:
     """The configuration the demo planned with, as its outputs record it."""
-    return settings_record(Settings(planner=cfg.planner.with_seed(cfg.seed)))
+    return settings_record(Settings(planner=cfg.planner.with_seed(cfg.seed), perception=cfg.perception))
 
 
 def _write_steps(timeline: Timeline, out: DemoResult, cfg: DemoConfig, names) -> None:
     """The steps as JSON beside the replay, and the replay's step panel."""
     if not out.steps or cfg.replay is None:
         return
+    level = None if out.result is None else out.result.level
     path = write_steps(steps_path(cfg.replay), steps_document(f"tamp demo --seed {cfg.seed}", "bilevel",
-                                                               out.result.level, out.steps, names, _record(cfg)))
+                                                               level, out.steps, names, _record(cfg)))
     timeline.show_panel(panel_entries(out.steps, timeline.t_end))
     print(f"steps written to {path}")
 
@@ -230,6 +250,9 @@ def _write_replay(timeline: Timeline, X_goal, predicted, path: Path, out: DemoRe
 def _replay_candidates(out: DemoResult, models, cfg: DemoConfig) -> None:
     """Execute the first `cfg.candidates` candidates that failed verification, one replay each."""
     assert cfg.replay is not None  # candidates need a replay path (checked in demo())
+    if out.result is None:
+        print("\nno first plan; no candidate replays")
+        return
     problem, rejected = out.problem, [(i, c) for i, c in enumerate(out.result.candidates, 1) if c.verified is False]
     if not rejected:
         print("\nno symbolic candidate failed verification; no candidate replays")
@@ -295,7 +318,7 @@ def _verdict(out: DemoResult) -> str:
                 f"{out.loop.error * 100:.1f} cm (eps {out.eps * 100:g} cm): {met}")
     ex = out.execution
     if ex is None:
-        return "no plan: " + "; ".join(out.result.reasons)
+        return "no plan: " + "; ".join(out.result.reasons if out.result is not None else [])
     if not ex.refined.success:
         return f"refinement failed at {ex.refined.failure}"
     met = "success" if ex.error < out.eps else "goal missed"
@@ -304,6 +327,7 @@ def _verdict(out: DemoResult) -> str:
 
 def _print_summary(out: DemoResult, cfg: DemoConfig) -> None:
     result, ex = out.result, out.execution
+    assert result is not None  # open loop: planned before
     print(f"\nsummary (seed {cfg.seed}, {cfg.fidelity} execution):")
     if result.solved:
         assert result.plan is not None and result.level is not None and result.predicted_error is not None  # solved
@@ -330,27 +354,30 @@ def _print_summary(out: DemoResult, cfg: DemoConfig) -> None:
 
 
 def _closed_loop(problem: Problem, models, plan_cfg: PlanConfig, kinematics: FeasibilityChecker | None,
-                 cfg: DemoConfig, first: PlanResult, timeline: Timeline | None,
+                 cfg: DemoConfig, first: PlanResult | None, timeline: Timeline | None,
                  step_times: list[tuple[float, float]], search: SearchRecording | None = None) -> ClosedLoopRun:
     """Execute the first action of the plan, observe the scene, plan again from it until the goal is
     reached or the loop's action budget is spent (a round keeps the rest of the last plan while it is
     on course, and widens its search when it finds no plan), in a World of the demo's fidelity: each
     action is refined and executed there, an action that cannot be refined changes nothing and the
-    loop goes on. The first round reuses the plan already printed. The replay shows each round's
-    prediction of the action it executed."""
-    print(f"\nclosed loop ({cfg.fidelity} world): execute, observe, plan again until the goal; at most "
-          f"{plan_cfg.loop.max_actions} actions", flush=True)
+    loop goes on. The first round reuses the plan already printed (`first`; None: it plans). The replay shows
+    each round's prediction of the action it executed, and with the cameras what they saw."""
+    cameras = rig_for(cfg.perception)
+    observing = f"observing through {len(cfg.perception.cameras())} cameras" if cameras is not None else \
+        "observing the simulator's truth"
+    print(f"\nclosed loop ({cfg.fidelity} world, {observing}): execute, observe, plan again until the goal; at "
+          f"most {plan_cfg.loop.max_actions} actions", flush=True)
     planned: list[tuple[int, PlanResult]] = []  # (index of the round's first executed action, result)
     executed: list[PickPlace] = []
 
     def plan_round(method, models_, X, X_goal, config, **kinematics):
-        return first if not planned else plan(method, models_, X, X_goal, config, **kinematics)
+        return first if not planned and first is not None else plan(method, models_, X, X_goal, config, **kinematics)
 
     def on_round(r: int, result: PlanResult) -> None:  # every round, planned anew or kept
         planned.append((len(executed), result))
         if search is not None:
             search.planned(result)
-        if r > 0:
+        if r > 0 or first is None:
             how = "kept the rest of the last plan" if result.kept else \
                 "searched over every action from the observed scene" if result.widened else \
                 "replanned from the observed scene"
@@ -367,7 +394,7 @@ def _closed_loop(problem: Problem, models, plan_cfg: PlanConfig, kinematics: Fea
 
     run = run_episode("bilevel", models, problem.X_init, problem.X_goal, plan_cfg, cfg.fidelity, closed_loop=True,
                       kinematics=kinematics, timeline=timeline, planner=plan_round, on_round=on_round,
-                      on_step=show_step).run
+                      on_step=show_step, cameras=cameras, on_seen=print_seen).run
     assert run is not None  # a closed loop
     step_times.extend(run.step_times)
     if timeline is not None:
@@ -415,7 +442,11 @@ def _print_loop_summary(out: DemoResult, cfg: DemoConfig) -> None:
     times = f"  times       planning {planning:.2f} s (all rounds), refinement {refine:.2f} s"
     print(times + (f", execution {execute:.1f} s" if cfg.fidelity == "full" else
                    " (execution: the refinement world's, included)"))
-    print(f"  final error {loop.error * 100:.1f} cm (max over blocks; eps {out.eps * 100:g} cm)")
+    run = out.loop_run
+    assert run is not None  # set with the loop
+    print(f"  final error {run.error * 100:.1f} cm (max over blocks; eps {out.eps * 100:g} cm)"
+          + ("" if run.perception_record() is None else f"; as the cameras saw it {loop.error * 100:.1f} cm"))
+    print_perception(run, indent="  ")
     outcome = {Outcome.SUCCESS: "success: every block within eps of its goal",
                Outcome.NO_PLAN: "failure: the planner found no plan",
                Outcome.WRONG_PLAN: f"failure: the goal was not reached ({loop.reason})"}[out.outcome]

@@ -64,12 +64,19 @@ class Faults:
             said.append(f"one free block pushed {low if low == high else low + '-' + high} cm after the first action")
         return "; ".join(said) or "none"
 
-    def known_to(self, loop: LoopConfig) -> LoopConfig:
+    def known_to(self, loop: LoopConfig, cameras: bool = False) -> LoopConfig:
         """`loop` as a closed loop that knows this noise, in the fields the configuration leaves to it (None): it
         stops `STOP_MARGIN_SIGMAS` sigma inside eps (a block's observed distance to its goal scatters by about one
         sigma around the true one), and after a round without a plan it looks again `LOOKS_UNDER_NOISE` times (the
         noise may have put neighbours into each other, so that the kinematic check rejects every action). Without
-        noise they are 0: exact observations, where a second look sees the same."""
+        noise they are 0: exact observations, where a second look sees the same. With `cameras` (the loop observes
+        through the camera rig, `perception.observe`) the noise is the cameras' own: the stop margin stays None,
+        for the loop to learn from what it measures (`tamp.app.observation`), and it looks again as under noise."""
+        if cameras:
+            if self.noise_m > 0:
+                raise UserError("--noise adds noise to the truth's observations; with perception.observe = "
+                                "\"cameras\" the loop observes through the camera rig, whose noise is its own")
+            return loop if loop.looks is not None else replace(loop, looks=LOOKS_UNDER_NOISE)
         noisy = self.noise_m > 0
         if loop.stop_margin is None:
             loop = replace(loop, stop_margin=STOP_MARGIN_SIGMAS * self.noise_m if noisy else 0.0)

@@ -11,7 +11,7 @@ from __future__ import annotations
 import argparse
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from tamp.app.args import (
     MODELS_HELP,
@@ -36,6 +36,10 @@ from tamp.planning.steps import dynamics_errors
 from tamp.planning.verify import goal_error
 from tamp.planning.vocabulary import Outcome
 from tamp.sim.world_types import FIDELITIES
+
+if TYPE_CHECKING:  # the runner loads Drake: imported when a plan is run
+    from tamp.app.observation import Observed
+    from tamp.app.runner import ClosedLoopRun
 
 STEPS_HELP = """\
 reading the per-step output (the same in OUT.steps.json and the replay's panel; docs/studying-refinement.md):
@@ -179,13 +183,35 @@ def _print_steps(records: list[dict]) -> None:
     print_steps(records)
 
 
+def print_seen(seen: Observed, indent: str = "  ") -> None:
+    """What perception said of one observation of the closed loop (nothing when it said nothing)."""
+    for words in seen.said:
+        print(f"{indent}perception: {words}")
+
+
+def print_perception(run: ClosedLoopRun, indent: str = "") -> None:
+    """With the cameras: how the loop's observations went, the error it learned and the truth's (never used)."""
+    record = run.perception_record()
+    if record is None:
+        return
+    learned = "none" if record["sigma_m"] is None else f"{record['sigma_m'] * 1000:.2f} mm"
+    truth = "" if record["error_median_m"] is None else \
+        f"; against the truth (not seen by the loop): median {record['error_median_m'] * 1000:.1f} mm, max " \
+        f"{record['error_max_m'] * 1000:.1f} mm"
+    print(f"{indent}perception  {record['observations']} observations ({record['looks']} renderings of the rig), "
+          f"{record['failures']} with a failure said; learned error {learned} per x or y{truth}")
+
+
 def _closed_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timeline, names,
                  search: SearchRecording | None = None) -> tuple[int, list[dict], Any]:
     from tamp.app.runner import kinematics_for, run_episode
     from tamp.app.step_report import closed_loop_steps
 
     faults = options.faults if options.faults.any else None
-    seen = "" if faults is None or faults.noise_m == 0 else " (observed)"
+    from tamp.app.observation import rig_for
+
+    cameras = rig_for(options.settings.perception)
+    seen = " (observed)" if cameras is not None or (faults is not None and faults.noise_m > 0) else ""
 
     def show_step(action, X, info, seconds) -> None:
         print(f"  executed {fmt_action(action)}: {info.status}{': ' + info.reason if info.reason else ''}; "
@@ -207,11 +233,14 @@ def _closed_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timelin
               f"{options.execute} world")
     if faults is not None:
         print(f"faults (drawn from the problem's seed, as `tamp evaluate` draws them): {faults.describe()}")
+    if cameras is not None:
+        print(f"observing through {len(cameras.sensors)} cameras (perception.observe = \"cameras\"): the planner, "
+              "the kinematic check and the skill take the perceived poses")
     with recording(None if search is None else search.recorder):
         episode = run_episode(options.method, models, problem.X_init, problem.X_goal, cfg, options.execute,
                               closed_loop=True, rounds=options.rounds, kinematics=kinematics_for(options.method, cfg),
                               timeline=timeline, on_round=show_round, on_step=show_step, faults=faults,
-                              fault_seed=problem.seed)
+                              fault_seed=problem.seed, cameras=cameras, on_seen=print_seen)
     run = episode.run
     assert run is not None  # a closed loop
     out = run.loop
@@ -226,6 +255,7 @@ def _closed_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timelin
     print(f"execution ({options.execute}): {len(out.executed)} action(s), final error {run.error * 100:.1f} cm "
           f"(max over objects{observed}) -> {'success' if outcome == Outcome.SUCCESS else 'failure'} "
           f"(eps {cfg.verify.eps * 100:g} cm)")
+    print_perception(run)
     print_cause(outcome, dynamics_errors(models, out.states, out.executed, worst=True),
                 stop_record(out.stop, out.rounds[-1] if out.rounds else None), None)
     return (0 if outcome == Outcome.SUCCESS else 1), records, episode
@@ -409,7 +439,8 @@ def options_from_args(args: argparse.Namespace) -> PlanOptions:
     if args.steps is not None and args.steps.suffix.lower() != ".json":
         raise UserError(f"the steps file is JSON; give a path ending in .json, got {args.steps}")
     faults, settings = faults_of(args), settings_of(args)
-    planner = replace(settings.planner, loop=faults.known_to(settings.planner.loop))  # the loop knows its noise
+    # the loop knows its noise (with the cameras: it learns it)
+    planner = replace(settings.planner, loop=faults.known_to(settings.planner.loop, settings.perception.cameras_on))
     settings = replace(settings, planner=planner)
     return PlanOptions(args.method, args.execute, args.replan, args.rounds, args.replay, planner,
                        args.max_actions is not None, settings, args.steps, args.trajectory, faults, args.name,

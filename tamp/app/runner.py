@@ -18,17 +18,18 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from typing import Callable, Sequence
+from typing import TYPE_CHECKING, Callable, Sequence
 
 import numpy as np
 
 from tamp.app.faults import Faults, push
+from tamp.app.observation import MARGIN_OF_EPS, CameraObserver, Observed, TruthObserver
 from tamp.planning.closed_loop import ClosedLoopResult, loop_outcome, plan_closed_loop
 from tamp.planning.config import PlanConfig
 from tamp.planning.models import Models
 from tamp.planning.planners import METHODS, plan
 from tamp.planning.results import PlanResult
-from tamp.planning.verify import goal_error
+from tamp.planning.verify import goal_error, rollout
 from tamp.planning.vocabulary import Outcome, PickPlace
 from tamp.sim import World, WorldConfig
 from tamp.sim.execute import execute
@@ -39,6 +40,9 @@ from tamp.sim.skill import Scene
 from tamp.sim.trajectory import FailureStage, RefinedPlan, RefinementFailure, refined_action
 from tamp.sim.trajectory_file import PlanTrajectory, TrajectoryError, action_motion
 from tamp.sim.world_types import StepInfo, StepStatus, fidelity_of
+
+if TYPE_CHECKING:  # the rig loads VTK: built by the commands that observe through it
+    from tamp.sim.cameras import CameraRig
 
 
 def kinematics_for(method: str, config: PlanConfig) -> FeasibilityChecker | None:
@@ -119,6 +123,19 @@ class ClosedLoopRun:
     X_after: list[np.ndarray] = field(default_factory=list)
     fidelity: str = "fast"  # the world that executed the actions
     faults: list[str] = field(default_factory=list)  # the faults injected (`Faults`), in words
+    observations: list[Observed] = field(default_factory=list)  # what the loop observed, in order
+    sigma_m: float | None = None  # with the cameras: the perception's error the loop learned (metres, per x or y)
+
+    def perception_record(self) -> dict | None:
+        """With the cameras: what the loop observed, for a row (None: it observed the truth)."""
+        if self.sigma_m is None and not any(o.scene is not None for o in self.observations):
+            return None
+        errors = [e for o in self.observations for e in o.errors_m]
+        said = [s for o in self.observations for s in o.said]
+        return {"observations": len(self.observations), "looks": sum(o.looks for o in self.observations),
+                "said": said[:10], "failures": sum(1 for o in self.observations if o.said),
+                "sigma_m": self.sigma_m, "error_median_m": float(np.median(errors)) if errors else None,
+                "error_max_m": max(errors, default=None)}
 
     @property
     def X_final(self) -> np.ndarray:
@@ -182,28 +199,45 @@ def run_closed_loop(method: str, models: Models, X_init: np.ndarray, X_goal: np.
                     planner: Callable[..., PlanResult] | None = None,
                     on_round: Callable[[int, PlanResult], None] | None = None,
                     on_step: StepCallback | None = None, faults: Faults | None = None,
-                    fault_seed: int = 0) -> ClosedLoopRun:
+                    fault_seed: int = 0, cameras: CameraRig | None = None,
+                    on_seen: Callable[[Observed], None] | None = None) -> ClosedLoopRun:
     """Plan, execute the first action in a World of `fidelity`, observe, plan again: until the goal or
     config.loop's action budget (`rounds` None), or the paper's `rounds` replanning rounds (the last
-    plan runs to its end). `kinematics` observes every scene the world reaches; `planner` and
-    `on_round` are passed to `plan_closed_loop`, `on_step` is called after every executed action.
-    `faults` disturb the world and the observations (`tamp.app.faults`, drawn from `fault_seed`)."""
+    plan runs to its end). `planner` and `on_round` are passed to `plan_closed_loop`, `on_step` is called after
+    every executed action, `on_seen` after every observation. The loop observes the truth (`faults` disturb the
+    world and the observations, `tamp.app.faults`, drawn from `fault_seed`), or with `cameras` the blocks the rig
+    perceives (`tamp.app.observation.CameraObserver`): then the planner, `kinematics` and the skill take the
+    perceived poses, and the loop stops the perception's learned error inside eps (when config.loop leaves
+    stop_margin to it)."""
     world = world or executing_world(fidelity)
     world.observer = timeline
-    X0 = world.reset(X=X_init)
+    world.reset(X=X_init)
+    assert world.scene is not None  # reset above
     scene_init, q_init = world.scene, world.q.copy()
     X_after: list[np.ndarray] = []
-    if kinematics is not None:
-        kinematics.observe(world.scene, world.q)
     infos: list[StepInfo] = []
     step_times: list[tuple[float, float]] = []
     action_starts: list[float | None] = []
     rng = np.random.default_rng(fault_seed)
     injected: list[str] = []
+    predict = None if models.dynamics is None else \
+        (lambda X, action: rollout(models.require_dynamics(), X, [action])[-1])
+    observer: TruthObserver | CameraObserver = TruthObserver(faults, rng) if cameras is None else \
+        CameraObserver(cameras, rng, X_init, predict, timeline)
+    seen = observer.first(world.scene)
+
+    def observed(now: Observed) -> np.ndarray:  # the observation, to whoever plans from it
+        nonlocal seen
+        seen = now
+        if kinematics is not None:
+            kinematics.observe(now.scene or world.scene, world.q)
+        if on_seen is not None:
+            on_seen(now)
+        return now.X
 
     def step(action: PickPlace) -> np.ndarray:
         t, marks = time.perf_counter(), len(timeline.action_starts) if timeline is not None else 0
-        X, info = world.step(action)
+        X, info = world.step(action, seen=seen.scene)
         seconds = time.perf_counter() - t
         if faults is not None and faults.push_m is not None and len(infos) == 0:  # the one push, after action 1
             scene, note = push(world.scene, faults, rng)
@@ -211,33 +245,32 @@ def run_closed_loop(method: str, models: Models, X_init: np.ndarray, X_goal: np.
             X = world.X
             injected.append(note)
         X_after.append(X)
-        if kinematics is not None:
-            kinematics.observe(world.scene, world.q)
         started = timeline is not None and len(timeline.action_starts) > marks  # it moved the arm
         action_starts.append(timeline.action_starts[marks] if timeline is not None and started else None)
         execute = info.timings.get("execute", 0.0)  # full fidelity; the fast world's step is all refinement
         step_times.append((seconds - execute, execute))
         infos.append(info)
-        if faults is not None:
-            X = faults.observe(X, rng, world.scene)
+        X = observed(observer.after(world.scene, action))
         if on_step is not None:
             on_step(action, X, info, seconds)
         return X
 
     def look() -> np.ndarray:  # the scene observed again, without acting (with new noise)
         assert world.scene is not None  # reset above
-        return world.X if faults is None else faults.observe(world.X, rng, world.scene)
+        return observed(observer.again(world.scene))
 
     if faults is not None and faults.noise_m > 0:
         injected.append(faults.noise_words)
+    learned = cameras is not None and config.loop.stop_margin is None  # the loop learns its margin from the cameras
+    margin = (lambda: min(observer.stop_margin(), MARGIN_OF_EPS * config.verify.eps)) if learned else None
     try:
-        seen = X0 if faults is None else faults.observe(X0, rng, world.scene)
-        loop = plan_closed_loop(method, models, seen, X_goal, step, rounds, config, on_round=on_round,
-                                planner=planner, kinematics=kinematics, look=look)
+        X0 = observed(seen)
+        loop = plan_closed_loop(method, models, X0, X_goal, step, rounds, config, on_round=on_round,
+                                planner=planner, kinematics=kinematics, look=look, margin=margin)
     finally:
         world.observer = None
     return ClosedLoopRun(loop, infos, step_times, action_starts, scene_init, q_init, X_after, world.config.fidelity,
-                         injected)
+                         injected, observer.observations, getattr(observer, "sigma_m", None))
 
 
 def run_episode(method: str, models: Models, X_init: np.ndarray, X_goal: np.ndarray, config: PlanConfig,
@@ -246,16 +279,18 @@ def run_episode(method: str, models: Models, X_init: np.ndarray, X_goal: np.ndar
                 kinematics: FeasibilityChecker | None = None, timeline: Timeline | None = None,
                 planner: Callable[..., PlanResult] | None = None,
                 on_round: Callable[[int, PlanResult], None] | None = None, on_step: StepCallback | None = None,
-                faults: Faults | None = None, fault_seed: int = 0) -> Episode:
+                faults: Faults | None = None, fault_seed: int = 0, cameras: CameraRig | None = None,
+                on_seen: Callable[[Observed], None] | None = None) -> Episode:
     """One problem run the one way `tamp plan`, `tamp demo` and `tamp evaluate` run it. Closed loop
     (`run_closed_loop`; `rounds` None: until the goal, else the paper's rounds; `planner`, `on_round`,
-    `on_step`, `faults` as there), or open loop: the plan (`first`, else planned now with `kinematics`)
-    refined and executed in a World of `fidelity` (`execute_plan`; `world`: the fast world to refine in)
-    when there is one."""
+    `on_step`, `faults`, `cameras`, `on_seen` as there), or open loop: the plan (`first`, else planned now with
+    `kinematics`) refined and executed in a World of `fidelity` (`execute_plan`; `world`: the fast world to refine
+    in) when there is one."""
     if closed_loop:
         run = run_closed_loop(method, models, X_init, X_goal, rounds, config, fidelity, world=world,
                               kinematics=kinematics, timeline=timeline, planner=planner, on_round=on_round,
-                              on_step=on_step, faults=faults, fault_seed=fault_seed)
+                              on_step=on_step, faults=faults, fault_seed=fault_seed, cameras=cameras,
+                              on_seen=on_seen)
         return Episode(run.loop.rounds[0] if run.loop.rounds else None, config.verify.eps, run=run)
     result = first if first is not None else plan(method, models, X_init, X_goal, config, kinematics=kinematics)
     if not result.solved:

@@ -114,13 +114,15 @@ def loop_outcome(loop: ClosedLoopResult, error: float | None = None) -> Outcome:
 
 Step = Callable[[PickPlace], np.ndarray]  # executes one action in the world, returns the observed (n, 5) state
 Look = Callable[[], np.ndarray]  # observes the world again without acting: the observed (n, 5) state
+Margin = Callable[[], float]  # metres inside eps the loop stops, as its observations have taught it so far
 
 
 def plan_closed_loop(method: str, models: Models, X_init, X_goal, step: Step, rounds: int | None,
                      cfg: PlanConfig = PlanConfig(),
                      on_round: Callable[[int, PlanResult], None] | None = None,
                      planner: Callable[..., PlanResult] | None = None,
-                     kinematics: KinematicFeasibility | None = None, look: Look | None = None) -> ClosedLoopResult:
+                     kinematics: KinematicFeasibility | None = None, look: Look | None = None,
+                     margin: Margin | None = None) -> ClosedLoopResult:
     """Plan, execute, observe, plan again; see the module doc. `rounds`: the paper's loop with that many
     replanning rounds (k - 1, `replan_rounds`: `paper_loop`); None: the loop that does not know k
     (`loop_until_goal`, cfg.loop).
@@ -130,10 +132,13 @@ def plan_closed_loop(method: str, models: Models, X_init, X_goal, step: Step, ro
     `planner` (default `plan`, same signature) lets a caller reuse a plan it already has.
     `kinematics` is passed to every planning call; `step` must let it observe the new scene
     (`FeasibilityChecker.observe`), since only the simulator knows the blocks' orientations. `look()`
-    observes the scene again without acting (the loop that does not know k, cfg.loop.looks).
+    observes the scene again without acting (the loop that does not know k, cfg.loop.looks). `margin()`, if
+    given, is that loop's stop margin, asked every round in place of cfg.loop.stop_margin (an observer that
+    learns its error as it observes).
     """
     if rounds is None:
-        return loop_until_goal(method, models, X_init, X_goal, step, cfg, on_round, planner, kinematics, look)
+        return loop_until_goal(method, models, X_init, X_goal, step, cfg, on_round, planner, kinematics, look,
+                               margin)
     return paper_loop(method, models, X_init, X_goal, step, rounds, cfg, on_round, planner, kinematics)
 
 
@@ -162,11 +167,13 @@ def paper_loop(method: str, models: Models, X_init, X_goal, step: Step, rounds: 
 def loop_until_goal(method: str, models: Models, X_init, X_goal, step: Step, cfg: PlanConfig = PlanConfig(),
                     on_round: Callable[[int, PlanResult], None] | None = None,
                     planner: Callable[..., PlanResult] | None = None,
-                    kinematics: KinematicFeasibility | None = None, look: Look | None = None) -> ClosedLoopResult:
+                    kinematics: KinematicFeasibility | None = None, look: Look | None = None,
+                    margin: Margin | None = None) -> ClosedLoopResult:
     """The loop that does not know k (`bilevel_loop`): one action a round until the goal, within the action
     and search budgets of cfg.loop; a round without a plan widens its search, else steps toward the closest
     state its searches found, else (with `look`, up to cfg.loop.looks times) observes the scene again and plans
-    from that; actions that led back to an observed state are left out (`revisits`)."""
+    from that; actions that led back to an observed state are left out (`revisits`). `margin()`: the stop
+    margin of each round, in place of cfg.loop.stop_margin."""
     out = ClosedLoopResult([], [], [np.asarray(X_init, dtype=float)], np.asarray(X_goal, dtype=float), cfg.verify.eps,
                            experience=Experience(REMEMBER_M, REMEMBER_ALIKE))
     inside = aimed_inside(cfg)
@@ -176,8 +183,11 @@ def loop_until_goal(method: str, models: Models, X_init, X_goal, step: Step, cfg
     looked = 0  # observations again after a round without a plan
     for r in itertools.count():
         X = out.X_final
+        if margin is not None:  # the margin the observations have taught so far
+            cfg = replace(cfg, loop=replace(cfg.loop, stop_margin=margin()))
+            inside = aimed_inside(cfg)
         if at_goal(X, out.X_goal, inside.verify.eps):
-            within = "within eps" if cfg.loop.margin == 0 else f"{cfg.loop.margin * 100:g} cm inside eps"
+            within = "within eps" if cfg.loop.margin == 0 else f"{cfg.loop.margin * 100:.2g} cm inside eps"
             return out.end(LoopStop.GOAL, f"the observed state is {within} of the goal")
         if len(out.executed) >= cfg.loop.max_actions:
             return out.end(LoopStop.BUDGET, f"{cfg.loop.max_actions} actions sent without reaching the goal "

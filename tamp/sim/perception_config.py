@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from tamp.errors import UserError
 
 RIG_SLOTS = ("above", "front", "left", "right")  # PerceptionConfig's cameras, in the order they are rendered
+OBSERVE = ("truth", "cameras")  # PerceptionConfig.observe: what the closed loops observe
 
 
 @dataclass(frozen=True)
@@ -59,8 +60,9 @@ class DepthNoise:
 
 @dataclass(frozen=True)
 class PerceptionConfig:
-    """The camera rig, its sensors' noise and the point cloud's resolution."""
+    """What the closed loops observe; the camera rig, its sensors' noise and the point cloud's resolution."""
 
+    observe: str = "truth"  # what the closed loops observe: "truth" (the simulator's poses) or "cameras" (this rig)
     voxel_m: float = 0.004  # metres: the fused cloud is averaged in cubes of this size (bounds the pipeline's time)
     noise: DepthNoise = DepthNoise()  # every camera's sensor errors
     above: CameraConfig = CameraConfig()  # 1.1 m over the middle of the workspace, looking straight down
@@ -69,6 +71,8 @@ class PerceptionConfig:
     right: CameraConfig = CameraConfig(position=(0.65, -0.85, 0.75))  # the other side
 
     def __post_init__(self) -> None:
+        if self.observe not in OBSERVE:
+            raise UserError(f"perception.observe must be one of {', '.join(OBSERVE)}, got {self.observe!r}")
         if not 0.001 <= self.voxel_m <= 0.01:
             raise UserError(f"perception.voxel_m must be in [0.001, 0.01] m, got {self.voxel_m}")
         if not self.cameras():
@@ -83,8 +87,13 @@ class PerceptionConfig:
         return dataclasses.replace(self, **{slot: dataclasses.replace(getattr(self, slot), on=slot in slots)
                                             for slot in RIG_SLOTS})
 
+    @property
+    def cameras_on(self) -> bool:
+        """Whether the closed loops observe through the cameras (`observe`)."""
+        return self.observe == "cameras"
+
     def without_noise(self) -> PerceptionConfig:
         return dataclasses.replace(self, noise=dataclasses.replace(self.noise, on=False))
 
 
-__all__ = ["CameraConfig", "DepthNoise", "PerceptionConfig", "RIG_SLOTS"]
+__all__ = ["CameraConfig", "DepthNoise", "OBSERVE", "PerceptionConfig", "RIG_SLOTS"]

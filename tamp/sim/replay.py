@@ -4,6 +4,9 @@ A `Timeline` collects frames (time, arm joints, block poses) while the world ste
 plays them through a MeshcatVisualizer recording and saves Meshcat's static HTML, which works
 offline in any browser.
 
+A timeline also shows what a camera rig saw (`observed`): at every observation, the fused point cloud and the
+perceived blocks (translucent purple boxes, in their estimated poses) beside the true blocks, until the next one.
+
 A timeline can also carry *ghosts*: translucent copies of the blocks at positions that were not
 executed, drawn beside the executed blocks (the paper's Fig. 3): the goal, shown throughout, and
 the Dynamics Model's prediction after each action, shown from the start of that action until the
@@ -30,6 +33,9 @@ REPLAY_FPS = 30.0
 _REPLAY_SPEED = 0.5  # fraction of the joint velocity limits used to time kinematic motions
 GOAL_RGBA = (0.1, 0.8, 0.2, 0.35)  # translucent green
 PREDICTED_RGBA = (1.0, 0.55, 0.0, 0.35)  # translucent orange
+PERCEIVED_RGBA = (0.55, 0.2, 0.9, 0.4)  # translucent purple: the blocks a camera rig perceived
+CLOUD_RGBA = (0.1, 0.1, 0.1, 1.0)  # the fused point cloud's points
+CLOUD_POINT_M = 0.003  # metres: a drawn point's size
 GHOST_SCALE = 1.04  # ghosts are slightly larger than the blocks, so that one on a block stays visible
 CAMERA_FOV = np.radians(75.0)  # Meshcat's vertical field of view
 VIEW_ASPECT = 1.6  # width / height the opening view is framed for (1280 x 800)
@@ -69,6 +75,15 @@ class Ghosts:
 
 
 @dataclass
+class Seen:
+    """What a camera rig saw at replay time `t` (seconds): the fused cloud and the perceived blocks."""
+
+    t: float
+    cloud: np.ndarray  # (k, 3) points in the world, metres
+    boxes: list[tuple[int, np.ndarray]]  # each perceived block's type and pose (4, 4) in the world
+
+
+@dataclass
 class Timeline(WorldObserver):
     """Frames of a replay: times (s), arm joints (6,), block poses (n, 7) as quaternion wxyz + xyz.
 
@@ -83,6 +98,7 @@ class Timeline(WorldObserver):
     caption: list[str] = field(default_factory=list)  # lines shown over the replay, above the legend
     # a side panel following the timeline: (replay seconds from which it shows, HTML), in time order
     panel: list[tuple[float, str]] = field(default_factory=list)
+    seen: list[Seen] = field(default_factory=list)  # what the cameras saw, in time order
 
     @property
     def t_end(self) -> float:
@@ -91,6 +107,13 @@ class Timeline(WorldObserver):
     def action_started(self) -> None:
         """Note that an action starts now (its frames follow)."""
         self.action_starts.append(self.t_end)
+
+    def observed(self, cloud: np.ndarray, boxes: list[tuple[int, np.ndarray]]) -> None:
+        """A camera rig's observation now: its fused cloud (k, 3) and perceived blocks (type, pose 4x4), shown until
+        the next observation (a later one at the same time, a look again, replaces it)."""
+        if self.seen and self.seen[-1].t == self.t_end:
+            self.seen.pop()
+        self.seen.append(Seen(self.t_end, np.asarray(cloud, dtype=float), list(boxes)))
 
     def show_goal(self, X_goal: np.ndarray) -> None:
         """The goal as translucent green blocks, throughout the replay."""
@@ -186,11 +209,12 @@ class Timeline(WorldObserver):
             visualizer.ForcedPublish(vis_ctx)
         for ghosts in self.ghosts:
             _draw_ghosts(meshcat, recording, ghosts)
+        _draw_seen(meshcat, recording, self.seen)
         del robot_ctx, recording
         visualizer.StopRecording()
         visualizer.PublishRecording()
         page = meshcat.StaticHtml()
-        if self.ghosts or self.caption:
+        if self.ghosts or self.caption or self.seen:
             page = page.replace("</body>", self._overlay() + "</body>", 1)
         if self.panel:
             page = page.replace("</body>", _panel(self.panel) + "</body>", 1)
@@ -233,6 +257,9 @@ class Timeline(WorldObserver):
             if g.name not in seen:
                 seen.add(g.name)
                 lines.append(swatch(g.rgba) + html.escape(g.label or g.name) + " (translucent)")
+        if self.seen:
+            lines.append(swatch(PERCEIVED_RGBA) + swatch(CLOUD_RGBA) + "what the cameras saw: the perceived blocks "
+                         "(translucent) and the fused point cloud")
         return ('<div id="tamp-legend" style="position:fixed;left:8px;top:8px;padding:6px 10px;'
                 'background:rgba(255,255,255,0.85);font:13px sans-serif;line-height:1.5;border-radius:4px;'
                 'pointer-events:none">' + "<br>".join(lines) + "</div>\n")
@@ -299,6 +326,33 @@ def _draw_ghosts(meshcat, recording, ghosts: Ghosts) -> None:
             if i > 0 and frame > frames[i - 1]:
                 recording.SetTransform(frame - 1, path, poses[i - 1])  # hold, then jump (no sliding)
             recording.SetTransform(frame, path, X_WGhost)
+
+
+def _draw_seen(meshcat, recording, seen: Sequence[Seen]) -> None:
+    """Each observation's cloud and boxes under /perception/<k>/, visible from its time until the next one's."""
+    from pydrake.geometry import Box, Rgba
+    from pydrake.perception import PointCloud
+
+    frames = [recording.frame(s.t) for s in seen]
+    for k, (s, frame) in enumerate(zip(seen, frames)):
+        until = frames[k + 1] if k + 1 < len(seen) else None
+        cloud = PointCloud(len(s.cloud))
+        cloud.mutable_xyzs()[:] = s.cloud.T
+        paths = [f"/perception/{k}/cloud"]
+        meshcat.SetObject(paths[0], cloud, CLOUD_POINT_M, Rgba(*CLOUD_RGBA))
+        for j, (block_type, X_WB) in enumerate(s.boxes):
+            path = f"/perception/{k}/block_{j}"
+            meshcat.SetObject(path, Box(*BLOCK_SIZES[int(block_type)]), Rgba(*PERCEIVED_RGBA))
+            meshcat.SetTransform(path, RigidTransform(np.asarray(X_WB)))  # type: ignore[arg-type]  # pydrake stubs
+            paths.append(path)
+        for path in paths:
+            meshcat.SetProperty(path, "visible", frame == 0)
+            if frame > 0:
+                recording.SetProperty(0, path, "visible", False)
+                recording.SetProperty(frame - 1, path, "visible", False)
+            recording.SetProperty(frame, path, "visible", True)
+            if until is not None and until > frame:
+                recording.SetProperty(until, path, "visible", False)
 
 
 def _position_layout(scene):

@@ -194,19 +194,25 @@ class World:
         return self.scene
 
     # --- the skill ---------------------------------------------------------------------------
-    def step(self, action: PickPlace | Iterable[int], settle: bool = True) -> tuple[np.ndarray, StepInfo]:
+    def step(self, action: PickPlace | Iterable[int], settle: bool = True,
+             seen: Scene | None = None) -> tuple[np.ndarray, StepInfo]:
         """Plan and execute one pick-place; returns the next state X and what happened.
 
         `settle=False` (the fast world only) plans the same motions but simulates no physics: the
         released blocks stay where the gripper let them go, and the retreat is planned from there.
         The planners' refinement uses it, so that what happens after a release stays the Dynamics
-        Model's prediction."""
+        Model's prediction. `seen`: the blocks as a camera saw them (the same blocks, in the same order):
+        the skill aims its gripper poses at those, and the world does what the true blocks do with them
+        (what the jaws close on, what is carried and where it lands, what the motions may not hit)."""
         scene = self._require_scene()
         action = validate_action(action, scene.n)
+        if seen is not None and seen.n != scene.n:
+            raise ValueError(f"the scene seen has {seen.n} blocks, the world {scene.n}")
         if self._predictor is not None:
             if not settle:
                 raise ValueError("settle=False plans without physics; it needs the fast world")
-            return self._step_full(action)
+            return self._step_full(action, seen)
+        aim = scene if seen is None else seen
         self.motion_seeds.step += 1
         info = StepInfo(action)
         t_start = time.perf_counter()
@@ -215,7 +221,7 @@ class World:
         planner.set_block_poses(scene.X_WB)
 
         # Approach: jaws open over the grasp point, then down to it.
-        approach = approach_poses(scene, action, self.config)
+        approach = approach_poses(aim, action, self.config)
         X_WGrasp = dict(approach)["grasp"]
         qs = self._solve_ik(approach, info)
         if qs is None:
@@ -233,7 +239,10 @@ class World:
             info.status, info.reason = StepStatus.NOTHING_GRASPED, "the jaws closed on nothing at the grasp point"
             return self._unchanged(info, t_start)
 
-        wp = pick_place_waypoints(scene, action, held, self.config)
+        wp = pick_place_waypoints(aim, action, held, self.config)
+        if aim is not scene:  # aimed at the blocks seen; the true blocks are what the jaws carry
+            carried = [held] + scene.resting_on(held)
+            wp = dataclasses.replace(wp, carried=carried, X_GC=[wp.grasp.inverse() @ scene.X_WB[c] for c in carried])
         info.carried = list(wp.carried)
         qs = self._solve_ik(wp.named(), info, q_start=qs["grasp"], skip=("pregrasp", "grasp"), known=qs)
         if qs is None:
@@ -313,13 +322,13 @@ class World:
             info.reason = f"released, but the retreat was blocked ({retreat.reason}); the arm was reset home"
         info.timings["motion"] += time.perf_counter() - t_motion
 
-    def _step_full(self, action: PickPlace) -> tuple[np.ndarray, StepInfo]:
+    def _step_full(self, action: PickPlace, seen: Scene | None = None) -> tuple[np.ndarray, StepInfo]:
         """Plan and predict with the fast world (which takes the step's motion seeds from the shared
-        `motion_seeds`), then execute the timed trajectory under physics."""
+        `motion_seeds`; aimed at `seen`, if given), then execute the timed trajectory under physics."""
         assert self._predictor is not None  # the full fidelity builds its predictor in __init__
         scene, q = self._require_scene(), self.q.copy()
         self._predictor.set_scene(scene, q)
-        X_predicted, info = self._predictor.step(action)
+        X_predicted, info = self._predictor.step(action, seen=seen)
         info.X_predicted = X_predicted
         if info.status == StepStatus.OK and not info.motion_success.get("retreat", False):
             info.status = StepStatus.MOTION_FAILURE  # no trajectory without a way out: nothing is executed

@@ -127,7 +127,7 @@ def test_a_missing_file_or_preset_is_refused(tmp_path, capsys):
     assert main(["config", "show", "--config", str(tmp_path / "none.toml")]) == 2
     assert "no configuration file at" in capsys.readouterr().err
     assert main(["config", "show", "--preset", "fast"]) == 2
-    assert "no preset 'fast'; the presets are default, paper" in capsys.readouterr().err
+    assert "no preset 'fast'; the presets are cameras, default, paper" in capsys.readouterr().err
 
 
 def test_validation_lives_with_the_fields():
