@@ -33,7 +33,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
     from tamp.app.demo import DemoConfig, run_demo
     from tamp.app.faults import Faults
-    from tamp.app.search_record import view_path
+    from tamp.app.plan_command import check_search_output
     from tamp.app.settings import settings_of
 
     check_output_file(args.replay, "--replay")
@@ -43,10 +43,9 @@ def cmd_demo(args: argparse.Namespace) -> int:
     planner = settings.planner
     if settings.perception.cameras_on:  # the closed loop learns the cameras' error and looks again after a failure
         planner = replace(planner, loop=Faults().known_to(planner.loop, cameras=True))
-    views = () if args.search is None else ((view_path(args.search), "--search"),)
-    for path, flag in ((args.trajectory, "--trajectory"), (args.search, "--search"), *views):
-        if path is not None:
-            check_output_file(path, flag)
+    if args.trajectory is not None:
+        check_output_file(args.trajectory, "--trajectory")
+    check_search_output(args.search)
     cfg = DemoConfig(seed=args.seed, objects=args.objects, actions=args.actions, models=args.models,
                      fidelity=args.fidelity, replay=args.replay, candidates=args.candidates,
                      replan=not args.open_loop, trajectory=args.trajectory, planner=planner, search=args.search,

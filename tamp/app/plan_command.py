@@ -204,12 +204,11 @@ def print_perception(run: ClosedLoopRun, indent: str = "") -> None:
 
 def _closed_loop(problem, models, options: PlanOptions, cfg: PlanConfig, timeline, names,
                  search: SearchRecording | None = None) -> tuple[int, list[dict], Any]:
+    from tamp.app.observation import rig_for
     from tamp.app.runner import kinematics_for, run_episode
     from tamp.app.step_report import closed_loop_steps
 
     faults = options.faults if options.faults.any else None
-    from tamp.app.observation import rig_for
-
     cameras = rig_for(options.settings.perception)
     seen = " (observed)" if cameras is not None or (faults is not None and faults.noise_m > 0) else ""
 
@@ -282,10 +281,9 @@ def run_plan(problem_path: Path, models_dir: Path, options: PlanOptions) -> int:
         raise UserError("--replan executes actions and observes the world; it needs --execute fast or full")
     if options.replay is not None and options.execute == "none":
         raise UserError("--replay needs an execution (--execute fast or full)")
-    views = () if options.search is None else (view_path(options.search),)
-    for path, flag in ((options.replay, "--replay"), (options.search, "--search"), *((v, "--search") for v in views)):
-        if path is not None:
-            check_output_file(path, flag)
+    if options.replay is not None:
+        check_output_file(options.replay, "--replay")
+    check_search_output(options.search)
     steps_file = options.steps
     if steps_file is None and options.replay is not None:
         from tamp.app.step_report import steps_path
@@ -317,7 +315,8 @@ def run_plan(problem_path: Path, models_dir: Path, options: PlanOptions) -> int:
     search = None if options.search is None else search_recording(
         problem, which, models, names, settings_record(replace(options.settings, planner=cfg)), options.replay)
     code, records, episode = runner(problem, models, options, cfg, timeline, names, search)
-    if search is not None and options.search is not None:
+    if search is not None:
+        assert options.search is not None  # the recording is made for it
         search.write(options.search)
     if steps_file is not None and records:
         from tamp.app.step_report import steps_document, write_steps
@@ -421,6 +420,13 @@ def add_search_argument(p: argparse.ArgumentParser) -> None:
                    help="write the search record: what each planning call considered (Level 1's candidates, the "
                    "continuous search's tree, refinements, the closed loop's rounds; docs/search-record.md) and "
                    "its view beside it, OUT.html (one offline page; `tamp view --search` writes it again)")
+
+
+def check_search_output(path: Path | None) -> None:
+    """--search's record and the view written beside it (`view_path`), checked before any work."""
+    if path is not None:
+        for out in (path, view_path(path)):
+            check_output_file(out, "--search")
 
 
 def add_trajectory_argument(p: argparse.ArgumentParser) -> None:
