@@ -94,7 +94,7 @@ def _children(pid: int) -> list[int]:
 @pytest.mark.slow
 def test_kill_9_mid_way_then_resume_equals_uninterrupted_run(reference, tmp_path, capsys):
     out = tmp_path / "killed"
-    proc = subprocess.Popen([sys.executable, "-m", "tamp.app.cli", *collect_cli(out, "--workers", "2")],
+    proc = subprocess.Popen([sys.executable, "-m", "tamp.app.cli", *collect_cli(out, "--workers", "1")],
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     deadline = time.monotonic() + 60
     while not (out.exists() and any(p.name.startswith("shard-") for p in out.iterdir())):
@@ -127,7 +127,7 @@ def test_ray_backend_gives_the_same_dataset(reference, tmp_path):
     pytest.importorskip("ray", reason="ray is not installed (optional extra: pip install ray)")
     out = tmp_path / "ray"
     run = subprocess.run([sys.executable, "-m", "tamp.app.cli",
-                          *collect_cli(out, "--backend", "ray", "--workers", "2")],
+                          *collect_cli(out, "--backend", "ray", "--workers", "1")],
                          capture_output=True, text=True, timeout=180)
     assert run.returncode == 0, run.stderr
     assert_same_dataset(reference, out)

@@ -50,16 +50,21 @@ def test_the_shipped_models_are_small_load_by_name_and_plan(name):
 
 @pytest.mark.sim
 @pytest.mark.slow
-@pytest.mark.parametrize("fidelity, candidates, loop", [("fast", 1, "open"), ("fast", 0, "closed"),
-                                                      ("full", 0, "open")])
-def test_demo_prints_the_summary_and_writes_replays_with_ghosts(tmp_path, capsys, fidelity, candidates, loop):
-    replay = tmp_path / "demo.html"
-    code = main(["demo", "--seed", "0", "--fidelity", fidelity, "--replay", str(replay),
-                 "--candidates", str(candidates)] + (["--open-loop"] if loop == "open" else []))
+@pytest.mark.parametrize("fidelity, candidates, loop, objects", [("fast", 1, "open", 3), ("fast", 0, "closed", 3),
+                                                               ("full", 0, "closed", 2)])
+def test_demo_prints_the_summary_and_writes_replays_with_ghosts(tmp_path, capsys, fidelity, candidates, loop,
+                                                                objects):
+    """The demo's summary and replays; in the full world (the default), also the round trip of its trajectory:
+    `tamp view --trajectory` executes it again from the recorded initial scene, every block ending within 2 mm
+    of the demo's final scene."""
+    replay, trajectory = tmp_path / "demo.html", tmp_path / "demo.json"
+    code = main(["demo", "--seed", "0", "--objects", str(objects), "--fidelity", fidelity, "--replay", str(replay),
+                 "--candidates", str(candidates)] + (["--open-loop"] if loop == "open" else [])
+                + (["--trajectory", str(trajectory)] if fidelity == "full" else []))
     out = capsys.readouterr().out
     summary = f"summary (seed 0, {fidelity} execution)" if loop == "open" else \
         f"summary (seed 0, {fidelity} execution, closed loop)"
-    for part in ("problem (seed 0): 3 blocks", "goal (", "symbolic candidates", summary,
+    for part in (f"problem (seed 0): {objects} blocks", "goal (", "symbolic candidates", summary,
                  "  plan" + (" " if loop == "open" else "s "), "planning ", "final error", "outcome "):
         assert part in out, part
     if loop == "closed":  # every executed action is reported, and the summary lists the same actions
@@ -70,7 +75,7 @@ def test_demo_prints_the_summary_and_writes_replays_with_ghosts(tmp_path, capsys
     assert code == (0 if outcome == "success" else 1)
     assert replay.is_file()
     scene = _scene_paths(replay)
-    for j in range(3):
+    for j in range(objects):
         assert f"/ghosts/goal/block_{j}".encode() in scene
     if "no plan" not in out:
         assert b"/ghosts/predicted/block_0" in scene
@@ -81,6 +86,23 @@ def test_demo_prints_the_summary_and_writes_replays_with_ghosts(tmp_path, capsys
         assert rejected is not None
         candidate = tmp_path / f"demo.candidate{rejected.group(1)}.html"
         assert candidate.is_file() and b"/ghosts/predicted/block_0" in _scene_paths(candidate)
+    if fidelity == "full":
+        _assert_the_trajectory_runs_again(trajectory, out, tmp_path, capsys)
+
+
+def _assert_the_trajectory_runs_again(path, out, tmp_path, capsys):
+    from tamp.sim.trajectory_file import read_trajectory
+
+    assert f"trajectory written to {path}" in out
+    plan = read_trajectory(path)
+    executed = re.findall(r"  executed (pick \d at [+-]\d, place on \d at [+-]\d)", out)
+    assert plan.world == "full" and len(plan.actions) + len(plan.skipped) == len(executed)
+    assert len(plan.actions) >= 2  # the second action starts where the first ended
+    assert main(["view", "--trajectory", str(path), "--out", str(tmp_path / "view.html")]) == 0
+    again = capsys.readouterr().out
+    deviation = float(re.search(r"final scene: every block within ([\d.]+) mm of the recorded one", again).group(1))
+    assert deviation <= 2.0
+    assert (tmp_path / "view.html").is_file()
 
 
 def test_demo_plans_with_the_configuration(tmp_path, capsys, monkeypatch):

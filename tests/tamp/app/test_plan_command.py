@@ -3,8 +3,6 @@ from __future__ import annotations
 
 import json
 import re
-import shutil
-import subprocess
 
 import numpy as np
 import pytest
@@ -12,6 +10,7 @@ import pytest
 from tamp.app.cli import main
 from tamp.app.problem import Problem, load_problem, pick_problem, problem_from_dict, save_problem
 from tamp.errors import UserError
+from tests.browser import CHROMIUM, Browser
 
 X = [[0.6, 0.15, 0.025, 1, 0], [0.7, -0.1, 0.025, 0, 1]]
 GOAL = [[0.7, -0.1, 0.075, 1, 0], [0.7, -0.1, 0.025, 0, 1]]
@@ -193,8 +192,24 @@ def test_the_shown_configuration_plans_as_its_preset(models_dir, tmp_path, capsy
 
 
 @pytest.mark.sim
-def test_cli_executes_and_writes_the_replay(models_dir, tmp_path, capsys):
-    _plan_with_replay(models_dir, tmp_path, capsys)
+def test_cli_executes_and_writes_the_replay_whose_panel_follows_the_step(models_dir, tmp_path, capsys):
+    """`tamp plan --replay`; in headless Chromium, the replay's panel shows the step named in the page's #step=N."""
+    replay, steps = _plan_with_replay(models_dir, tmp_path, capsys)
+    if CHROMIUM is None:
+        pytest.skip("the replay's panel in a browser needs Chromium (Debian: apt-get install chromium)")
+    # the panel's entry once the page has set it from the fragment (or after 10 s)
+    panel = ("new Promise(done => { const t0 = Date.now(); (function poll() {"
+             " const p = document.getElementById('tamp-steps');"
+             " if ((p && p.dataset.entry === '%d') || Date.now() - t0 > 10000)"
+             " done(p && [p.dataset.entry, p.innerText]);"
+             " else setTimeout(poll, 20); })(); })")
+    with Browser() as browser:
+        for step in range(steps + 1):
+            browser.open(replay, f"step={step}")
+            shown = browser.eval(panel % step)
+            assert shown is not None and int(shown[0]) == step
+            assert (f"step {step} of {steps}" if step else "before step 1") in shown[1]
+        assert not browser.errors()
 
 
 def _plan_with_replay(models_dir, tmp_path, capsys):
@@ -223,125 +238,3 @@ def _plan_with_replay(models_dir, tmp_path, capsys):
     page = replay.read_text()
     assert 'id="tamp-steps"' in page and f"step {len(steps)} of {len(steps)}" in page
     return replay, len(steps)
-
-
-CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
-
-
-@pytest.mark.sim
-@pytest.mark.skipif(CHROMIUM is None, reason="needs Chromium (Debian: apt-get install chromium)")
-def test_the_replay_panel_follows_the_step_in_a_browser(models_dir, tmp_path, capsys):
-    """In headless Chromium, the replay's panel shows the step named in the page's #step=N."""
-    replay, steps = _plan_with_replay(models_dir, tmp_path, capsys)
-    for step in range(steps + 1):
-        dom = subprocess.run([CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--no-first-run",
-                              "--disable-background-networking", "--disable-component-update", "--disable-sync",
-                              f"--user-data-dir={tmp_path / 'chromium'}", "--virtual-time-budget=5000",
-                              "--dump-dom", f"{replay.as_uri()}#step={step}"],
-                             capture_output=True, text=True, timeout=120).stdout
-        panel = re.search(r'<div id="tamp-steps"[^>]*data-entry="(\d+)"[^>]*>(.*?)</div>', dom, re.S)
-        assert panel is not None and int(panel.group(1)) == step
-        assert (f"step {step} of {steps}" if step else "before step 1") in panel.group(2)
-
-
-@pytest.mark.sim
-def test_cli_replans_in_a_world(models_dir, tmp_path, capsys):
-    path = _problem_reachable_by_the_model(models_dir, tmp_path)
-    assert main(["plan", "--problem", str(path), "--models", str(models_dir), "--replan", "--execute", "none"]) == 2
-    assert "--replan executes actions" in capsys.readouterr().err
-    code = main(["plan", "--problem", str(path), "--models", str(models_dir), "--method", "cfs", "--replan",
-                 "--rounds", "1"])
-    out = capsys.readouterr().out
-    assert "round 0:" in out and "closed loop ended:" in out and "execution (fast):" in out
-    assert out.index("round 0:") < out.index("executed pick")  # the plan is shown before it is executed
-    assert code == (0 if "-> success" in out else 1)
-
-
-@pytest.mark.sim
-def test_cli_replans_under_the_faults_tamp_evaluate_injects(models_dir, tmp_path, capsys):
-    """`tamp plan --replan --noise --push` runs the loop `tamp evaluate` runs on the problem, the faults drawn from
-    its seed alike, and judges it by where the world ended, not by the noisy observation."""
-    from evaluation.run import read_rows
-
-    path = _problem_reachable_by_the_model(models_dir, tmp_path)
-    assert main(["plan", "--problem", str(path), "--models", str(models_dir), "--noise", "0.005"]) == 2
-    assert "--noise and --push disturb the closed loop; give them with --replan" in capsys.readouterr().err
-    with pytest.raises(SystemExit) as refused:
-        main(["plan", "--problem", str(path), "--replan", "--push", "0.05,0.03"])
-    assert refused.value.code == 2 and "expected MIN,MAX metres" in capsys.readouterr().err
-    faults = ["--noise", "0.005", "--push", "0.03,0.05"]
-    code = main(["plan", "--problem", str(path), "--models", str(models_dir), "--replan", *faults])
-    out = capsys.readouterr().out
-    injected = re.search(r"faults injected: (.*)", out)
-    final = re.search(r"final error ([\d.]+) cm \(max over objects, observed [\d.]+ cm\) -> (\w+)", out)
-    assert injected is not None and "pushed" in injected.group(1) and final is not None
-    problems = tmp_path / "set.jsonl"
-    problems.write_text(json.dumps({**load_problem(path).to_dict(), "name": "p0"}) + "\n")
-    assert main(["evaluate", "--models", str(models_dir), "--problems", str(problems), "--out", str(tmp_path / "ev"),
-                 "--methods", "bilevel_loop", *faults, "--quiet", "--no-report"]) == 0
-    (row,) = read_rows(tmp_path / "ev" / "rows.jsonl")
-    assert row["stop"]["faults"] == injected.group(1).split("; ")
-    assert float(final.group(1)) == pytest.approx(row["final_error_m"] * 100, abs=0.051)
-    assert final.group(2) == ("success" if row["success"] else "failure") and code == (0 if row["success"] else 1)
-
-
-@pytest.mark.slow
-def test_tamp_pddl_exports_the_bundled_domain_and_a_problem_that_an_independent_parser_reads(tmp_path, capsys):
-    import pddl
-
-    save_problem(tmp_path / "p.json", Problem(np.array(X, float), np.array(GOAL, float), name="problem"))
-    assert main(["pddl", "--out", str(tmp_path / "out"), "--problem", str(tmp_path / "p.json")]) == 0
-    out = tmp_path / "out"
-    assert {p.name for p in out.iterdir()} == {"domain.pddl", "domain.ppddl", "problem.pddl", ".tamp-output"}
-    parsed = pddl.parse_problem(out / "problem.pddl")  # a problem named `problem` is renamed, not rejected
-    assert parsed.name != "problem" and {o.name for o in parsed.objects} == {"o0", "o1"}
-    assert "(:action pp0_" in (out / "domain.pddl").read_text()[:5000]
-    capsys.readouterr()
-    assert main(["pddl", "--out", str(tmp_path / "o2"), "--problem", str(tmp_path / "missing.json")]) == 2
-    err = capsys.readouterr().err
-    assert "missing.json" in err and "Traceback" not in err
-
-
-@pytest.mark.sim
-def test_cli_writes_the_executed_trajectory(models_dir, tmp_path, capsys):
-    """`tamp plan --trajectory`, open and closed loop: the executed actions' motion, readable and checked."""
-    from tamp.sim.trajectory_file import read_trajectory
-
-    path = _problem_reachable_by_the_model(models_dir, tmp_path)
-    out = tmp_path / "motion.json"
-    assert main(["plan", "--problem", str(path), "--models", str(models_dir), "--execute", "none",
-                 "--trajectory", str(out)]) == 2
-    assert "--trajectory records the executed motion" in capsys.readouterr().err and not out.exists()
-    for loop in ([], ["--replan", "--rounds", "1"]):
-        main(["plan", "--problem", str(path), "--models", str(models_dir), "--method", "cfs", "--execute", "fast",
-              "--trajectory", str(out)] + loop)
-        text = capsys.readouterr().out
-        written = re.search(r"trajectory written to \S+ \((\d+) action\(s\)", text)
-        assert written is not None, text
-        plan = read_trajectory(out)
-        assert plan.world == "fast" and plan.source.startswith("tamp plan")
-        assert plan.configuration["format"] == "tamp-config/1" and plan.configuration["level1"]["n_domains"] == 100
-        assert ("--replan" in plan.source) == bool(loop)
-        assert len(plan.actions) == int(written.group(1)) >= 1
-        out.unlink()
-
-
-def test_ctrl_c_inside_an_import_that_wraps_it_is_an_interruption(monkeypatch, tmp_path, capsys):
-    """pydrake turns a Ctrl-C during its first import into ImportError("initialization failed") raised from the
-    KeyboardInterrupt: `tamp` says it was interrupted (exit 130), not a traceback."""
-    import tamp.app.plan_command as plan_command
-
-    def interrupted_import(*args, **kwargs):
-        try:
-            raise KeyboardInterrupt
-        except KeyboardInterrupt as ctrl_c:
-            raise ImportError("initialization failed") from ctrl_c
-
-    monkeypatch.setattr(plan_command, "run_plan", interrupted_import)
-    path = tmp_path / "p.json"
-    save_problem(path, Problem(np.array(X, float), np.array(GOAL, float), k=2))
-    assert main(["plan", "--problem", str(path)]) == 130
-    assert capsys.readouterr().err.strip() == "tamp plan: interrupted"
-    monkeypatch.setattr(plan_command, "run_plan", lambda *a, **k: (_ for _ in ()).throw(ImportError("no module")))
-    with pytest.raises(ImportError, match="no module"):  # an import that fails by itself is still a bug to show
-        main(["plan", "--problem", str(path)])

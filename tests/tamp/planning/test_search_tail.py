@@ -16,12 +16,12 @@ from tests.paths import DATA
 
 pytestmark = [pytest.mark.sim, pytest.mark.slow]
 
-# four problems of a strict set of seed 4242 (tests/data/tail-problems.jsonl): Level-2 plans found after 86-273
-# expansions, and a search that finds none within 800 (a stall cut of 300 ends it after about 360), on the 1 cm
-# duplicate grid they were chosen with
-FINE = replace(PlanConfig(), search=replace(PlanConfig().search, resolution=0.01, max_expansions=800))
+# three problems of a strict set of seed 4242 (tests/data/tail-problems.jsonl): Level-2 plans found after 86 and 273
+# expansions, and a search that finds none within 400 (a stall cut of 300 ends it after about 360), on the 1 cm
+# duplicate grid they were chosen with. The same comparison over whole problem sets: bench/planning_tail.py.
+FINE = replace(PlanConfig(), search=replace(PlanConfig().search, resolution=0.01, max_expansions=400))
 PROBLEMS = DATA / "tail-problems.jsonl"
-NAMES = ("n4-k4-000", "n3-k5-001", "n2-k5-008", "n2-k3-005")
+NAMES = ("n4-k4-000", "n2-k5-008", "n2-k3-005")
 
 
 def planned(models, problem, cfg: PlanConfig, checker: FeasibilityChecker):
@@ -56,29 +56,16 @@ def test_the_search_finds_the_plans_it_found_without_its_shortcuts():
     assert left_out > 0  # cubes grasped off their centre: never predicted
 
 
-# four 5-6 block problems of the tuning sets (seeds 4245, 4243, 5304; the `random` set, the default then): plans
-# found after 284, 924 (the longest plateau of the tuning searches, 350-400 expansions) and 362 expansions, and a
-# search that finds none within its 1,500 (its last progress after about 100)
+# a 6-block problem of a tuning set (seed 5304; the `random` set, the default then) whose plan comes after the
+# longest plateau of the tuning searches (350-400 expansions without progress, found after 411). That the cut ends
+# the searches that find no plan, and loses none that the search to its budget finds: bench/planning_tail.py
+# --objects 5,6 (and the cut's own rule: tests/tamp/planning/test_search.py).
 GREEDY_PROBLEMS = DATA / "tail-problems-5-6.jsonl"
 
 
-def test_from_5_blocks_on_the_greedy_stall_cut_keeps_the_plans_and_ends_the_search_that_finds_none():
-    models = load_models(pretrained_dir() / "random")
-    checker = FeasibilityChecker()
-    cut = PlanConfig()
-    to_the_budget = replace(cut, search=replace(cut.search, greedy_stall=None))
-    uncut = 0
-    for problem in read_problem_set(GREEDY_PROBLEMS):
-        after = planned(models, problem, cut, checker)
-        if after.solved and after.search is not None and after.search.status == "solved":
-            uncut += 1  # the cut did not end it: the search without the cut is this one, expansion for expansion
-            continue
-        before = planned(models, problem, to_the_budget, checker)
-        assert before.plan == after.plan, problem.name
-        if before.solved:
-            assert before.search.expanded == after.search.expanded, problem.name
-        else:
-            assert before.search.status == "node_limit" and before.search.expanded == 1500, problem.name
-            assert after.search.status == "stalled" and after.search.expanded < 1500, problem.name
-    assert uncut == 3  # the three plans, found as without the cut
-    assert PlanConfig().search.greedy_stall == 800  # the cut these problems were chosen against
+def test_from_5_blocks_the_greedy_stall_cut_lets_the_longest_plateau_through_to_its_plan():
+    (problem,) = read_problem_set(GREEDY_PROBLEMS)
+    result = planned(load_models(pretrained_dir() / "random"), problem, PlanConfig(), FeasibilityChecker())
+    assert result.solved and result.level == 2 and result.search.status == "solved", result.reasons
+    assert result.search.expanded > 400  # the plateau lay before the plan
+    assert PlanConfig().search.greedy_stall == 800  # the cut this problem was chosen against

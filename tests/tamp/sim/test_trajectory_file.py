@@ -1,11 +1,11 @@
 """Trajectory files (`tamp plan/demo --trajectory`, `tamp view --trajectory`): the format, the UR10e's
-limits read from the model file, one-line errors for bad files, and the round trip through the full world."""
+limits read from the model file and one-line errors for bad files (the round trip of a demo's trajectory through
+the full world: tests/tamp/app/test_demo.py)."""
 from __future__ import annotations
 
 import copy
 import dataclasses
 import json
-import re
 import xml.etree.ElementTree as ET
 
 import numpy as np
@@ -225,26 +225,3 @@ def test_the_commands_offer_the_trajectory(capsys):
     with pytest.raises(SystemExit):
         main(["demo", "--trajectory", "out.txt"])
     assert "ending in .json" in capsys.readouterr().err
-
-
-@pytest.mark.sim
-@pytest.mark.slow
-def test_a_demo_trajectory_executed_again_ends_where_the_demo_did(tmp_path, capsys):
-    """The round trip: `tamp demo` (closed loop, full world) writes its trajectory of two executed actions;
-    `tamp view --trajectory` executes it again from the recorded initial scene and every block ends within
-    2 mm of the demo's final scene."""
-    from tamp.app.demo import DemoConfig, run_demo
-    from tamp.sim.trajectory_file import read_trajectory
-
-    path = tmp_path / "demo.json"
-    demo = run_demo(DemoConfig(seed=0, objects=2, actions=3, replay=None, trajectory=path))
-    assert demo.loop is not None and f"trajectory written to {path}" in capsys.readouterr().out
-    plan = read_trajectory(path)
-    assert plan.world == "full" and len(plan.actions) + len(plan.skipped) == len(demo.loop.executed)
-    assert len(plan.actions) >= 2  # the second action starts where the first ended
-    assert np.allclose(plan.X_final[:, :3], demo.loop.X_final[:, :3], atol=1e-6)
-    assert main(["view", "--trajectory", str(path), "--out", str(tmp_path / "view.html")]) == 0
-    out = capsys.readouterr().out
-    deviation = float(re.search(r"final scene: every block within ([\d.]+) mm of the recorded one", out).group(1))
-    assert deviation <= 2.0
-    assert (tmp_path / "view.html").is_file()
