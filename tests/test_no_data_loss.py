@@ -80,6 +80,22 @@ def problem_file(tmp_path_factory):
     return path
 
 
+@pytest.fixture(scope="module")
+def small_models(tmp_path_factory) -> Path:
+    """The bundled networks with the first 6 operators of their domain: what `tamp pddl` writes stays small."""
+    from symbolic import load_domain
+    from symbolic.operators import to_json
+    from symbolic.structs import OperatorSet
+
+    models = tmp_path_factory.mktemp("models")
+    for name in ("symbolic.pt", "dynamics.pt"):
+        shutil.copy(pretrained_dir() / name, models / name)
+    ops = load_domain(pretrained_dir() / "domain")
+    atomic_write_json(models / "domain" / "operators.json",
+                      to_json(OperatorSet(ops.operators[:6], ops.n_unary, ops.n_relations)))
+    return models
+
+
 def refused_on_full_disk(capsys, full: Path, argv: list[str]) -> str:
     """Run `argv` with its output on the full disk: exit 2, one line naming a path on it, and the disk's folder
     as it was (no file, folder, temporary or lock left)."""
@@ -93,9 +109,10 @@ def refused_on_full_disk(capsys, full: Path, argv: list[str]) -> str:
     return line
 
 
-def test_full_disk_pddl(capsys, full_disk, problem_file):
-    refused_on_full_disk(capsys, full_disk, ["pddl", "--out", str(full_disk / "pddl")])
-    refused_on_full_disk(capsys, full_disk, ["pddl", "--out", str(full_disk / "pddl"), "--problem",
+def test_full_disk_pddl(capsys, full_disk, problem_file, small_models):
+    models = ["--models", str(small_models)]
+    refused_on_full_disk(capsys, full_disk, ["pddl", *models, "--out", str(full_disk / "pddl")])
+    refused_on_full_disk(capsys, full_disk, ["pddl", *models, "--out", str(full_disk / "pddl"), "--problem",
                                              str(problem_file), "--sampled", "2"])
 
 
@@ -456,17 +473,18 @@ def test_collect_sizes_are_bounded_and_say_so(tmp_path, capsys, flag):
     assert "at most" in action.help
 
 
-def test_pddl_never_replaces_a_sampled_folder_it_did_not_make(tmp_path, capsys):
+def test_pddl_never_replaces_a_sampled_folder_it_did_not_make(tmp_path, capsys, small_models):
+    models = ["--models", str(small_models)]
     out = tmp_path / "pd"
     (out / "sampled").mkdir(parents=True)
     (out / "sampled" / "notes.txt").write_text("mine")
     (out / "domain.pddl").write_text("an old export")  # looks like an export, but carries no marker
     before = tree(tmp_path)
-    assert main(["pddl", "--out", str(out), "--sampled", "2"]) == 2
+    assert main(["pddl", *models, "--out", str(out), "--sampled", "2"]) == 2
     assert "did not make" in capsys.readouterr().err
     assert tree(tmp_path) == before
     fresh = tmp_path / "fresh"
-    assert main(["pddl", "--out", str(fresh), "--sampled", "2"]) == 0
-    assert main(["pddl", "--out", str(fresh), "--sampled", "3"]) == 0  # its own sampled/ it replaces
+    assert main(["pddl", *models, "--out", str(fresh), "--sampled", "2"]) == 0
+    assert main(["pddl", *models, "--out", str(fresh), "--sampled", "3"]) == 0  # its own sampled/ it replaces
     assert len(list((fresh / "sampled").glob("domain_*.pddl"))) == 3 and made_by_tool(fresh)
     assert not [p for p in tmp_path.iterdir() if "staging" in p.name]
