@@ -155,12 +155,12 @@ def test_plan_files(tmp_path):
 
 @pytest.mark.parametrize("name", ["operators.json", "operators.json.gz"])
 def test_operators_files(tmp_path, name):
-    from symbolic import load_operators
+    from symbolic import load_domain, load_operators
     from symbolic.operators import to_json
     from symbolic.structs import OperatorSet
     from tamp.planning.models import pretrained_dir
 
-    ops = load_operators(pretrained_dir() / "paper" / "domain" / "operators.json")
+    ops = load_domain(pretrained_dir() / "paper" / "domain")  # read once per test process (tests/conftest.py)
     small = json.dumps(to_json(OperatorSet(ops.operators[:6], ops.n_unary, ops.n_relations))).encode()
     _fuzz(load_operators, small, tmp_path / name, gz=name.endswith(".gz"))
 
