@@ -147,11 +147,11 @@ def test_from_greedy_from_blocks_on_greedy_stall_is_the_stall_cut():
     X4 = np.array([[0.6, 0.0, 0.025, 1, 0], [0.7, 0.1, 0.025, 1, 0], [0.8, -0.2, 0.025, 1, 0], [0.5, 0.3, 0.025, 0, 1]])
     G = X4.copy()
     G[0, :2] = (1.0, 0.5)  # unreachable by the stub world's actions: every search plateaus
-    below = continuous_search(StubModel(), X4, G, SearchConfig(max_expansions=300, greedy_from=5, greedy_stall=25))
-    assert below.status == "node_limit" and below.expanded == 300
-    greedy = continuous_search(StubModel(), X4, G, SearchConfig(max_expansions=300, greedy_from=4, greedy_stall=25))
-    assert greedy.status == "stalled" and greedy.expanded < 300 and "in 25 expansions" in greedy.reason
-    assert continuous_search(StubModel(), X4, G, SearchConfig(max_expansions=300, greedy_from=4, greedy_stall=None,
+    below = continuous_search(StubModel(), X4, G, SearchConfig(max_expansions=120, greedy_from=5, greedy_stall=25))
+    assert below.status == "node_limit" and below.expanded == 120
+    greedy = continuous_search(StubModel(), X4, G, SearchConfig(max_expansions=120, greedy_from=4, greedy_stall=25))
+    assert greedy.status == "stalled" and greedy.expanded < 120 and "in 25 expansions" in greedy.reason
+    assert continuous_search(StubModel(), X4, G, SearchConfig(max_expansions=120, greedy_from=4, greedy_stall=None,
                                                               stall=25)).status == "node_limit"
 
 
