@@ -14,7 +14,7 @@ FORBIDDEN = {
     "tamp/planning": ("tamp.sim", "tamp.app", "evaluation", *DRAKE_SIDE),
     "tamp/sim": ("tamp.app", "evaluation"),
     "tamp/app": ("evaluation",),
-    "learned": ("tamp", "evaluation", *DRAKE_SIDE),
+    "learned": ("tamp", "symbolic", "evaluation", *DRAKE_SIDE),
     "symbolic": ("tamp", "learned", "evaluation", "torch", *DRAKE_SIDE),
     "guarded": ("tamp", "learned", "symbolic", "evaluation", "numpy", "torch", *DRAKE_SIDE),
 }

@@ -1,5 +1,6 @@
 """`tamp reproduce`'s train stage: a wall-clock cap never finishes the stage; a rerun resumes the models."""
 import json
+from concurrent.futures import ThreadPoolExecutor
 
 import pytest
 import torch
@@ -27,9 +28,12 @@ def test_train_job_records_the_stop_and_resumes_a_time_limited_model(tmp_path):
 
 
 def test_an_unfinished_model_leaves_the_train_stage_open(tmp_path, monkeypatch):
+    """The stage's decision, with its one job run in this process (the ablation cells' test below runs the
+    jobs in spawned workers)."""
     out = tmp_path / "repro"
     write_synthetic_dataset(out / "data", num_samples=300, seed=0)
-    monkeypatch.setitem(rep.SCALES, "quick", _scale(train_time_limit_s=1e-9))
+    monkeypatch.setitem(rep.SCALES, "quick", _scale(train_time_limit_s=1e-9, ablation_runs=0))
+    monkeypatch.setattr(rep, "ProcessPoolExecutor", lambda max_workers, mp_context: ThreadPoolExecutor(max_workers))
     rep.Stages(out, "quick", rep.SCALES["quick"]).finish("collect", 0.0)
     with pytest.raises(rep.TrainingUnfinished, match="dynamics.pt stopped at the time limit"):
         rep.reproduce(out, "quick", workers=1)
@@ -53,7 +57,7 @@ def test_the_ablation_cells_make_table_i_and_a_finished_cell_is_not_trained_agai
     them, and a rerun of a cell that finished reads its model back instead of training it."""
     out = tmp_path / "repro"
     write_synthetic_dataset(out / "data", num_samples=300, seed=0)
-    monkeypatch.setitem(rep.SCALES, "quick", _scale(ablation_runs=2))
+    monkeypatch.setitem(rep.SCALES, "quick", _scale(ablation_runs=2, models=()))  # the cells alone
     monkeypatch.setattr(rep, "_evaluate_stages", lambda *args, **kwargs: out / "not evaluated")
     rep.Stages(out, "quick", rep.SCALES["quick"]).finish("collect", 0.0)
     rep.reproduce(out, "quick", workers=1)

@@ -283,14 +283,16 @@ def test_the_oracle_counts_success_iff_some_plan_reaches_the_goal(monkeypatch):
 @pytest.mark.sim
 @pytest.mark.slow
 def test_an_evaluation_killed_midway_resumes_without_redoing_or_losing_rows(serial, problems_file, tmp_path):
-    """Killed and resumed on the set's first two problems: a row depends on its problem and method alone."""
+    """Killed and resumed on the set's first two problems and two of its methods (an open-loop and a closed-loop
+    one): a row depends on its problem and method alone."""
     (tmp_path / "models").mkdir()
     out = tmp_path / "results"
+    methods = ["deterministic", "bilevel_loop"]
     problems_file = write_problems(tmp_path / "problems.jsonl", read_problems(problems_file)[:2])
     script = ("from tests.evaluation.test_run import CONFIG, stub_models\n"
               "from evaluation.run import evaluate\n"
-              f"evaluate({str(tmp_path / 'models')!r}, {str(problems_file)!r}, {str(out)!r}, config=CONFIG, "
-              "models=stub_models())\n")
+              f"evaluate({str(tmp_path / 'models')!r}, {str(problems_file)!r}, {str(out)!r}, {methods!r}, "
+              "config=CONFIG, models=stub_models())\n")
     proc = subprocess.Popen([sys.executable, "-c", script], cwd=ROOT)
     rows_path = out / "rows.jsonl"
     deadline = time.monotonic() + 120
@@ -302,24 +304,26 @@ def test_an_evaluation_killed_midway_resumes_without_redoing_or_losing_rows(seri
     before = rows_path.read_bytes()
     complete = before[:before.rfind(b"\n") + 1]
     n_before = complete.count(b"\n")
-    total = 2 * len(METHODS)
+    total = 2 * len(methods)
     assert 2 <= n_before < total, "killed too late to test resumption"
     with open(rows_path, "ab") as f:  # a kill in the middle of writing a row leaves half a line
         f.write(complete.splitlines(keepends=True)[0][:40])
-    evaluate(tmp_path / "models", problems_file, out, config=CONFIG, models=stub_models())
+    evaluate(tmp_path / "models", problems_file, out, methods, config=CONFIG, models=stub_models())
     after = rows_path.read_bytes()
     assert after.startswith(complete)  # the finished rows are untouched
     rows = read_rows(rows_path)
     keys = [(r["problem"], r["method"]) for r in rows]
     assert len(keys) == len(set(keys)) == total
-    assert _by_key(rows) == {k: v for k, v in _by_key(read_rows(serial)).items() if k[0] in ("n2-k1-000", "n2-k2-000")}
+    assert _by_key(rows) == {k: v for k, v in _by_key(read_rows(serial)).items()
+                             if k[0] in ("n2-k1-000", "n2-k2-000") and k[1] in methods}
     # running again computes nothing, also with the results and the problem set moved elsewhere
-    evaluate(tmp_path / "models", problems_file, out, config=CONFIG, models=stub_models())
+    evaluate(tmp_path / "models", problems_file, out, methods, config=CONFIG, models=stub_models())
     assert rows_path.read_bytes() == after
     moved = tmp_path / "moved"
     shutil.copytree(out, moved / "results")
     shutil.copy(problems_file, moved / "problems.jsonl")
-    evaluate(tmp_path / "models", moved / "problems.jsonl", moved / "results", config=CONFIG, models=stub_models())
+    evaluate(tmp_path / "models", moved / "problems.jsonl", moved / "results", methods, config=CONFIG,
+             models=stub_models())
     assert (moved / "results" / "rows.jsonl").read_bytes() == after
     assert json.loads((moved / "results" / "meta.json").read_text())["problems"] == str(moved / "problems.jsonl")
 
@@ -327,14 +331,17 @@ def test_an_evaluation_killed_midway_resumes_without_redoing_or_losing_rows(seri
 @pytest.mark.sim
 @pytest.mark.slow
 def test_two_workers_give_the_same_rows_as_one(serial, problems_file, tmp_path):
-    """On the solvable problems (k = 1, 2, 3): each worker plans and executes problems one after another."""
+    """Two solvable problems (k = 1, 2) by two methods (an open-loop and a closed-loop one): four rows shared out
+    between the workers, each of which plans and executes its rows one after another."""
     (tmp_path / "models").mkdir()
-    problems_file = write_problems(tmp_path / "problems.jsonl", read_problems(problems_file)[:3])
-    rows = read_rows(evaluate(tmp_path / "models", problems_file, tmp_path / "results",
+    methods = ["probabilistic_oracle", "bilevel_replan"]
+    problems_file = write_problems(tmp_path / "problems.jsonl", read_problems(problems_file)[:2])
+    rows = read_rows(evaluate(tmp_path / "models", problems_file, tmp_path / "results", methods,
                               config=EvalConfig(planner=PlanConfig(search=SearchConfig(max_expansions=300)),
                                                 progress=False, workers=2),
                               models=stub_models()))
-    assert _by_key(rows) == {k: v for k, v in _by_key(read_rows(serial)).items() if k[0] != "n2-unreachable"}
+    assert len(rows) == 4 and _by_key(rows) == {k: v for k, v in _by_key(read_rows(serial)).items()
+                                                if k[0] in ("n2-k1-000", "n2-k2-000") and k[1] in methods}
 
 
 @pytest.mark.sim
@@ -457,7 +464,7 @@ def test_reproduce_evaluates_given_models_under_the_paper_protocol_over_runs(mod
     from tamp.app.cli import main
 
     monkeypatch.setitem(rep.SCALES, "quick", rep.Scale(samples=0, epochs=0, train_time_limit_s=None, ablation_runs=0,
-                                                       ablation_epochs=0, per_cell=1, search_time_limit_s=5.0,
+                                                       ablation_epochs=0, per_cell=1, search_time_limit_s=0.5,
                                                        objects=(2,), actions=(1,)))
     out = tmp_path / "repro"
     args = ["reproduce", "--out", str(out), "--models", str(models_dir), "--protocol", "paper", "--runs", "2",

@@ -24,7 +24,7 @@ def scattered():
 def test_the_spread_head_learns_where_the_world_scatters(scattered):
     data, val = scattered
     res = train_model(data, ModelConfig(hidden=64, d_msg=32, d_z=4, heads=2, spread=True),
-                      TrainConfig(epochs=40, batch_size=128, lr=2e-3),
+                      TrainConfig(epochs=30, batch_size=128, lr=2e-3),
                       val_data=val, progress=False)
     figures = fit_spread(res.model, data, val, SpreadConfig(epochs=30, patience_epochs=10))
     assert 0.85 <= figures["val_coverage95"] <= 0.995, figures

@@ -248,15 +248,6 @@ def test_foreign_or_corrupt_checkpoints_give_clear_errors(tmp_path):
         load_model(pickled)
 
 
-def test_learned_imports_no_drake_and_no_other_package():
-    import subprocess
-    import sys
-    code = ("import sys, learned, learned.synthetic; "
-            "bad = [m for m in sys.modules if m.split('.')[0] in "
-            "('pydrake', 'tamp', 'symbolic', 'evaluation')]; print(bad); assert not bad")
-    subprocess.run([sys.executable, "-c", code], check=True, capture_output=True, text=True)
-
-
 def test_the_whole_action_tells_the_picked_block_the_release_offset_and_the_targets_type():
     """whole=True: the picked object reads the release offset and the target's type, the target the grasp offset
     and the picked object's type (the paper's columns unchanged); a bystander reads nothing of the action."""

@@ -234,7 +234,7 @@ def test_the_position_loss_makes_a_unary_bit_say_where_a_block_stands(tmp_path):
     for weight in (0.0, 1.0):
         config = ModelConfig(hidden=32, d_msg=16, d_z=3, heads=1, activation="gumbel_sigmoid", arm_input=False,
                              position_decoder=bool(weight))
-        fit(data, config, 60, tmp_path / f"p{weight}.pt", lr=3e-3, seed=0, position_weight=weight)
+        fit(data, config, 30, tmp_path / f"p{weight}.pt", lr=3e-3, seed=0, position_weight=weight)
         u, _ = load_model(tmp_path / f"p{weight}.pt").symbols_batch(data.X, data.mask)
         bits = [u[..., k][data.mask] for k in range(3)]
         best[weight] = [max((abs(np.corrcoef(b, side)[0, 1]) for b in bits if b.std()), default=0.0) for side in sides]

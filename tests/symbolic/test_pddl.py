@@ -16,7 +16,7 @@ from symbolic.sampling import dedup_choices, sample_choices, write_sampled_domai
 
 @pytest.fixture(scope="module")
 def ops():
-    return learn_operators(bw.random_dataset(2500, (2, 3), seed=11, p_large=0.2))
+    return learn_operators(bw.random_dataset(800, (2, 3), seed=11, p_large=0.2))
 
 
 @pytest.fixture(scope="module")
