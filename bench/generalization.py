@@ -2,6 +2,7 @@
 
     tamp collect --samples 1200 --objects 4,5,6 --out runs/d456 --workers 2 --seed 11
     .venv/bin/python bench/generalization.py --data runs/d456            # the bundled Dynamics Model
+    .venv/bin/python bench/generalization.py --data runs/d678 --trained-up-to 6
 
 Per object count of the dataset: the mean effect error (cm per object, `learned.train.evaluate`) of
 the model with its object limit lifted, beside predicting no motion (`zero`) and "the picked block
@@ -28,6 +29,9 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--data", type=Path, required=True, help="dataset directory (tamp collect)")
     ap.add_argument("--model", type=Path, default=None, help="Dynamics Model (default: the bundled one)")
+    ap.add_argument("--trained-up-to", type=int, default=None,
+                    help="the most objects the model's training data held, the baseline count (default: its "
+                         "object limit, which a raised limit puts above the data's: the bundled ones saw up to 6)")
     args = ap.parse_args()
 
     import torch
@@ -40,9 +44,9 @@ def main() -> None:
     torch.set_num_threads(1)
     path = args.model or pretrained_dir() / DYNAMICS_FILE
     model = learned.load_model(path)
-    trained_for = model.config.n_max
+    trained_for = args.trained_up_to or model.config.n_max
     data = learned.load_transitions(args.data)
-    model.config = dataclasses.replace(model.config, n_max=max(trained_for, int(data.X.shape[1])))
+    model.config = dataclasses.replace(model.config, n_max=max(model.config.n_max, int(data.X.shape[1])))
     moved = learned.moved_picks(data.X, data.X_next, data.action)
     print(f"{path} (trained for up to {trained_for} objects) on {args.data}: {len(data)} transitions")
     print(f"{'n':>2} {'transitions':>11} {'error cm':>9} {'zero cm':>8} {'arm cm':>7} {'moved: error cm':>16} "
