@@ -9,7 +9,6 @@ import pytest
 
 from tamp.app.cli import main
 from tamp.app.problem import Problem, load_problem, pick_problem, problem_from_dict, save_problem
-from tamp.errors import UserError
 from tests.browser import CHROMIUM, Browser
 
 X = [[0.6, 0.15, 0.025, 1, 0], [0.7, -0.1, 0.025, 0, 1]]
@@ -121,7 +120,8 @@ def _problem_reachable_by_the_model(models_dir, tmp_path):
 
 def test_the_object_limit_is_the_one_the_models_were_trained_for(models_dir, tmp_path, capsys):
     """Models trained on scenes of up to 4 blocks refuse a fifth in one line naming 4; the bundled
-    models take 6 (PROVENANCE.md: trained on 2-4, checked at 5 and 6) of the world's MAX_OBJECTS and refuse a 7th."""
+    models take the world's MAX_OBJECTS, 8 (PROVENANCE.md: trained on 2-4 and 2-6, checked at 7 and 8), and a
+    ninth block is refused in one line naming the world's limit."""
     from tamp.planning.models import load_models, pretrained_dir
     from tamp.planning.validate import MAX_OBJECTS
 
@@ -132,10 +132,13 @@ def test_the_object_limit_is_the_one_the_models_were_trained_for(models_dir, tmp
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and "5 objects, but the models were trained for at most 4" in err
     bundled = load_models(pretrained_dir())
-    assert bundled.n_max == 6 < MAX_OBJECTS
-    bundled.require_objects(6, "a six-block problem")
-    with pytest.raises(UserError, match="7 objects, but the models were trained for at most 6"):
-        bundled.require_objects(7, "a seven-block problem")
+    assert bundled.n_max == MAX_OBJECTS == 8
+    bundled.require_objects(8, "an eight-block problem")
+    nine = [[0.40 + 0.05 * (i % 5), -0.2 + 0.1 * (i // 5), 0.025, 1, 0] for i in range(9)]
+    path.write_text(json.dumps({"X_init": nine, "X_goal": nine}))
+    assert main(["plan", "--problem", str(path), "--execute", "none"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "has 9 blocks, but the world holds 1..8" in err
 
 
 @pytest.mark.sim
