@@ -23,6 +23,8 @@ SEEN_THROUGH_M = 0.008  # metres: a camera that measured this much farther than 
 _FACE_INSET_M = 0.004  # metres: free-space samples keep this far inside a face's edges (pose errors at silhouettes)
 _SAMPLE_STEP_M = 0.01  # metres between free-space samples on a box's faces
 MIN_PATCH = 12  # points of a face worth a hypothesis (a 5 cm face holds about 150 at 4 mm)
+TILTED_RAD = np.radians(5.0)  # a block proposed from a vertical face with six degrees of freedom leans more: a
+#   6-DOF fit of an upright block hidden but for its sides drifted 8 mm where the upright fit did not
 _GRAZING_COS = 0.34  # a face seen more obliquely than 70 degrees by a camera is not checked against it
 
 
@@ -216,38 +218,52 @@ def footprint_hypotheses(points: np.ndarray) -> list[tuple[int, np.ndarray]]:
     return hypotheses
 
 
-def side_hypotheses(p: np.ndarray, n: np.ndarray, voxel: float) -> list[tuple[int, np.ndarray]]:
-    """Upright blocks behind the vertical faces among the points p (normals n, sign arbitrary): a block whose top
-    face is hidden (under a leaning bar, or an overhang) may show a single side. Each face (points whose horizontal
-    normals agree, connected) proposes, on either side of its plane (which side the cameras looked from is
-    unknown), a cube at either end or the middle of the face, a bar along it likewise, and a bar across it; the
-    block stands in the layer of the face's median height."""
+def vertical_faces(p: np.ndarray, n: np.ndarray, voxel: float) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The vertical faces among the points p (normals n, sign arbitrary): (points, horizontal unit normal, sign
+    arbitrary) of each group of points whose horizontal normals agree (5 degree bins, the four fullest), connected."""
     side = np.flatnonzero(np.abs(n[:, 2]) < 0.2)
     if len(side) < MIN_PATCH:
         return []
     heading = np.mod(np.arctan2(n[side, 1], n[side, 0]), np.pi)  # the face's direction, either sign
     bins = np.round(heading / np.radians(5.0)).astype(int) % 36
-    hypotheses = []
+    faces = []
     for peak in np.argsort(np.bincount(bins, minlength=36))[::-1][:4]:
         near = side[np.abs(np.mod(bins - peak + 18, 36) - 18) <= 1]
         if len(near) < MIN_PATCH:
             break
-        for face in components(p[near], 2.5 * voxel):
-            if len(face) < MIN_PATCH:
-                break
-            f = p[near[face]]
-            m = np.array([np.cos(peak * np.radians(5.0)), np.sin(peak * np.radians(5.0)), 0.0])
-            t = np.array([-m[1], m[0], 0.0])
-            plane, (lo, hi) = float(np.median(f @ m)), np.percentile(f @ t, [2.0, 98.0])
-            z = (np.floor(float(np.median(f[:, 2])) / BLOCK_HEIGHT) + 0.5) * BLOCK_HEIGHT
-            for sign in (-1.0, 1.0):
-                for block_type, axis, depth in ((SMALL, t, 0.025), (LARGE, t, 0.025), (LARGE, m, 0.125)):
-                    R = np.column_stack([np.cross(axis, [0.0, 0.0, 1.0]), axis, [0.0, 0.0, 1.0]])
-                    half = BLOCK_SIZES[block_type][1] / 2 if axis is t else 0.0
-                    along = {(lo + hi) / 2} | ({lo + half, hi - half} if half else set())
-                    hypotheses += [(block_type, pose(R, (plane - sign * depth) * m + s * t + [0.0, 0.0, z]))
-                                   for s in along]
+        m = np.array([np.cos(peak * np.radians(5.0)), np.sin(peak * np.radians(5.0)), 0.0])
+        faces += [(p[near[face]], m) for face in components(p[near], 2.5 * voxel) if len(face) >= MIN_PATCH]
+    return faces
+
+
+def side_hypotheses(p: np.ndarray, n: np.ndarray, voxel: float) -> list[tuple[int, np.ndarray]]:
+    """Upright blocks behind the vertical faces among the points p (normals n, sign arbitrary): a block whose top
+    face is hidden (under a leaning bar, or an overhang) may show a single side. Each face (`vertical_faces`)
+    proposes, on either side of its plane (which side the cameras looked from is unknown), a cube at either end or
+    the middle of the face, a bar along it likewise, and a bar across it; the block stands in the layer of the
+    face's median height."""
+    hypotheses = []
+    for f, m in vertical_faces(p, n, voxel):
+        t = np.array([-m[1], m[0], 0.0])
+        plane, (lo, hi) = float(np.median(f @ m)), np.percentile(f @ t, [2.0, 98.0])
+        z = (np.floor(float(np.median(f[:, 2])) / BLOCK_HEIGHT) + 0.5) * BLOCK_HEIGHT
+        for sign in (-1.0, 1.0):
+            for block_type, axis, depth in ((SMALL, t, 0.025), (LARGE, t, 0.025), (LARGE, m, 0.125)):
+                R = np.column_stack([np.cross(axis, [0.0, 0.0, 1.0]), axis, [0.0, 0.0, 1.0]])
+                half = BLOCK_SIZES[block_type][1] / 2 if axis is t else 0.0
+                along = {(lo + hi) / 2} | ({lo + half, hi - half} if half else set())
+                hypotheses += [(block_type, pose(R, (plane - sign * depth) * m + s * t + [0.0, 0.0, z]))
+                               for s in along]
     return hypotheses
+
+
+def tilted_side_hypotheses(p: np.ndarray, n: np.ndarray, voxel: float) -> list[tuple[int, np.ndarray]]:
+    """Blocks with six degrees of freedom behind the vertical faces among the points p (normals n, sign arbitrary):
+    a block leaning in the plane of a side face (rolled about its short axis) whose top another block covers shows
+    only its sides, tilted rectangles. Each face (`vertical_faces`) proposes `face_hypotheses` on either side of
+    its plane, those tilted more than TILTED_RAD (an upright block's sides propose it upright: `side_hypotheses`)."""
+    return [h for f, m in vertical_faces(p, n, voxel) for sign in (-1.0, 1.0)
+            for h in face_hypotheses(f, sign * m, BLOCK_HEIGHT / 2) if np.abs(h[1][2, :3]).max() < np.cos(TILTED_RAD)]
 
 
 @cache
@@ -270,5 +286,6 @@ def orientation_error(R_est: np.ndarray, R_true: np.ndarray, block_type: int) ->
     return float(np.arccos(np.clip((traces.max() - 1.0) / 2.0, -1.0, 1.0)))
 
 
-__all__ = ["MIN_PATCH", "box_sdf", "components", "face_hypotheses", "fit_box", "footprint_hypotheses", "half_size",
-           "min_area_rectangle", "orientation_error", "pose", "seen_through", "side_hypotheses", "symmetries"]
+__all__ = ["MIN_PATCH", "TILTED_RAD", "box_sdf", "components", "face_hypotheses", "fit_box", "footprint_hypotheses",
+           "half_size", "min_area_rectangle", "orientation_error", "pose", "seen_through", "side_hypotheses",
+           "symmetries", "tilted_side_hypotheses", "vertical_faces"]

@@ -17,9 +17,12 @@ The pipeline (numpy and scipy, no renderer; `tamp.sim.cameras` renders the views
    most points (less those seen inside it) is kept, and its points leave the cloud; a bar most of whose top is
    hidden waits for step 3, since what hides it may lean on it. Blocks side by side at one height share a patch:
    what a block leaves of it is a patch again;
-3. what is left is clustered, and each cluster fitted in turn from three families of proposals: upright blocks
+3. what is left is clustered, and each cluster fitted in turn from four families of proposals: upright blocks
    from a layer's outline and from each single side face (a block whose top a leaning bar or an overhang hides),
-   and blocks with six degrees of freedom from the largest upward face (leaning and toppled blocks);
+   blocks with six degrees of freedom from the largest upward face (leaning and toppled blocks) and from each
+   vertical face (a leaning block whose top another covers shows only its sides). Then a block that explains
+   little its neighbours do not, once they are refitted jointly to the points of all of them, is dropped (a
+   piece of a pile fitted on its own);
 4. with `previous`, its count and types (a closed loop knows them; positions may be stale, since a block moved):
    where the blocks found disagree with them, the explanations they name are tried on the points, to looser
    thresholds, and kept only where the points support them (not seen through, no overlap): a bar for the cubes
@@ -43,6 +46,7 @@ from scipy.spatial import cKDTree
 from tamp.planning.vocabulary import BLOCK_HEIGHT, LARGE, SMALL, TYPE_NAMES
 from tamp.sim.box_fit import (
     MIN_PATCH,
+    TILTED_RAD,
     box_sdf,
     components,
     face_hypotheses,
@@ -52,6 +56,7 @@ from tamp.sim.box_fit import (
     pose,
     seen_through,
     side_hypotheses,
+    tilted_side_hypotheses,
 )
 from tamp.sim.perception_config import PerceptionConfig
 
@@ -74,6 +79,7 @@ _VICINITY_M = 0.01  # metres: the points a left-over block's fit is judged on
 _PRIOR_MIN = 20  # points that a block of a type the prior misses must explain (MIN_CLUSTER otherwise)
 _PRIOR_QUALITY = 0.5  # the share of its vicinity's points such a block must explain (MIN_EXPLAINED otherwise)
 _FIT_REACH_M = 0.02  # metres: a hypothesis is fitted to the points this close to its starting box
+_LEANING_SIDES = 3  # the family of hypotheses from vertical faces with six degrees of freedom: leaning blocks only
 
 
 @dataclass(frozen=True)
@@ -221,9 +227,11 @@ def _best_box(points: np.ndarray, candidates: np.ndarray, hypotheses, views, qua
     ranked.sort(key=lambda r: r[0], reverse=True)
     chosen = [r for f in {r[4] for r in ranked} for r in [r for r in ranked if r[4] == f][:_FITTED]]
     best = None
-    for _, block_type, X0, upright, _ in chosen:
+    for _, block_type, X0, upright, family in chosen:
         half = half_size(block_type)
         X = fit_box(points[box_sdf(X0, half, points) < _FIT_REACH_M], half, X0, upright)
+        if family == _LEANING_SIDES and np.abs(X[2, :3]).max() > np.cos(TILTED_RAD):
+            continue  # a block resting flat is proposed upright from its sides (a 6-DOF fit drifted 8 mm)
         if (X[2, 3] - np.abs(X[2, :3]) @ half < -_UNDER_TABLE_M or seen_through(X, block_type, views) > MAX_SEEN_THROUGH
                 or _overlaps(X, block_type, found)):
             continue  # through the table (where no camera sees), seen through, or inside a block found
@@ -294,12 +302,14 @@ def _tilted_face(p: np.ndarray, tree: cKDTree, cluster: np.ndarray, voxel: float
 
 
 def _cluster_hypotheses(p: np.ndarray, tree: cKDTree, cluster: np.ndarray, voxel: float) -> list:
-    """(type, initial pose, upright, family) of the blocks a cluster's points may be, in three families: upright
+    """(type, initial pose, upright, family) of the blocks a cluster's points may be, in four families: upright
     blocks from its layers' outline, upright blocks from its vertical faces, blocks with six degrees of freedom from
-    its largest upward face."""
+    its largest upward face and from its vertical faces."""
     face, normal = _tilted_face(p, tree, cluster, voxel)
     hypotheses = [(t, X0, True, 0) for t, X0 in footprint_hypotheses(p[cluster])]
-    hypotheses += [(t, X0, True, 1) for t, X0 in side_hypotheses(p[cluster], normals(p, tree, cluster), voxel)]
+    n = normals(p, tree, cluster)
+    hypotheses += [(t, X0, True, 1) for t, X0 in side_hypotheses(p[cluster], n, voxel)]
+    hypotheses += [(t, X0, False, _LEANING_SIDES) for t, X0 in tilted_side_hypotheses(p[cluster], n, voxel)]
     if len(face) >= MIN_PATCH:
         hypotheses += [(t, X0, False, 2) for t, X0 in face_hypotheses(face, normal, BLOCK_HEIGHT / 2)]
     return hypotheses
@@ -319,6 +329,36 @@ def _left_over(p: np.ndarray, tree: cKDTree, free: np.ndarray, views, voxel: flo
             found.append(best[1])
             free[cluster[best[2]]] = False
             cluster = cluster[~best[2]]
+
+
+def _without_extras(p: np.ndarray, views, found: list) -> None:
+    """The end of step 3: a block that explains little the blocks touching it do not (a piece of a pile fitted on
+    its own beside a neighbour fitted a little off) is dropped, where those neighbours, refitted jointly to the
+    points of all of them (each point to its nearest box), explain all but fewer than MIN_CLUSTER of what they
+    explained with it, and no camera sees through them. The weakest block is tried first."""
+    for block in sorted(found, key=lambda b: b.points):
+        if not any(b is block for b in found):
+            continue
+        mine = box_sdf(block.X_WB, half_size(block.type), p) < _FIT_REACH_M
+        near = [b for b in found if b is not block and np.any(box_sdf(b.X_WB, half_size(b.type), p[mine])
+                                                               < _FIT_REACH_M)]
+        if not near:
+            continue
+        group = mine | np.any([box_sdf(b.X_WB, half_size(b.type), p) < _FIT_REACH_M for b in near], axis=0)
+        q = p[group]
+        before = np.abs(np.min([box_sdf(b.X_WB, half_size(b.type), q) for b in [block, *near]], axis=0))
+        fitted = [b.X_WB for b in near]
+        for _ in range(2):  # each point to its nearest box, each box refitted to its points
+            distance = np.array([box_sdf(X, half_size(b.type), q) for X, b in zip(fitted, near)])
+            nearest = np.argmin(np.abs(distance), axis=0)
+            fitted = [fit_box(q[nearest == k], half_size(b.type), X, b.upright) for k, (X, b) in
+                      enumerate(zip(fitted, near))]
+        after = np.abs(np.min([box_sdf(X, half_size(b.type), q) for X, b in zip(fitted, near)], axis=0))
+        lost = int(np.count_nonzero(before < EXPLAINED_M)) - int(np.count_nonzero(after < EXPLAINED_M))
+        if lost >= MIN_CLUSTER or any(seen_through(X, b.type, views) > MAX_SEEN_THROUGH for X, b in zip(fitted, near)):
+            continue
+        moved = {id(b): replace(b, X_WB=X) for X, b in zip(fitted, near)}
+        found[:] = [moved.get(id(b), b) for b in found if b is not block]
 
 
 def _with_prior(p: np.ndarray, tree: cKDTree, free: np.ndarray, views, voxel: float, found: list,
@@ -411,6 +451,7 @@ def perceive(views: list[DepthView], config: PerceptionConfig, previous: np.ndar
         tree = cKDTree(p)
         _top_faces(p, tree, free, views, config.voxel_m, found, failures)
         _left_over(p, tree, free, views, config.voxel_m, found)
+        _without_extras(p, views, found)
         if previous is not None:
             _with_prior(p, tree, free, views, config.voxel_m, found, np.argmax(np.asarray(previous)[:, 3:], axis=1))
         failures += _unexplained(p, free, config.voxel_m)

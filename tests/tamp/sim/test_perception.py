@@ -118,6 +118,21 @@ def test_a_bar_under_two_cubes_is_one_bar_not_a_row_of_cubes(rig):
         assert np.linalg.norm(bar.position - [0.6131, 0.1855, 0.025]) < 0.003
 
 
+def test_two_bars_leaning_on_a_cube_are_two_bars(rig):
+    """A bar leans on a cube's top edge and a second bar lies on it: the lower bar shows only its sides, tilted
+    rectangles (without proposals from tilted side faces it was fitted as an upright bar and cubes under the top
+    one), and a piece of it fitted on its own beside it is no block (it was an extra bar; unsaid without a prior)."""
+    pile = scene((LARGE, (0.6217, 0.1663, 0.0591), 0.0, 16.52), (LARGE, (0.6217, 0.1619, 0.11), 0.0, 16.52),
+                 (SMALL, (0.6217, 0.2462, 0.025), 0.0))
+    rendered = rig.render(pile)
+    for seed in (290, 294, 296):
+        seen = perceive(rig.measured(rendered, np.random.default_rng(seed)), rig.config, previous=pile.X())
+        assert seen.ok and [b.type for b in seen.blocks] == [LARGE, LARGE, SMALL], seen.failures
+        lower = seen.blocks[0]
+        assert np.linalg.norm(lower.position - [0.6217, 0.1663, 0.0591]) < 0.01
+        assert not lower.upright and np.degrees(lower.tilt) == pytest.approx(16.5, abs=5.0)
+
+
 def test_a_missing_block_and_an_extra_are_said(rig):
     views = rig.render(TWO)
     expected = np.vstack([TWO.X(), [[0.5, 0.3, 0.025, 1.0, 0.0]]])  # a third block the cameras do not see
