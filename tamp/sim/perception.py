@@ -79,7 +79,9 @@ _VICINITY_M = 0.01  # metres: the points a left-over block's fit is judged on
 _PRIOR_MIN = 20  # points that a block of a type the prior misses must explain (MIN_CLUSTER otherwise)
 _PRIOR_QUALITY = 0.5  # the share of its vicinity's points such a block must explain (MIN_EXPLAINED otherwise)
 _FIT_REACH_M = 0.02  # metres: a hypothesis is fitted to the points this close to its starting box
-_LEANING_SIDES = 3  # the family of hypotheses from vertical faces with six degrees of freedom: leaning blocks only
+# step 3's families of hypotheses (`_best_box` fits the best few of each): upright from a layer's outline, upright
+# from a side face, six degrees of freedom from the largest upward face, and from a vertical face (leaning blocks only)
+_OUTLINE, _SIDES, _TOP_FACE, _LEANING_SIDES = range(4)
 
 
 @dataclass(frozen=True)
@@ -306,12 +308,12 @@ def _cluster_hypotheses(p: np.ndarray, tree: cKDTree, cluster: np.ndarray, voxel
     blocks from its layers' outline, upright blocks from its vertical faces, blocks with six degrees of freedom from
     its largest upward face and from its vertical faces."""
     face, normal = _tilted_face(p, tree, cluster, voxel)
-    hypotheses = [(t, X0, True, 0) for t, X0 in footprint_hypotheses(p[cluster])]
+    hypotheses = [(t, X0, True, _OUTLINE) for t, X0 in footprint_hypotheses(p[cluster])]
     n = normals(p, tree, cluster)
-    hypotheses += [(t, X0, True, 1) for t, X0 in side_hypotheses(p[cluster], n, voxel)]
+    hypotheses += [(t, X0, True, _SIDES) for t, X0 in side_hypotheses(p[cluster], n, voxel)]
     hypotheses += [(t, X0, False, _LEANING_SIDES) for t, X0 in tilted_side_hypotheses(p[cluster], n, voxel)]
     if len(face) >= MIN_PATCH:
-        hypotheses += [(t, X0, False, 2) for t, X0 in face_hypotheses(face, normal, BLOCK_HEIGHT / 2)]
+        hypotheses += [(t, X0, False, _TOP_FACE) for t, X0 in face_hypotheses(face, normal, BLOCK_HEIGHT / 2)]
     return hypotheses
 
 
