@@ -31,11 +31,17 @@ lint: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/mypy
 
-# Everything: lint, then the whole suite (the simulator and slow tests included; see BUILD_NOTES.md
-# for `-m "not sim"` and `-m "not slow"`), on two pytest-xdist workers: the tests of a file that share a
-# module-scoped fixture stay on one worker (tests/conftest.py).
-test: lint
-	$(BIN)/python -m pytest -q -n 2
+# Everything: ruff (a finding stops here), then mypy beside the whole suite (the simulator and slow tests
+# included; see BUILD_NOTES.md for `-m "not sim"` and `-m "not slow"`) on two pytest-xdist workers: the tests
+# of a file that share a module-scoped fixture stay on one worker (tests/conftest.py). mypy is one process and
+# the suite's workers leave a core idle while they start and end, so beside it mypy costs little time; its
+# findings are printed after the suite, and either failing fails `make test`.
+test: $(STAMP)
+	$(BIN)/ruff check .
+	@$(BIN)/mypy > $(VENV)/mypy.log 2>&1 & types=$$!; trap 'kill $$types 2>/dev/null; exit 130' INT TERM; \
+	$(BIN)/python -m pytest -q -n 2; tests=$$?; \
+	wait $$types; typed=$$?; echo "mypy:"; cat $(VENV)/mypy.log; \
+	test $$tests -eq 0 && test $$typed -eq 0
 
 clean:
 	rm -rf $(VENV) *.egg-info
