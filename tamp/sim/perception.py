@@ -51,6 +51,7 @@ from tamp.sim.box_fit import (
     components,
     face_hypotheses,
     fit_box,
+    fit_boxes,
     footprint_hypotheses,
     half_size,
     pose,
@@ -349,12 +350,8 @@ def _without_extras(p: np.ndarray, views, found: list) -> None:
         group = mine | np.any([box_sdf(b.X_WB, half_size(b.type), p) < _FIT_REACH_M for b in near], axis=0)
         q = p[group]
         before = np.abs(np.min([box_sdf(b.X_WB, half_size(b.type), q) for b in [block, *near]], axis=0))
-        fitted = [b.X_WB for b in near]
-        for _ in range(2):  # each point to its nearest box, each box refitted to its points
-            distance = np.array([box_sdf(X, half_size(b.type), q) for X, b in zip(fitted, near)])
-            nearest = np.argmin(np.abs(distance), axis=0)
-            fitted = [fit_box(q[nearest == k], half_size(b.type), X, b.upright) for k, (X, b) in
-                      enumerate(zip(fitted, near))]
+        fitted = fit_boxes(q, [half_size(b.type) for b in near], [b.X_WB for b in near], list(range(len(near))),
+                           [b.upright for b in near])
         after = np.abs(np.min([box_sdf(X, half_size(b.type), q) for X, b in zip(fitted, near)], axis=0))
         lost = int(np.count_nonzero(before < EXPLAINED_M)) - int(np.count_nonzero(after < EXPLAINED_M))
         if lost >= MIN_CLUSTER or any(seen_through(X, b.type, views) > MAX_SEEN_THROUGH for X, b in zip(fitted, near)):
