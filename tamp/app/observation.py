@@ -28,12 +28,13 @@ as it does with noise of a known sigma (`tamp.app.faults`).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from itertools import combinations
 from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
 from tamp.app.faults import STOP_MARGIN_SIGMAS, Faults
-from tamp.planning.vocabulary import TYPE_NAMES, PickPlace
+from tamp.planning.vocabulary import BLOCK_SIZES, TYPE_NAMES, PickPlace
 
 if TYPE_CHECKING:  # Drake loads when a loop runs
     from tamp.sim.cameras import CameraRig
@@ -49,7 +50,10 @@ SURPRISE_M = 0.05  # metres: a block seen this far from where it was expected is
 AS_WELL = 1.02  # the prediction's scene explains the depth as well as the one seen when its residual is this close
 REFIT_M = 0.02  # metres: a block seen this far from the prediction is fitted again from it in `_as_expected`
 #   (a cube split off a bar's far end shifts the bar by the cube's length)
+APART_M = 0.003  # metres: blocks seen this far or less in each other are moved apart (blocks that touch, each fitted
+#   within a millimetre or so); a deeper overlap is no fitting noise and is left to the planner's checks
 MIN_POINTS = 30  # fused points near where a block is expected, for it to be fitted there (a 5 cm face holds ~150)
+_CLEARANCE_M = 0.0002  # metres: blocks moved apart (`APART_M`) are left this far apart
 SAME_BLOCK_M = 0.01  # metres: two estimates of a block nothing moved that differ more are a failure, not noise
 MARGIN_OF_EPS = 0.5  # the learned stop margin stays below this share of eps (a loop that sees badly still stops)
 
@@ -189,6 +193,8 @@ class CameraObserver:
 
         from tamp.sim.skill import Scene
 
+        poses = _apart(self.types, poses)
+        X[:, :3] = [p[:3, 3] for p in poses]
         observed = Scene(self.types.copy(), [RigidTransform(p) for p in poses])  # type: ignore[arg-type]  # stubs
         self._learn(X, set(moved) | unseen | self.unseen)
         self.last, self.scene, self.unseen = X, observed, unseen
@@ -206,24 +212,35 @@ class CameraObserver:
 
     def _as_expected(self, views, X: np.ndarray, poses: list[np.ndarray], unseen: set[int], expected: np.ndarray):
         """(X, poses, unseen, what was done, in words) with each block not seen or seen `REFIT_M` from `expected`
-        fitted to the cloud from where `expected` has it (`box_fit.fit_box`), if that scene explains the depth
-        images as well as the one seen (`_depth_residual_m`, within `AS_WELL`): a cube and a bar lying end to end
-        look alike however they are split, and the prediction says which split the action made. None otherwise."""
-        from tamp.sim.box_fit import fit_box, half_size
+        fitted to the cloud from where `expected` has it, if that scene explains the depth images as well as the one
+        seen (`_depth_residual_m`, within `AS_WELL`): a cube and a bar lying end to end look alike however they are
+        split, and the prediction says which split the action made. None otherwise. The blocks are fitted jointly
+        with the blocks around them, each point to its nearest box (`box_fit.fit_boxes`), so that blocks that touch
+        do not pull each other into one another; each upright (x, y, yaw), unless its points say it leans (with six
+        degrees of freedom it tilts more than `box_fit.TILTED_RAD`: a bar set down on a cube's end, its far end on
+        the table)."""
+        from tamp.sim.box_fit import fit_boxes, half_size, leans
         from tamp.sim.perception import fused_cloud
 
         off = np.linalg.norm(X[:, :3] - expected[:, :3], axis=1)
-        odd = sorted(i for i in range(len(X)) if i in unseen or off[i] >= REFIT_M)
+        inside = {k for a, b, depth, _ in _overlaps(self.types, poses) if depth > APART_M for k in (a, b)}
+        odd = sorted({i for i in range(len(X)) if i in unseen or off[i] >= REFIT_M} | inside)
+        if not odd:
+            return None
         cloud = fused_cloud(views, self.rig.config.voxel_m)
-        X_alt, poses_alt = X.copy(), list(poses)
-        for i in odd:
-            half = half_size(int(self.types[i]))
-            near = cloud[np.linalg.norm(cloud - expected[i, :3], axis=1) < np.linalg.norm(half) + 0.01]
-            if len(near) < MIN_POINTS:
-                return None
-            poses_alt[i] = fit_box(near, half, self._pose(i, expected[i, :3]), upright=True)
-            X_alt[i, :3] = poses_alt[i][:3, 3]
-        if not odd or _refused(X_alt) is not None:
+        halves = [half_size(int(t)) for t in self.types]
+        near = [np.linalg.norm(cloud - expected[i, :3], axis=1) < np.linalg.norm(halves[i]) + 0.01 for i in odd]
+        if min(np.count_nonzero(m) for m in near) < MIN_POINTS:
+            return None
+        points = cloud[np.any(near, axis=0)]
+        starts = [self._pose(i, expected[i, :3]) if i in odd else p for i, p in enumerate(poses)]
+        six = fit_boxes(points, halves, starts, odd, [False] * len(X))
+        leaning = {i for i in odd if leans(six[i])}
+        poses_alt = fit_boxes(points, halves, [six[i] if i in leaning else p for i, p in enumerate(starts)], odd,
+                              [i not in leaning for i in range(len(X))])
+        X_alt = X.copy()
+        X_alt[odd, :3] = [poses_alt[i][:3, 3] for i in odd]
+        if _refused(X_alt) is not None:
             return None
         if self._depth_residual_m(views, poses_alt) > AS_WELL * self._depth_residual_m(views, poses):
             return None
@@ -313,6 +330,40 @@ class CameraObserver:
 
         cloud = fused_cloud(views, self.rig.config.voxel_m)
         self.timeline.observed(cloud, [(b.type, b.X_WB) for b in seen.blocks])
+
+
+def _overlaps(types: np.ndarray, poses: list[np.ndarray]) -> list[tuple[int, int, float, np.ndarray]]:
+    """(a, b, metres, unit axis from a towards b) of each pair of blocks seen in each other: how far b must move
+    along the axis to leave a (`skill.penetration`)."""
+    from pydrake.math import RigidTransform
+
+    from tamp.sim.skill import penetration
+
+    X_WB = [RigidTransform(p) for p in poses]  # type: ignore[arg-type]  # pydrake stubs
+    sizes = [np.array(BLOCK_SIZES[int(t)]) for t in types]
+    pairs = [(a, b, *penetration(X_WB[a], sizes[a], X_WB[b], sizes[b])) for a, b in combinations(range(len(poses)), 2)]
+    return [pair for pair in pairs if pair[2] > 0.0]
+
+
+def _apart(types: np.ndarray, poses: list[np.ndarray]) -> list[np.ndarray]:
+    """`poses` with blocks seen up to `APART_M` in each other moved apart along their axis of least overlap, to
+    `_CLEARANCE_M`: blocks that touch are each fitted within a millimetre or so, and the kinematic check takes any
+    overlap for a collision of every action. Of two blocks one above the other (the axis within 60 degrees of
+    vertical), the upper one moves; else each moves half."""
+    poses = [np.array(p, dtype=float) for p in poses]
+    for _ in range(3):  # a block moved from one neighbour may reach another
+        pairs = [pair for pair in _overlaps(types, poses) if pair[2] <= APART_M]
+        if not pairs:
+            break
+        for a, b, depth, axis in pairs:
+            step = (depth + _CLEARANCE_M) * axis
+            if abs(axis[2]) > 0.5:
+                upper, sign = (b, 1.0) if axis[2] > 0 else (a, -1.0)
+                poses[upper][:3, 3] += sign * step
+            else:
+                poses[a][:3, 3] -= step / 2
+                poses[b][:3, 3] += step / 2
+    return poses
 
 
 def _refused(X: np.ndarray) -> str | None:
