@@ -17,7 +17,9 @@ The camera observer keeps the blocks' identities by assigning each perception to
   the rig observes again, up to `LOOKS` more times (new sensor noise);
 - if the count is still wrong, the loop plans with n blocks and says so: a block not seen is planned at where the
   Dynamics Model predicts it after the action (its last estimate when nothing moved it), an estimate left over
-  is left out.
+  is left out (`_as_expected` first tries the prediction's split of the points);
+- blocks seen up to `APART_M` in each other are moved apart (`_apart`): the kinematic check would take the
+  overlap of two touching blocks' fits for a collision of every action.
 
 It also learns its own error from what it measures, not from an assumed sigma: a block the action did not pick
 or place (or a scene observed twice) should be seen where it was seen before, so the difference of the two
@@ -160,7 +162,8 @@ class CameraObserver:
         """Render, perceive (identities from the last estimates), look again while perception says a failure, and
         fill in what is still missing from `expected` (the state predicted after the action), saying so. A scene
         the planner would refuse (`check_scene`: blocks in each other, floating, out of reach) is said too; if every
-        look gives one, the loop plans from `expected`, else from its last observation."""
+        look gives one, the loop plans from `expected`, else from its last observation. Blocks fitted a little into
+        each other are moved apart (`_apart`)."""
         from tamp.sim.perception import perceive
 
         said: list[str] = []
