@@ -214,19 +214,20 @@ class CameraObserver:
         return pose
 
     def _as_expected(self, views, X: np.ndarray, poses: list[np.ndarray], unseen: set[int], expected: np.ndarray):
-        """(X, poses, unseen, what was done, in words) with each block not seen or seen `REFIT_M` from `expected`
-        fitted to the cloud from where `expected` has it, if that scene explains the depth images as well as the one
-        seen (`_depth_residual_m`, within `AS_WELL`): a cube and a bar lying end to end look alike however they are
-        split, and the prediction says which split the action made. None otherwise. The blocks are fitted jointly
-        with the blocks around them, each point to its nearest box (`box_fit.fit_boxes`), so that blocks that touch
-        do not pull each other into one another; each upright (x, y, yaw), unless its points say it leans (with six
-        degrees of freedom it tilts more than `box_fit.TILTED_RAD`: a bar set down on a cube's end, its far end on
-        the table)."""
+        """(X, poses, unseen, what was done, in words) with each block not seen, seen `REFIT_M` from `expected` or
+        seen more than `APART_M` inside another block fitted to the cloud from where `expected` has it, if that scene
+        explains the depth images as well as the one seen (`_depth_residual_m`, within `AS_WELL`): a cube and a bar
+        lying end to end look alike however they are split, and the prediction says which split the action made.
+        None otherwise. The blocks are fitted jointly with the blocks around them, each point to its nearest box
+        (`box_fit.fit_boxes`), so that blocks that touch do not pull each other into one another; each upright (x, y,
+        yaw), unless its points say it leans (with six degrees of freedom it tilts more than `box_fit.TILTED_RAD`: a
+        bar set down on a cube's end, its far end on the table)."""
         from tamp.sim.box_fit import fit_boxes, half_size, leans
         from tamp.sim.perception import fused_cloud
 
         off = np.linalg.norm(X[:, :3] - expected[:, :3], axis=1)
-        inside = {k for a, b, depth, _ in _overlaps(self.types, poses) if depth > APART_M for k in (a, b)}
+        inside = {k for a, b in combinations(range(len(X)), 2) if _overlap(self.types, poses, a, b)[0] > APART_M
+                  for k in (a, b)}
         odd = sorted({i for i in range(len(X)) if i in unseen or off[i] >= REFIT_M} | inside)
         if not odd:
             return None
@@ -335,17 +336,15 @@ class CameraObserver:
         self.timeline.observed(cloud, [(b.type, b.X_WB) for b in seen.blocks])
 
 
-def _overlaps(types: np.ndarray, poses: list[np.ndarray]) -> list[tuple[int, int, float, np.ndarray]]:
-    """(a, b, metres, unit axis from a towards b) of each pair of blocks seen in each other: how far b must move
-    along the axis to leave a (`skill.penetration`)."""
+def _overlap(types: np.ndarray, poses: list[np.ndarray], a: int, b: int) -> tuple[float, np.ndarray]:
+    """(metres, unit axis from a towards b): how far block b must move along the axis to leave block a (0 or less:
+    they do not overlap; `skill.penetration`)."""
     from pydrake.math import RigidTransform
 
     from tamp.sim.skill import penetration
 
-    X_WB = [RigidTransform(p) for p in poses]  # type: ignore[arg-type]  # pydrake stubs
-    sizes = [np.array(BLOCK_SIZES[int(t)]) for t in types]
-    pairs = [(a, b, *penetration(X_WB[a], sizes[a], X_WB[b], sizes[b])) for a, b in combinations(range(len(poses)), 2)]
-    return [pair for pair in pairs if pair[2] > 0.0]
+    return penetration(RigidTransform(poses[a]), BLOCK_SIZES[int(types[a])],  # type: ignore[arg-type]  # stubs
+                       RigidTransform(poses[b]), BLOCK_SIZES[int(types[b])])  # type: ignore[arg-type]
 
 
 def _apart(types: np.ndarray, poses: list[np.ndarray]) -> list[np.ndarray]:
@@ -355,10 +354,11 @@ def _apart(types: np.ndarray, poses: list[np.ndarray]) -> list[np.ndarray]:
     vertical), the upper one moves; else each moves half."""
     poses = [np.array(p, dtype=float) for p in poses]
     for _ in range(3):  # a block moved from one neighbour may reach another
-        pairs = [pair for pair in _overlaps(types, poses) if pair[2] <= APART_M]
-        if not pairs:
-            break
-        for a, b, depth, axis in pairs:
+        moved = False
+        for a, b in combinations(range(len(poses)), 2):
+            depth, axis = _overlap(types, poses, a, b)
+            if not 0.0 < depth <= APART_M:
+                continue
             step = (depth + _CLEARANCE_M) * axis
             if abs(axis[2]) > 0.5:
                 upper, sign = (b, 1.0) if axis[2] > 0 else (a, -1.0)
@@ -366,6 +366,9 @@ def _apart(types: np.ndarray, poses: list[np.ndarray]) -> list[np.ndarray]:
             else:
                 poses[a][:3, 3] -= step / 2
                 poses[b][:3, 3] += step / 2
+            moved = True
+        if not moved:
+            break
     return poses
 
 

@@ -220,3 +220,20 @@ def test_a_cube_and_a_bar_end_to_end_are_planned_as_the_action_split_them_and_no
     assert np.abs(seen.X[:, :3] - X_true[:, :3]).max() < 0.002
     assert seen.scene is not None and not boxes_overlap(seen.scene.X_WB[0], truth.size(0), seen.scene.X_WB[1],
                                                         truth.size(1))
+
+
+def test_blocks_seen_a_millimetre_in_each_other_are_planned_apart():
+    """Blocks that touch are each fitted within a millimetre or so; the kinematic check would take their overlap for
+    a collision of every action. Side by side, each moves half; one on the other, the upper one moves up."""
+    from tamp.app.observation import _apart
+
+    types = np.array([SMALL, LARGE, SMALL])
+    poses = [RigidTransform(p).GetAsMatrix4() for p in ([0.6, 0.0, 0.025], [0.6, 0.149, 0.025], [0.6, 0.0, 0.0745])]
+    apart = _apart(types, poses)
+    sizes = [np.array([0.05, 0.05, 0.05]), np.array([0.05, 0.25, 0.05]), np.array([0.05, 0.05, 0.05])]
+    assert not any(boxes_overlap(RigidTransform(apart[a]), sizes[a], RigidTransform(apart[b]), sizes[b], margin=0.0)
+                   for a, b in [(0, 1), (0, 2), (1, 2)])
+    assert apart[0][1, 3] == pytest.approx(-0.0006, abs=1e-4) and apart[1][1, 3] == pytest.approx(0.1496, abs=1e-4)
+    assert apart[2][2, 3] == pytest.approx(0.0752, abs=1e-4)  # lifted: the table holds the cube under it
+    far = [RigidTransform(p).GetAsMatrix4() for p in ([0.6, 0.0, 0.025], [0.6, 0.14, 0.025])]  # 1 cm: no fitting noise
+    assert all(np.array_equal(a, b) for a, b in zip(_apart(types[:2], far), far))
