@@ -10,8 +10,10 @@ An observation (`Observed`) is all the planner, the kinematic check and the skil
 in the blocks' identities, and with the cameras the blocks' perceived poses (`Observed.scene`, orientations
 included). The world executes in its own truth; the observer is handed the true scene only to render it.
 
-The camera observer keeps the blocks' identities by assigning each perception to its last estimates
-(`tamp.sim.perception.perceive`'s `previous`), and never passes a failure silently:
+The camera observer keeps the blocks' identities by assigning each perception to where it expects the blocks
+(`tamp.sim.perception.perceive`'s `previous`): its last estimates, moved as the Dynamics Model predicts the action
+moved them (a block the action carried far is not taken for a neighbour a push moved a little). It never passes a
+failure silently:
 - a block not found, two blocks merged into one estimate, a ghost, a block of the wrong type, points no block
   explains or a block seen `SURPRISE_M` from where the action should have left it are said (`Observed.said`), and
   the rig observes again, up to `LOOKS` more times (new sensor noise);
@@ -159,7 +161,7 @@ class CameraObserver:
         return self._observe(scene, self.last)
 
     def _observe(self, scene: Scene, expected: np.ndarray, moved: frozenset[int] | set[int] = frozenset()) -> Observed:
-        """Render, perceive (identities from the last estimates), look again while perception says a failure, and
+        """Render, perceive (identities from `expected`), look again while perception says a failure, and
         fill in what is still missing from `expected` (the state predicted after the action), saying so. A scene
         the planner would refuse (`check_scene`: blocks in each other, floating, out of reach) is said too; if every
         look gives one, the loop plans from `expected`, else from its last observation. Blocks fitted a little into
@@ -170,7 +172,7 @@ class CameraObserver:
         best: tuple[int, Perception, list[str], list] | None = None
         for look in range(1 + self.looks):
             views = self.rig.observe(scene, self.rng)
-            seen = perceive(views, self.rig.config, previous=self.last)
+            seen = perceive(views, self.rig.config, previous=expected)
             problems = [f.reason for f in seen.failures] + self._wrong_types(seen) + self._surprises(seen, expected)
             refused = _refused(self._state(seen, expected)[0])
             self._show(views, seen)

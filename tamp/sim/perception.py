@@ -29,7 +29,7 @@ The pipeline (numpy and scipy, no renderer; `tamp.sim.cameras` renders the views
    fitted to pieces of its top (its ends hidden), a block of a type still missing among the points left. Such
    blocks are marked `prior`. What the points do not resolve stays a disagreement and is said in step 5; the
    prior never adds a block the points do not show;
-5. identities: the estimates assigned to `previous` (the last estimates, or the problem's scene) by
+5. identities: the estimates assigned to `previous` (where the blocks are expected, or the problem's scene) by
    `scipy.optimize.linear_sum_assignment` on distance and type, since goals name blocks. A block of `previous`
    with no estimate is said to be missing, an estimate with none an extra; points no block explains are said.
 """
@@ -429,7 +429,7 @@ def assign(blocks: list[BlockEstimate], previous: np.ndarray) -> tuple[list[Bloc
     matched = dict(zip(cols.tolist(), rows.tolist()))
     order = sorted(range(len(blocks)), key=lambda c: matched.get(c, len(previous) + c))
     failures = [PerceptionFailure(Failure.MISSING, f"block {i} ({TYPE_NAMES[int(np.argmax(previous[i, 3:]))]}, "
-                                  f"last at {_at_xyz(previous[i, :3])} m) not seen", i)
+                                  f"expected at {_at_xyz(previous[i, :3])} m) not seen", i)
                 for i in range(len(previous)) if i not in set(rows.tolist())]
     failures += [PerceptionFailure(Failure.EXTRA, f"a {TYPE_NAMES[blocks[c].type]} at {_at_xyz(blocks[c].position)} m "
                                    "matches no block") for c in order if c not in matched]
