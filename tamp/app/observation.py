@@ -10,14 +10,18 @@ An observation (`Observed`) is all the planner, the kinematic check and the skil
 in the blocks' identities, and with the cameras the blocks' perceived poses (`Observed.scene`, orientations
 included). The world executes in its own truth; the observer is handed the true scene only to render it.
 
-The camera observer keeps the blocks' identities by assigning each perception to its last estimates
-(`tamp.sim.perception.perceive`'s `previous`), and never passes a failure silently:
+The camera observer keeps the blocks' identities by assigning each perception to where it expects the blocks
+(`tamp.sim.perception.perceive`'s `previous`): its last estimates, moved as the Dynamics Model predicts the action
+moved them (a block the action carried far is not taken for a neighbour a push moved a little). It never passes a
+failure silently:
 - a block not found, two blocks merged into one estimate, a ghost, a block of the wrong type, points no block
   explains or a block seen `SURPRISE_M` from where the action should have left it are said (`Observed.said`), and
   the rig observes again, up to `LOOKS` more times (new sensor noise);
 - if the count is still wrong, the loop plans with n blocks and says so: a block not seen is planned at where the
   Dynamics Model predicts it after the action (its last estimate when nothing moved it), an estimate left over
-  is left out.
+  is left out (`_as_expected` first tries the prediction's split of the points);
+- blocks seen up to `APART_M` in each other are moved apart (`_apart`): the kinematic check would take the
+  overlap of two touching blocks' fits for a collision of every action.
 
 It also learns its own error from what it measures, not from an assumed sigma: a block the action did not pick
 or place (or a scene observed twice) should be seen where it was seen before, so the difference of the two
@@ -28,12 +32,13 @@ as it does with noise of a known sigma (`tamp.app.faults`).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from itertools import combinations
 from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
 from tamp.app.faults import STOP_MARGIN_SIGMAS, Faults
-from tamp.planning.vocabulary import TYPE_NAMES, PickPlace
+from tamp.planning.vocabulary import BLOCK_SIZES, TYPE_NAMES, PickPlace
 
 if TYPE_CHECKING:  # Drake loads when a loop runs
     from tamp.sim.cameras import CameraRig
@@ -49,7 +54,10 @@ SURPRISE_M = 0.05  # metres: a block seen this far from where it was expected is
 AS_WELL = 1.02  # the prediction's scene explains the depth as well as the one seen when its residual is this close
 REFIT_M = 0.02  # metres: a block seen this far from the prediction is fitted again from it in `_as_expected`
 #   (a cube split off a bar's far end shifts the bar by the cube's length)
+APART_M = 0.003  # metres: blocks seen this far or less in each other are moved apart (blocks that touch, each fitted
+#   within a millimetre or so); a deeper overlap is no fitting noise and is left to the planner's checks
 MIN_POINTS = 30  # fused points near where a block is expected, for it to be fitted there (a 5 cm face holds ~150)
+_CLEARANCE_M = 0.0002  # metres: blocks moved apart (`APART_M`) are left this far apart
 SAME_BLOCK_M = 0.01  # metres: two estimates of a block nothing moved that differ more are a failure, not noise
 MARGIN_OF_EPS = 0.5  # the learned stop margin stays below this share of eps (a loop that sees badly still stops)
 
@@ -153,17 +161,18 @@ class CameraObserver:
         return self._observe(scene, self.last)
 
     def _observe(self, scene: Scene, expected: np.ndarray, moved: frozenset[int] | set[int] = frozenset()) -> Observed:
-        """Render, perceive (identities from the last estimates), look again while perception says a failure, and
+        """Render, perceive (identities from `expected`), look again while perception says a failure, and
         fill in what is still missing from `expected` (the state predicted after the action), saying so. A scene
         the planner would refuse (`check_scene`: blocks in each other, floating, out of reach) is said too; if every
-        look gives one, the loop plans from `expected`, else from its last observation."""
+        look gives one, the loop plans from `expected`, else from its last observation. Blocks fitted a little into
+        each other are moved apart (`_apart`)."""
         from tamp.sim.perception import perceive
 
         said: list[str] = []
         best: tuple[int, Perception, list[str], list] | None = None
         for look in range(1 + self.looks):
             views = self.rig.observe(scene, self.rng)
-            seen = perceive(views, self.rig.config, previous=self.last)
+            seen = perceive(views, self.rig.config, previous=expected)
             problems = [f.reason for f in seen.failures] + self._wrong_types(seen) + self._surprises(seen, expected)
             refused = _refused(self._state(seen, expected)[0])
             self._show(views, seen)
@@ -189,6 +198,8 @@ class CameraObserver:
 
         from tamp.sim.skill import Scene
 
+        poses = _apart(self.types, poses)
+        X[:, :3] = [p[:3, 3] for p in poses]
         observed = Scene(self.types.copy(), [RigidTransform(p) for p in poses])  # type: ignore[arg-type]  # stubs
         self._learn(X, set(moved) | unseen | self.unseen)
         self.last, self.scene, self.unseen = X, observed, unseen
@@ -205,25 +216,37 @@ class CameraObserver:
         return pose
 
     def _as_expected(self, views, X: np.ndarray, poses: list[np.ndarray], unseen: set[int], expected: np.ndarray):
-        """(X, poses, unseen, what was done, in words) with each block not seen or seen `REFIT_M` from `expected`
-        fitted to the cloud from where `expected` has it (`box_fit.fit_box`), if that scene explains the depth
-        images as well as the one seen (`_depth_residual_m`, within `AS_WELL`): a cube and a bar lying end to end
-        look alike however they are split, and the prediction says which split the action made. None otherwise."""
-        from tamp.sim.box_fit import fit_box, half_size
+        """(X, poses, unseen, what was done, in words) with each block not seen, seen `REFIT_M` from `expected` or
+        seen more than `APART_M` inside another block fitted to the cloud from where `expected` has it, if that scene
+        explains the depth images as well as the one seen (`_depth_residual_m`, within `AS_WELL`): a cube and a bar
+        lying end to end look alike however they are split, and the prediction says which split the action made.
+        None otherwise. The blocks are fitted jointly with the blocks around them, each point to its nearest box
+        (`box_fit.fit_boxes`), so that blocks that touch do not pull each other into one another; each upright (x, y,
+        yaw), unless its points say it leans (with six degrees of freedom it tilts more than `box_fit.TILTED_RAD`: a
+        bar set down on a cube's end, its far end on the table)."""
+        from tamp.sim.box_fit import fit_boxes, half_size, leans
         from tamp.sim.perception import fused_cloud
 
         off = np.linalg.norm(X[:, :3] - expected[:, :3], axis=1)
-        odd = sorted(i for i in range(len(X)) if i in unseen or off[i] >= REFIT_M)
+        inside = {k for a, b in combinations(range(len(X)), 2) if _overlap(self.types, poses, a, b)[0] > APART_M
+                  for k in (a, b)}
+        odd = sorted({i for i in range(len(X)) if i in unseen or off[i] >= REFIT_M} | inside)
+        if not odd:
+            return None
         cloud = fused_cloud(views, self.rig.config.voxel_m)
-        X_alt, poses_alt = X.copy(), list(poses)
-        for i in odd:
-            half = half_size(int(self.types[i]))
-            near = cloud[np.linalg.norm(cloud - expected[i, :3], axis=1) < np.linalg.norm(half) + 0.01]
-            if len(near) < MIN_POINTS:
-                return None
-            poses_alt[i] = fit_box(near, half, self._pose(i, expected[i, :3]), upright=True)
-            X_alt[i, :3] = poses_alt[i][:3, 3]
-        if not odd or _refused(X_alt) is not None:
+        halves = [half_size(int(t)) for t in self.types]
+        near = [np.linalg.norm(cloud - expected[i, :3], axis=1) < np.linalg.norm(halves[i]) + 0.01 for i in odd]
+        if min(np.count_nonzero(m) for m in near) < MIN_POINTS:
+            return None
+        points = cloud[np.any(near, axis=0)]
+        starts = [self._pose(i, expected[i, :3]) if i in odd else p for i, p in enumerate(poses)]
+        six = fit_boxes(points, halves, starts, odd, [False] * len(X))
+        leaning = {i for i in odd if leans(six[i])}
+        poses_alt = fit_boxes(points, halves, [six[i] if i in leaning else p for i, p in enumerate(starts)], odd,
+                              [i not in leaning for i in range(len(X))])
+        X_alt = X.copy()
+        X_alt[odd, :3] = [poses_alt[i][:3, 3] for i in odd]
+        if _refused(X_alt) is not None:
             return None
         if self._depth_residual_m(views, poses_alt) > AS_WELL * self._depth_residual_m(views, poses):
             return None
@@ -313,6 +336,42 @@ class CameraObserver:
 
         cloud = fused_cloud(views, self.rig.config.voxel_m)
         self.timeline.observed(cloud, [(b.type, b.X_WB) for b in seen.blocks])
+
+
+def _overlap(types: np.ndarray, poses: list[np.ndarray], a: int, b: int) -> tuple[float, np.ndarray]:
+    """(metres, unit axis from a towards b): how far block b must move along the axis to leave block a (0 or less:
+    they do not overlap; `skill.penetration`)."""
+    from pydrake.math import RigidTransform
+
+    from tamp.sim.skill import penetration
+
+    return penetration(RigidTransform(poses[a]), BLOCK_SIZES[int(types[a])],  # type: ignore[arg-type]  # stubs
+                       RigidTransform(poses[b]), BLOCK_SIZES[int(types[b])])  # type: ignore[arg-type]
+
+
+def _apart(types: np.ndarray, poses: list[np.ndarray]) -> list[np.ndarray]:
+    """`poses` with blocks seen up to `APART_M` in each other moved apart along their axis of least overlap, to
+    `_CLEARANCE_M`: blocks that touch are each fitted within a millimetre or so, and the kinematic check takes any
+    overlap for a collision of every action. Of two blocks one above the other (the axis within 60 degrees of
+    vertical), the upper one moves; else each moves half."""
+    poses = [np.array(p, dtype=float) for p in poses]
+    for _ in range(3):  # a block moved from one neighbour may reach another
+        moved = False
+        for a, b in combinations(range(len(poses)), 2):
+            depth, axis = _overlap(types, poses, a, b)
+            if not 0.0 < depth <= APART_M:
+                continue
+            step = (depth + _CLEARANCE_M) * axis
+            if abs(axis[2]) > 0.5:
+                upper, sign = (b, 1.0) if axis[2] > 0 else (a, -1.0)
+                poses[upper][:3, 3] += sign * step
+            else:
+                poses[a][:3, 3] -= step / 2
+                poses[b][:3, 3] += step / 2
+            moved = True
+        if not moved:
+            break
+    return poses
 
 
 def _refused(X: np.ndarray) -> str | None:

@@ -85,6 +85,25 @@ def fit_box(points: np.ndarray, half: np.ndarray, X0: np.ndarray, upright: bool,
     return X
 
 
+def leans(X_WB: np.ndarray) -> bool:
+    """Whether the box at X_WB tilts more than TILTED_RAD (none of its axes that close to the world's z)."""
+    return bool(np.abs(X_WB[2, :3]).max() < np.cos(TILTED_RAD))
+
+
+def fit_boxes(points: np.ndarray, halves: list[np.ndarray], poses: list[np.ndarray], moving: list[int],
+              upright: list[bool], rounds: int = 2) -> list[np.ndarray]:
+    """`poses` with the boxes `moving` refitted jointly to `points`: each point goes to its nearest box (of all of
+    them), each moving box is fitted to its points (`fit_box`, `upright[k]`), `rounds` times, so that the points of
+    blocks that touch pull only their own box."""
+    poses = list(poses)
+    for _ in range(rounds):
+        distance = np.array([box_sdf(X, half, points) for X, half in zip(poses, halves)])
+        nearest = np.argmin(np.abs(distance), axis=0)
+        for k in moving:
+            poses[k] = fit_box(points[nearest == k], halves[k], poses[k], upright[k])
+    return poses
+
+
 @cache
 def _face_samples(block_type: int) -> tuple[np.ndarray, np.ndarray]:
     """Points on block_type's faces and their faces' outward normals (box frame), _SAMPLE_STEP_M apart and
@@ -286,6 +305,6 @@ def orientation_error(R_est: np.ndarray, R_true: np.ndarray, block_type: int) ->
     return float(np.arccos(np.clip((traces.max() - 1.0) / 2.0, -1.0, 1.0)))
 
 
-__all__ = ["MIN_PATCH", "TILTED_RAD", "box_sdf", "components", "face_hypotheses", "fit_box", "footprint_hypotheses",
-           "half_size", "min_area_rectangle", "orientation_error", "pose", "seen_through", "side_hypotheses",
-           "symmetries", "tilted_side_hypotheses", "vertical_faces"]
+__all__ = ["MIN_PATCH", "TILTED_RAD", "box_sdf", "components", "face_hypotheses", "fit_box", "fit_boxes",
+           "footprint_hypotheses", "half_size", "leans", "min_area_rectangle", "orientation_error", "pose",
+           "seen_through", "side_hypotheses", "symmetries", "tilted_side_hypotheses", "vertical_faces"]

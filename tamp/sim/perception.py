@@ -29,7 +29,7 @@ The pipeline (numpy and scipy, no renderer; `tamp.sim.cameras` renders the views
    fitted to pieces of its top (its ends hidden), a block of a type still missing among the points left. Such
    blocks are marked `prior`. What the points do not resolve stays a disagreement and is said in step 5; the
    prior never adds a block the points do not show;
-5. identities: the estimates assigned to `previous` (the last estimates, or the problem's scene) by
+5. identities: the estimates assigned to `previous` (where the blocks are expected, or the problem's scene) by
    `scipy.optimize.linear_sum_assignment` on distance and type, since goals name blocks. A block of `previous`
    with no estimate is said to be missing, an estimate with none an extra; points no block explains are said.
 """
@@ -51,6 +51,7 @@ from tamp.sim.box_fit import (
     components,
     face_hypotheses,
     fit_box,
+    fit_boxes,
     footprint_hypotheses,
     half_size,
     pose,
@@ -349,12 +350,8 @@ def _without_extras(p: np.ndarray, views, found: list) -> None:
         group = mine | np.any([box_sdf(b.X_WB, half_size(b.type), p) < _FIT_REACH_M for b in near], axis=0)
         q = p[group]
         before = np.abs(np.min([box_sdf(b.X_WB, half_size(b.type), q) for b in [block, *near]], axis=0))
-        fitted = [b.X_WB for b in near]
-        for _ in range(2):  # each point to its nearest box, each box refitted to its points
-            distance = np.array([box_sdf(X, half_size(b.type), q) for X, b in zip(fitted, near)])
-            nearest = np.argmin(np.abs(distance), axis=0)
-            fitted = [fit_box(q[nearest == k], half_size(b.type), X, b.upright) for k, (X, b) in
-                      enumerate(zip(fitted, near))]
+        fitted = fit_boxes(q, [half_size(b.type) for b in near], [b.X_WB for b in near], list(range(len(near))),
+                           [b.upright for b in near])
         after = np.abs(np.min([box_sdf(X, half_size(b.type), q) for X, b in zip(fitted, near)], axis=0))
         lost = int(np.count_nonzero(before < EXPLAINED_M)) - int(np.count_nonzero(after < EXPLAINED_M))
         if lost >= MIN_CLUSTER or any(seen_through(X, b.type, views) > MAX_SEEN_THROUGH for X, b in zip(fitted, near)):
@@ -432,7 +429,7 @@ def assign(blocks: list[BlockEstimate], previous: np.ndarray) -> tuple[list[Bloc
     matched = dict(zip(cols.tolist(), rows.tolist()))
     order = sorted(range(len(blocks)), key=lambda c: matched.get(c, len(previous) + c))
     failures = [PerceptionFailure(Failure.MISSING, f"block {i} ({TYPE_NAMES[int(np.argmax(previous[i, 3:]))]}, "
-                                  f"last at {_at_xyz(previous[i, :3])} m) not seen", i)
+                                  f"expected at {_at_xyz(previous[i, :3])} m) not seen", i)
                 for i in range(len(previous)) if i not in set(rows.tolist())]
     failures += [PerceptionFailure(Failure.EXTRA, f"a {TYPE_NAMES[blocks[c].type]} at {_at_xyz(blocks[c].position)} m "
                                    "matches no block") for c in order if c not in matched]

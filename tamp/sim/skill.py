@@ -309,15 +309,23 @@ def boxes_overlap(X_WA: RigidTransform, size_A, X_WB: RigidTransform, size_B, ma
     """Whether two boxes (sizes in metres, centred at their poses) interpenetrate by more than `margin`
     along every separating axis (the 15 of the separating axis theorem): then any collision checker that
     knows these boxes reports a collision. A cheap, conservative test: False does not mean free."""
+    return penetration(X_WA, size_A, X_WB, size_B)[0] > margin
+
+
+def penetration(X_WA: RigidTransform, size_A, X_WB: RigidTransform, size_B) -> tuple[float, np.ndarray]:
+    """(metres, unit axis from A towards B): how far box B must move along the axis (of the 15 of the separating
+    axis theorem, the one of least overlap) to leave box A; depth 0 or less when a separating axis exists."""
     h_A, h_B = np.asarray(size_A, dtype=float) / 2, np.asarray(size_B, dtype=float) / 2
     T = np.asarray(X_WB.translation()) - np.asarray(X_WA.translation())
     if np.linalg.norm(T) >= np.linalg.norm(h_A) + np.linalg.norm(h_B):  # their bounding spheres do not meet
-        return False
+        return 0.0, np.zeros(3)
     R_A, R_B = X_WA.rotation().matrix(), X_WB.rotation().matrix()
     cross = np.einsum("klm,il,jm->ijk", _LEVI_CIVITA, R_A.T, R_B.T).reshape(9, 3)  # every edge pair's axis
     axes = np.concatenate([R_A.T, R_B.T, cross])
     norms = np.linalg.norm(axes, axis=1)
     axes = axes[norms > 1e-9] / norms[norms > 1e-9, None]  # parallel edges give no axis of their own
-    reach = np.abs(axes @ R_A) @ h_A + np.abs(axes @ R_B) @ h_B
-    return bool(np.all(np.abs(axes @ T) < reach - margin))
+    along = axes @ T
+    overlap = np.abs(axes @ R_A) @ h_A + np.abs(axes @ R_B) @ h_B - np.abs(along)
+    k = int(np.argmin(overlap))
+    return float(overlap[k]), axes[k] * (1.0 if along[k] >= 0 else -1.0)
 

@@ -139,7 +139,7 @@ def test_a_missing_block_and_an_extra_are_said(rig):
     seen = perceive(views, rig.config, previous=expected)
     assert [(f.kind, f.block) for f in seen.failures] == [(Failure.MISSING, 2)]  # the prior forces no block
     assert not any(block.prior for block in seen.blocks)
-    assert "block 2 (small, last at (0.500, 0.300, 0.025) m) not seen" in seen.failures[0].reason
+    assert "block 2 (small, expected at (0.500, 0.300, 0.025) m) not seen" in seen.failures[0].reason
     fewer = perceive(views, rig.config, previous=TWO.X()[1:])  # one block more than expected
     assert [f.kind for f in fewer.failures] == [Failure.EXTRA] and fewer.identity == [0, -1]
     assert fewer.blocks[0].type == LARGE and len(fewer.X) == 2
