@@ -6,6 +6,7 @@ Poses are (4, 4) homogeneous matrices X_WB (block B in the world W), lengths met
 """
 from __future__ import annotations
 
+import math
 from functools import cache
 from itertools import permutations, product
 
@@ -13,7 +14,6 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import ConvexHull, cKDTree
-from scipy.spatial.transform import Rotation
 
 from tamp.planning.vocabulary import BLOCK_HEIGHT, BLOCK_SIZES, LARGE, SMALL
 
@@ -44,21 +44,17 @@ def box_sdf(X_WB: np.ndarray, half: np.ndarray, p_W: np.ndarray) -> np.ndarray:
     return np.linalg.norm(np.maximum(q, 0.0), axis=1) + np.minimum(q.max(axis=1), 0.0)
 
 
-def _sdf_and_gradient(X_WB: np.ndarray, half: np.ndarray, p_W: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """box_sdf of the points and its gradient with respect to the points (k, 3), in the world frame."""
-    R, c = X_WB[:3, :3], X_WB[:3, 3]
-    p_B = (p_W - c) @ R
-    q = np.abs(p_B) - half
-    out = np.maximum(q, 0.0)
-    distance = np.linalg.norm(out, axis=1)
-    outside = distance > 0
-    g_B = np.zeros_like(p_B)
-    g_B[outside] = out[outside] / distance[outside, None]
-    nearest = np.argmax(q, axis=1)
-    inside = np.flatnonzero(~outside)
-    g_B[inside, nearest[inside]] = 1.0
-    g_B *= np.where(p_B < 0, -1.0, 1.0)
-    return distance + np.minimum(q.max(axis=1), 0.0), g_B @ R.T
+def _rotation(w: np.ndarray) -> np.ndarray:
+    """The rotation matrix of the rotation vector w (Rodrigues' formula)."""
+    x, y, z = (float(v) for v in w)
+    angle = math.sqrt(x * x + y * y + z * z)
+    if angle < 1e-12:
+        return np.eye(3)
+    x, y, z = x / angle, y / angle, z / angle
+    s, v = math.sin(angle), 1.0 - math.cos(angle)
+    return np.array([[1.0 - v * (y * y + z * z), v * x * y - s * z, v * x * z + s * y],
+                     [v * x * y + s * z, 1.0 - v * (x * x + z * z), v * y * z - s * x],
+                     [v * x * z - s * y, v * y * z + s * x, 1.0 - v * (x * x + y * y)]])
 
 
 def fit_box(points: np.ndarray, half: np.ndarray, X0: np.ndarray, upright: bool, iterations: int = 15) -> np.ndarray:
@@ -67,22 +63,41 @@ def fit_box(points: np.ndarray, half: np.ndarray, X0: np.ndarray, upright: bool,
     yaw about the world's z move (a block resting flat, its height known from its top face)."""
     if len(points) > FIT_POINTS:
         points = points[np.linspace(0, len(points) - 1, FIT_POINTS).astype(int)]
-    columns = [2, 3, 4] if upright else list(range(6))  # of (rotation about x, y, z; translation x, y, z)
-    if len(points) < 2 * len(columns):
+    if len(points) < (6 if upright else 12):
         return X0
-    X = X0.copy()
+    R, c = X0[:3, :3].copy(), X0[:3, 3].copy()
+    rows = np.arange(len(points))
     for _ in range(iterations):
-        r, g_W = _sdf_and_gradient(X, half, points)
+        d = points - c
+        p_B = d @ R
+        q = np.abs(p_B) - half
+        out = np.maximum(q, 0.0)
+        outside_m = np.sqrt(np.einsum("ij,ij->i", out, out))
+        nearest = np.argmax(q, axis=1)
+        r = outside_m + np.minimum(q[rows, nearest], 0.0)  # the signed distance
+        # its gradient: outside, towards the nearest surface point; inside, the nearest face's normal
+        outside = outside_m > 0
+        g_B = out / np.where(outside, outside_m, 1.0)[:, None]
+        g_B[~outside, nearest[~outside]] = 1.0
+        g_W = np.copysign(g_B, p_B) @ R.T
         # a small rotation w about the centre and a translation dc move the points' box coordinates by
-        # -(w x d) and -dc (d = p - c): the signed distance changes by -(d x g).w - g.dc
-        J = -np.hstack([np.cross(points - X[:3, 3], g_W), g_W])[:, columns]
+        # -(w x d) and -dc: the signed distance changes by -(d x g).w - g.dc
+        if upright:  # yaw, x, y
+            J = -np.column_stack([d[:, 0] * g_W[:, 1] - d[:, 1] * g_W[:, 0], g_W[:, 0], g_W[:, 1]])
+        else:
+            J = -np.column_stack([d[:, 1] * g_W[:, 2] - d[:, 2] * g_W[:, 1], d[:, 2] * g_W[:, 0] - d[:, 0] * g_W[:, 2],
+                                  d[:, 0] * g_W[:, 1] - d[:, 1] * g_W[:, 0], g_W])
         w = 1.0 / (1.0 + (r / FIT_SCALE_M) ** 2)
-        step = np.zeros(6)
-        step[columns] = np.linalg.lstsq(J * np.sqrt(w)[:, None], -r * np.sqrt(w), rcond=None)[0]
-        X = pose(Rotation.from_rotvec(step[:3]).as_matrix() @ X[:3, :3], X[:3, 3] + step[3:])
+        Jw = J * w[:, None]
+        # the weighted least squares' normal equations, damped a trace's 1e-12th: a direction the points do not fix
+        #   (a face's own plane, seen alone) stays where it is
+        A = Jw.T @ J
+        solution = np.linalg.solve(A + 1e-12 * np.trace(A) * np.eye(len(A)), -(Jw.T @ r))
+        step = np.array([0.0, 0.0, solution[0], solution[1], solution[2], 0.0]) if upright else solution
+        R, c = _rotation(step[:3]) @ R, c + step[3:]
         if np.abs(step).max() < 1e-5:
             break
-    return X
+    return pose(R, c)
 
 
 @cache
@@ -103,30 +118,57 @@ def _face_samples(block_type: int) -> tuple[np.ndarray, np.ndarray]:
     return np.concatenate(samples), np.concatenate(normals)
 
 
+class _Cameras:
+    """The views' cameras stacked (poses, intrinsics, depth images) so that `seen_through` asks them all at once."""
+
+    def __init__(self, views) -> None:
+        self.views = list(views)
+        self.R = np.concatenate([v.X_WC[:3, :3] for v in self.views], axis=1)  # (3, 3 cameras): world to camera
+        self.p_WC = np.array([v.X_WC[:3, 3] for v in self.views]).reshape(-1, 3)
+        self.p_C0 = (self.p_WC[:, None, :] @ self.R.reshape(3, -1, 3).transpose(1, 0, 2)).ravel()  # origin's offset
+        self.p_WC_sq = np.sum(self.p_WC ** 2, axis=1)
+        fx, fy, cx, cy = (np.array([v.intrinsics[k] for v in self.views]) for k in range(4))
+        self.fx, self.fy, self.cx, self.cy = fx, fy, cx, cy
+        self.h = np.array([v.depth.shape[0] for v in self.views])
+        self.w = np.array([v.depth.shape[1] for v in self.views])
+        self.depth = [v.depth for v in self.views]
+
+
+_cameras_cache: list[_Cameras] = []  # the last views' stack (it holds them, so their ids are not reused)
+
+
+def _cameras(views) -> _Cameras:
+    """The stack of `views`, built once for the views of one perception."""
+    views = list(views)
+    if not (_cameras_cache and len(_cameras_cache[0].views) == len(views)
+            and all(a is b for a, b in zip(_cameras_cache[0].views, views))):
+        _cameras_cache[:] = [_Cameras(views)]
+    return _cameras_cache[0]
+
+
 def seen_through(X_WB: np.ndarray, block_type: int, views) -> float:
     """The share of the box's face samples that some camera saw past: its measured depth there is farther than the
     sample by SEEN_THROUGH_M. A box that is really there hides what is behind it; no return proves nothing, and
     a face a camera sees more obliquely than _GRAZING_COS is not asked of it (a pixel's width there spans the
     face's whole depth)."""
+    cameras = _cameras(views)
     p_B, n_B = _face_samples(block_type)
     p_W, n_W = p_B @ X_WB[:3, :3].T + X_WB[:3, 3], n_B @ X_WB[:3, :3].T
-    through = np.zeros(len(p_W), dtype=bool)
-    for view in views:
-        R_WC, p_WC = view.X_WC[:3, :3], view.X_WC[:3, 3]
-        p_C = (p_W - p_WC) @ R_WC
-        ray = p_W - p_WC
-        oblique = np.abs(np.sum(ray * n_W, axis=1)) < _GRAZING_COS * np.linalg.norm(ray, axis=1)
-        fx, fy, cx, cy = view.intrinsics
-        z = p_C[:, 2]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            u = np.round(fx * p_C[:, 0] / z + cx).astype(np.int64, copy=False)
-            v = np.round(fy * p_C[:, 1] / z + cy).astype(np.int64, copy=False)
-        h, w = view.depth.shape
-        inside = (z > 0) & (u >= 0) & (u < w) & (v >= 0) & (v < h) & ~oblique
-        measured = np.full(len(p_W), np.nan)
-        measured[inside] = view.depth[v[inside], u[inside]]
-        through |= np.isfinite(measured) & (measured > z + SEEN_THROUGH_M)
-    return float(through.mean())
+    # per camera (rows) and sample (columns): the ray's length squared and its dot with the face's normal
+    ray_sq = np.sum(p_W ** 2, axis=1) - 2 * cameras.p_WC @ p_W.T + cameras.p_WC_sq[:, None]
+    along = np.sum(p_W * n_W, axis=1) - cameras.p_WC @ n_W.T
+    oblique = along ** 2 < _GRAZING_COS ** 2 * ray_sq
+    p_C = (p_W @ cameras.R - cameras.p_C0).reshape(len(p_W), -1, 3).transpose(1, 0, 2)  # (cameras, samples, 3)
+    z = p_C[:, :, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = np.round(cameras.fx[:, None] * p_C[:, :, 0] / z + cameras.cx[:, None]).astype(np.int64, copy=False)
+        v = np.round(cameras.fy[:, None] * p_C[:, :, 1] / z + cameras.cy[:, None]).astype(np.int64, copy=False)
+    inside = ((z > 0) & (u >= 0) & (u < cameras.w[:, None]) & (v >= 0) & (v < cameras.h[:, None]) & ~oblique)
+    measured = np.zeros(z.shape)
+    for k, depth in enumerate(cameras.depth):
+        measured[k, inside[k]] = depth[v[k, inside[k]], u[k, inside[k]]]
+    with np.errstate(invalid="ignore"):  # no return (inf) proves nothing, nor does one too near (0)
+        return float(np.mean(np.any((measured > z + SEEN_THROUGH_M) & np.isfinite(measured), axis=0)))
 
 
 def min_area_rectangle(xy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
