@@ -6,7 +6,6 @@ Poses are (4, 4) homogeneous matrices X_WB (block B in the world W), lengths met
 """
 from __future__ import annotations
 
-import math
 from functools import cache
 from itertools import permutations, product
 
@@ -40,64 +39,92 @@ def pose(R: np.ndarray, p: np.ndarray) -> np.ndarray:
 
 def box_sdf(X_WB: np.ndarray, half: np.ndarray, p_W: np.ndarray) -> np.ndarray:
     """Signed distance (metres, negative inside) of the points p_W (k, 3) to the box of half sizes `half` at X_WB."""
-    q = np.abs((p_W - X_WB[:3, 3]) @ X_WB[:3, :3]) - half
-    return np.linalg.norm(np.maximum(q, 0.0), axis=1) + np.minimum(q.max(axis=1), 0.0)
+    return boxes_sdf(X_WB[None], np.asarray(half)[None], p_W)[0]
 
 
-def _rotation(w: np.ndarray) -> np.ndarray:
-    """The rotation matrix of the rotation vector w (Rodrigues' formula)."""
-    x, y, z = (float(v) for v in w)
-    angle = math.sqrt(x * x + y * y + z * z)
-    if angle < 1e-12:
-        return np.eye(3)
-    x, y, z = x / angle, y / angle, z / angle
-    s, v = math.sin(angle), 1.0 - math.cos(angle)
-    return np.array([[1.0 - v * (y * y + z * z), v * x * y - s * z, v * x * z + s * y],
-                     [v * x * y + s * z, 1.0 - v * (x * x + z * z), v * y * z - s * x],
-                     [v * x * z - s * y, v * y * z + s * x, 1.0 - v * (x * x + y * y)]])
+def boxes_sdf(X_WB: np.ndarray, half: np.ndarray, p_W: np.ndarray) -> np.ndarray:
+    """box_sdf of the points p_W (k, 3) to each of the boxes at X_WB (b, 4, 4) of half sizes `half` (b, 3): (b, k)."""
+    q = np.abs((p_W[None] - X_WB[:, None, :3, 3]) @ X_WB[:, :3, :3]) - half[:, None]
+    return _sdf_of(q[..., 0], q[..., 1], q[..., 2])
+
+
+def _sdf_of(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """The signed distance of points whose box coordinates' magnitudes exceed the half sizes by x, y and z (written
+    per axis: numpy's reductions over an axis of three cost ten times an elementwise operation)."""
+    outside = np.sqrt(np.maximum(x, 0.0) ** 2 + np.maximum(y, 0.0) ** 2 + np.maximum(z, 0.0) ** 2)
+    return outside + np.minimum(np.maximum(np.maximum(x, y), z), 0.0)
+
+
+def _rotations(w: np.ndarray) -> np.ndarray:
+    """The rotation matrices (b, 3, 3) of the rotation vectors w (b, 3) (Rodrigues' formula)."""
+    angle = np.linalg.norm(w, axis=1)
+    k = w / np.where(angle > 0, angle, 1.0)[:, None]
+    K = np.zeros((len(w), 3, 3))
+    K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -k[:, 2], k[:, 1], -k[:, 0]
+    K -= np.swapaxes(K, 1, 2)
+    return np.eye(3) + np.sin(angle)[:, None, None] * K + (1.0 - np.cos(angle))[:, None, None] * (K @ K)
 
 
 def fit_box(points: np.ndarray, half: np.ndarray, X0: np.ndarray, upright: bool, iterations: int = 15) -> np.ndarray:
     """The pose near X0 whose box surface passes closest to `points`: Gauss-Newton on the signed distance with
     Cauchy weights (iteratively reweighted), so that a neighbour's points do not pull. `upright`: only x, y and the
     yaw about the world's z move (a block resting flat, its height known from its top face)."""
-    if len(points) > FIT_POINTS:
-        points = points[np.linspace(0, len(points) - 1, FIT_POINTS).astype(int)]
-    if len(points) < (6 if upright else 12):
-        return X0
-    R, c = X0[:3, :3].copy(), X0[:3, 3].copy()
-    rows = np.arange(len(points))
+    return fit_boxes([points], np.asarray(half)[None], X0[None], upright, iterations)[0]
+
+
+def fit_boxes(points: list[np.ndarray], half: np.ndarray, X0: np.ndarray, upright: bool,
+              iterations: int = 15) -> np.ndarray:
+    """`fit_box` of several boxes at once (half sizes (b, 3), starting poses (b, 4, 4)), each to its own points:
+    the poses (b, 4, 4). A box with fewer points than twice its degrees of freedom stays at its start."""
+    points = [q[np.linspace(0, len(q) - 1, FIT_POINTS).astype(int)] if len(q) > FIT_POINTS else q for q in points]
+    p = np.zeros((len(points), max((len(q) for q in points), default=0), 3))
+    used = np.zeros(p.shape[:2])  # 1 for a box's points, 0 for the padding after them
+    for k, q in enumerate(points):
+        p[k, :len(q)], used[k, :len(q)] = q, 1.0
+    dof = 3 if upright else 6
+    moving = np.array([len(q) >= 2 * dof for q in points], dtype=bool)
+    R, c = X0[:, :3, :3].copy(), X0[:, :3, 3].copy()
     for _ in range(iterations):
-        d = points - c
-        p_B = d @ R
-        q = np.abs(p_B) - half
+        k = np.flatnonzero(moving)
+        if not len(k):
+            break
+        d = p[k] - c[k, None]
+        p_B = d @ R[k]
+        q = np.abs(p_B) - half[k, None]
+        r = _sdf_of(q[..., 0], q[..., 1], q[..., 2])
+        # its gradient: outside, towards the nearest surface point; inside, the nearest face's normal (the first
+        #   axis of the largest excess, as argmax)
         out = np.maximum(q, 0.0)
-        outside_m = np.sqrt(np.einsum("ij,ij->i", out, out))
-        nearest = np.argmax(q, axis=1)
-        r = outside_m + np.minimum(q[rows, nearest], 0.0)  # the signed distance
-        # its gradient: outside, towards the nearest surface point; inside, the nearest face's normal
-        outside = outside_m > 0
-        g_B = out / np.where(outside, outside_m, 1.0)[:, None]
-        g_B[~outside, nearest[~outside]] = 1.0
-        g_W = np.copysign(g_B, p_B) @ R.T
+        outside_m = np.sqrt(out[..., 0] ** 2 + out[..., 1] ** 2 + out[..., 2] ** 2)
+        inside = outside_m == 0
+        g_B = out / np.where(inside, 1.0, outside_m)[:, :, None]
+        x_first = (q[..., 0] >= q[..., 1]) & (q[..., 0] >= q[..., 2])
+        g_B[..., 0] += inside & x_first
+        g_B[..., 1] += inside & ~x_first & (q[..., 1] >= q[..., 2])
+        g_B[..., 2] += inside & ~x_first & (q[..., 1] < q[..., 2])
+        g = np.copysign(g_B, p_B) @ np.swapaxes(R[k], 1, 2)
         # a small rotation w about the centre and a translation dc move the points' box coordinates by
-        # -(w x d) and -dc: the signed distance changes by -(d x g).w - g.dc
+        # -(w x d) and -dc (d = p - c): the signed distance changes by -(d x g).w - g.dc
+        yaw = d[:, :, 0] * g[:, :, 1] - d[:, :, 1] * g[:, :, 0]
         if upright:  # yaw, x, y
-            J = -np.column_stack([d[:, 0] * g_W[:, 1] - d[:, 1] * g_W[:, 0], g_W[:, 0], g_W[:, 1]])
+            J = -np.stack([yaw, g[:, :, 0], g[:, :, 1]], axis=2)
         else:
-            J = -np.column_stack([d[:, 1] * g_W[:, 2] - d[:, 2] * g_W[:, 1], d[:, 2] * g_W[:, 0] - d[:, 0] * g_W[:, 2],
-                                  d[:, 0] * g_W[:, 1] - d[:, 1] * g_W[:, 0], g_W])
-        w = 1.0 / (1.0 + (r / FIT_SCALE_M) ** 2)
-        Jw = J * w[:, None]
+            J = -np.stack([d[:, :, 1] * g[:, :, 2] - d[:, :, 2] * g[:, :, 1],
+                           d[:, :, 2] * g[:, :, 0] - d[:, :, 0] * g[:, :, 2], yaw, g[:, :, 0], g[:, :, 1], g[:, :, 2]],
+                          axis=2)
+        Jw = J * (used[k] / (1.0 + (r / FIT_SCALE_M) ** 2))[:, :, None]
         # the weighted least squares' normal equations, damped a trace's 1e-12th: a direction the points do not fix
         #   (a face's own plane, seen alone) stays where it is
-        A = Jw.T @ J
-        solution = np.linalg.solve(A + 1e-12 * np.trace(A) * np.eye(len(A)), -(Jw.T @ r))
-        step = np.array([0.0, 0.0, solution[0], solution[1], solution[2], 0.0]) if upright else solution
-        R, c = _rotation(step[:3]) @ R, c + step[3:]
-        if np.abs(step).max() < 1e-5:
-            break
-    return pose(R, c)
+        A = np.swapaxes(Jw, 1, 2) @ J
+        A += 1e-12 * np.trace(A, axis1=1, axis2=2)[:, None, None] * np.eye(dof)
+        solution = np.linalg.solve(A, -(np.swapaxes(Jw, 1, 2) @ r[:, :, None]))[:, :, 0]
+        step = np.zeros((len(k), 6))
+        step[:, [2, 3, 4] if upright else slice(None)] = solution
+        R[k], c[k] = _rotations(step[:, :3]) @ R[k], c[k] + step[:, 3:]
+        moving[k[np.abs(step).max(axis=1) < 1e-5]] = False
+    X = np.repeat(np.eye(4)[None], len(points), axis=0)
+    X[:, :3, :3], X[:, :3, 3] = R, c
+    return X
 
 
 @cache
@@ -151,14 +178,31 @@ def seen_through(X_WB: np.ndarray, block_type: int, views) -> float:
     sample by SEEN_THROUGH_M. A box that is really there hides what is behind it; no return proves nothing, and
     a face a camera sees more obliquely than _GRAZING_COS is not asked of it (a pixel's width there spans the
     face's whole depth)."""
+    return float(seen_through_boxes(X_WB[None], np.array([block_type]), views)[0])
+
+
+def seen_through_boxes(X_WB: np.ndarray, block_types: np.ndarray, views) -> np.ndarray:
+    """`seen_through` of each of the boxes at X_WB (b, 4, 4) of types `block_types` (b,): (b,)."""
     cameras = _cameras(views)
-    p_B, n_B = _face_samples(block_type)
-    p_W, n_W = p_B @ X_WB[:3, :3].T + X_WB[:3, 3], n_B @ X_WB[:3, :3].T
-    # per camera (rows) and sample (columns): the ray's length squared and its dot with the face's normal
-    ray_sq = np.sum(p_W ** 2, axis=1) - 2 * cameras.p_WC @ p_W.T + cameras.p_WC_sq[:, None]
-    along = np.sum(p_W * n_W, axis=1) - cameras.p_WC @ n_W.T
+    shares = np.zeros(len(X_WB))
+    for block_type in np.unique(block_types):
+        mine = np.flatnonzero(block_types == block_type)
+        p_B, n_B = _face_samples(int(block_type))
+        p_W = (p_B @ np.swapaxes(X_WB[mine, :3, :3], 1, 2) + X_WB[mine, None, :3, 3]).reshape(-1, 3)
+        n_W = (n_B @ np.swapaxes(X_WB[mine, :3, :3], 1, 2)).reshape(-1, 3)
+        shares[mine] = np.mean(_seen_past(p_W, n_W, cameras).reshape(len(mine), -1), axis=1)
+    return shares
+
+
+def _seen_past(p_W: np.ndarray, n_W: np.ndarray, cameras: _Cameras) -> np.ndarray:
+    """Whether some camera measured a depth farther than each point p_W (k, 3) by SEEN_THROUGH_M, where it sees the
+    point's face (normal n_W) less obliquely than _GRAZING_COS."""
+    # per camera (rows) and point (columns): the ray's length squared and its dot with the face's normal
+    x, y, z = p_W.T
+    ray_sq = x * x + y * y + z * z - 2 * cameras.p_WC @ p_W.T + cameras.p_WC_sq[:, None]
+    along = x * n_W[:, 0] + y * n_W[:, 1] + z * n_W[:, 2] - cameras.p_WC @ n_W.T
     oblique = along ** 2 < _GRAZING_COS ** 2 * ray_sq
-    p_C = (p_W @ cameras.R - cameras.p_C0).reshape(len(p_W), -1, 3).transpose(1, 0, 2)  # (cameras, samples, 3)
+    p_C = (p_W @ cameras.R - cameras.p_C0).reshape(len(p_W), -1, 3).transpose(1, 0, 2)  # (cameras, points, 3)
     z = p_C[:, :, 2]
     with np.errstate(divide="ignore", invalid="ignore"):
         u = np.round(cameras.fx[:, None] * p_C[:, :, 0] / z + cameras.cx[:, None]).astype(np.int64, copy=False)
@@ -168,7 +212,7 @@ def seen_through(X_WB: np.ndarray, block_type: int, views) -> float:
     for k, depth in enumerate(cameras.depth):
         measured[k, inside[k]] = depth[v[k, inside[k]], u[k, inside[k]]]
     with np.errstate(invalid="ignore"):  # no return (inf) proves nothing, nor does one too near (0)
-        return float(np.mean(np.any((measured > z + SEEN_THROUGH_M) & np.isfinite(measured), axis=0)))
+        return np.any((measured > z + SEEN_THROUGH_M) & np.isfinite(measured), axis=0)
 
 
 def min_area_rectangle(xy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
@@ -328,6 +372,6 @@ def orientation_error(R_est: np.ndarray, R_true: np.ndarray, block_type: int) ->
     return float(np.arccos(np.clip((traces.max() - 1.0) / 2.0, -1.0, 1.0)))
 
 
-__all__ = ["MIN_PATCH", "TILTED_RAD", "box_sdf", "components", "face_hypotheses", "fit_box", "footprint_hypotheses",
-           "half_size", "min_area_rectangle", "orientation_error", "pose", "seen_through", "side_hypotheses",
-           "symmetries", "tilted_side_hypotheses", "vertical_faces"]
+__all__ = ["MIN_PATCH", "TILTED_RAD", "box_sdf", "boxes_sdf", "components", "face_hypotheses", "fit_box", "fit_boxes",
+           "footprint_hypotheses", "half_size", "min_area_rectangle", "orientation_error", "pose", "seen_through",
+           "seen_through_boxes", "side_hypotheses", "symmetries", "tilted_side_hypotheses", "vertical_faces"]

@@ -48,13 +48,16 @@ from tamp.sim.box_fit import (
     MIN_PATCH,
     TILTED_RAD,
     box_sdf,
+    boxes_sdf,
     components,
     face_hypotheses,
     fit_box,
+    fit_boxes,
     footprint_hypotheses,
     half_size,
     pose,
     seen_through,
+    seen_through_boxes,
     side_hypotheses,
     tilted_side_hypotheses,
 )
@@ -170,7 +173,9 @@ def world_points(view: DepthView) -> np.ndarray:
         height = view.depth * (R[2, 0] * x_ray[None, :] + R[2, 1] * y_ray[:, None] + R[2, 2]) + t[2]
     v, u = np.nonzero((height > CROP_M[2][0]) & (height < CROP_M[2][1]) & (view.depth > 0))
     z = view.depth[v, u].astype(float)
-    p_W = np.column_stack([x_ray[u] * z, y_ray[v] * z, z]) @ R.T + t
+    x, y = x_ray[u] * z, y_ray[v] * z
+    p_W = np.column_stack([R[k, 0] * x + R[k, 1] * y + R[k, 2] * z + t[k] for k in range(3)])  # not a matmul: a
+    #   (k, 3) one takes OpenBLAS's threads, which wait for each other on a busy machine
     inside = np.all([(p_W[:, k] > lo) & (p_W[:, k] < hi) for k, (lo, hi) in enumerate(CROP_M)], axis=0)
     return p_W[inside]
 
@@ -191,15 +196,19 @@ def fused_cloud(views: list[DepthView], voxel_m: float) -> np.ndarray:
 def smallest_eigenvectors(C: np.ndarray) -> np.ndarray:
     """Unit eigenvectors (k, 3) of the smallest eigenvalues of the symmetric (k, 3, 3) matrices C, in closed form:
     the eigenvalue by the trigonometric formula, the vector as the longest cross product of two rows of C less it
-    (a third of the time of LAPACK's `eigh`, one small matrix at a time)."""
-    q = np.trace(C, axis1=1, axis2=2) / 3
-    off = C[:, 0, 1] ** 2 + C[:, 0, 2] ** 2 + C[:, 1, 2] ** 2
-    spread = np.sqrt(((C[:, 0, 0] - q) ** 2 + (C[:, 1, 1] - q) ** 2 + (C[:, 2, 2] - q) ** 2 + 2 * off) / 6)
-    B = (C - q[:, None, None] * np.eye(3)) / np.where(spread > 0, spread, 1.0)[:, None, None]
-    phi = np.arccos(np.clip(np.linalg.det(B) / 2, -1.0, 1.0)) / 3
-    M = C - (q + 2 * spread * np.cos(phi + 2 * np.pi / 3))[:, None, None] * np.eye(3)
-    crossed = np.stack([np.cross(M[:, 0], M[:, 1]), np.cross(M[:, 0], M[:, 2]), np.cross(M[:, 1], M[:, 2])], axis=1)
-    length = np.linalg.norm(crossed, axis=2)
+    (written per entry: a tenth of the time of LAPACK's `eigh`, one small matrix at a time)."""
+    a, b, c, d, e, f = C[:, 0, 0], C[:, 1, 1], C[:, 2, 2], C[:, 0, 1], C[:, 0, 2], C[:, 1, 2]
+    mean = (a + b + c) / 3
+    spread = np.sqrt(((a - mean) ** 2 + (b - mean) ** 2 + (c - mean) ** 2 + 2 * (d * d + e * e + f * f)) / 6)
+    s = np.where(spread > 0, spread, 1.0)
+    A, B, S, D, E, F = (a - mean) / s, (b - mean) / s, (c - mean) / s, d / s, e / s, f / s  # (C - mean I) / spread
+    det = A * (B * S - F * F) - D * (D * S - F * E) + E * (D * F - B * E)
+    smallest = mean + 2 * spread * np.cos(np.arccos(np.clip(det / 2, -1.0, 1.0)) / 3 + 2 * np.pi / 3)
+    a, b, c = a - smallest, b - smallest, c - smallest  # the rows of C less it: (a, d, e), (d, b, f), (e, f, c)
+    crossed = np.stack([np.stack([d * f - e * b, e * d - a * f, a * b - d * d], axis=1),
+                        np.stack([d * c - e * f, e * e - a * c, a * f - d * e], axis=1),
+                        np.stack([b * c - f * f, f * e - d * c, d * f - b * e], axis=1)], axis=1)
+    length = np.sqrt(np.einsum("kij,kij->ki", crossed, crossed))
     best = np.argmax(length, axis=1)
     rows = np.arange(len(C))
     vector = crossed[rows, best] / np.where(length[rows, best] > 0, length[rows, best], 1.0)[:, None]
@@ -221,18 +230,22 @@ class Normals:
         new = np.unique(which[~self._known[which]])
         if len(new):
             _, near = self.tree.query(self.p[new], k=min(_NEIGHBOURS, len(self.p)))
-            local = self.p[near]
-            local -= local.mean(axis=1, keepdims=True)
-            self._normals[new] = smallest_eigenvectors(np.einsum("kni,knj->kij", local, local))
+            axes = [self.p[near, k] for k in range(3)]  # (points, neighbours) per axis
+            axes = [v - v.mean(axis=1, keepdims=True) for v in axes]
+            C = np.empty((len(new), 3, 3))
+            for i in range(3):
+                for j in range(i, 3):
+                    C[:, i, j] = C[:, j, i] = np.einsum("kn,kn->k", axes[i], axes[j])
+            self._normals[new] = smallest_eigenvectors(C)
             self._known[new] = True
         return self._normals[which]
 
 
-def _score(distance: np.ndarray) -> int:
-    """A box's support from the points at these signed distances: those on its surface, less _INSIDE_WEIGHT for each
-    one inside it (a surface the cameras saw inside a solid box is evidence against it)."""
-    on = int(np.count_nonzero(np.abs(distance) < EXPLAINED_M))
-    return on - _INSIDE_WEIGHT * int(np.count_nonzero(distance <= -EXPLAINED_M))
+def _scores(distance: np.ndarray) -> np.ndarray:
+    """Each box's support from the points at these signed distances (boxes, points): those on its surface, less
+    _INSIDE_WEIGHT for each one inside it (a surface the cameras saw inside a solid box is evidence against it)."""
+    on = np.count_nonzero(np.abs(distance) < EXPLAINED_M, axis=1)
+    return on - _INSIDE_WEIGHT * np.count_nonzero(distance <= -EXPLAINED_M, axis=1)
 
 
 def _overlaps(X_WB: np.ndarray, block_type: int, found: Sequence[BlockEstimate]) -> bool:
@@ -249,32 +262,53 @@ def _best_box(points: np.ndarray, candidates: np.ndarray, hypotheses, views, qua
     those whose points within _VICINITY_M lie on its surface for at least the share `quality` and that do not
     overlap a block `found`; None when there is none. Only the _FITTED hypotheses of each family (an optional fourth
     item) that explain most before the fit are fitted (a fit costs milliseconds; one family's many near misses must
-    not crowd out another's right guess)."""
-    ranked = []
-    for block_type, X0, upright, *family in hypotheses:
-        if seen_through(X0, block_type, views) <= 2 * MAX_SEEN_THROUGH:  # far off: most wrong ones end here
-            score = _score(box_sdf(X0, half_size(block_type), candidates))
-            ranked.append((score, block_type, X0, upright, family[0] if family else 0))
-    ranked.sort(key=lambda r: r[0], reverse=True)
-    chosen = [r for f in {r[4] for r in ranked} for r in [r for r in ranked if r[4] == f][:_FITTED]]
+    not crowd out another's right guess). The hypotheses are tested and fitted together (`box_fit`'s batched
+    forms): numpy's time is in its calls, not in their sizes."""
+    if not hypotheses:
+        return None
+    types = np.array([h[0] for h in hypotheses])
+    X0 = np.array([h[1] for h in hypotheses])
+    upright = np.array([h[2] for h in hypotheses], dtype=bool)
+    family = np.array([h[3] if len(h) > 3 else 0 for h in hypotheses])
+    half = np.array([half_size(t) for t in types])
+    near = np.flatnonzero(seen_through_boxes(X0, types, views) <= 2 * MAX_SEEN_THROUGH)  # far off: most wrong
+    #   ones end here
+    ranked = near[np.argsort(-_scores(boxes_sdf(X0[near], half[near], candidates)), kind="stable")]
+    chosen = np.array([i for f in sorted(set(family[ranked].tolist())) for i in ranked[family[ranked] == f][:_FITTED]],
+                      dtype=int)
+    if not len(chosen):
+        return None
+    X = np.zeros((len(chosen), 4, 4))
+    reach = boxes_sdf(X0[chosen], half[chosen], points) < _FIT_REACH_M
+    for flat in (True, False):
+        mine = np.flatnonzero(upright[chosen] == flat)
+        if len(mine):
+            X[mine] = fit_boxes([points[reach[k]] for k in mine], half[chosen[mine]], X0[chosen[mine]], flat)
+    half, types, upright, family = half[chosen], types[chosen], upright[chosen], family[chosen]
+    level = np.abs(X[:, 2, :3]).max(axis=1) > np.cos(TILTED_RAD)  # a block resting flat is proposed upright
+    #   from its sides (a 6-DOF fit from a vertical face drifted 8 mm)
+    bottom = X[:, 2, 3] - np.einsum("ki,ki->k", np.abs(X[:, 2, :3]), half)
+    keep = ~((family == _LEANING_SIDES) & level) & (bottom >= -_UNDER_TABLE_M)  # through the table, where no
+    #   camera sees: no block
+    keep[keep] = seen_through_boxes(X[keep], types[keep], views) <= MAX_SEEN_THROUGH
+    distance = boxes_sdf(X[keep], half[keep], candidates)
+    scores = np.zeros(len(X), dtype=int)
+    scores[keep] = _scores(distance)
+    vicinity = np.zeros(len(X), dtype=int)
+    vicinity[keep] = np.count_nonzero(np.abs(distance) < _VICINITY_M, axis=1)
+    row = np.cumsum(keep) - 1
     best = None
-    for _, block_type, X0, upright, family in chosen:
-        half = half_size(block_type)
-        X = fit_box(points[box_sdf(X0, half, points) < _FIT_REACH_M], half, X0, upright)
-        if family == _LEANING_SIDES and np.abs(X[2, :3]).max() > np.cos(TILTED_RAD):
-            continue  # a block resting flat is proposed upright from its sides (a 6-DOF fit drifted 8 mm)
-        if (X[2, 3] - np.abs(X[2, :3]) @ half < -_UNDER_TABLE_M or seen_through(X, block_type, views) > MAX_SEEN_THROUGH
-                or _overlaps(X, block_type, found)):
-            continue  # through the table (where no camera sees), seen through, or inside a block found
-        distance = box_sdf(X, half, candidates)
-        explained = distance < EXPLAINED_M
-        score = _score(distance)
-        if score < quality * np.count_nonzero(np.abs(distance) < _VICINITY_M):
+    for k in np.flatnonzero(keep):
+        if scores[k] < quality * vicinity[k] or _overlaps(X[k], int(types[k]), found):
             continue
-        volume = float(np.prod(half))
-        if best is None or (score > best[0] / _TIE if volume > best[3] else score >= best[0] * _TIE):
-            best = (score, BlockEstimate(block_type, X, score, upright), explained, volume)
-    return None if best is None else best[:3]
+        volume = float(np.prod(half[k]))
+        if best is None or (scores[k] > best[0] / _TIE if volume > best[2] else scores[k] >= best[0] * _TIE):
+            best = (int(scores[k]), k, volume)
+    if best is None:
+        return None
+    k = best[1]
+    block = BlockEstimate(int(types[k]), X[k], best[0], bool(upright[k]))
+    return best[0], block, distance[row[k]] < EXPLAINED_M
 
 
 def _carries(block: BlockEstimate, found: list[BlockEstimate]) -> bool:
