@@ -226,16 +226,13 @@ def min_area_rectangle(xy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarr
         return None
     edges = np.diff(np.vstack([hull, hull[:1]]), axis=0)
     angles = np.unique(np.mod(np.arctan2(edges[:, 1], edges[:, 0]), np.pi / 2))
-    best = None
-    for angle in angles:
-        axes = np.array([[np.cos(angle), np.sin(angle)], [-np.sin(angle), np.cos(angle)]])
-        local = hull @ axes.T
-        low, high = local.min(axis=0), local.max(axis=0)
-        area = float(np.prod(high - low))
-        if best is None or area < best[0]:
-            best = (area, axes, low, high)
-    assert best is not None
-    _, axes, low, high = best
+    cos, sin = np.cos(angles)[:, None], np.sin(angles)[:, None]
+    along, across = cos * hull[:, 0] + sin * hull[:, 1], cos * hull[:, 1] - sin * hull[:, 0]  # (angles, vertices)
+    low = np.column_stack([along.min(axis=1), across.min(axis=1)])
+    high = np.column_stack([along.max(axis=1), across.max(axis=1)])
+    k = int(np.argmin((high[:, 0] - low[:, 0]) * (high[:, 1] - low[:, 1])))  # the first of the smallest areas
+    axes = np.array([[cos[k, 0], sin[k, 0]], [-sin[k, 0], cos[k, 0]]])
+    low, high = low[k], high[k]
     centre = ((low + high) / 2) @ axes
     sizes = high - low
     long = int(np.argmax(sizes))
@@ -322,14 +319,14 @@ def vertical_faces(p: np.ndarray, n: np.ndarray, voxel: float) -> list[tuple[np.
     return faces
 
 
-def side_hypotheses(p: np.ndarray, n: np.ndarray, voxel: float) -> list[tuple[int, np.ndarray]]:
-    """Upright blocks behind the vertical faces among the points p (normals n, sign arbitrary): a block whose top
-    face is hidden (under a leaning bar, or an overhang) may show a single side. Each face (`vertical_faces`)
+def side_hypotheses(faces: list[tuple[np.ndarray, np.ndarray]]) -> list[tuple[int, np.ndarray]]:
+    """Upright blocks behind vertical faces (`vertical_faces`: points and horizontal normal, sign arbitrary): a
+    block whose top face is hidden (under a leaning bar, or an overhang) may show a single side. Each face
     proposes, on either side of its plane (which side the cameras looked from is unknown), a cube at either end or
     the middle of the face, a bar along it likewise, and a bar across it; the block stands in the layer of the
     face's median height."""
     hypotheses = []
-    for f, m in vertical_faces(p, n, voxel):
+    for f, m in faces:
         t = np.array([-m[1], m[0], 0.0])
         plane, (lo, hi) = float(np.median(f @ m)), np.percentile(f @ t, [2.0, 98.0])
         z = (np.floor(float(np.median(f[:, 2])) / BLOCK_HEIGHT) + 0.5) * BLOCK_HEIGHT
@@ -343,12 +340,12 @@ def side_hypotheses(p: np.ndarray, n: np.ndarray, voxel: float) -> list[tuple[in
     return hypotheses
 
 
-def tilted_side_hypotheses(p: np.ndarray, n: np.ndarray, voxel: float) -> list[tuple[int, np.ndarray]]:
-    """Blocks with six degrees of freedom behind the vertical faces among the points p (normals n, sign arbitrary):
-    a block leaning in the plane of a side face (rolled about its short axis) whose top another block covers shows
-    only its sides, tilted rectangles. Each face (`vertical_faces`) proposes `face_hypotheses` on either side of
-    its plane, those tilted more than TILTED_RAD (an upright block's sides propose it upright: `side_hypotheses`)."""
-    return [h for f, m in vertical_faces(p, n, voxel) for sign in (-1.0, 1.0)
+def tilted_side_hypotheses(faces: list[tuple[np.ndarray, np.ndarray]]) -> list[tuple[int, np.ndarray]]:
+    """Blocks with six degrees of freedom behind vertical faces (`vertical_faces`): a block leaning in the plane of
+    a side face (rolled about its short axis) whose top another block covers shows only its sides, tilted
+    rectangles. Each face proposes `face_hypotheses` on either side of its plane, those tilted more than TILTED_RAD
+    (an upright block's sides propose it upright: `side_hypotheses`)."""
+    return [h for f, m in faces for sign in (-1.0, 1.0)
             for h in face_hypotheses(f, sign * m, BLOCK_HEIGHT / 2) if np.abs(h[1][2, :3]).max() < np.cos(TILTED_RAD)]
 
 
