@@ -150,12 +150,10 @@ class _Cameras:
 
     def __init__(self, views) -> None:
         self.views = list(views)
-        self.R = np.concatenate([v.X_WC[:3, :3] for v in self.views], axis=1)  # (3, 3 cameras): world to camera
+        self.R_WC = np.array([v.X_WC[:3, :3] for v in self.views]).reshape(-1, 3, 3)
         self.p_WC = np.array([v.X_WC[:3, 3] for v in self.views]).reshape(-1, 3)
-        self.p_C0 = (self.p_WC[:, None, :] @ self.R.reshape(3, -1, 3).transpose(1, 0, 2)).ravel()  # origin's offset
         self.p_WC_sq = np.sum(self.p_WC ** 2, axis=1)
-        fx, fy, cx, cy = (np.array([v.intrinsics[k] for v in self.views]) for k in range(4))
-        self.fx, self.fy, self.cx, self.cy = fx, fy, cx, cy
+        self.fx, self.fy, self.cx, self.cy = (np.array([v.intrinsics[k] for v in self.views]) for k in range(4))
         self.h = np.array([v.depth.shape[0] for v in self.views])
         self.w = np.array([v.depth.shape[1] for v in self.views])
         self.depth = [v.depth for v in self.views]
@@ -197,16 +195,20 @@ def seen_through_boxes(X_WB: np.ndarray, block_types: np.ndarray, views) -> np.n
 def _seen_past(p_W: np.ndarray, n_W: np.ndarray, cameras: _Cameras) -> np.ndarray:
     """Whether some camera measured a depth farther than each point p_W (k, 3) by SEEN_THROUGH_M, where it sees the
     point's face (normal n_W) less obliquely than _GRAZING_COS."""
-    # per camera (rows) and point (columns): the ray's length squared and its dot with the face's normal
-    x, y, z = p_W.T
-    ray_sq = x * x + y * y + z * z - 2 * cameras.p_WC @ p_W.T + cameras.p_WC_sq[:, None]
-    along = x * n_W[:, 0] + y * n_W[:, 1] + z * n_W[:, 2] - cameras.p_WC @ n_W.T
+    # per camera (rows) and point (columns), written per axis (a (k, 3) by (3, 12) matmul takes OpenBLAS's threads,
+    #   which wait for each other on a busy machine): the ray's length squared and its dot with the face's normal
+    x, y, z = np.ascontiguousarray(p_W.T)
+    o = cameras.p_WC[:, :, None]  # (cameras, 3, 1)
+    ray_sq = x * x + y * y + z * z - 2 * (o[:, 0] * x + o[:, 1] * y + o[:, 2] * z) + cameras.p_WC_sq[:, None]
+    along = x * n_W[:, 0] + y * n_W[:, 1] + z * n_W[:, 2] - (o[:, 0] * n_W[:, 0] + o[:, 1] * n_W[:, 1]
+                                                             + o[:, 2] * n_W[:, 2])
     oblique = along ** 2 < _GRAZING_COS ** 2 * ray_sq
-    p_C = (p_W @ cameras.R - cameras.p_C0).reshape(len(p_W), -1, 3).transpose(1, 0, 2)  # (cameras, points, 3)
-    z = p_C[:, :, 2]
+    R = cameras.R_WC[:, :, :, None]  # the point in each camera's frame: (p - o) @ R, per axis
+    x, y, z = x - o[:, 0], y - o[:, 1], z - o[:, 2]
+    x_C, y_C, z = (x * R[:, 0, j] + y * R[:, 1, j] + z * R[:, 2, j] for j in range(3))
     with np.errstate(divide="ignore", invalid="ignore"):
-        u = np.round(cameras.fx[:, None] * p_C[:, :, 0] / z + cameras.cx[:, None]).astype(np.int64, copy=False)
-        v = np.round(cameras.fy[:, None] * p_C[:, :, 1] / z + cameras.cy[:, None]).astype(np.int64, copy=False)
+        u = np.round(cameras.fx[:, None] * x_C / z + cameras.cx[:, None]).astype(np.int64, copy=False)
+        v = np.round(cameras.fy[:, None] * y_C / z + cameras.cy[:, None]).astype(np.int64, copy=False)
     inside = ((z > 0) & (u >= 0) & (u < cameras.w[:, None]) & (v >= 0) & (v < cameras.h[:, None]) & ~oblique)
     measured = np.zeros(z.shape)
     for k, depth in enumerate(cameras.depth):

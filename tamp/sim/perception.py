@@ -52,12 +52,10 @@ from tamp.sim.box_fit import (
     boxes_sdf,
     components,
     face_hypotheses,
-    fit_box,
     fit_boxes,
     footprint_hypotheses,
     half_size,
     pose,
-    seen_through,
     seen_through_boxes,
     side_hypotheses,
     tilted_side_hypotheses,
@@ -293,12 +291,8 @@ def _best_box(points: np.ndarray, candidates: np.ndarray, hypotheses, views, qua
                       dtype=int)
     if not len(chosen):
         return None
-    X = np.zeros((len(chosen), 4, 4))
     reach = boxes_sdf(X0[chosen], half[chosen], points) < _FIT_REACH_M
-    for flat in (True, False):
-        mine = np.flatnonzero(upright[chosen] == flat)
-        if len(mine):
-            X[mine] = fit_boxes([points[reach[k]] for k in mine], half[chosen[mine]], X0[chosen[mine]], flat)
+    X = _fit_each([points[r] for r in reach], half[chosen], X0[chosen], upright[chosen])
     half, types, upright, family = half[chosen], types[chosen], upright[chosen], family[chosen]
     level = np.abs(X[:, 2, :3]).max(axis=1) > np.cos(TILTED_RAD)  # a block resting flat is proposed upright
     #   from its sides (a 6-DOF fit from a vertical face drifted 8 mm)
@@ -420,26 +414,48 @@ def _without_extras(p: np.ndarray, views, found: list) -> None:
     for block in sorted(found, key=lambda b: b.points):
         if not any(b is block for b in found):
             continue
+        others = [b for b in found if b is not block]
+        if not others:
+            continue
+        reach = boxes_sdf(_poses(others), _halves(others), p) < _FIT_REACH_M
         mine = box_sdf(block.X_WB, half_size(block.type), p) < _FIT_REACH_M
-        near = [b for b in found if b is not block and np.any(box_sdf(b.X_WB, half_size(b.type), p[mine])
-                                                               < _FIT_REACH_M)]
+        touching = np.any(reach[:, mine], axis=1)
+        near = [b for b, t in zip(others, touching) if t]
         if not near:
             continue
-        group = mine | np.any([box_sdf(b.X_WB, half_size(b.type), p) < _FIT_REACH_M for b in near], axis=0)
-        q = p[group]
-        before = np.abs(np.min([box_sdf(b.X_WB, half_size(b.type), q) for b in [block, *near]], axis=0))
-        fitted = [b.X_WB for b in near]
+        q = p[mine | np.any(reach[touching], axis=0)]
+        half = _halves(near)
+        before = np.abs(np.min(boxes_sdf(_poses([block, *near]), _halves([block, *near]), q), axis=0))
+        fitted = _poses(near)
         for _ in range(2):  # each point to its nearest box, each box refitted to its points
-            distance = np.array([box_sdf(X, half_size(b.type), q) for X, b in zip(fitted, near)])
-            nearest = np.argmin(np.abs(distance), axis=0)
-            fitted = [fit_box(q[nearest == k], half_size(b.type), X, b.upright) for k, (X, b) in
-                      enumerate(zip(fitted, near))]
-        after = np.abs(np.min([box_sdf(X, half_size(b.type), q) for X, b in zip(fitted, near)], axis=0))
+            nearest = np.argmin(np.abs(boxes_sdf(fitted, half, q)), axis=0)
+            fitted = _fit_each([q[nearest == k] for k in range(len(near))], half, fitted,
+                               np.array([b.upright for b in near]))
+        after = np.abs(np.min(boxes_sdf(fitted, half, q), axis=0))
         lost = int(np.count_nonzero(before < EXPLAINED_M)) - int(np.count_nonzero(after < EXPLAINED_M))
-        if lost >= MIN_CLUSTER or any(seen_through(X, b.type, views) > MAX_SEEN_THROUGH for X, b in zip(fitted, near)):
+        if lost >= MIN_CLUSTER or np.any(seen_through_boxes(fitted, np.array([b.type for b in near]), views)
+                                         > MAX_SEEN_THROUGH):
             continue
         moved = {id(b): replace(b, X_WB=X) for X, b in zip(fitted, near)}
         found[:] = [moved.get(id(b), b) for b in found if b is not block]
+
+
+def _poses(blocks: Sequence[BlockEstimate]) -> np.ndarray:
+    return np.array([b.X_WB for b in blocks]).reshape(-1, 4, 4)
+
+
+def _halves(blocks: Sequence[BlockEstimate]) -> np.ndarray:
+    return np.array([half_size(b.type) for b in blocks]).reshape(-1, 3)
+
+
+def _fit_each(points: list[np.ndarray], half: np.ndarray, X0: np.ndarray, upright: np.ndarray) -> np.ndarray:
+    """`box_fit.fit_boxes` of boxes some of which are `upright` (b,) and some not: their poses (b, 4, 4)."""
+    X = np.zeros((len(points), 4, 4))
+    for flat in (True, False):
+        mine = np.flatnonzero(upright == flat)
+        if len(mine):
+            X[mine] = fit_boxes([points[k] for k in mine], half[mine], X0[mine], flat)
+    return X
 
 
 def _with_prior(p: np.ndarray, normals: Normals, free: np.ndarray, views, voxel: float, found: list,
