@@ -79,8 +79,8 @@ def fit_boxes(points: list[np.ndarray], half: np.ndarray, X0: np.ndarray, uprigh
     points = [q[np.linspace(0, len(q) - 1, FIT_POINTS).astype(int)] if len(q) > FIT_POINTS else q for q in points]
     p = np.zeros((len(points), max((len(q) for q in points), default=0), 3))
     used = np.zeros(p.shape[:2])  # 1 for a box's points, 0 for the padding after them
-    for k, q in enumerate(points):
-        p[k, :len(q)], used[k, :len(q)] = q, 1.0
+    for box, q in enumerate(points):
+        p[box, :len(q)], used[box, :len(q)] = q, 1.0
     dof = 3 if upright else 6
     moving = np.array([len(q) >= 2 * dof for q in points], dtype=bool)
     R, c = X0[:, :3, :3].copy(), X0[:, :3, 3].copy()
