@@ -114,9 +114,10 @@ def fit_boxes(points: list[np.ndarray], half: np.ndarray, X0: np.ndarray, uprigh
                           axis=2)
         Jw = J * (used[k] / (1.0 + (r / FIT_SCALE_M) ** 2))[:, :, None]
         # the weighted least squares' normal equations, damped a trace's 1e-12th: a direction the points do not fix
-        #   (a face's own plane, seen alone) stays where it is
+        #   (a face's own plane, seen alone) stays where it is, and so does an upright box fitted to points all
+        #   above its top face (no x, y or yaw moves them: J = 0)
         A = np.swapaxes(Jw, 1, 2) @ J
-        A += 1e-12 * np.trace(A, axis1=1, axis2=2)[:, None, None] * np.eye(dof)
+        A += (1e-12 * np.trace(A, axis1=1, axis2=2) + np.finfo(float).tiny)[:, None, None] * np.eye(dof)
         solution = np.linalg.solve(A, -(np.swapaxes(Jw, 1, 2) @ r[:, :, None]))[:, :, 0]
         step = np.zeros((len(k), 6))
         step[:, [2, 3, 4] if upright else slice(None)] = solution
