@@ -221,10 +221,10 @@ class CameraObserver:
         explains the depth images as well as the one seen (`_depth_residual_m`, within `AS_WELL`): a cube and a bar
         lying end to end look alike however they are split, and the prediction says which split the action made.
         None otherwise. The blocks are fitted jointly with the blocks around them, each point to its nearest box
-        (`box_fit.fit_boxes`), so that blocks that touch do not pull each other into one another; each upright (x, y,
+        (`box_fit.fit_jointly`), so that blocks that touch do not pull each other into one another; each upright (x, y,
         yaw), unless its points say it leans (with six degrees of freedom it tilts more than `box_fit.TILTED_RAD`: a
         bar set down on a cube's end, its far end on the table)."""
-        from tamp.sim.box_fit import fit_boxes, half_size, leans
+        from tamp.sim.box_fit import fit_jointly, half_size, leans
         from tamp.sim.perception import fused_cloud
 
         off = np.linalg.norm(X[:, :3] - expected[:, :3], axis=1)
@@ -234,16 +234,17 @@ class CameraObserver:
         if not odd:
             return None
         cloud = fused_cloud(views, self.rig.config.voxel_m)
-        halves = [half_size(int(t)) for t in self.types]
+        halves = np.array([half_size(int(t)) for t in self.types])
         near = [np.linalg.norm(cloud - expected[i, :3], axis=1) < np.linalg.norm(halves[i]) + 0.01 for i in odd]
         if min(np.count_nonzero(m) for m in near) < MIN_POINTS:
             return None
         points = cloud[np.any(near, axis=0)]
         starts = [self._pose(i, expected[i, :3]) if i in odd else p for i, p in enumerate(poses)]
-        six = fit_boxes(points, halves, starts, odd, [False] * len(X))
+        six = fit_jointly(points, halves, np.array(starts), odd, np.zeros(len(X), dtype=bool))
         leaning = {i for i in odd if leans(six[i])}
-        poses_alt = fit_boxes(points, halves, [six[i] if i in leaning else p for i, p in enumerate(starts)], odd,
-                              [i not in leaning for i in range(len(X))])
+        poses_alt = list(fit_jointly(points, halves, np.array([six[i] if i in leaning else p
+                                                               for i, p in enumerate(starts)]),
+                                     odd, np.array([i not in leaning for i in range(len(X))])))
         X_alt = X.copy()
         X_alt[odd, :3] = [poses_alt[i][:3, 3] for i in odd]
         if _refused(X_alt) is not None:

@@ -6,6 +6,7 @@ Poses are (4, 4) homogeneous matrices X_WB (block B in the world W), lengths met
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from functools import cache
 from itertools import permutations, product
 
@@ -13,7 +14,6 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import ConvexHull, cKDTree
-from scipy.spatial.transform import Rotation
 
 from tamp.planning.vocabulary import BLOCK_HEIGHT, BLOCK_SIZES, LARGE, SMALL
 
@@ -40,48 +40,92 @@ def pose(R: np.ndarray, p: np.ndarray) -> np.ndarray:
 
 def box_sdf(X_WB: np.ndarray, half: np.ndarray, p_W: np.ndarray) -> np.ndarray:
     """Signed distance (metres, negative inside) of the points p_W (k, 3) to the box of half sizes `half` at X_WB."""
-    q = np.abs((p_W - X_WB[:3, 3]) @ X_WB[:3, :3]) - half
-    return np.linalg.norm(np.maximum(q, 0.0), axis=1) + np.minimum(q.max(axis=1), 0.0)
+    return boxes_sdf(X_WB[None], np.asarray(half)[None], p_W)[0]
 
 
-def _sdf_and_gradient(X_WB: np.ndarray, half: np.ndarray, p_W: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """box_sdf of the points and its gradient with respect to the points (k, 3), in the world frame."""
-    R, c = X_WB[:3, :3], X_WB[:3, 3]
-    p_B = (p_W - c) @ R
-    q = np.abs(p_B) - half
-    out = np.maximum(q, 0.0)
-    distance = np.linalg.norm(out, axis=1)
-    outside = distance > 0
-    g_B = np.zeros_like(p_B)
-    g_B[outside] = out[outside] / distance[outside, None]
-    nearest = np.argmax(q, axis=1)
-    inside = np.flatnonzero(~outside)
-    g_B[inside, nearest[inside]] = 1.0
-    g_B *= np.where(p_B < 0, -1.0, 1.0)
-    return distance + np.minimum(q.max(axis=1), 0.0), g_B @ R.T
+def boxes_sdf(X_WB: np.ndarray, half: np.ndarray, p_W: np.ndarray) -> np.ndarray:
+    """box_sdf of the points p_W (k, 3) to each of the boxes at X_WB (b, 4, 4) of half sizes `half` (b, 3): (b, k)."""
+    q = np.abs((p_W[None] - X_WB[:, None, :3, 3]) @ X_WB[:, :3, :3]) - half[:, None]
+    return _sdf_of(q[..., 0], q[..., 1], q[..., 2])
+
+
+def _sdf_of(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """The signed distance of points whose box coordinates' magnitudes exceed the half sizes by x, y and z (written
+    per axis: numpy's reductions over an axis of three cost ten times an elementwise operation)."""
+    outside = np.sqrt(np.maximum(x, 0.0) ** 2 + np.maximum(y, 0.0) ** 2 + np.maximum(z, 0.0) ** 2)
+    return outside + np.minimum(np.maximum(np.maximum(x, y), z), 0.0)
+
+
+def _rotations(w: np.ndarray) -> np.ndarray:
+    """The rotation matrices (b, 3, 3) of the rotation vectors w (b, 3) (Rodrigues' formula)."""
+    angle = np.linalg.norm(w, axis=1)
+    k = w / np.where(angle > 0, angle, 1.0)[:, None]
+    K = np.zeros((len(w), 3, 3))
+    K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -k[:, 2], k[:, 1], -k[:, 0]
+    K -= np.swapaxes(K, 1, 2)
+    return np.eye(3) + np.sin(angle)[:, None, None] * K + (1.0 - np.cos(angle))[:, None, None] * (K @ K)
 
 
 def fit_box(points: np.ndarray, half: np.ndarray, X0: np.ndarray, upright: bool, iterations: int = 15) -> np.ndarray:
     """The pose near X0 whose box surface passes closest to `points`: Gauss-Newton on the signed distance with
     Cauchy weights (iteratively reweighted), so that a neighbour's points do not pull. `upright`: only x, y and the
     yaw about the world's z move (a block resting flat, its height known from its top face)."""
-    if len(points) > FIT_POINTS:
-        points = points[np.linspace(0, len(points) - 1, FIT_POINTS).astype(int)]
-    columns = [2, 3, 4] if upright else list(range(6))  # of (rotation about x, y, z; translation x, y, z)
-    if len(points) < 2 * len(columns):
-        return X0
-    X = X0.copy()
+    return fit_boxes([points], np.asarray(half)[None], X0[None], upright, iterations)[0]
+
+
+def fit_boxes(points: list[np.ndarray], half: np.ndarray, X0: np.ndarray, upright: bool,
+              iterations: int = 15) -> np.ndarray:
+    """`fit_box` of several boxes at once (half sizes (b, 3), starting poses (b, 4, 4)), each to its own points:
+    the poses (b, 4, 4). A box with fewer points than twice its degrees of freedom stays at its start."""
+    points = [q[np.linspace(0, len(q) - 1, FIT_POINTS).astype(int)] if len(q) > FIT_POINTS else q for q in points]
+    p = np.zeros((len(points), max((len(q) for q in points), default=0), 3))
+    used = np.zeros(p.shape[:2])  # 1 for a box's points, 0 for the padding after them
+    for box, q in enumerate(points):
+        p[box, :len(q)], used[box, :len(q)] = q, 1.0
+    dof = 3 if upright else 6
+    moving = np.array([len(q) >= 2 * dof for q in points], dtype=bool)
+    R, c = X0[:, :3, :3].copy(), X0[:, :3, 3].copy()
     for _ in range(iterations):
-        r, g_W = _sdf_and_gradient(X, half, points)
+        k = np.flatnonzero(moving)
+        if not len(k):
+            break
+        d = p[k] - c[k, None]
+        p_B = d @ R[k]
+        q = np.abs(p_B) - half[k, None]
+        r = _sdf_of(q[..., 0], q[..., 1], q[..., 2])
+        # its gradient: outside, towards the nearest surface point; inside, the nearest face's normal (the first
+        #   axis of the largest excess, as argmax)
+        out = np.maximum(q, 0.0)
+        outside_m = np.sqrt(out[..., 0] ** 2 + out[..., 1] ** 2 + out[..., 2] ** 2)
+        inside = outside_m == 0
+        g_B = out / np.where(inside, 1.0, outside_m)[:, :, None]
+        x_first = (q[..., 0] >= q[..., 1]) & (q[..., 0] >= q[..., 2])
+        g_B[..., 0] += inside & x_first
+        g_B[..., 1] += inside & ~x_first & (q[..., 1] >= q[..., 2])
+        g_B[..., 2] += inside & ~x_first & (q[..., 1] < q[..., 2])
+        g = np.copysign(g_B, p_B) @ np.swapaxes(R[k], 1, 2)
         # a small rotation w about the centre and a translation dc move the points' box coordinates by
         # -(w x d) and -dc (d = p - c): the signed distance changes by -(d x g).w - g.dc
-        J = -np.hstack([np.cross(points - X[:3, 3], g_W), g_W])[:, columns]
-        w = 1.0 / (1.0 + (r / FIT_SCALE_M) ** 2)
-        step = np.zeros(6)
-        step[columns] = np.linalg.lstsq(J * np.sqrt(w)[:, None], -r * np.sqrt(w), rcond=None)[0]
-        X = pose(Rotation.from_rotvec(step[:3]).as_matrix() @ X[:3, :3], X[:3, 3] + step[3:])
-        if np.abs(step).max() < 1e-5:
-            break
+        yaw = d[:, :, 0] * g[:, :, 1] - d[:, :, 1] * g[:, :, 0]
+        if upright:  # yaw, x, y
+            J = -np.stack([yaw, g[:, :, 0], g[:, :, 1]], axis=2)
+        else:
+            J = -np.stack([d[:, :, 1] * g[:, :, 2] - d[:, :, 2] * g[:, :, 1],
+                           d[:, :, 2] * g[:, :, 0] - d[:, :, 0] * g[:, :, 2], yaw, g[:, :, 0], g[:, :, 1], g[:, :, 2]],
+                          axis=2)
+        Jw = J * (used[k] / (1.0 + (r / FIT_SCALE_M) ** 2))[:, :, None]
+        # the weighted least squares' normal equations, damped a trace's 1e-12th: a direction the points do not fix
+        #   (a face's own plane, seen alone) stays where it is, and so does an upright box fitted to points all
+        #   above its top face (no x, y or yaw moves them: J = 0)
+        A = np.swapaxes(Jw, 1, 2) @ J
+        A += (1e-12 * np.trace(A, axis1=1, axis2=2) + np.finfo(float).tiny)[:, None, None] * np.eye(dof)
+        solution = np.linalg.solve(A, -(np.swapaxes(Jw, 1, 2) @ r[:, :, None]))[:, :, 0]
+        step = np.zeros((len(k), 6))
+        step[:, [2, 3, 4] if upright else slice(None)] = solution
+        R[k], c[k] = _rotations(step[:, :3]) @ R[k], c[k] + step[:, 3:]
+        moving[k[np.abs(step).max(axis=1) < 1e-5]] = False
+    X = np.repeat(np.eye(4)[None], len(points), axis=0)
+    X[:, :3, :3], X[:, :3, 3] = R, c
     return X
 
 
@@ -90,18 +134,20 @@ def leans(X_WB: np.ndarray) -> bool:
     return bool(np.abs(X_WB[2, :3]).max() < np.cos(TILTED_RAD))
 
 
-def fit_boxes(points: np.ndarray, halves: list[np.ndarray], poses: list[np.ndarray], moving: list[int],
-              upright: list[bool], rounds: int = 2) -> list[np.ndarray]:
-    """`poses` with the boxes `moving` refitted jointly to `points`: each point goes to its nearest box (of all of
-    them), each moving box is fitted to its points (`fit_box`, `upright[k]`), `rounds` times, so that the points of
-    blocks that touch pull only their own box."""
-    poses = list(poses)
+def fit_jointly(points: np.ndarray, half: np.ndarray, X0: np.ndarray, moving: Sequence[int], upright: np.ndarray,
+                rounds: int = 2) -> np.ndarray:
+    """The poses X0 (b, 4, 4) of boxes of half sizes `half` (b, 3) with the boxes `moving` refitted jointly to
+    `points`: each point goes to its nearest box (of all of them), each moving box is fitted to its points
+    (`fit_boxes`, upright where `upright` (b,) says), `rounds` times, so that the points of blocks that touch pull
+    only their own box."""
+    X = np.array(X0, dtype=float)
     for _ in range(rounds):
-        distance = np.array([box_sdf(X, half, points) for X, half in zip(poses, halves)])
-        nearest = np.argmin(np.abs(distance), axis=0)
-        for k in moving:
-            poses[k] = fit_box(points[nearest == k], halves[k], poses[k], upright[k])
-    return poses
+        nearest = np.argmin(np.abs(boxes_sdf(X, half, points)), axis=0)
+        for flat in (True, False):
+            mine = [k for k in moving if bool(upright[k]) == flat]
+            if mine:
+                X[mine] = fit_boxes([points[nearest == k] for k in mine], half[mine], X[mine], flat)
+    return X
 
 
 @cache
@@ -122,30 +168,76 @@ def _face_samples(block_type: int) -> tuple[np.ndarray, np.ndarray]:
     return np.concatenate(samples), np.concatenate(normals)
 
 
+class _Cameras:
+    """The views' cameras stacked (poses, intrinsics, depth images) so that `seen_through` asks them all at once."""
+
+    def __init__(self, views) -> None:
+        self.views = list(views)
+        self.R_WC = np.array([v.X_WC[:3, :3] for v in self.views]).reshape(-1, 3, 3)
+        self.p_WC = np.array([v.X_WC[:3, 3] for v in self.views]).reshape(-1, 3)
+        self.p_WC_sq = np.sum(self.p_WC ** 2, axis=1)
+        self.fx, self.fy, self.cx, self.cy = (np.array([v.intrinsics[k] for v in self.views]) for k in range(4))
+        self.h = np.array([v.depth.shape[0] for v in self.views])
+        self.w = np.array([v.depth.shape[1] for v in self.views])
+        self.depth = [v.depth for v in self.views]
+
+
+_cameras_cache: list[_Cameras] = []  # the last views' stack (it holds them, so their ids are not reused)
+
+
+def _cameras(views) -> _Cameras:
+    """The stack of `views`, built once for the views of one perception."""
+    views = list(views)
+    if not (_cameras_cache and len(_cameras_cache[0].views) == len(views)
+            and all(a is b for a, b in zip(_cameras_cache[0].views, views))):
+        _cameras_cache[:] = [_Cameras(views)]
+    return _cameras_cache[0]
+
+
 def seen_through(X_WB: np.ndarray, block_type: int, views) -> float:
     """The share of the box's face samples that some camera saw past: its measured depth there is farther than the
     sample by SEEN_THROUGH_M. A box that is really there hides what is behind it; no return proves nothing, and
     a face a camera sees more obliquely than _GRAZING_COS is not asked of it (a pixel's width there spans the
     face's whole depth)."""
-    p_B, n_B = _face_samples(block_type)
-    p_W, n_W = p_B @ X_WB[:3, :3].T + X_WB[:3, 3], n_B @ X_WB[:3, :3].T
-    through = np.zeros(len(p_W), dtype=bool)
-    for view in views:
-        R_WC, p_WC = view.X_WC[:3, :3], view.X_WC[:3, 3]
-        p_C = (p_W - p_WC) @ R_WC
-        ray = p_W - p_WC
-        oblique = np.abs(np.sum(ray * n_W, axis=1)) < _GRAZING_COS * np.linalg.norm(ray, axis=1)
-        fx, fy, cx, cy = view.intrinsics
-        z = p_C[:, 2]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            u = np.round(fx * p_C[:, 0] / z + cx).astype(np.int64, copy=False)
-            v = np.round(fy * p_C[:, 1] / z + cy).astype(np.int64, copy=False)
-        h, w = view.depth.shape
-        inside = (z > 0) & (u >= 0) & (u < w) & (v >= 0) & (v < h) & ~oblique
-        measured = np.full(len(p_W), np.nan)
-        measured[inside] = view.depth[v[inside], u[inside]]
-        through |= np.isfinite(measured) & (measured > z + SEEN_THROUGH_M)
-    return float(through.mean())
+    return float(seen_through_boxes(X_WB[None], np.array([block_type]), views)[0])
+
+
+def seen_through_boxes(X_WB: np.ndarray, block_types: np.ndarray, views) -> np.ndarray:
+    """`seen_through` of each of the boxes at X_WB (b, 4, 4) of types `block_types` (b,): (b,)."""
+    cameras = _cameras(views)
+    shares = np.zeros(len(X_WB))
+    for block_type in np.unique(block_types):
+        mine = np.flatnonzero(block_types == block_type)
+        p_B, n_B = _face_samples(int(block_type))
+        p_W = (p_B @ np.swapaxes(X_WB[mine, :3, :3], 1, 2) + X_WB[mine, None, :3, 3]).reshape(-1, 3)
+        n_W = (n_B @ np.swapaxes(X_WB[mine, :3, :3], 1, 2)).reshape(-1, 3)
+        shares[mine] = np.mean(_seen_past(p_W, n_W, cameras).reshape(len(mine), -1), axis=1)
+    return shares
+
+
+def _seen_past(p_W: np.ndarray, n_W: np.ndarray, cameras: _Cameras) -> np.ndarray:
+    """Whether some camera measured a depth farther than each point p_W (k, 3) by SEEN_THROUGH_M, where it sees the
+    point's face (normal n_W) less obliquely than _GRAZING_COS."""
+    # per camera (rows) and point (columns), written per axis (a (k, 3) by (3, 12) matmul takes OpenBLAS's threads,
+    #   which wait for each other on a busy machine): the ray's length squared and its dot with the face's normal
+    x, y, z = np.ascontiguousarray(p_W.T)
+    o = cameras.p_WC[:, :, None]  # (cameras, 3, 1)
+    ray_sq = x * x + y * y + z * z - 2 * (o[:, 0] * x + o[:, 1] * y + o[:, 2] * z) + cameras.p_WC_sq[:, None]
+    along = x * n_W[:, 0] + y * n_W[:, 1] + z * n_W[:, 2] - (o[:, 0] * n_W[:, 0] + o[:, 1] * n_W[:, 1]
+                                                             + o[:, 2] * n_W[:, 2])
+    oblique = along ** 2 < _GRAZING_COS ** 2 * ray_sq
+    R = cameras.R_WC[:, :, :, None]  # the point in each camera's frame: (p - o) @ R, per axis
+    x, y, z = x - o[:, 0], y - o[:, 1], z - o[:, 2]
+    x_C, y_C, z = (x * R[:, 0, j] + y * R[:, 1, j] + z * R[:, 2, j] for j in range(3))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = np.round(cameras.fx[:, None] * x_C / z + cameras.cx[:, None]).astype(np.int64, copy=False)
+        v = np.round(cameras.fy[:, None] * y_C / z + cameras.cy[:, None]).astype(np.int64, copy=False)
+    inside = ((z > 0) & (u >= 0) & (u < cameras.w[:, None]) & (v >= 0) & (v < cameras.h[:, None]) & ~oblique)
+    measured = np.zeros(z.shape)
+    for k, depth in enumerate(cameras.depth):
+        measured[k, inside[k]] = depth[v[k, inside[k]], u[k, inside[k]]]
+    with np.errstate(invalid="ignore"):  # no return (inf) proves nothing, nor does one too near (0)
+        return np.any((measured > z + SEEN_THROUGH_M) & np.isfinite(measured), axis=0)
 
 
 def min_area_rectangle(xy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
@@ -159,16 +251,13 @@ def min_area_rectangle(xy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarr
         return None
     edges = np.diff(np.vstack([hull, hull[:1]]), axis=0)
     angles = np.unique(np.mod(np.arctan2(edges[:, 1], edges[:, 0]), np.pi / 2))
-    best = None
-    for angle in angles:
-        axes = np.array([[np.cos(angle), np.sin(angle)], [-np.sin(angle), np.cos(angle)]])
-        local = hull @ axes.T
-        low, high = local.min(axis=0), local.max(axis=0)
-        area = float(np.prod(high - low))
-        if best is None or area < best[0]:
-            best = (area, axes, low, high)
-    assert best is not None
-    _, axes, low, high = best
+    cos, sin = np.cos(angles)[:, None], np.sin(angles)[:, None]
+    along, across = cos * hull[:, 0] + sin * hull[:, 1], cos * hull[:, 1] - sin * hull[:, 0]  # (angles, vertices)
+    low = np.column_stack([along.min(axis=1), across.min(axis=1)])
+    high = np.column_stack([along.max(axis=1), across.max(axis=1)])
+    k = int(np.argmin((high[:, 0] - low[:, 0]) * (high[:, 1] - low[:, 1])))  # the first of the smallest areas
+    axes = np.array([[cos[k, 0], sin[k, 0]], [-sin[k, 0], cos[k, 0]]])
+    low, high = low[k], high[k]
     centre = ((low + high) / 2) @ axes
     sizes = high - low
     long = int(np.argmax(sizes))
@@ -255,14 +344,14 @@ def vertical_faces(p: np.ndarray, n: np.ndarray, voxel: float) -> list[tuple[np.
     return faces
 
 
-def side_hypotheses(p: np.ndarray, n: np.ndarray, voxel: float) -> list[tuple[int, np.ndarray]]:
-    """Upright blocks behind the vertical faces among the points p (normals n, sign arbitrary): a block whose top
-    face is hidden (under a leaning bar, or an overhang) may show a single side. Each face (`vertical_faces`)
+def side_hypotheses(faces: list[tuple[np.ndarray, np.ndarray]]) -> list[tuple[int, np.ndarray]]:
+    """Upright blocks behind vertical faces (`vertical_faces`: points and horizontal normal, sign arbitrary): a
+    block whose top face is hidden (under a leaning bar, or an overhang) may show a single side. Each face
     proposes, on either side of its plane (which side the cameras looked from is unknown), a cube at either end or
     the middle of the face, a bar along it likewise, and a bar across it; the block stands in the layer of the
     face's median height."""
     hypotheses = []
-    for f, m in vertical_faces(p, n, voxel):
+    for f, m in faces:
         t = np.array([-m[1], m[0], 0.0])
         plane, (lo, hi) = float(np.median(f @ m)), np.percentile(f @ t, [2.0, 98.0])
         z = (np.floor(float(np.median(f[:, 2])) / BLOCK_HEIGHT) + 0.5) * BLOCK_HEIGHT
@@ -276,12 +365,12 @@ def side_hypotheses(p: np.ndarray, n: np.ndarray, voxel: float) -> list[tuple[in
     return hypotheses
 
 
-def tilted_side_hypotheses(p: np.ndarray, n: np.ndarray, voxel: float) -> list[tuple[int, np.ndarray]]:
-    """Blocks with six degrees of freedom behind the vertical faces among the points p (normals n, sign arbitrary):
-    a block leaning in the plane of a side face (rolled about its short axis) whose top another block covers shows
-    only its sides, tilted rectangles. Each face (`vertical_faces`) proposes `face_hypotheses` on either side of
-    its plane, those tilted more than TILTED_RAD (an upright block's sides propose it upright: `side_hypotheses`)."""
-    return [h for f, m in vertical_faces(p, n, voxel) for sign in (-1.0, 1.0)
+def tilted_side_hypotheses(faces: list[tuple[np.ndarray, np.ndarray]]) -> list[tuple[int, np.ndarray]]:
+    """Blocks with six degrees of freedom behind vertical faces (`vertical_faces`): a block leaning in the plane of
+    a side face (rolled about its short axis) whose top another block covers shows only its sides, tilted
+    rectangles. Each face proposes `face_hypotheses` on either side of its plane, those tilted more than TILTED_RAD
+    (an upright block's sides propose it upright: `side_hypotheses`)."""
+    return [h for f, m in faces for sign in (-1.0, 1.0)
             for h in face_hypotheses(f, sign * m, BLOCK_HEIGHT / 2) if np.abs(h[1][2, :3]).max() < np.cos(TILTED_RAD)]
 
 
@@ -305,6 +394,7 @@ def orientation_error(R_est: np.ndarray, R_true: np.ndarray, block_type: int) ->
     return float(np.arccos(np.clip((traces.max() - 1.0) / 2.0, -1.0, 1.0)))
 
 
-__all__ = ["MIN_PATCH", "TILTED_RAD", "box_sdf", "components", "face_hypotheses", "fit_box", "fit_boxes",
-           "footprint_hypotheses", "half_size", "leans", "min_area_rectangle", "orientation_error", "pose",
-           "seen_through", "side_hypotheses", "symmetries", "tilted_side_hypotheses", "vertical_faces"]
+__all__ = ["MIN_PATCH", "TILTED_RAD", "box_sdf", "boxes_sdf", "components", "face_hypotheses", "fit_box",
+           "fit_boxes", "fit_jointly", "footprint_hypotheses", "half_size", "leans", "min_area_rectangle",
+           "orientation_error", "pose", "seen_through", "seen_through_boxes", "side_hypotheses", "symmetries",
+           "tilted_side_hypotheses", "vertical_faces"]

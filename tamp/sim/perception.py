@@ -38,6 +38,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from enum import StrEnum
+from functools import lru_cache
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
@@ -48,16 +49,18 @@ from tamp.sim.box_fit import (
     MIN_PATCH,
     TILTED_RAD,
     box_sdf,
+    boxes_sdf,
     components,
     face_hypotheses,
-    fit_box,
     fit_boxes,
+    fit_jointly,
     footprint_hypotheses,
     half_size,
     pose,
-    seen_through,
+    seen_through_boxes,
     side_hypotheses,
     tilted_side_hypotheses,
+    vertical_faces,
 )
 from tamp.sim.perception_config import PerceptionConfig
 
@@ -168,12 +171,27 @@ def world_points(view: DepthView) -> np.ndarray:
     x_ray = ((np.arange(w) - cx) / fx).astype(np.float32)
     y_ray = ((np.arange(h) - cy) / fy).astype(np.float32)
     with np.errstate(invalid="ignore"):  # inf * 0 where a ray is level
-        height = view.depth * (R[2, 0] * x_ray[None, :] + R[2, 1] * y_ray[:, None] + R[2, 2]) + t[2]
-    v, u = np.nonzero((height > CROP_M[2][0]) & (height < CROP_M[2][1]) & (view.depth > 0))
+        height = view.depth * _rise(view.intrinsics, (h, w), tuple(R[2])) + t[2]
+    pixel = np.flatnonzero((height > CROP_M[2][0]) & (height < CROP_M[2][1]) & (view.depth > 0))  # np.nonzero's
+    #   (rows, columns) take twenty times as long
+    v, u = pixel // w, pixel % w
     z = view.depth[v, u].astype(float)
-    p_W = np.column_stack([x_ray[u] * z, y_ray[v] * z, z]) @ R.T + t
+    x, y = x_ray[u] * z, y_ray[v] * z
+    p_W = np.column_stack([R[k, 0] * x + R[k, 1] * y + R[k, 2] * z + t[k] for k in range(3)])  # not a matmul: a
+    #   (k, 3) one takes OpenBLAS's threads, which wait for each other on a busy machine
     inside = np.all([(p_W[:, k] > lo) & (p_W[:, k] < hi) for k, (lo, hi) in enumerate(CROP_M)], axis=0)
     return p_W[inside]
+
+
+@lru_cache(maxsize=16)
+def _rise(intrinsics: tuple[float, float, float, float], shape: tuple[int, int],
+          R_z: tuple[float, float, float]) -> np.ndarray:
+    """(H, W) float32: the world height gained per metre of depth along each pixel's ray, for a camera whose
+    rotation's last row is R_z (a fixed camera's, computed once)."""
+    fx, fy, cx, cy = intrinsics
+    x_ray = ((np.arange(shape[1]) - cx) / fx).astype(np.float32)
+    y_ray = ((np.arange(shape[0]) - cy) / fy).astype(np.float32)
+    return R_z[0] * x_ray[None, :] + R_z[1] * y_ray[:, None] + np.float32(R_z[2])
 
 
 def fused_cloud(views: list[DepthView], voxel_m: float) -> np.ndarray:
@@ -189,22 +207,59 @@ def fused_cloud(views: list[DepthView], voxel_m: float) -> np.ndarray:
     return np.stack([np.bincount(voxel, p[:, k]) for k in range(3)], axis=1) / counts[:, None]
 
 
-def normals(p: np.ndarray, tree: cKDTree, which: np.ndarray) -> np.ndarray:
-    """Unit normals (k, 3) of the local planes at the points p[which] (PCA of each one's nearest neighbours among all
-    of `p`, whose tree is `tree`), sign arbitrary."""
-    if not len(which):
-        return np.zeros((0, 3))
-    _, near = tree.query(p[which], k=min(_NEIGHBOURS, len(p)))
-    local = p[near] - p[near].mean(axis=1, keepdims=True)
-    _, vectors = np.linalg.eigh(np.swapaxes(local, 1, 2) @ local)
-    return vectors[:, :, 0]
+def smallest_eigenvectors(C: np.ndarray) -> np.ndarray:
+    """Unit eigenvectors (k, 3) of the smallest eigenvalues of the symmetric (k, 3, 3) matrices C, in closed form:
+    the eigenvalue by the trigonometric formula, the vector as the longest cross product of two rows of C less it
+    (written per entry: a fifth of the time of LAPACK's `eigh`, one small matrix at a time)."""
+    a, b, c, d, e, f = C[:, 0, 0], C[:, 1, 1], C[:, 2, 2], C[:, 0, 1], C[:, 0, 2], C[:, 1, 2]
+    mean = (a + b + c) / 3
+    spread = np.sqrt(((a - mean) ** 2 + (b - mean) ** 2 + (c - mean) ** 2 + 2 * (d * d + e * e + f * f)) / 6)
+    s = np.where(spread > 0, spread, 1.0)
+    A, B, S, D, E, F = (a - mean) / s, (b - mean) / s, (c - mean) / s, d / s, e / s, f / s  # (C - mean I) / spread
+    det = A * (B * S - F * F) - D * (D * S - F * E) + E * (D * F - B * E)
+    smallest = mean + 2 * spread * np.cos(np.arccos(np.clip(det / 2, -1.0, 1.0)) / 3 + 2 * np.pi / 3)
+    a, b, c = a - smallest, b - smallest, c - smallest  # the rows of C less it: (a, d, e), (d, b, f), (e, f, c)
+    crossed = np.stack([np.stack([d * f - e * b, e * d - a * f, a * b - d * d], axis=1),
+                        np.stack([d * c - e * f, e * e - a * c, a * f - d * e], axis=1),
+                        np.stack([b * c - f * f, f * e - d * c, d * f - b * e], axis=1)], axis=1)
+    length = np.sqrt(np.einsum("kij,kij->ki", crossed, crossed))
+    best = np.argmax(length, axis=1)
+    rows = np.arange(len(C))
+    vector = crossed[rows, best] / np.where(length[rows, best] > 0, length[rows, best], 1.0)[:, None]
+    vector[length[rows, best] == 0] = (0.0, 0.0, 1.0)  # an isotropic neighbourhood: no plane
+    return vector
 
 
-def _score(distance: np.ndarray) -> int:
-    """A box's support from the points at these signed distances: those on its surface, less _INSIDE_WEIGHT for each
-    one inside it (a surface the cameras saw inside a solid box is evidence against it)."""
-    on = int(np.count_nonzero(np.abs(distance) < EXPLAINED_M))
-    return on - _INSIDE_WEIGHT * int(np.count_nonzero(distance <= -EXPLAINED_M))
+class Normals:
+    """Unit normals of the fused points' local planes (PCA of each one's _NEIGHBOURS nearest points), sign
+    arbitrary; each point's is computed once, when first asked for."""
+
+    def __init__(self, p: np.ndarray, tree: cKDTree) -> None:
+        self.p, self.tree = p, tree
+        self._normals = np.zeros((len(p), 3))
+        self._known = np.zeros(len(p), dtype=bool)
+
+    def __call__(self, which: np.ndarray) -> np.ndarray:
+        """The normals (k, 3) of the points p[which]."""
+        new = np.unique(which[~self._known[which]])
+        if len(new):
+            _, near = self.tree.query(self.p[new], k=min(_NEIGHBOURS, len(self.p)))
+            axes = [self.p[near, k] for k in range(3)]  # (points, neighbours) per axis
+            axes = [v - v.mean(axis=1, keepdims=True) for v in axes]
+            C = np.empty((len(new), 3, 3))
+            for i in range(3):
+                for j in range(i, 3):
+                    C[:, i, j] = C[:, j, i] = np.einsum("kn,kn->k", axes[i], axes[j])
+            self._normals[new] = smallest_eigenvectors(C)
+            self._known[new] = True
+        return self._normals[which]
+
+
+def _scores(distance: np.ndarray) -> np.ndarray:
+    """Each box's support from the points at these signed distances (boxes, points): those on its surface, less
+    _INSIDE_WEIGHT for each one inside it (a surface the cameras saw inside a solid box is evidence against it)."""
+    on = np.count_nonzero(np.abs(distance) < EXPLAINED_M, axis=1)
+    return on - _INSIDE_WEIGHT * np.count_nonzero(distance <= -EXPLAINED_M, axis=1)
 
 
 def _overlaps(X_WB: np.ndarray, block_type: int, found: Sequence[BlockEstimate]) -> bool:
@@ -221,32 +276,49 @@ def _best_box(points: np.ndarray, candidates: np.ndarray, hypotheses, views, qua
     those whose points within _VICINITY_M lie on its surface for at least the share `quality` and that do not
     overlap a block `found`; None when there is none. Only the _FITTED hypotheses of each family (an optional fourth
     item) that explain most before the fit are fitted (a fit costs milliseconds; one family's many near misses must
-    not crowd out another's right guess)."""
-    ranked = []
-    for block_type, X0, upright, *family in hypotheses:
-        if seen_through(X0, block_type, views) <= 2 * MAX_SEEN_THROUGH:  # far off: most wrong ones end here
-            score = _score(box_sdf(X0, half_size(block_type), candidates))
-            ranked.append((score, block_type, X0, upright, family[0] if family else 0))
-    ranked.sort(key=lambda r: r[0], reverse=True)
-    chosen = [r for f in {r[4] for r in ranked} for r in [r for r in ranked if r[4] == f][:_FITTED]]
+    not crowd out another's right guess). The hypotheses are tested and fitted together (`box_fit`'s batched
+    forms): numpy's time is in its calls more than in their sizes."""
+    if not hypotheses:
+        return None
+    types = np.array([h[0] for h in hypotheses])
+    X0 = np.array([h[1] for h in hypotheses])
+    upright = np.array([h[2] for h in hypotheses], dtype=bool)
+    family = np.array([h[3] if len(h) > 3 else 0 for h in hypotheses])
+    half = np.array([half_size(t) for t in types])
+    near = np.flatnonzero(seen_through_boxes(X0, types, views) <= 2 * MAX_SEEN_THROUGH)  # far off: most wrong
+    #   ones end here
+    ranked = near[np.argsort(-_scores(boxes_sdf(X0[near], half[near], candidates)), kind="stable")]
+    chosen = np.array([i for f in sorted(set(family[ranked].tolist())) for i in ranked[family[ranked] == f][:_FITTED]],
+                      dtype=int)
+    if not len(chosen):
+        return None
+    reach = boxes_sdf(X0[chosen], half[chosen], points) < _FIT_REACH_M
+    X = _fit_each([points[r] for r in reach], half[chosen], X0[chosen], upright[chosen])
+    half, types, upright, family = half[chosen], types[chosen], upright[chosen], family[chosen]
+    level = np.abs(X[:, 2, :3]).max(axis=1) > np.cos(TILTED_RAD)  # a block resting flat is proposed upright
+    #   from its sides (a 6-DOF fit from a vertical face drifted 8 mm)
+    bottom = X[:, 2, 3] - np.einsum("ki,ki->k", np.abs(X[:, 2, :3]), half)
+    keep = ~((family == _LEANING_SIDES) & level) & (bottom >= -_UNDER_TABLE_M)  # through the table, where no
+    #   camera sees: no block
+    keep[keep] = seen_through_boxes(X[keep], types[keep], views) <= MAX_SEEN_THROUGH
+    distance = boxes_sdf(X[keep], half[keep], candidates)
+    scores = np.zeros(len(X), dtype=int)
+    scores[keep] = _scores(distance)
+    vicinity = np.zeros(len(X), dtype=int)
+    vicinity[keep] = np.count_nonzero(np.abs(distance) < _VICINITY_M, axis=1)
+    row = np.cumsum(keep) - 1
     best = None
-    for _, block_type, X0, upright, family in chosen:
-        half = half_size(block_type)
-        X = fit_box(points[box_sdf(X0, half, points) < _FIT_REACH_M], half, X0, upright)
-        if family == _LEANING_SIDES and np.abs(X[2, :3]).max() > np.cos(TILTED_RAD):
-            continue  # a block resting flat is proposed upright from its sides (a 6-DOF fit drifted 8 mm)
-        if (X[2, 3] - np.abs(X[2, :3]) @ half < -_UNDER_TABLE_M or seen_through(X, block_type, views) > MAX_SEEN_THROUGH
-                or _overlaps(X, block_type, found)):
-            continue  # through the table (where no camera sees), seen through, or inside a block found
-        distance = box_sdf(X, half, candidates)
-        explained = distance < EXPLAINED_M
-        score = _score(distance)
-        if score < quality * np.count_nonzero(np.abs(distance) < _VICINITY_M):
+    for k in np.flatnonzero(keep):
+        if scores[k] < quality * vicinity[k] or _overlaps(X[k], int(types[k]), found):
             continue
-        volume = float(np.prod(half))
-        if best is None or (score > best[0] / _TIE if volume > best[3] else score >= best[0] * _TIE):
-            best = (score, BlockEstimate(block_type, X, score, upright), explained, volume)
-    return None if best is None else best[:3]
+        volume = float(np.prod(half[k]))
+        if best is None or (scores[k] > best[0] / _TIE if volume > best[2] else scores[k] >= best[0] * _TIE):
+            best = (int(scores[k]), k, volume)
+    if best is None:
+        return None
+    k = best[1]
+    block = BlockEstimate(int(types[k]), X[k], best[0], bool(upright[k]))
+    return best[0], block, distance[row[k]] < EXPLAINED_M
 
 
 def _carries(block: BlockEstimate, found: list[BlockEstimate]) -> bool:
@@ -259,11 +331,11 @@ def _carries(block: BlockEstimate, found: list[BlockEstimate]) -> bool:
     return False
 
 
-def _top_faces(p: np.ndarray, tree: cKDTree, free: np.ndarray, views, voxel: float, found: list,
+def _top_faces(p: np.ndarray, normals: Normals, free: np.ndarray, views, voxel: float, found: list,
                failures: list) -> None:
     """Step 2 of the pipeline: upright blocks from the top face patches, the highest first."""
     high = np.flatnonzero(free & (p[:, 2] > BLOCK_HEIGHT - 0.01))
-    up = high[np.abs(normals(p, tree, high)[:, 2]) > UP_COS]
+    up = high[np.abs(normals(high)[:, 2]) > UP_COS]
     queue = [up[c] for c in components(p[up], 2.5 * voxel) if len(c) >= MIN_PATCH]
     while queue:
         queue.sort(key=lambda c: (round(float(np.median(p[c, 2])) / BLOCK_HEIGHT), len(c)))  # the highest layer, its
@@ -290,9 +362,9 @@ def _top_faces(p: np.ndarray, tree: cKDTree, free: np.ndarray, views, voxel: flo
         queue.extend(rest[c] for c in components(p[rest], 2.5 * voxel) if len(c) >= MIN_PATCH)
 
 
-def _tilted_face(p: np.ndarray, tree: cKDTree, cluster: np.ndarray, voxel: float) -> tuple[np.ndarray, np.ndarray]:
+def _tilted_face(p: np.ndarray, normals: Normals, cluster: np.ndarray, voxel: float) -> tuple[np.ndarray, np.ndarray]:
     """The largest face of a cluster that looks up at all (a leaning block's top): its points and outward normal."""
-    n = normals(p, tree, cluster)
+    n = normals(cluster)
     n *= np.where(n[:, 2] < 0, -1.0, 1.0)[:, None]
     upward = np.flatnonzero(n[:, 2] > 0.3)
     if len(upward) < MIN_PATCH:
@@ -304,28 +376,29 @@ def _tilted_face(p: np.ndarray, tree: cKDTree, cluster: np.ndarray, voxel: float
     return p[face], normal
 
 
-def _cluster_hypotheses(p: np.ndarray, tree: cKDTree, cluster: np.ndarray, voxel: float) -> list:
+def _cluster_hypotheses(p: np.ndarray, normals: Normals, cluster: np.ndarray, voxel: float) -> list:
     """(type, initial pose, upright, family) of the blocks a cluster's points may be, in four families: upright
     blocks from its layers' outline, upright blocks from its vertical faces, blocks with six degrees of freedom from
     its largest upward face and from its vertical faces."""
-    face, normal = _tilted_face(p, tree, cluster, voxel)
+    face, normal = _tilted_face(p, normals, cluster, voxel)
     hypotheses = [(t, X0, True, _OUTLINE) for t, X0 in footprint_hypotheses(p[cluster])]
-    n = normals(p, tree, cluster)
-    hypotheses += [(t, X0, True, _SIDES) for t, X0 in side_hypotheses(p[cluster], n, voxel)]
-    hypotheses += [(t, X0, False, _LEANING_SIDES) for t, X0 in tilted_side_hypotheses(p[cluster], n, voxel)]
+    n = normals(cluster)
+    faces = vertical_faces(p[cluster], n, voxel)
+    hypotheses += [(t, X0, True, _SIDES) for t, X0 in side_hypotheses(faces)]
+    hypotheses += [(t, X0, False, _LEANING_SIDES) for t, X0 in tilted_side_hypotheses(faces)]
     if len(face) >= MIN_PATCH:
         hypotheses += [(t, X0, False, _TOP_FACE) for t, X0 in face_hypotheses(face, normal, BLOCK_HEIGHT / 2)]
     return hypotheses
 
 
-def _left_over(p: np.ndarray, tree: cKDTree, free: np.ndarray, views, voxel: float, found: list) -> None:
+def _left_over(p: np.ndarray, normals: Normals, free: np.ndarray, views, voxel: float, found: list) -> None:
     """Step 3 of the pipeline: the clusters left, as blocks whose top face is hidden (upright, from their sides'
     outline) or that lean (six degrees of freedom, from their largest upward face)."""
     left = np.flatnonzero(free)
     for cluster in components(p[left], 2.5 * voxel):
         cluster = left[cluster]
         while len(cluster) >= MIN_CLUSTER:
-            hypotheses = _cluster_hypotheses(p, tree, cluster, voxel)
+            hypotheses = _cluster_hypotheses(p, normals, cluster, voxel)
             best = _best_box(p[cluster], p[cluster], hypotheses, views, quality=MIN_EXPLAINED, found=found)
             if best is None or best[0] < MIN_CLUSTER:
                 break
@@ -342,25 +415,47 @@ def _without_extras(p: np.ndarray, views, found: list) -> None:
     for block in sorted(found, key=lambda b: b.points):
         if not any(b is block for b in found):
             continue
+        others = [b for b in found if b is not block]
+        if not others:
+            continue
+        reach = boxes_sdf(_poses(others), _halves(others), p) < _FIT_REACH_M
         mine = box_sdf(block.X_WB, half_size(block.type), p) < _FIT_REACH_M
-        near = [b for b in found if b is not block and np.any(box_sdf(b.X_WB, half_size(b.type), p[mine])
-                                                               < _FIT_REACH_M)]
+        touching = np.any(reach[:, mine], axis=1)
+        near = [b for b, t in zip(others, touching) if t]
         if not near:
             continue
-        group = mine | np.any([box_sdf(b.X_WB, half_size(b.type), p) < _FIT_REACH_M for b in near], axis=0)
-        q = p[group]
-        before = np.abs(np.min([box_sdf(b.X_WB, half_size(b.type), q) for b in [block, *near]], axis=0))
-        fitted = fit_boxes(q, [half_size(b.type) for b in near], [b.X_WB for b in near], list(range(len(near))),
-                           [b.upright for b in near])
-        after = np.abs(np.min([box_sdf(X, half_size(b.type), q) for X, b in zip(fitted, near)], axis=0))
+        q = p[mine | np.any(reach[touching], axis=0)]
+        half = _halves(near)
+        before = np.abs(np.min(boxes_sdf(_poses([block, *near]), _halves([block, *near]), q), axis=0))
+        fitted = fit_jointly(q, half, _poses(near), range(len(near)), np.array([b.upright for b in near]))
+        after = np.abs(np.min(boxes_sdf(fitted, half, q), axis=0))
         lost = int(np.count_nonzero(before < EXPLAINED_M)) - int(np.count_nonzero(after < EXPLAINED_M))
-        if lost >= MIN_CLUSTER or any(seen_through(X, b.type, views) > MAX_SEEN_THROUGH for X, b in zip(fitted, near)):
+        if lost >= MIN_CLUSTER or np.any(seen_through_boxes(fitted, np.array([b.type for b in near]), views)
+                                         > MAX_SEEN_THROUGH):
             continue
         moved = {id(b): replace(b, X_WB=X) for X, b in zip(fitted, near)}
         found[:] = [moved.get(id(b), b) for b in found if b is not block]
 
 
-def _with_prior(p: np.ndarray, tree: cKDTree, free: np.ndarray, views, voxel: float, found: list,
+def _poses(blocks: Sequence[BlockEstimate]) -> np.ndarray:
+    return np.array([b.X_WB for b in blocks]).reshape(-1, 4, 4)
+
+
+def _halves(blocks: Sequence[BlockEstimate]) -> np.ndarray:
+    return np.array([half_size(b.type) for b in blocks]).reshape(-1, 3)
+
+
+def _fit_each(points: list[np.ndarray], half: np.ndarray, X0: np.ndarray, upright: np.ndarray) -> np.ndarray:
+    """`box_fit.fit_boxes` of boxes some of which are `upright` (b,) and some not: their poses (b, 4, 4)."""
+    X = np.zeros((len(points), 4, 4))
+    for flat in (True, False):
+        mine = np.flatnonzero(upright == flat)
+        if len(mine):
+            X[mine] = fit_boxes([points[k] for k in mine], half[mine], X0[mine], flat)
+    return X
+
+
+def _with_prior(p: np.ndarray, normals: Normals, free: np.ndarray, views, voxel: float, found: list,
                 prior_types: np.ndarray) -> None:
     """Where the blocks found and the prior's types (`previous`) disagree, the explanations the prior names and the
     points support: a bar for a cube fitted to a bar's visible middle (its ends hidden), and a block of a type the
@@ -394,7 +489,7 @@ def _with_prior(p: np.ndarray, tree: cKDTree, free: np.ndarray, views, voxel: fl
     for cluster in components(p[left], 2.5 * voxel):
         cluster = left[cluster]
         while len(cluster) >= _PRIOR_MIN and max(short(SMALL), short(LARGE)) > 0:
-            hypotheses = [h for h in _cluster_hypotheses(p, tree, cluster, voxel) if short(h[0]) > 0]
+            hypotheses = [h for h in _cluster_hypotheses(p, normals, cluster, voxel) if short(h[0]) > 0]
             best = _best_box(p[cluster], p[cluster], hypotheses, views, _PRIOR_QUALITY, found)
             if best is None or best[0] < _PRIOR_MIN:
                 break
@@ -447,12 +542,12 @@ def perceive(views: list[DepthView], config: PerceptionConfig, previous: np.ndar
     found: list[BlockEstimate] = []
     failures: list[PerceptionFailure] = []
     if len(p) >= _NEIGHBOURS:
-        tree = cKDTree(p)
-        _top_faces(p, tree, free, views, config.voxel_m, found, failures)
-        _left_over(p, tree, free, views, config.voxel_m, found)
+        normals = Normals(p, cKDTree(p))
+        _top_faces(p, normals, free, views, config.voxel_m, found, failures)
+        _left_over(p, normals, free, views, config.voxel_m, found)
         _without_extras(p, views, found)
         if previous is not None:
-            _with_prior(p, tree, free, views, config.voxel_m, found, np.argmax(np.asarray(previous)[:, 3:], axis=1))
+            _with_prior(p, normals, free, views, config.voxel_m, found, np.argmax(np.asarray(previous)[:, 3:], axis=1))
         failures += _unexplained(p, free, config.voxel_m)
     identity = list(range(len(found)))
     if previous is not None:

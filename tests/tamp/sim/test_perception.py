@@ -7,7 +7,7 @@ from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 from guarded import InputError
 from tamp.app.settings import load_settings
 from tamp.planning.vocabulary import LARGE, SMALL
-from tamp.sim.box_fit import orientation_error
+from tamp.sim.box_fit import fit_box, fit_boxes, half_size, orientation_error, pose
 from tamp.sim.cameras import CameraRig, noisy_depth
 from tamp.sim.perception import Failure, perceive
 from tamp.sim.perception_check import check, observe
@@ -194,3 +194,22 @@ def test_orientation_errors_count_the_box_symmetries():
     assert orientation_error(turned, R, SMALL) == pytest.approx(0.0, abs=1e-9)  # a cube turned a quarter is itself
     assert orientation_error(turned, R, LARGE) == pytest.approx(np.pi / 2)  # a bar is not
     assert orientation_error(R @ RotationMatrix.MakeZRotation(np.pi).matrix(), R, LARGE) == pytest.approx(0.0, abs=1e-9)
+
+
+def test_box_fits_together_match_one_at_a_time_and_stay_put_where_the_points_fix_nothing():
+    rng = np.random.default_rng(0)
+    half = half_size(LARGE)
+    X_true = pose(RotationMatrix.MakeZRotation(0.4).matrix(), np.array([0.6, 0.1, 0.025]))
+    top = rng.uniform(-1, 1, (300, 3)) * half
+    top[:, 2] = half[2]
+    side, end = rng.uniform(-1, 1, (200, 3)) * half, rng.uniform(-1, 1, (100, 3)) * half
+    side[:, 0], end[:, 1] = half[0], half[1]
+    points = np.vstack([top, side, end]) @ X_true[:3, :3].T + X_true[:3, 3]
+    X0 = pose(RotationMatrix.MakeZRotation(0.45).matrix(), np.array([0.605, 0.095, 0.025]))
+    X = fit_box(points, half, X0, upright=True)
+    assert np.abs(X - X_true).max() < 1e-6  # found from 5 mm and 3 degrees off
+    together = fit_boxes([points, points[:250]], np.array([half, half]), np.array([X0, X0]), upright=True)
+    assert np.allclose(together[0], X, atol=1e-9)
+    above = X0[:3, 3] + rng.uniform(-0.01, 0.01, (30, 3)) + [0.0, 0.0, half[2] + 0.0025]  # all over its top face:
+    #   no x, y or yaw moves them (a singular step that once raised)
+    assert np.array_equal(fit_box(above, half, X0, upright=True), X0)
