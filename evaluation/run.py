@@ -126,8 +126,9 @@ class Evaluator:
             return
         cfg = self.config.plan_config(problem.seed)
         if models.symbolic is not None and models.domain is not None:
-            models.symbolic_planner(cfg.level1.backend).task(problem.n)
-            models.symbolic.symbols(problem.X_init)
+            for size in cfg.level1.scene_sizes(problem.n):  # Level 1's sub-scenes from focus_from blocks on
+                models.symbolic_planner(cfg.level1.backend).task(size)
+                models.symbolic.symbols(problem.X_init[:size])
         if models.dynamics is not None:
             models.dynamics.predict_effect(problem.X_init, np.zeros((1, 4), dtype=np.int64))
         self._warm.add(key)

@@ -80,6 +80,13 @@ class Level1Config:
         """Whether Level 1 focuses on the blocks off their goal in a scene of `n_objects` blocks."""
         return self.focus_from is not None and n_objects >= self.focus_from
 
+    def scene_sizes(self, n_objects: int) -> tuple[int, ...]:
+        """The object counts of the scenes Level 1 may plan in, in a scene of `n_objects` blocks: the whole scene's,
+        and when focused its sub-scenes' (`level1.level1_scene`). The symbolic planner builds its task once per
+        count (0.3-1 s each), a one-off cost that a benchmark pays before timing."""
+        subscenes = range(1, min(n_objects, SUBSCENE_OBJECTS) + 1) if self.focused(n_objects) else ()
+        return tuple(sorted({n_objects, *subscenes}))
+
 
 @dataclass(frozen=True)
 class KinematicsConfig:
