@@ -119,8 +119,9 @@ class Evaluator:
         return world
 
     def warm_up(self, models, problem: Problem) -> None:
-        """One-off costs for n objects, paid before any planner is timed: the symbolic planner's
-        ground task cache and the networks' first forward passes."""
+        """One-off costs for n objects, paid before any planner is timed: the symbolic planner's tasks (of the
+        scene's size and of the sub-scenes Level 1 plans in, `Level1Config.scene_sizes`) and the networks' first
+        forward passes."""
         key = (id(models), problem.n)
         if key in self._warm:
             return
