@@ -119,15 +119,17 @@ class Evaluator:
         return world
 
     def warm_up(self, models, problem: Problem) -> None:
-        """One-off costs for n objects, paid before any planner is timed: the symbolic planner's
-        ground task cache and the networks' first forward passes."""
+        """One-off costs for n objects, paid before any planner is timed: the symbolic planner's tasks (of the
+        scene's size and of the sub-scenes Level 1 plans in, `Level1Config.scene_sizes`) and the networks' first
+        forward passes."""
         key = (id(models), problem.n)
         if key in self._warm:
             return
         cfg = self.config.plan_config(problem.seed)
         if models.symbolic is not None and models.domain is not None:
-            models.symbolic_planner(cfg.level1.backend).task(problem.n)
-            models.symbolic.symbols(problem.X_init)
+            for size in cfg.level1.scene_sizes(problem.n):  # Level 1's sub-scenes from focus_from blocks on
+                models.symbolic_planner(cfg.level1.backend).task(size)
+                models.symbolic.symbols(problem.X_init[:size])
         if models.dynamics is not None:
             models.dynamics.predict_effect(problem.X_init, np.zeros((1, 4), dtype=np.int64))
         self._warm.add(key)

@@ -26,7 +26,7 @@ from tamp.planning.kinematic_check import Feasibility
 from tamp.planning.level1 import level1, level1_serial
 from tamp.planning.level2 import level2
 from tamp.planning.models import Models
-from tamp.planning.results import Clock, Level2Result, PlanResult, assemble
+from tamp.planning.results import Clock, Level1Result, Level2Result, PlanResult, assemble
 from tamp.planning.search import SearchConfig
 from tamp.planning.verify import Verification, VerifyConfig, doubt
 from tamp.planning.vocabulary import KinematicFeasibility
@@ -54,12 +54,28 @@ def plan_bilevel(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConfig(),
     if chosen is None or waits is not None:  # line 16: continuous search fallback
         second = level2(models.require_dynamics(), X_init, X_goal, cfg.search, cfg.verify, clock, started, feas)
     plan: tuple[Sequence, int, np.ndarray] | None = None if second is None else second.plan
-    if plan is None and chosen is not None:
+    reasons = [] if waits is None else [waits]
+    if plan is None and chosen is not None and refined_late(first, feas, reasons):
         plan = (chosen.actions, 1, chosen.trajectory)
-    return assemble("bilevel", X_goal, clock, started, level1=first, level2=second,
-                    reasons=() if waits is None else (waits,), plan=plan,
+    return assemble("bilevel", X_goal, clock, started, level1=first, level2=second, reasons=reasons, plan=plan,
                     rejected=None if feas is None else feas.rejected,
                     refinements=() if feas is None else feas.refinements)
+
+
+def refined_late(first: Level1Result, feas: Feasibility | None, reasons: list[str]) -> bool:
+    """Whether Level 1's chosen plan may be returned when Level 2 has none: refined now if it waited unrefined
+    (`Level1Result.refine_later`; why not into `reasons`)."""
+    if not first.refine_later:
+        return True
+    assert feas is not None and first.chosen is not None  # refine_later: chosen after feas's check
+    if feas.refinements_left <= 0:
+        reasons.append(f"level 1: refinement budget ({feas.config.max_refinements}) used up; its waiting plan "
+                       "was not refined")
+        return False
+    outcome = feas.refine(1, first.chosen.trajectory, first.chosen.actions)
+    if not outcome.success:
+        reasons.append(f"level 1: its waiting plan did not refine (action {outcome.action_index}: {outcome.message})")
+    return outcome.success
 
 
 def level1_waits(models: Models, X_init, X_goal, chosen: Verification, wait_beyond: float | None,
@@ -86,4 +102,4 @@ def plan_bilevel_alg1(models: Models, X_init, X_goal, cfg: PlanConfig = PlanConf
     return replace(plan_bilevel(models, X_init, X_goal, paper_config(cfg)), method="bilevel_alg1")
 
 
-__all__: Sequence[str] = ["level1_waits", "plan_bilevel", "plan_bilevel_alg1"]
+__all__: Sequence[str] = ["level1_waits", "plan_bilevel", "plan_bilevel_alg1", "refined_late"]

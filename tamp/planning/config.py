@@ -59,7 +59,7 @@ class Level1Config:
     n_domains: int = 100  # N sampled PDDL domains (the paper's N)
     seed: int = 0  # seed of the sampled domains; callers set the problem's
     backend: str = "python"  # symbolic planner: python (in-process, fastest), fd (Fast Downward), fd-naive
-    budget: int | None = 25_000  # symbolic states one search for all N domains may generate: later plans rarely verify
+    budget: int | None = 5_000  # symbolic states one search for all N domains may generate: later plans rarely verify
     focus_from: int | None = 5  # from this many objects on, plans pick up only misplaced blocks
     serial: bool = True  # from focus_from on, with no verified plan, plan one misplaced block at a time
     wait_beyond: float | None = EPS_SUCCESS  # metres: a verified plan predicted this far waits for Level 2
@@ -79,6 +79,13 @@ class Level1Config:
     def focused(self, n_objects: int) -> bool:
         """Whether Level 1 focuses on the blocks off their goal in a scene of `n_objects` blocks."""
         return self.focus_from is not None and n_objects >= self.focus_from
+
+    def scene_sizes(self, n_objects: int) -> tuple[int, ...]:
+        """The object counts of the scenes Level 1 may plan in, in a scene of `n_objects` blocks: the whole scene's,
+        and when focused its sub-scenes' (`level1.level1_scene`). The symbolic planner builds its task once per
+        count (0.3-1 s each), a one-off cost that a benchmark pays before timing."""
+        subscenes = range(1, min(n_objects, SUBSCENE_OBJECTS) + 1) if self.focused(n_objects) else ()
+        return tuple(sorted({n_objects, *subscenes}))
 
 
 @dataclass(frozen=True)

@@ -94,9 +94,11 @@ class Feasibility:
         return outcome
 
 
-def feasible_choice(verified: list[Verification], feas: Feasibility | None) -> Verification | None:
+def feasible_choice(verified: list[Verification], feas: Feasibility | None, refine: bool = True
+                    ) -> Verification | None:
     """The first verified plan (smallest error first) that passes the kinematic check on its predicted
-    states and then refines; without `feas`, the first verified plan."""
+    states and then refines (`refine` False: the check alone, the caller refines it if it needs it); without
+    `feas`, the first verified plan."""
     if feas is None:
         return verified[0] if verified else None
     for v in verified:
@@ -104,7 +106,7 @@ def feasible_choice(verified: list[Verification], feas: Feasibility | None) -> V
         if reason is not None:
             feas.rejected[1][reason] += 1
             continue
-        if not v.actions:
+        if not v.actions or not refine:
             return v
         if feas.refinements_left <= 0:
             return None

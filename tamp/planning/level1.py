@@ -42,7 +42,7 @@ def level1(models: Models, X_init, X_goal, config: Level1Config, goal: VerifyCon
         record.reasons.append(f"level 1: the goal involves {len(objects)} objects, more than the "
                               f"{SUBSCENE_OBJECTS} of the scenes it plans in")
         return record
-    verifier = Verifier(models, X_init, X_goal, goal, clock, feas, record)
+    verifier = Verifier(models, X_init, X_goal, goal, clock, feas, record, config.wait_beyond)
     verifier.ranked = symbolic_plans(models, X_init, X_goal, config, goal, clock, record, objects=objects,  # 5-7
                                      decided=verifier.check_decided)
     verifier.run()  # line 9: in decreasing order of probability, lines 10-12
@@ -130,12 +130,13 @@ class Verifier:
       the search. The plan taken is the full ranking's first verified plan, found sooner.
     - The ranked plans' rollouts are computed in growing chunks (1, 2, 4, ... plans), all prefixes
       of one length in one forward pass (`verify_many`): the same numbers as one plan at a time.
-    - Kinematics (`feas`, our extension): a verified plan is taken only if it passes the check and refines.
+    - Kinematics (`feas`, our extension): a verified plan is taken only if it passes the check and refines; one
+      predicted `wait_beyond` or more from the goal only if it passes the check (`take`).
     """
 
     def __init__(self, models: Models, X_init, X_goal, goal: VerifyConfig, clock: Clock,
-                 feas: Feasibility | None, record: Level1Result):
-        self.X_init, self.X_goal, self.goal = X_init, X_goal, goal
+                 feas: Feasibility | None, record: Level1Result, wait_beyond: float | None = None):
+        self.X_init, self.X_goal, self.goal, self.wait_beyond = X_init, X_goal, goal, wait_beyond
         self.clock, self.feas, self.record = clock, feas, record
         self.ranked: list[Candidate] = []
         self.model = models.require_dynamics()
@@ -185,7 +186,7 @@ class Verifier:
         self.checked.append(candidate)
         self.any_verified = self.any_verified or v.verified
         if self.record.chosen is None and v.verified:
-            self.record.chosen = feasible_choice([v], self.feas)
+            take(self.record, v, self.feas, self.wait_beyond)
         if self.recording:
             kept(candidate, v, self.feas)
 
@@ -202,6 +203,15 @@ class Verifier:
         best = min(c.error for c in self.checked if c.error is not None)
         record.reasons.append(f"level 1: none of the {len(ranked)} symbolic plans verified (best predicted error "
                               f"{best * 100:.1f} cm, tau {self.goal.tau_verify * 100:g} cm)")
+
+
+def take(record: Level1Result, v: Verification, feas: Feasibility | None, wait_beyond: float | None) -> None:
+    """Level 1's choice of the verified plan `v` (`feasible_choice`) into `record`. A plan predicted `wait_beyond`
+    metres or more from the goal waits for Level 2 (`bilevel.level1_waits`) and is taken after the kinematic check
+    alone (record.refine_later): it is refined only if Level 2 finds no plan, not in every call that searches."""
+    later = wait_beyond is not None and v.error >= wait_beyond
+    record.chosen = feasible_choice([v], feas, refine=not later)
+    record.refine_later = later and record.chosen is not None and feas is not None and bool(v.actions)
 
 
 def kept(candidate: Candidate, v: Verification, feas: Feasibility | None) -> None:
@@ -302,7 +312,7 @@ def level1_serial(models: Models, X_init, X_goal, config: Level1Config, goal: Ve
         record.reasons.append(f"level 1, one block at a time: the joined plan is predicted {whole.error * 100:.1f} "
                               f"cm from the goal (tau {goal.tau_verify * 100:g} cm)")
         return
-    record.chosen = feasible_choice([whole], feas)
+    take(record, whole, feas, config.wait_beyond)
     if active() is not None:
         kept(joined, whole, feas)
     if record.chosen is None:

@@ -91,6 +91,9 @@ class Level1Result:
     candidates it ranked and verified, the symbolic planner's figures, and why it gave no plan."""
 
     chosen: Verification | None = None
+    # chosen passed the kinematic check but is not refined yet: it waits for Level 2 (`Level1Config.wait_beyond`),
+    #   which refines it only if Level 2 finds no plan (`bilevel.plan_bilevel`)
+    refine_later: bool = False
     candidates: list[Candidate] = field(default_factory=list)
     symbolic_stats: dict = field(default_factory=dict)  # domains, unique plans, planner outcomes
     reasons: list[str] = field(default_factory=list)

@@ -404,6 +404,24 @@ def test_a_refinement_failure_of_the_first_level1_candidate_returns_the_second(d
     assert off.plan == [(0, 0, 1, 1)] and off.rejected is None and len(kin.refined) == 2
 
 
+def test_a_waiting_level1_plan_is_refined_only_when_the_continuous_search_finds_none(domain):
+    # as above: Level 1's verified plan ends 6 cm off and waits while Level 2 searches
+    goal = A_ON_B.copy()
+    goal[:, 1] += 0.06
+    kin = StubKinematics()
+    found = plan("bilevel", models(domain), X_INIT, goal, with_level1(n_domains=100, seed=0), kinematics=kin)
+    assert found.level == 2 and kin.refined == [found.plan]  # Level 2's plan, refined; the waiting one never
+    # Level 2 finds nothing: the waiting plan is refined then, and returned
+    shallow = PlanConfig(level1=Level1Config(n_domains=100, seed=0), search=SearchConfig(max_depth=1))
+    kin = StubKinematics()
+    kept = plan("bilevel", models(domain), X_INIT, goal, shallow, kinematics=kin)
+    assert kept.level == 1 and kin.refined == [kept.plan] and kept.refinements[0]["level"] == 1
+    # ... unless it does not refine: no plan, and why
+    kin = StubKinematics(unrefinable={tuple(kept.plan[0])})
+    lost = plan("bilevel", models(domain), X_INIT, goal, shallow, kinematics=kin)
+    assert lost.plan is None and any("its waiting plan did not refine" in r for r in lost.reasons)
+
+
 def test_a_level1_candidate_failing_the_check_is_not_refined_and_the_next_is_returned(domain):
     from tamp.planning.vocabulary import Infeasible
 
