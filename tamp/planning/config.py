@@ -59,7 +59,7 @@ class Level1Config:
     n_domains: int = 100  # N sampled PDDL domains (the paper's N)
     seed: int = 0  # seed of the sampled domains; callers set the problem's
     backend: str = "python"  # symbolic planner: python (in-process, fastest), fd (Fast Downward), fd-naive
-    budget: int | None = 5_000  # symbolic states one search for all N domains may generate: later plans rarely verify
+    budget: int | None = 25_000  # symbolic states one search for all N domains may generate: later plans rarely verify
     focus_from: int | None = 5  # from this many objects on, plans pick up only misplaced blocks
     serial: bool = True  # from focus_from on, with no verified plan, plan one misplaced block at a time
     wait_beyond: float | None = EPS_SUCCESS  # metres: a verified plan predicted this far waits for Level 2
