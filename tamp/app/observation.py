@@ -20,7 +20,8 @@ failure silently:
 - if the count is still wrong, the loop plans with n blocks and says so: a block not seen is planned at where the
   Dynamics Model predicts it after the action (its last estimate when nothing moved it), an estimate left over
   is left out (`_as_expected` first tries the prediction's split of the points);
-- blocks seen up to `APART_M` in each other are moved apart (`_apart`): the kinematic check would take the
+- blocks still seen more than `APART_M` in each other are refitted jointly from where they were seen (`_jointly`),
+  and blocks seen up to `APART_M` in each other are moved apart (`_apart`): the kinematic check would take the
   overlap of two touching blocks' fits for a collision of every action.
 
 It also learns its own error from what it measures, not from an assumed sigma: a block the action did not pick
@@ -186,6 +187,7 @@ class CameraObserver:
         if best[0] and not best[2]:  # still a failure: does the prediction explain the depth images as well?
             X, poses, unseen, filled = self._as_expected(best[3], X, poses, unseen, expected) or \
                 (X, poses, unseen, filled)
+        X, poses = self._jointly(best[3], X, poses)
         if filled:
             said.append(f"after {look + 1} look(s), planned with every block: " + "; ".join(filled))
         if best[2]:  # every look gave a scene the planner refuses
@@ -214,6 +216,31 @@ class CameraObserver:
         pose[:3, :3] = np.eye(3) if self.scene is None else self.scene.X_WB[i].rotation().matrix()
         pose[:3, 3] = position
         return pose
+
+    def _jointly(self, views, X: np.ndarray, poses: list[np.ndarray]) -> tuple[np.ndarray, list[np.ndarray]]:
+        """(X, poses) with the blocks seen more than `APART_M` in each other refitted jointly from where they were
+        seen, each point to its nearest box (`box_fit.fit_jointly`), if that leaves them at most `APART_M` in each
+        other and explains the depth images as well (`AS_WELL`): a bar and a cube lying end to end show one top face,
+        and the bar fitted to it alone reaches into the cube. Unchanged otherwise."""
+        pairs = [(a, b) for a, b in combinations(range(len(X)), 2) if _overlap(self.types, poses, a, b)[0] > APART_M]
+        if not pairs:
+            return X, poses
+        from tamp.sim.box_fit import boxes_sdf, fit_jointly, half_size, leans
+        from tamp.sim.perception import fused_cloud
+
+        inside = sorted({k for pair in pairs for k in pair})
+        halves = np.array([half_size(int(t)) for t in self.types])
+        cloud = fused_cloud(views, self.rig.config.voxel_m)
+        near = np.min(np.abs(boxes_sdf(np.array(poses)[inside], halves[inside], cloud)), axis=0) < 0.01
+        upright = np.array([not leans(p) for p in poses])
+        refitted = list(fit_jointly(cloud[near], halves, np.array(poses), inside, upright))
+        if any(_overlap(self.types, refitted, a, b)[0] > APART_M for a, b in pairs):
+            return X, poses
+        if self._depth_residual_m(views, refitted) > AS_WELL * self._depth_residual_m(views, poses):
+            return X, poses
+        X = X.copy()
+        X[inside, :3] = [refitted[i][:3, 3] for i in inside]
+        return X, refitted
 
     def _as_expected(self, views, X: np.ndarray, poses: list[np.ndarray], unseen: set[int], expected: np.ndarray):
         """(X, poses, unseen, what was done, in words) with each block not seen, seen `REFIT_M` from `expected` or
