@@ -57,6 +57,7 @@ REFIT_M = 0.02  # metres: a block seen this far from the prediction is fitted ag
 #   (a cube split off a bar's far end shifts the bar by the cube's length)
 APART_M = 0.003  # metres: blocks seen this far or less in each other are moved apart (blocks that touch, each fitted
 #   within a millimetre or so); a deeper overlap is no fitting noise and is left to the planner's checks
+NEAR_M = 0.01  # metres: fused points this far beyond a block's box at most are refitted with it
 MIN_POINTS = 30  # fused points near where a block is expected, for it to be fitted there (a 5 cm face holds ~150)
 _CLEARANCE_M = 0.0002  # metres: blocks moved apart (`APART_M`) are left this far apart
 SAME_BLOCK_M = 0.01  # metres: two estimates of a block nothing moved that differ more are a failure, not noise
@@ -231,7 +232,7 @@ class CameraObserver:
         inside = sorted({k for pair in pairs for k in pair})
         halves = np.array([half_size(int(t)) for t in self.types])
         cloud = fused_cloud(views, self.rig.config.voxel_m)
-        near = np.min(np.abs(boxes_sdf(np.array(poses)[inside], halves[inside], cloud)), axis=0) < 0.01
+        near = np.min(np.abs(boxes_sdf(np.array(poses)[inside], halves[inside], cloud)), axis=0) < NEAR_M
         upright = np.array([not leans(p) for p in poses])
         refitted = list(fit_jointly(cloud[near], halves, np.array(poses), inside, upright))
         if any(_overlap(self.types, refitted, a, b)[0] > APART_M for a, b in pairs):
@@ -262,7 +263,7 @@ class CameraObserver:
             return None
         cloud = fused_cloud(views, self.rig.config.voxel_m)
         halves = np.array([half_size(int(t)) for t in self.types])
-        near = [np.linalg.norm(cloud - expected[i, :3], axis=1) < np.linalg.norm(halves[i]) + 0.01 for i in odd]
+        near = [np.linalg.norm(cloud - expected[i, :3], axis=1) < np.linalg.norm(halves[i]) + NEAR_M for i in odd]
         if min(np.count_nonzero(m) for m in near) < MIN_POINTS:
             return None
         points = cloud[np.any(near, axis=0)]
