@@ -9,11 +9,10 @@ its schema) is appended (whole line, flushed) to OUT/rows.jsonl as it finishes. 
 the models, the problem set, the configuration and the package versions; OUT/symbols.json what the
 Symbolic Model's bits mean on the set's scenes (`learned.interpret`).
 
-Resumable: rows already in rows.jsonl are kept and not recomputed (a line cut short by a kill is
-dropped and its row redone); an OUT started with other models, another problem file or another
-configuration is refused. Worlds are reseeded for every row, so a row does not depend on which
-worker computed it or what that worker did before: the rows are the same for any number of workers
-(timings aside), as long as no planner hits its wall-clock limit.
+Resumable: rows already in rows.jsonl are kept and not recomputed (a line cut short by a kill is dropped and its row
+redone); an OUT started with other models, another problem file or another configuration is refused. Worlds are
+reseeded for every row, so a row does not depend on which worker computed it or what that worker did before: the
+rows are the same for any number of workers (timings aside), as long as no planner hits its wall-clock limit.
 """
 from __future__ import annotations
 
@@ -119,9 +118,8 @@ class Evaluator:
         return world
 
     def warm_up(self, models, problem: Problem) -> None:
-        """One-off costs for n objects, paid before any planner is timed: the symbolic planner's tasks (of the
-        scene's size and of the sub-scenes Level 1 plans in, `Level1Config.scene_sizes`) and the networks' first
-        forward passes."""
+        """One-off costs for n objects, paid before any planner is timed: the symbolic planner's tasks (of the scene
+        and of Level 1's sub-scenes, `Level1Config.scene_sizes`) and the networks' first forward passes."""
         key = (id(models), problem.n)
         if key in self._warm:
             return

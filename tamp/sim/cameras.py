@@ -28,9 +28,9 @@ from pydrake.systems.sensors import CameraInfo, RgbdSensor
 
 from tamp.planning.validate import MAX_OBJECTS
 from tamp.planning.vocabulary import LARGE, SMALL
-from tamp.sim.perception import DepthView
 from tamp.sim.perception_config import CameraConfig, DepthNoise, PerceptionConfig
 from tamp.sim.plants import TABLE_FILE, add_blocks
+from tamp.sim.point_cloud import DepthView
 from tamp.sim.skill import Scene
 
 RENDERER = "vtk"
