@@ -314,11 +314,12 @@ def boxes_overlap(X_WA: RigidTransform, size_A, X_WB: RigidTransform, size_B, ma
 
 def penetration(X_WA: RigidTransform, size_A, X_WB: RigidTransform, size_B) -> tuple[float, np.ndarray]:
     """(metres, unit axis from A towards B): how far box B must move along the axis (of the 15 of the separating
-    axis theorem, the one of least overlap) to leave box A; depth 0 or less when a separating axis exists."""
+    axis theorem, the one of least overlap) to leave box A; depth 0 or less when a separating axis exists (-inf
+    when their bounding spheres do not meet)."""
     h_A, h_B = np.asarray(size_A, dtype=float) / 2, np.asarray(size_B, dtype=float) / 2
     T = np.asarray(X_WB.translation()) - np.asarray(X_WA.translation())
     if np.linalg.norm(T) >= np.linalg.norm(h_A) + np.linalg.norm(h_B):  # their bounding spheres do not meet
-        return 0.0, np.zeros(3)
+        return -np.inf, np.zeros(3)
     R_A, R_B = X_WA.rotation().matrix(), X_WB.rotation().matrix()
     cross = np.einsum("klm,il,jm->ijk", _LEVI_CIVITA, R_A.T, R_B.T).reshape(9, 3)  # every edge pair's axis
     axes = np.concatenate([R_A.T, R_B.T, cross])
