@@ -134,19 +134,30 @@ def leans(X_WB: np.ndarray) -> bool:
     return bool(np.abs(X_WB[2, :3]).max() < np.cos(TILTED_RAD))
 
 
+def fit_each(points: list[np.ndarray], half: np.ndarray, X0: np.ndarray, upright: np.ndarray) -> np.ndarray:
+    """`fit_boxes` of boxes some of which are `upright` (b,) and some not: their poses (b, 4, 4)."""
+    X = np.zeros((len(points), 4, 4))
+    for flat in (True, False):
+        mine = np.flatnonzero(np.asarray(upright, dtype=bool) == flat)
+        if len(mine):
+            X[mine] = fit_boxes([points[k] for k in mine], half[mine], X0[mine], flat)
+    return X
+
+
 def fit_jointly(points: np.ndarray, half: np.ndarray, X0: np.ndarray, moving: Sequence[int], upright: np.ndarray,
                 rounds: int = 2) -> np.ndarray:
     """The poses X0 (b, 4, 4) of boxes of half sizes `half` (b, 3) with the boxes `moving` refitted jointly to
     `points`: each point goes to its nearest box (of all of them), each moving box is fitted to its points
-    (`fit_boxes`, upright where `upright` (b,) says), `rounds` times, so that the points of blocks that touch pull
+    (`fit_each`, upright where `upright` (b,) says), `rounds` times, so that the points of blocks that touch pull
     only their own box."""
     X = np.array(X0, dtype=float)
+    moving = list(moving)
+    if not moving:
+        return X
+    upright = np.asarray(upright, dtype=bool)
     for _ in range(rounds):
         nearest = np.argmin(np.abs(boxes_sdf(X, half, points)), axis=0)
-        for flat in (True, False):
-            mine = [k for k in moving if bool(upright[k]) == flat]
-            if mine:
-                X[mine] = fit_boxes([points[nearest == k] for k in mine], half[mine], X[mine], flat)
+        X[moving] = fit_each([points[nearest == k] for k in moving], half[moving], X[moving], upright[moving])
     return X
 
 
@@ -395,6 +406,6 @@ def orientation_error(R_est: np.ndarray, R_true: np.ndarray, block_type: int) ->
 
 
 __all__ = ["MIN_PATCH", "TILTED_RAD", "box_sdf", "boxes_sdf", "components", "face_hypotheses", "fit_box",
-           "fit_boxes", "fit_jointly", "footprint_hypotheses", "half_size", "leans", "min_area_rectangle",
+           "fit_boxes", "fit_each", "fit_jointly", "footprint_hypotheses", "half_size", "leans", "min_area_rectangle",
            "orientation_error", "pose", "seen_through", "seen_through_boxes", "side_hypotheses", "symmetries",
            "tilted_side_hypotheses", "vertical_faces"]

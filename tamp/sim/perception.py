@@ -51,7 +51,7 @@ from tamp.sim.box_fit import (
     boxes_sdf,
     components,
     face_hypotheses,
-    fit_boxes,
+    fit_each,
     fit_jointly,
     footprint_hypotheses,
     half_size,
@@ -188,7 +188,7 @@ def _best_box(points: np.ndarray, candidates: np.ndarray, hypotheses, views, qua
     if not len(chosen):
         return None
     reach = boxes_sdf(X0[chosen], half[chosen], points) < _FIT_REACH_M
-    X = _fit_each([points[r] for r in reach], half[chosen], X0[chosen], upright[chosen])
+    X = fit_each([points[r] for r in reach], half[chosen], X0[chosen], upright[chosen])
     half, types, upright, family = half[chosen], types[chosen], upright[chosen], family[chosen]
     level = np.abs(X[:, 2, :3]).max(axis=1) > np.cos(TILTED_RAD)  # a block resting flat is proposed upright
     #   from its sides (a 6-DOF fit from a vertical face drifted 8 mm)
@@ -338,16 +338,6 @@ def _poses(blocks: Sequence[BlockEstimate]) -> np.ndarray:
 
 def _halves(blocks: Sequence[BlockEstimate]) -> np.ndarray:
     return np.array([half_size(b.type) for b in blocks]).reshape(-1, 3)
-
-
-def _fit_each(points: list[np.ndarray], half: np.ndarray, X0: np.ndarray, upright: np.ndarray) -> np.ndarray:
-    """`box_fit.fit_boxes` of boxes some of which are `upright` (b,) and some not: their poses (b, 4, 4)."""
-    X = np.zeros((len(points), 4, 4))
-    for flat in (True, False):
-        mine = np.flatnonzero(upright == flat)
-        if len(mine):
-            X[mine] = fit_boxes([points[k] for k in mine], half[mine], X0[mine], flat)
-    return X
 
 
 def _with_prior(p: np.ndarray, normals: Normals, free: np.ndarray, views, voxel: float, found: list,
