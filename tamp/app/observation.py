@@ -293,7 +293,9 @@ class CameraObserver:
         total = 0.0
         for measured, model in zip(views, rendered):
             seen = np.isfinite(measured.depth) & (measured.depth > 0)
-            diff = np.where(np.isfinite(model.depth), np.abs(measured.depth - model.depth), 0.05)
+            both = seen & np.isfinite(model.depth)
+            diff = np.full(measured.depth.shape, 0.05)
+            diff[both] = np.abs(measured.depth[both] - model.depth[both])
             total += float(np.minimum(diff[seen], 0.05).mean())
         return total / len(views)
 

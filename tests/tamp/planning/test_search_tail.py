@@ -16,12 +16,12 @@ from tests.paths import DATA
 
 pytestmark = [pytest.mark.sim, pytest.mark.slow]
 
-# three problems of a strict set of seed 4242 (tests/data/tail-problems.jsonl): Level-2 plans found after 86 and 273
+# two problems of a strict set of seed 4242 (tests/data/tail-problems.jsonl): a Level-2 plan found after 86
 # expansions, and a search that finds none within 400 (a stall cut of 300 ends it after about 360), on the 1 cm
 # duplicate grid they were chosen with. The same comparison over whole problem sets: bench/planning_tail.py.
 FINE = replace(PlanConfig(), search=replace(PlanConfig().search, resolution=0.01, max_expansions=400))
 PROBLEMS = DATA / "tail-problems.jsonl"
-NAMES = ("n4-k4-000", "n2-k5-008", "n2-k3-005")
+NAMES = ("n4-k4-000", "n2-k3-005")
 
 
 def planned(models, problem, cfg: PlanConfig, checker: FeasibilityChecker):
