@@ -49,6 +49,7 @@ from tamp.sim.box_fit import (
     TILTED_RAD,
     box_sdf,
     boxes_sdf,
+    boxes_sdf_near,
     components,
     face_hypotheses,
     fit_each,
@@ -182,12 +183,12 @@ def _best_box(points: np.ndarray, candidates: np.ndarray, hypotheses, views, qua
     half = np.array([half_size(t) for t in types])
     near = np.flatnonzero(seen_through_boxes(X0, types, views) <= 2 * MAX_SEEN_THROUGH)  # far off: most wrong
     #   ones end here
-    ranked = near[np.argsort(-_scores(boxes_sdf(X0[near], half[near], candidates)), kind="stable")]
+    ranked = near[np.argsort(-_scores(boxes_sdf_near(X0[near], half[near], candidates, EXPLAINED_M)), kind="stable")]
     chosen = np.array([i for f in sorted(set(family[ranked].tolist())) for i in ranked[family[ranked] == f][:_FITTED]],
                       dtype=int)
     if not len(chosen):
         return None
-    reach = boxes_sdf(X0[chosen], half[chosen], points) < _FIT_REACH_M
+    reach = boxes_sdf_near(X0[chosen], half[chosen], points, _FIT_REACH_M) < _FIT_REACH_M
     X = fit_each([points[r] for r in reach], half[chosen], X0[chosen], upright[chosen])
     half, types, upright, family = half[chosen], types[chosen], upright[chosen], family[chosen]
     level = np.abs(X[:, 2, :3]).max(axis=1) > np.cos(TILTED_RAD)  # a block resting flat is proposed upright
@@ -196,7 +197,7 @@ def _best_box(points: np.ndarray, candidates: np.ndarray, hypotheses, views, qua
     keep = ~((family == _LEANING_SIDES) & level) & (bottom >= -_UNDER_TABLE_M)  # through the table, where no
     #   camera sees: no block
     keep[keep] = seen_through_boxes(X[keep], types[keep], views) <= MAX_SEEN_THROUGH
-    distance = boxes_sdf(X[keep], half[keep], candidates)
+    distance = boxes_sdf_near(X[keep], half[keep], candidates, _VICINITY_M)
     scores = np.zeros(len(X), dtype=int)
     scores[keep] = _scores(distance)
     vicinity = np.zeros(len(X), dtype=int)
@@ -307,14 +308,21 @@ def _without_extras(p: np.ndarray, views, found: list) -> None:
     its own beside a neighbour fitted a little off) is dropped, where those neighbours, refitted jointly to the
     points of all of them (each point to its nearest box), explain all but fewer than MIN_CLUSTER of what they
     explained with it, and no camera sees through them. The weakest block is tried first."""
+    reaches: dict[int, tuple[BlockEstimate, np.ndarray]] = {}  # each block's points within _FIT_REACH_M, by id
+
+    def reach_of(block: BlockEstimate) -> np.ndarray:
+        if id(block) not in reaches or reaches[id(block)][0] is not block:
+            reaches[id(block)] = (block, box_sdf(block.X_WB, half_size(block.type), p) < _FIT_REACH_M)
+        return reaches[id(block)][1]
+
     for block in sorted(found, key=lambda b: b.points):
         if not any(b is block for b in found):
             continue
         others = [b for b in found if b is not block]
         if not others:
             continue
-        reach = boxes_sdf(_poses(others), _halves(others), p) < _FIT_REACH_M
-        mine = box_sdf(block.X_WB, half_size(block.type), p) < _FIT_REACH_M
+        reach = np.array([reach_of(b) for b in others])
+        mine = reach_of(block)
         touching = np.any(reach[:, mine], axis=1)
         near = [b for b, t in zip(others, touching) if t]
         if not near:
