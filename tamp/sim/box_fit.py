@@ -49,6 +49,23 @@ def boxes_sdf(X_WB: np.ndarray, half: np.ndarray, p_W: np.ndarray) -> np.ndarray
     return _sdf_of(q[..., 0], q[..., 1], q[..., 2])
 
 
+def boxes_sdf_near(X_WB: np.ndarray, half: np.ndarray, p_W: np.ndarray, margin_m: float) -> np.ndarray:
+    """boxes_sdf (b, k) where it is below margin_m, and margin_m where it is not: the points outside the
+    axis-aligned box around all the boxes, grown by margin_m, are farther than that from each and not computed (a
+    test of `< margin_m` or of inside is the same on both)."""
+    distance = np.full((len(X_WB), len(p_W)), margin_m)
+    if not len(X_WB):
+        return distance
+    extent = np.abs(X_WB[:, :3, :3]) @ half[:, :, None]  # (b, 3, 1): each box's half extent along the world axes
+    low = (X_WB[:, :3, 3] - extent[:, :, 0]).min(axis=0) - margin_m
+    high = (X_WB[:, :3, 3] + extent[:, :, 0]).max(axis=0) + margin_m
+    x, y, z = p_W.T
+    near = np.flatnonzero((x >= low[0]) & (x <= high[0]) & (y >= low[1]) & (y <= high[1]) & (z >= low[2])
+                          & (z <= high[2]))
+    distance[:, near] = boxes_sdf(X_WB, half, p_W[near])
+    return distance
+
+
 def _sdf_of(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> np.ndarray:
     """The signed distance of points whose box coordinates' magnitudes exceed the half sizes by x, y and z (written
     per axis: numpy's reductions over an axis of three cost ten times an elementwise operation)."""
@@ -123,7 +140,8 @@ def fit_boxes(points: list[np.ndarray], half: np.ndarray, X0: np.ndarray, uprigh
         step = np.zeros((len(k), 6))
         step[:, [2, 3, 4] if upright else slice(None)] = solution
         R[k], c[k] = _rotations(step[:, :3]) @ R[k], c[k] + step[:, 3:]
-        moving[k[np.abs(step).max(axis=1) < 1e-5]] = False
+        moving[k[np.abs(step).max(axis=1) < 1e-4]] = False  # a step under 0.1 mm and 1e-4 rad: converged (under
+        #   half the position error's median; 1e-5 took a fifth more iterations, for no better estimate)
     X = np.repeat(np.eye(4)[None], len(points), axis=0)
     X[:, :3, :3], X[:, :3, 3] = R, c
     return X
@@ -405,7 +423,7 @@ def orientation_error(R_est: np.ndarray, R_true: np.ndarray, block_type: int) ->
     return float(np.arccos(np.clip((traces.max() - 1.0) / 2.0, -1.0, 1.0)))
 
 
-__all__ = ["MIN_PATCH", "TILTED_RAD", "box_sdf", "boxes_sdf", "components", "face_hypotheses", "fit_box",
-           "fit_boxes", "fit_each", "fit_jointly", "footprint_hypotheses", "half_size", "leans", "min_area_rectangle",
-           "orientation_error", "pose", "seen_through", "seen_through_boxes", "side_hypotheses", "symmetries",
-           "tilted_side_hypotheses", "vertical_faces"]
+__all__ = ["MIN_PATCH", "TILTED_RAD", "box_sdf", "boxes_sdf", "boxes_sdf_near", "components", "face_hypotheses",
+           "fit_box", "fit_boxes", "fit_each", "fit_jointly", "footprint_hypotheses", "half_size", "leans",
+           "min_area_rectangle", "orientation_error", "pose", "seen_through", "seen_through_boxes", "side_hypotheses",
+           "symmetries", "tilted_side_hypotheses", "vertical_faces"]

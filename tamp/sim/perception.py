@@ -22,13 +22,16 @@ The pipeline (numpy and scipy, no renderer; `tamp.sim.cameras` renders the views
    blocks with six degrees of freedom from the largest upward face (leaning and toppled blocks) and from each
    vertical face (a leaning block whose top another covers shows only its sides). Then a block that explains
    little its neighbours do not, once they are refitted jointly to the points of all of them, is dropped (a
-   piece of a pile fitted on its own);
+   piece of a pile fitted on its own). A left-over block that explains _DISPLACE times the points of blocks found
+   whose centres it holds (or that hold its centre) replaces them: the lower end of a leaning bar, whose top looked
+   flat at a block's height, is fitted as a cube in step 2;
 4. with `previous`, its count and types (a closed loop knows them; positions may be stale, since a block moved):
    where the blocks found disagree with them, the explanations they name are tried on the points, to looser
-   thresholds, and kept only where the points support them (not seen through, no overlap): a bar for the cubes
-   fitted to pieces of its top (its ends hidden), a block of a type still missing among the points left. Such
-   blocks are marked `prior`. What the points do not resolve stays a disagreement and is said in step 5; the
-   prior never adds a block the points do not show;
+   thresholds, and kept only where the points support them (not seen through, no overlap): two cubes for a bar
+   fitted over a cube and the cube beyond it (the second's top proposed a bar running hidden under a block the
+   first carries), a bar for the cubes fitted to pieces of its top (its ends hidden), a block of a type still
+   missing among the points left. Such blocks are marked `prior`. What the points do not resolve stays a
+   disagreement and is said in step 5; the prior never adds a block the points do not show;
 5. identities: the estimates assigned to `previous` (where the blocks are expected, or the problem's scene) by
    `scipy.optimize.linear_sum_assignment` on distance and type, since goals name blocks. A block of `previous`
    with no estimate is said to be missing, an estimate with none an extra; points no block explains are said.
@@ -49,6 +52,7 @@ from tamp.sim.box_fit import (
     TILTED_RAD,
     box_sdf,
     boxes_sdf,
+    boxes_sdf_near,
     components,
     face_hypotheses,
     fit_each,
@@ -80,6 +84,7 @@ _FLAT_QUALITY = 0.5  # a block resting flat must explain this share of the point
 _VICINITY_M = 0.01  # metres: the points a left-over block's fit is judged on
 _PRIOR_MIN = 20  # points that a block of a type the prior misses must explain (MIN_CLUSTER otherwise)
 _PRIOR_QUALITY = 0.5  # the share of its vicinity's points such a block must explain (MIN_EXPLAINED otherwise)
+_DISPLACE = 3  # a left-over block may replace the blocks found it overlaps, explaining this many times their points
 _FIT_REACH_M = 0.02  # metres: a hypothesis is fitted to the points this close to its starting box
 # step 3's families of hypotheses (`_best_box` fits the best few of each): upright from a layer's outline, upright
 # from a side face, six degrees of freedom from the largest upward face, and from a vertical face (leaning blocks only)
@@ -157,19 +162,21 @@ def _scores(distance: np.ndarray) -> np.ndarray:
     return on - _INSIDE_WEIGHT * np.count_nonzero(distance <= -EXPLAINED_M, axis=1)
 
 
-def _overlaps(X_WB: np.ndarray, block_type: int, found: Sequence[BlockEstimate]) -> bool:
-    """Whether the box at X_WB and one of the blocks `found` hold each other's centre (solid blocks cannot)."""
+def _overlapped(X_WB: np.ndarray, block_type: int, found: Sequence[BlockEstimate]) -> list[BlockEstimate]:
+    """The blocks `found` that the box at X_WB holds the centre of, or whose box holds its centre (solid blocks
+    cannot)."""
     half = half_size(block_type)
-    return any(box_sdf(b.X_WB, half_size(b.type), X_WB[None, :3, 3])[0] < 0.0
-               or box_sdf(X_WB, half, b.position[None])[0] < 0.0 for b in found)
+    return [b for b in found if box_sdf(b.X_WB, half_size(b.type), X_WB[None, :3, 3])[0] < 0.0
+            or box_sdf(X_WB, half, b.position[None])[0] < 0.0]
 
 
 def _best_box(points: np.ndarray, candidates: np.ndarray, hypotheses, views, quality: float = 0.0,
-              found: Sequence[BlockEstimate] = ()):
-    """(points explained, estimate, which of `candidates` it explains) of the fitted hypothesis (type, initial pose,
-    upright) that explains most of `candidates` and that no camera saw through (a smaller box wins a near tie), of
-    those whose points within _VICINITY_M lie on its surface for at least the share `quality` and that do not
-    overlap a block `found`; None when there is none. Only the _FITTED hypotheses of each family (an optional fourth
+              found: Sequence[BlockEstimate] = (), displace: bool = False):
+    """(points explained, estimate, which of `candidates` it explains, the blocks `found` it overlaps) of the fitted
+    hypothesis (type, initial pose, upright) that explains most of `candidates` and that no camera saw through (a
+    smaller box wins a near tie), of those whose points within _VICINITY_M lie on its surface for at least the share
+    `quality` and that do not overlap a block `found` (with `displace`: or that explain _DISPLACE times the points
+    of those they overlap); None when there is none. Only the _FITTED hypotheses of each family (an optional fourth
     item) that explain most before the fit are fitted (a fit costs milliseconds; one family's many near misses must
     not crowd out another's right guess). The hypotheses are tested and fitted together (`box_fit`'s batched
     forms): numpy's time is in its calls more than in their sizes."""
@@ -182,12 +189,12 @@ def _best_box(points: np.ndarray, candidates: np.ndarray, hypotheses, views, qua
     half = np.array([half_size(t) for t in types])
     near = np.flatnonzero(seen_through_boxes(X0, types, views) <= 2 * MAX_SEEN_THROUGH)  # far off: most wrong
     #   ones end here
-    ranked = near[np.argsort(-_scores(boxes_sdf(X0[near], half[near], candidates)), kind="stable")]
+    ranked = near[np.argsort(-_scores(boxes_sdf_near(X0[near], half[near], candidates, EXPLAINED_M)), kind="stable")]
     chosen = np.array([i for f in sorted(set(family[ranked].tolist())) for i in ranked[family[ranked] == f][:_FITTED]],
                       dtype=int)
     if not len(chosen):
         return None
-    reach = boxes_sdf(X0[chosen], half[chosen], points) < _FIT_REACH_M
+    reach = boxes_sdf_near(X0[chosen], half[chosen], points, _FIT_REACH_M) < _FIT_REACH_M
     X = fit_each([points[r] for r in reach], half[chosen], X0[chosen], upright[chosen])
     half, types, upright, family = half[chosen], types[chosen], upright[chosen], family[chosen]
     level = np.abs(X[:, 2, :3]).max(axis=1) > np.cos(TILTED_RAD)  # a block resting flat is proposed upright
@@ -196,7 +203,7 @@ def _best_box(points: np.ndarray, candidates: np.ndarray, hypotheses, views, qua
     keep = ~((family == _LEANING_SIDES) & level) & (bottom >= -_UNDER_TABLE_M)  # through the table, where no
     #   camera sees: no block
     keep[keep] = seen_through_boxes(X[keep], types[keep], views) <= MAX_SEEN_THROUGH
-    distance = boxes_sdf(X[keep], half[keep], candidates)
+    distance = boxes_sdf_near(X[keep], half[keep], candidates, _VICINITY_M)
     scores = np.zeros(len(X), dtype=int)
     scores[keep] = _scores(distance)
     vicinity = np.zeros(len(X), dtype=int)
@@ -204,16 +211,19 @@ def _best_box(points: np.ndarray, candidates: np.ndarray, hypotheses, views, qua
     row = np.cumsum(keep) - 1
     best = None
     for k in np.flatnonzero(keep):
-        if scores[k] < quality * vicinity[k] or _overlaps(X[k], int(types[k]), found):
+        if scores[k] < quality * vicinity[k]:
+            continue
+        overlapped = _overlapped(X[k], int(types[k]), found)
+        if overlapped and not (displace and scores[k] >= _DISPLACE * sum(b.points for b in overlapped)):
             continue
         volume = float(np.prod(half[k]))
         if best is None or (scores[k] > best[0] / _TIE if volume > best[2] else scores[k] >= best[0] * _TIE):
-            best = (int(scores[k]), k, volume)
+            best = (int(scores[k]), k, volume, overlapped)
     if best is None:
         return None
     k = best[1]
     block = BlockEstimate(int(types[k]), X[k], best[0], bool(upright[k]))
-    return best[0], block, distance[row[k]] < EXPLAINED_M
+    return best[0], block, distance[row[k]] < EXPLAINED_M, best[3]
 
 
 def _carries(block: BlockEstimate, found: list[BlockEstimate]) -> bool:
@@ -248,7 +258,7 @@ def _top_faces(p: np.ndarray, normals: Normals, free: np.ndarray, views, voxel: 
         best = _best_box(p[slab], p[near], [(t, X0, True) for t, X0 in hypotheses], views, _FLAT_QUALITY, found)
         if best is None:  # not a block resting flat (a leaning one's top, or blocks merged): left to step 3
             continue
-        _, block, explained = best
+        _, block, explained, _ = best
         if block.type == LARGE and np.ptp(p[patch] @ block.X_WB[:3, 1]) < _HIDDEN_BAR_M and not _carries(block, found):
             continue  # most of the bar's top unseen, and no block found on it: what hides it may lean on it (step 3)
         found.append(block)
@@ -294,9 +304,16 @@ def _left_over(p: np.ndarray, normals: Normals, free: np.ndarray, views, voxel: 
         cluster = left[cluster]
         while len(cluster) >= MIN_CLUSTER:
             hypotheses = _cluster_hypotheses(p, normals, cluster, voxel)
-            best = _best_box(p[cluster], p[cluster], hypotheses, views, quality=MIN_EXPLAINED, found=found)
+            best = _best_box(p[cluster], p[cluster], hypotheses, views, MIN_EXPLAINED, found, displace=True)
             if best is None or best[0] < MIN_CLUSTER:
                 break
+            if best[3]:  # blocks it overlaps, a few times smaller: pieces of it (the lower end of a leaning bar
+                #   fitted as a cube from its top faces' step); their points go to it, or back to the cloud
+                found[:] = [b for b in found if not any(b is d for d in best[3])]
+                back = np.any([box_sdf(b.X_WB, half_size(b.type), p) < EXPLAINED_M for b in best[3]], axis=0)
+                for other in [*found, best[1]]:
+                    back &= box_sdf(other.X_WB, half_size(other.type), p) >= EXPLAINED_M
+                free |= back
             found.append(best[1])
             free[cluster[best[2]]] = False
             cluster = cluster[~best[2]]
@@ -307,14 +324,21 @@ def _without_extras(p: np.ndarray, views, found: list) -> None:
     its own beside a neighbour fitted a little off) is dropped, where those neighbours, refitted jointly to the
     points of all of them (each point to its nearest box), explain all but fewer than MIN_CLUSTER of what they
     explained with it, and no camera sees through them. The weakest block is tried first."""
+    reaches: dict[int, tuple[BlockEstimate, np.ndarray]] = {}  # each block's points within _FIT_REACH_M, by id
+
+    def reach_of(block: BlockEstimate) -> np.ndarray:
+        if id(block) not in reaches or reaches[id(block)][0] is not block:
+            reaches[id(block)] = (block, box_sdf(block.X_WB, half_size(block.type), p) < _FIT_REACH_M)
+        return reaches[id(block)][1]
+
     for block in sorted(found, key=lambda b: b.points):
         if not any(b is block for b in found):
             continue
         others = [b for b in found if b is not block]
         if not others:
             continue
-        reach = boxes_sdf(_poses(others), _halves(others), p) < _FIT_REACH_M
-        mine = box_sdf(block.X_WB, half_size(block.type), p) < _FIT_REACH_M
+        reach = np.array([reach_of(b) for b in others])
+        mine = reach_of(block)
         touching = np.any(reach[:, mine], axis=1)
         near = [b for b, t in zip(others, touching) if t]
         if not near:
@@ -340,17 +364,45 @@ def _halves(blocks: Sequence[BlockEstimate]) -> np.ndarray:
     return np.array([half_size(b.type) for b in blocks]).reshape(-1, 3)
 
 
+def _cubes_for_a_bar(p: np.ndarray, free: np.ndarray, views, found: list, want: np.ndarray) -> None:
+    """Where the prior (`want`: blocks of each type) has fewer bars and at least two more cubes than found: a bar
+    resting flat over two cubes in a row (one cube's top proposed a bar whose hidden rest runs under a block carried
+    by the other) is replaced by two cubes fitted to its points, where they explain as much (_TIE) and no camera
+    sees through them. The weakest bar is tried first; the cubes are marked `prior`."""
+    for bar in sorted([b for b in found if b.type == LARGE and b.upright], key=lambda b: b.points):
+        count = np.bincount([b.type for b in found], minlength=2)
+        if count[LARGE] <= want[LARGE] or count[SMALL] + 2 > want[SMALL]:
+            return
+        distance = box_sdf(bar.X_WB, half_size(LARGE), p)
+        near = np.flatnonzero((free | (distance < EXPLAINED_M)) & (distance < _VICINITY_M))
+        others = [b for b in found if b is not bar]
+        cubes: list[BlockEstimate] = []
+        for _ in range(2):
+            hypotheses = [(SMALL, pose(bar.X_WB[:3, :3], bar.position + s * bar.X_WB[:3, 1]), True)
+                          for s in (-0.1, -0.05, 0.0, 0.05, 0.1)]
+            best = _best_box(p[near], p[near], hypotheses, views, _FLAT_QUALITY, others + cubes)
+            if best is None:
+                break
+            cubes.append(replace(best[1], prior=True))
+            free[near[best[2]]] = False
+            near = near[~best[2]]
+        if len(cubes) == 2 and sum(c.points for c in cubes) >= _TIE * bar.points:
+            found[:] = others + cubes
+
+
 def _with_prior(p: np.ndarray, normals: Normals, free: np.ndarray, views, voxel: float, found: list,
                 prior_types: np.ndarray) -> None:
     """Where the blocks found and the prior's types (`previous`) disagree, the explanations the prior names and the
-    points support: a bar for a cube fitted to a bar's visible middle (its ends hidden), and a block of a type the
-    prior has more of among the points left, to looser thresholds. These blocks are marked `prior`; what the
-    points do not resolve stays a disagreement, which `assign` says."""
+    points support: two cubes for a bar over two cubes (`_cubes_for_a_bar`), a bar for a cube fitted to a bar's
+    visible middle (its ends hidden), and a block of a type the prior has more of among the points left, to looser
+    thresholds. These blocks are marked `prior`; what the points do not resolve stays a disagreement, which
+    `assign` says."""
     want = np.bincount(prior_types, minlength=2)
 
     def short(block_type: int) -> int:
         return int(want[block_type]) - sum(b.type == block_type for b in found)
 
+    _cubes_for_a_bar(p, free, views, found, want)
     up = np.array([0.0, 0.0, 1.0])
     for cube in sorted([b for b in found if b.type == SMALL and b.upright], key=lambda b: b.points):
         if short(LARGE) <= 0 or short(SMALL) >= 0 or not any(b is cube for b in found):
