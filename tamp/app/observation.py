@@ -227,7 +227,7 @@ class CameraObserver:
         if not pairs:
             return X, poses
         from tamp.sim.box_fit import boxes_sdf, fit_jointly, half_size, leans
-        from tamp.sim.perception import fused_cloud
+        from tamp.sim.point_cloud import fused_cloud
 
         inside = sorted({k for pair in pairs for k in pair})
         halves = np.array([half_size(int(t)) for t in self.types])
@@ -253,7 +253,7 @@ class CameraObserver:
         yaw), unless its points say it leans (with six degrees of freedom it tilts more than `box_fit.TILTED_RAD`: a
         bar set down on a cube's end, its far end on the table)."""
         from tamp.sim.box_fit import fit_jointly, half_size, leans
-        from tamp.sim.perception import fused_cloud
+        from tamp.sim.point_cloud import fused_cloud
 
         off = np.linalg.norm(X[:, :3] - expected[:, :3], axis=1)
         inside = {k for a, b in combinations(range(len(X)), 2) if _overlap(self.types, poses, a, b)[0] > APART_M
@@ -363,7 +363,7 @@ class CameraObserver:
         """The fused cloud and the estimated boxes in the replay, at the replay's current time."""
         if self.timeline is None:
             return
-        from tamp.sim.perception import fused_cloud
+        from tamp.sim.point_cloud import fused_cloud
 
         cloud = fused_cloud(views, self.rig.config.voxel_m)
         self.timeline.observed(cloud, [(b.type, b.X_WB) for b in seen.blocks])
